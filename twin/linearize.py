@@ -1,0 +1,132 @@
+"""Linearize the MuJoCo model at the origin and reduce it to the thesis's four states.
+
+The contact model has 7 degrees of freedom (beam hinge + free ball) and so a 14-state linearization. The
+ball's orientation does not enter the dynamics (a sphere) and is dropped; of the remaining 11 modes, 7 are
+the fast contact modes (the wires' normal and friction constraints, time constants of a few ms) and 4 are
+the slow rigid-body modes of the rolling ball on the beam. The slow modal subspace, expressed in
+(x, θ, ẋ, θ̇), is the reduced model.
+"""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+
+from twin import model as mdl
+from twin.parameters import Parameters
+from twin.plant import Plant
+from twin.reference import InputKind
+
+__all__ = ["linearize_mujoco", "LinearizationError"]
+
+# The slow and fast modes must be well separated for the reduction to be meaningful.
+MIN_MODE_SEPARATION = 20.0
+
+
+class LinearizationError(RuntimeError):
+    pass
+
+
+def _continuous_jacobians(plant: Plant, eps: float) -> tuple[np.ndarray, np.ndarray]:
+    """Continuous-time (A, B) in MuJoCo's tangent coordinates (dq, v) from a semi-implicit Euler step.
+
+    With Euler, v' = v + h·a(q, v, u) exactly, so the v-rows of the transition Jacobian divided by h give
+    ∂a/∂q, ∂a/∂v, ∂a/∂u; and dq/dt = v in tangent coordinates."""
+    m, d = plant.model, plant.data
+    nv, nu = m.nv, m.nu
+    h = m.opt.timestep
+    a_d = np.zeros((2 * nv + m.na, 2 * nv + m.na))
+    b_d = np.zeros((2 * nv + m.na, nu))
+    mujoco.mjd_transitionFD(m, d, eps, True, a_d, b_d, None, None)
+    a = np.zeros((2 * nv, 2 * nv))
+    a[:nv, nv:] = np.eye(nv)
+    a[nv:, :nv] = a_d[nv : 2 * nv, :nv] / h
+    a[nv:, nv:] = (a_d[nv : 2 * nv, nv : 2 * nv] - np.eye(nv)) / h
+    b = np.zeros((2 * nv, nu))
+    b[nv:] = b_d[nv : 2 * nv] / h
+    return a, b
+
+
+def _output_map(plant: Plant, eps: float) -> np.ndarray:
+    """∂(x, θ, ẋ, θ̇)/∂(dq, v) by central differences around the current state."""
+    m, d = plant.model, plant.data
+    nv = m.nv
+    qpos0, qvel0 = d.qpos.copy(), d.qvel.copy()
+    c = np.zeros((4, 2 * nv))
+    for i in range(2 * nv):
+        outs = []
+        for sign in (1.0, -1.0):
+            d.qpos[:] = qpos0
+            d.qvel[:] = qvel0
+            if i < nv:
+                dq = np.zeros(nv)
+                dq[i] = sign * eps
+                mujoco.mj_integratePos(m, d.qpos, dq, 1.0)
+            else:
+                d.qvel[i - nv] += sign * eps
+            mujoco.mj_kinematics(m, d)
+            outs.append(plant.state())
+        c[:, i] = (outs[0] - outs[1]) / (2 * eps)
+    d.qpos[:] = qpos0
+    d.qvel[:] = qvel0
+    mujoco.mj_forward(m, d)
+    return c
+
+
+def linearize_mujoco(
+    params: Parameters | None = None, input: InputKind = "torque", eps: float = 1e-6
+) -> tuple[np.ndarray, np.ndarray]:
+    """Continuous-time (A, B) of the MuJoCo model at the origin in (x, θ, ẋ, θ̇).
+
+    ``input='torque'`` differentiates with respect to the hinge torque, ``'voltage'`` with respect to the
+    motor's terminal volts (the dcmotor's back-EMF then appears in A)."""
+    plant = Plant(params)
+    m, d = plant.model, plant.data
+    m.opt.integrator = mujoco.mjtIntegrator.mjINT_EULER
+    m.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_EULERDAMP  # keep damping explicit: exact ∂a/∂v
+    plant.reset()
+    # Let the contacts settle into their rest state at the (symmetric, hence exact) equilibrium.
+    for _ in range(300):
+        mujoco.mj_step(m, d)
+    plant.reset()  # back to the exact origin, contacts now warm-started
+    d.qvel[:] = 0.0
+    mujoco.mj_forward(m, d)
+
+    if input == "torque":
+        # Differentiate with respect to the torque at the hinge: make the motor a plain torque source
+        # (gain 1/N through gear N) so back-EMF does not enter while the rotor inertia and viscous damping,
+        # which MuJoCo reflects through the gear, stay.
+        m.actuator_gainprm[0, :] = 0.0
+        m.actuator_biasprm[0, :] = 0.0
+        m.actuator_gaintype[0] = mujoco.mjtGain.mjGAIN_FIXED
+        m.actuator_biastype[0] = mujoco.mjtBias.mjBIAS_NONE
+        m.actuator_dyntype[0] = mujoco.mjtDyn.mjDYN_NONE
+        m.actuator_gainprm[0, 0] = 1.0 / m.actuator_gear[0, 0]
+        m.actuator_ctrlrange[0] = [-1e6, 1e6]
+    elif input != "voltage":
+        raise ValueError(f"input = {input!r}: expected 'torque' or 'voltage'")
+
+    a_full, b_full = _continuous_jacobians(plant, eps)
+    c_full = _output_map(plant, eps)
+
+    # Drop the ball's orientation (tangent dofs 3..5 of its free joint): nothing depends on it.
+    ball_dof = int(m.joint(mdl.BALL_JOINT).dofadr[0])
+    drop = set(range(ball_dof + 3, ball_dof + 6))
+    keep = [i for i in range(a_full.shape[0]) if i not in drop]
+    a, b, c = a_full[np.ix_(keep, keep)], b_full[keep], c_full[:, keep]
+
+    eigvals, right = np.linalg.eig(a)
+
+    order = np.argsort(np.abs(eigvals))
+    slow, fast = order[:4], order[4:]
+    separation = np.abs(eigvals[fast[0]]) / np.abs(eigvals[slow[-1]])
+    if separation < MIN_MODE_SEPARATION:
+        raise LinearizationError(
+            f"slow and fast modes are not separated (|λ5|/|λ4| = {separation:.1f}); cannot reduce"
+        )
+    left = np.linalg.inv(right)
+    # Reduced model in output coordinates: z = C V_s η, η' = Λ η + W_s B u.
+    cv = c @ right[:, slow]
+    a_red = cv @ np.diag(eigvals[slow]) @ np.linalg.inv(cv)
+    b_red = cv @ (left[slow] @ b)
+    return np.real_if_close(a_red, tol=1e6).real, np.real_if_close(b_red, tol=1e6).real

@@ -1,0 +1,163 @@
+"""Build the MuJoCo model of the rig from ``models/ballbeam.xml`` and a ``Parameters`` set.
+
+The XML gives the structure (bodies, joints, geoms, actuator, sensors, scene); every physical number is
+reapplied here from ``Parameters`` through ``mujoco.MjSpec``.
+"""
+
+from __future__ import annotations
+
+import math
+from importlib import resources
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+from twin.parameters import Parameters
+
+__all__ = ["ModelError", "model_path", "build_spec", "build_model", "measure_rest_gap_m"]
+
+MODEL_FILE = "ballbeam.xml"
+
+# Element names in models/ballbeam.xml that the twin relies on.
+BEAM_BODY = "beam"
+BALL_BODY = "ball"
+HINGE = "beam_hinge"
+BALL_JOINT = "ball_free"
+MOTOR = "motor"
+WIRES = ("wire_rod", "wire_spring")
+BALL_GEOM = "ball"
+HINGE_AXIS_BEAM = np.array([0.0, -1.0, 0.0])  # theta > 0 lifts the +x end (eq 3.1.26 sign convention)
+
+# Cosmetic lateral/long-axis inertia of the beam bar (40 mm x 10 mm section); only the hinge-axis inertia
+# (Table 3.1) enters the dynamics because the hinge removes the other rotations.
+_BEAM_BAR_WIDTH_M = 0.04
+_BEAM_BAR_THICKNESS_M = 0.01
+
+
+class ModelError(RuntimeError):
+    """The model file is missing or does not have the elements the twin needs."""
+
+
+def model_path() -> Path:
+    """Path of ballbeam.xml: inside the installed package, or models/ at the repository root."""
+    packaged = resources.files("twin").joinpath("models", MODEL_FILE)
+    if packaged.is_file():
+        return Path(str(packaged))
+    source = Path(__file__).resolve().parent.parent / "models" / MODEL_FILE
+    if source.is_file():
+        return source
+    raise ModelError(f"{MODEL_FILE} not found (looked in {packaged} and {source})")
+
+
+def _find(spec: mujoco.MjSpec, kind: str, name: str):
+    element = getattr(spec, kind)(name)
+    if element is None:
+        raise ModelError(f"{model_path()}: no {kind} named '{name}'")
+    return element
+
+
+def build_spec(params: Parameters | None = None, *, hold_beam_rad: float | None = None) -> mujoco.MjSpec:
+    """The rig's MjSpec with every physical value taken from ``params``.
+
+    ``hold_beam_rad`` replaces the hinge by a rigid mount at that angle (the beam "held" by hand, for
+    rolling checks and static sensor calibration); the motor is then removed with the hinge."""
+    p = params or Parameters()
+    spec = mujoco.MjSpec.from_file(str(model_path()))
+
+    spec.option.timestep = p.physics.timestep_s
+    spec.option.gravity = [0.0, 0.0, -p.physics.gravity_m_s2]
+
+    # Beam: mass M_B at h above P; J_BP about P means J_BP - M_B h^2 about the centre of gravity.
+    beam = _find(spec, "body", BEAM_BODY)
+    i_hinge = p.beam.inertia_pivot_kgm2 - p.beam.mass_kg * p.beam.cog_height_m**2
+    i_long = p.beam.mass_kg * (_BEAM_BAR_WIDTH_M**2 + _BEAM_BAR_THICKNESS_M**2) / 12.0
+    beam.mass = p.beam.mass_kg
+    beam.ipos = [0.0, 0.0, p.beam.cog_height_m]
+    beam.iquat = [1.0, 0.0, 0.0, 0.0]
+    beam.inertia = [i_long, i_hinge, i_hinge]
+    beam.explicitinertial = True
+
+    hinge = _find(spec, "joint", HINGE)
+    hinge.range = [-p.beam.stop_angle_rad, p.beam.stop_angle_rad]
+    hinge.axis = HINGE_AXIS_BEAM.tolist()
+
+    # Wires: each contact point lies h* above P and d/2 to the side; the wire axis lies one wire radius
+    # further along the line from the ball centre through the contact point.
+    r, rho, rs = p.ball.radius_m, p.track.wire_radius_m, p.rolling_radius_m
+    h_star, half_d, half_len = p.track.contact_height_m, p.track.contact_spacing_m / 2, p.track.half_length_m
+    y_axis = half_d * (1.0 + rho / r)
+    z_axis = h_star - rho * rs / r
+    timeconst = p.physics.contact_timeconst_s
+    impedance = p.physics.contact_impedance
+    solimp = [impedance, impedance, 0.001, 0.5, 2.0]
+    for name, side in zip(WIRES, (1.0, -1.0)):
+        wire = _find(spec, "geom", name)
+        wire.type = mujoco.mjtGeom.mjGEOM_CAPSULE
+        wire.size = [rho, 0.0, 0.0]
+        wire.fromto = [-half_len, side * y_axis, z_axis, half_len, side * y_axis, z_axis]
+        wire.friction = [p.track.friction, 0.0, 0.0]
+        wire.solref = [timeconst, 1.0]
+        wire.solimp = solimp
+        wire.margin = p.physics.contact_margin_m
+    for name, x in (("track_centre", 0.0), ("track_end_pos", half_len), ("track_end_neg", -half_len)):
+        _find(spec, "site", name).pos = [x, 0.0, h_star]
+
+    # Ball: solid sphere, J = 2/5 m r^2 (eq 3.1.21), resting with its centre h* + r* above P.
+    ball = _find(spec, "body", BALL_BODY)
+    ball.mass = p.ball.mass_kg
+    ball.inertia = [p.ball.inertia_kgm2] * 3
+    ball.ipos = [0.0, 0.0, 0.0]
+    ball.explicitinertial = True
+    ball.pos = [beam.pos[0], beam.pos[1], beam.pos[2] + p.ball_centre_height_m]
+    ball_geom = _find(spec, "geom", BALL_GEOM)
+    ball_geom.size = [r, 0.0, 0.0]
+    ball_geom.friction = [p.track.friction, 0.0, 0.0]
+    ball_geom.solref = [timeconst, 1.0]
+    ball_geom.solimp = solimp
+
+    # Motor (eq 3.3.1): joint torque = N Kt/R (V - Kb N thetadot); rotor inertia and viscous damping are
+    # reflected by N^2 by MuJoCo; the amplifier's rails bound the terminal volts (§6.4).
+    motor = _find(spec, "actuator", MOTOR)
+    motor.set_to_dcmotor(
+        motorconst=[p.motor.torque_constant_nm_per_a, p.motor.backemf_constant_v_s_per_rad],
+        resistance=p.motor.resistance_ohm,
+    )
+    motor.gear = [p.motor.gear_ratio, 0, 0, 0, 0, 0]
+    motor.armature = p.motor.rotor_inertia_kgm2
+    motor.damping = [p.motor.viscous_damping_nm_s_per_rad, 0.0, 0.0]
+    motor.ctrllimited = mujoco.mjtLimited.mjLIMITED_TRUE
+    motor.ctrlrange = [-p.amplifier.rail_v, p.amplifier.rail_v]
+
+    if hold_beam_rad is not None:
+        if not math.isfinite(hold_beam_rad):
+            raise ValueError(f"hold_beam_rad = {hold_beam_rad!r} is not finite")
+        # Rotation by theta about the hinge axis (0, -1, 0).
+        beam.quat = [math.cos(hold_beam_rad / 2), 0.0, -math.sin(hold_beam_rad / 2), 0.0]
+        spec.delete(motor)
+        for sensor in list(spec.sensors):
+            if sensor.name in ("beam_angle", "beam_rate", "motor_torque"):
+                spec.delete(sensor)
+        spec.delete(hinge)
+    return spec
+
+
+def build_model(params: Parameters | None = None, *, hold_beam_rad: float | None = None) -> mujoco.MjModel:
+    """Compiled model; see ``build_spec``."""
+    return build_spec(params, hold_beam_rad=hold_beam_rad).compile()
+
+
+def measure_rest_gap_m(params: Parameters | None = None, settle_s: float = 0.5) -> float:
+    """Distance between the ball and the wires once the ball rests at the centre of the level beam.
+
+    Negative means the ball sinks into the wires. With ``contact_margin_m`` = 0 this is minus the rest
+    penetration, the measurement the default margin comes from; with the default margin it is ≈ 0."""
+    model = build_model(params, hold_beam_rad=0.0)
+    data = mujoco.MjData(model)
+    for _ in range(int(round(settle_s / model.opt.timestep))):
+        mujoco.mj_step(model, data)
+    wires = {model.geom(n).id for n in WIRES}
+    dists = [c.dist for c in data.contact[: data.ncon] if c.geom1 in wires or c.geom2 in wires]
+    if len(dists) != 2:
+        raise ModelError(f"ball rests on {len(dists)} wire contacts, expected 2")
+    return float(np.mean(dists))

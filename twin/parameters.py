@@ -1,0 +1,355 @@
+"""Every physical, electrical and numerical parameter of the rig, in one typed place.
+
+Each field carries its unit and where its value comes from (thesis table or equation, physics, or a
+measurement). Values are validated on construction: an impossible value raises ``ParameterError`` naming
+the parameter and the value. Parameters can be overridden from code (``Parameters.with_overrides``) or
+from a TOML/JSON file (``Parameters.from_file``); they reach the MuJoCo model only through
+``twin.model.build_spec`` (``mujoco.MjSpec``), never by editing XML text.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import tomllib
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import Any, Mapping
+
+__all__ = [
+    "ParameterError",
+    "Ball",
+    "Beam",
+    "Track",
+    "Motor",
+    "Amplifier",
+    "Physics",
+    "Parameters",
+]
+
+
+class ParameterError(ValueError):
+    """An impossible or unknown parameter; the message names the parameter, the value and the source."""
+
+
+def param(
+    default: float,
+    unit: str,
+    source: str,
+    *,
+    gt: float | None = None,
+    ge: float | None = None,
+    lt: float | None = None,
+    le: float | None = None,
+) -> Any:
+    """A dataclass field with its unit, provenance and admissible range."""
+    return field(
+        default=default,
+        metadata={"unit": unit, "source": source, "gt": gt, "ge": ge, "lt": lt, "le": le},
+    )
+
+
+def _check_fields(obj: Any, group: str) -> None:
+    for f in fields(obj):
+        value = getattr(obj, f.name)
+        name = f"{group}.{f.name}"
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ParameterError(f"{name} = {value!r} is not a number")
+        value = float(value)
+        if not math.isfinite(value):
+            raise ParameterError(f"{name} = {value!r} is impossible: it must be finite")
+        md = f.metadata
+        unit = md.get("unit", "")
+        for key, ok, word in (
+            ("gt", lambda v, b: v > b, ">"),
+            ("ge", lambda v, b: v >= b, ">="),
+            ("lt", lambda v, b: v < b, "<"),
+            ("le", lambda v, b: v <= b, "<="),
+        ):
+            bound = md.get(key)
+            if bound is not None and not ok(value, bound):
+                raise ParameterError(f"{name} = {value!r} {unit} is impossible: it must be {word} {bound}")
+        object.__setattr__(obj, f.name, value)
+
+
+@dataclass(frozen=True)
+class Ball:
+    """The steel ball."""
+
+    mass_kg: float = param(18.848e-3, "kg", "Table 3.1 (m)", gt=0.0)
+    radius_m: float = param(8.329e-3, "m", "Table 3.1 (r)", gt=0.0)
+
+    def __post_init__(self) -> None:
+        _check_fields(self, "ball")
+
+    @property
+    def inertia_kgm2(self) -> float:
+        """Solid sphere, J = 2/5·m·r² (eq 3.1.21). Table 3.1's J = 0.455e-6 is not used by the thesis's
+        equations and is not used here."""
+        return 0.4 * self.mass_kg * self.radius_m**2
+
+
+@dataclass(frozen=True)
+class Beam:
+    """The beam on its pivot P (without the ball)."""
+
+    mass_kg: float = param(136.78e-3, "kg", "Table 3.1 (M_B)", gt=0.0)
+    inertia_pivot_kgm2: float = param(4e-3, "kg·m²", "Table 3.1 (J_BP), about the pivot axis", gt=0.0)
+    cog_height_m: float = param(
+        10.2e-3, "m", "Table 3.1 (h): centre of gravity above the pivot (destabilising, eq 3.1.27)"
+    )
+    stop_angle_rad: float = param(
+        math.radians(43.4), "rad", "§3 (|θ| ≤ 43.4°): mechanical stops", gt=0.0, lt=math.pi / 2
+    )
+
+    def __post_init__(self) -> None:
+        _check_fields(self, "beam")
+        if self.inertia_pivot_kgm2 <= self.mass_kg * self.cog_height_m**2:
+            raise ParameterError(
+                f"beam.inertia_pivot_kgm2 = {self.inertia_pivot_kgm2!r} kg·m² is impossible: it must exceed "
+                f"M_B·h² = {self.mass_kg * self.cog_height_m**2:.6g} (parallel-axis theorem)"
+            )
+
+
+@dataclass(frozen=True)
+class Track:
+    """The two wires the ball rolls on."""
+
+    contact_height_m: float = param(
+        17.281e-3, "m", "Table 3.1 (h*): the wires' contact line above the pivot", gt=0.0
+    )
+    contact_spacing_m: float = param(13.785e-3, "m", "Table 3.1 (d): distance between the two contacts", gt=0.0)
+    half_length_m: float = param(0.323, "m", "§3: |x| ≤ 0.323 m, the ball leaves the track beyond", gt=0.0)
+    wire_radius_m: float = param(
+        1.0e-3,
+        "m",
+        "not given in the thesis; only the contact geometry (h*, d) enters the dynamics",
+        gt=0.0,
+    )
+    friction: float = param(
+        1.0,
+        "-",
+        "not given; rolling without slipping (thesis §1) needs μ > ≈0.3 up to the 43.4° stop",
+        gt=0.0,
+    )
+
+
+    def __post_init__(self) -> None:
+        _check_fields(self, "track")
+
+
+@dataclass(frozen=True)
+class Motor:
+    """Escap 26L18-216 DC motor and its 1:7 gearbox (Table 3.2, §3.3)."""
+
+    resistance_ohm: float = param(9.4, "Ω", "Table 3.2 (R)", gt=0.0)
+    torque_constant_nm_per_a: float = param(0.022, "N·m/A", "Table 3.2 (K_t)", gt=0.0)
+    backemf_constant_v_s_per_rad: float = param(0.022, "V·s/rad", "Table 3.2 (K_b)", gt=0.0)
+    gear_ratio: float = param(7.0, "-", "§3.3: gearbox 1:7 (N2/N1 in eq 3.3.1)", gt=0.0)
+    rotor_inertia_kgm2: float = param(
+        8.5e-7, "kg·m²", "Table 3.2 (J_m), reflected ×N² to the beam; the thesis neglects it", ge=0.0
+    )
+    viscous_damping_nm_s_per_rad: float = param(
+        0.4e-6, "N·m·s/rad", "Table 3.2 (B_m), reflected ×N² to the beam; the thesis neglects it", ge=0.0
+    )
+    inductance_h: float = param(
+        0.8e-3, "H", "Table 3.2 (L); L/R = 85 µs ≪ 1 ms step, neglected as in §3.3", ge=0.0
+    )
+    continuous_current_a: float = param(0.76, "A", "Table 3.2 (I_a), a rating, not a limit", gt=0.0)
+
+    def __post_init__(self) -> None:
+        _check_fields(self, "motor")
+
+    @property
+    def torque_per_volt_nm_per_v(self) -> float:
+        """N·K_t/R of eq 3.3.1: 0.016383 N·m/V at the beam."""
+        return self.gear_ratio * self.torque_constant_nm_per_a / self.resistance_ohm
+
+    @property
+    def backemf_at_beam_v_s_per_rad(self) -> float:
+        """N·K_b of eq 3.3.1: 0.154 V·s/rad at the beam."""
+        return self.gear_ratio * self.backemf_constant_v_s_per_rad
+
+
+@dataclass(frozen=True)
+class Amplifier:
+    """Power amplifier between the I/O card's DAC and the motor (§6.4)."""
+
+    gain_v_per_v: float = param(9.6, "V/V", "§6.4: gain 9.6", gt=0.0)
+    zero_command_v: float = param(2.5, "V", "§6.4: 2.5 V command gives 0 V at the motor")
+    rail_v: float = param(12.0, "V", "§6.4: ±12 V full scale across the motor", gt=0.0)
+
+    def __post_init__(self) -> None:
+        _check_fields(self, "amplifier")
+
+
+@dataclass(frozen=True)
+class Physics:
+    """Numerical settings of the MuJoCo model (design.md: the values that make rolling on two wires exact)."""
+
+    gravity_m_s2: float = param(9.81, "m/s²", "standard gravity, as used by the thesis", gt=0.0)
+    timestep_s: float = param(1e-3, "s", "design.md: 1 ms with implicitfast", gt=0.0, le=0.02)
+    contact_timeconst_s: float = param(
+        2e-3, "s", "design.md: solref time constant = 2·timestep (stiff enough that the ball does not sink)",
+        gt=0.0,
+    )
+    contact_impedance: float = param(
+        0.99,
+        "-",
+        "MuJoCo solimp d (dmin = dmax): 0.99 instead of the default 0.9-0.95 makes the no-slip friction 10x "
+        "harder; with 0.9 the soft friction lets the ball creep (linearization off by 2 % in ∂ẍ/∂θ̇)",
+        gt=0.0,
+        lt=1.0,
+    )
+    contact_margin_m: float = param(
+        3.495e-7,
+        "m",
+        "measured: rest penetration of the ball on the wires with no margin at the default timestep, "
+        "time constant and impedance (twin.model.measure_rest_gap_m; tests/test_model.py keeps it current)",
+        ge=0.0,
+    )
+
+    def __post_init__(self) -> None:
+        _check_fields(self, "physics")
+        if self.contact_timeconst_s < 2 * self.timestep_s:
+            raise ParameterError(
+                f"physics.contact_timeconst_s = {self.contact_timeconst_s!r} s is impossible: MuJoCo needs at "
+                f"least 2·timestep = {2 * self.timestep_s!r} s"
+            )
+
+
+_GROUPS: dict[str, type] = {
+    "ball": Ball,
+    "beam": Beam,
+    "track": Track,
+    "motor": Motor,
+    "amplifier": Amplifier,
+    "physics": Physics,
+}
+
+
+@dataclass(frozen=True)
+class Parameters:
+    """All parameters of the rig. Defaults are the thesis's values (see each field's ``source``)."""
+
+    ball: Ball = field(default_factory=Ball)
+    beam: Beam = field(default_factory=Beam)
+    track: Track = field(default_factory=Track)
+    motor: Motor = field(default_factory=Motor)
+    amplifier: Amplifier = field(default_factory=Amplifier)
+    physics: Physics = field(default_factory=Physics)
+
+    def __post_init__(self) -> None:
+        r, d = self.ball.radius_m, self.track.contact_spacing_m
+        if d >= 2 * r:
+            raise ParameterError(
+                f"track.contact_spacing_m = {d!r} m is impossible: the ball (radius {r!r} m) falls between "
+                f"the wires unless d < 2r = {2 * r!r} m"
+            )
+
+    # --- derived geometry -------------------------------------------------------------------------
+    @property
+    def rolling_radius_m(self) -> float:
+        """r* = √(r² − d²/4): height of the ball centre above the wires' contact line.
+
+        Table 3.1 prints 4.264 mm; its own formula gives 4.676 mm, which the thesis's derived numbers use."""
+        r, d = self.ball.radius_m, self.track.contact_spacing_m
+        return math.sqrt(r * r - d * d / 4.0)
+
+    @property
+    def ball_centre_height_m(self) -> float:
+        """h* + r*: the ball centre above the pivot, in the beam frame (eq 3.1.3)."""
+        return self.track.contact_height_m + self.rolling_radius_m
+
+    @property
+    def rolling_inertia_ratio(self) -> float:
+        """2r²/(5r*²): rotational over translational inertia of the ball rolling on two wires (eq 3.1.26)."""
+        return 0.4 * self.ball.radius_m**2 / self.rolling_radius_m**2
+
+    # --- overrides and files ----------------------------------------------------------------------
+    def with_overrides(self, overrides: Mapping[str, Any], *, origin: str = "overrides") -> "Parameters":
+        """A copy with some values replaced.
+
+        ``overrides`` is nested (``{"ball": {"mass_kg": 0.02}}``) or dotted (``{"ball.mass_kg": 0.02}``).
+        Unknown groups or names raise ``ParameterError`` naming them and ``origin``."""
+        nested: dict[str, dict[str, Any]] = {}
+        for key, value in overrides.items():
+            if "." in key:
+                group, name = key.split(".", 1)
+                nested.setdefault(group, {})[name] = value
+            elif isinstance(value, Mapping):
+                nested.setdefault(key, {}).update(value)
+            else:
+                raise ParameterError(f"{origin}: '{key}' is not a parameter group (expected one of {sorted(_GROUPS)})")
+        changes: dict[str, Any] = {}
+        for group, values in nested.items():
+            if group not in _GROUPS:
+                raise ParameterError(f"{origin}: unknown parameter group '{group}' (expected one of {sorted(_GROUPS)})")
+            known = {f.name for f in fields(_GROUPS[group])}
+            for name in values:
+                if name not in known:
+                    raise ParameterError(f"{origin}: unknown parameter '{group}.{name}' (known: {sorted(known)})")
+            try:
+                changes[group] = dataclasses.replace(getattr(self, group), **values)
+            except ParameterError as exc:
+                raise ParameterError(f"{origin}: {exc}") from None
+        try:
+            return dataclasses.replace(self, **changes)
+        except ParameterError as exc:
+            raise ParameterError(f"{origin}: {exc}") from None
+
+    @classmethod
+    def from_file(cls, path: str | Path) -> "Parameters":
+        """Defaults overridden by a TOML or JSON file (groups as tables/objects, e.g. ``[ball] mass_kg = …``)."""
+        path = Path(path)
+        try:
+            text = path.read_bytes()
+        except OSError as exc:
+            raise ParameterError(f"{path}: cannot read parameter file ({exc.strerror})") from None
+        try:
+            if path.suffix.lower() == ".json":
+                data = json.loads(text)
+            else:
+                data = tomllib.loads(text.decode("utf-8"))
+        except (json.JSONDecodeError, tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+            raise ParameterError(f"{path}: not a valid {path.suffix.lstrip('.').upper() or 'TOML'} file: {exc}") from None
+        if not isinstance(data, dict):
+            raise ParameterError(f"{path}: expected a table of parameter groups at the top level")
+        return cls().with_overrides(data, origin=str(path))
+
+    def to_dict(self) -> dict[str, dict[str, float]]:
+        return {group: dataclasses.asdict(getattr(self, group)) for group in _GROUPS}
+
+    def save(self, path: str | Path, *, overwrite: bool = False) -> None:
+        """Write all values as TOML (or JSON for a .json path). Refuses to overwrite unless asked."""
+        path = Path(path)
+        if path.exists() and not overwrite:
+            raise FileExistsError(f"{path}: exists; not overwritten")
+        if path.suffix.lower() == ".json":
+            path.write_text(json.dumps(self.to_dict(), indent=2) + "\n")
+            return
+        lines = []
+        for group, values in self.to_dict().items():
+            lines.append(f"[{group}]")
+            for f in fields(_GROUPS[group]):
+                lines.append(f"{f.name} = {values[f.name]!r}  # {f.metadata['unit']}; {f.metadata['source']}")
+            lines.append("")
+        path.write_text("\n".join(lines))
+
+    @staticmethod
+    def describe() -> list[dict[str, str]]:
+        """Name, default, unit and source of every parameter (for documentation and reports)."""
+        rows = []
+        for group, cls_ in _GROUPS.items():
+            default = cls_()
+            for f in fields(cls_):
+                rows.append(
+                    {
+                        "name": f"{group}.{f.name}",
+                        "default": repr(getattr(default, f.name)),
+                        "unit": f.metadata["unit"],
+                        "source": f.metadata["source"],
+                    }
+                )
+        return rows

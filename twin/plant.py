@@ -1,0 +1,176 @@
+"""The MuJoCo plant: set and read the rig's state in the thesis's coordinates, step it, detect a lost ball.
+
+State (eq 3.1.28): x = (x, θ, ẋ, θ̇) with x the ball centre along the beam from the pivot's normal (m),
+θ the beam angle (rad, > 0 lifts the +x end), ẋ the ball's speed relative to the beam.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from twin import model as mdl
+from twin.parameters import Parameters
+
+__all__ = ["Plant", "BallKinematics"]
+
+# The ball counts as lost once its centre has dropped this far below (or risen above) its seat on the wires.
+# 2 mm is 40x the largest transient lift seen in fast combined rolling and tilting (design.md: µm).
+LOST_HEIGHT_TOLERANCE_M = 2e-3
+
+
+@dataclass(frozen=True)
+class BallKinematics:
+    """The ball relative to the beam, in the beam frame."""
+
+    position_m: np.ndarray  # (along the beam, lateral, height above P)
+    velocity_m_s: np.ndarray  # relative to the beam, beam frame
+    spin_rad_s: float  # ball angular velocity relative to the beam, about the hinge axis
+
+
+class Plant:
+    """MuJoCo model + data of the rig, with the thesis's state coordinates.
+
+    ``hold_beam_rad`` builds the rig with the beam rigidly held at that angle (no motor)."""
+
+    def __init__(self, params: Parameters | None = None, *, hold_beam_rad: float | None = None) -> None:
+        self.params = params or Parameters()
+        self.held_angle_rad = hold_beam_rad
+        self.model = mdl.build_model(self.params, hold_beam_rad=hold_beam_rad)
+        self.data = mujoco.MjData(self.model)
+        m = self.model
+        self._beam = m.body(mdl.BEAM_BODY).id
+        self._ball = m.body(mdl.BALL_BODY).id
+        ball_joint = m.joint(mdl.BALL_JOINT)
+        self._ball_qpos = int(ball_joint.qposadr[0])
+        self._ball_dof = int(ball_joint.dofadr[0])
+        if hold_beam_rad is None:
+            hinge = m.joint(mdl.HINGE)
+            self._hinge_qpos: int | None = int(hinge.qposadr[0])
+            self._hinge_dof: int | None = int(hinge.dofadr[0])
+        else:
+            self._hinge_qpos = self._hinge_dof = None
+        self.ball_lost = False
+        self.ball_lost_time_s: float | None = None
+        self.reset()
+
+    # --- state ------------------------------------------------------------------------------------
+    @property
+    def time_s(self) -> float:
+        return float(self.data.time)
+
+    def reset(
+        self, x_m: float = 0.0, theta_rad: float = 0.0, xdot_m_s: float = 0.0, thetadot_rad_s: float = 0.0
+    ) -> None:
+        """Put the ball on the wires at x, rolling without slipping at ẋ, and the beam at θ, θ̇."""
+        for name, value in (("x_m", x_m), ("theta_rad", theta_rad), ("xdot_m_s", xdot_m_s),
+                            ("thetadot_rad_s", thetadot_rad_s)):
+            if not math.isfinite(value):
+                raise ValueError(f"initial state {name} = {value!r} is not finite")
+        p = self.params
+        if abs(x_m) > p.track.half_length_m:
+            raise ValueError(f"initial x_m = {x_m!r} is off the track (|x| ≤ {p.track.half_length_m} m)")
+        if self.held_angle_rad is not None:
+            theta_rad, thetadot_rad_s = self.held_angle_rad, 0.0
+        elif abs(theta_rad) > p.beam.stop_angle_rad:
+            raise ValueError(
+                f"initial theta_rad = {theta_rad!r} is beyond the stops (|θ| ≤ {p.beam.stop_angle_rad:.4f} rad)"
+            )
+        m, d = self.model, self.data
+        mujoco.mj_resetData(m, d)
+        if self._hinge_qpos is not None:
+            d.qpos[self._hinge_qpos] = theta_rad
+            d.qvel[self._hinge_dof] = thetadot_rad_s
+        mujoco.mj_kinematics(m, d)
+        rot = d.xmat[self._beam].reshape(3, 3)
+        pivot = d.xpos[self._beam].copy()
+        axis = rot @ mdl.HINGE_AXIS_BEAM
+        rel = np.array([x_m, 0.0, p.ball_centre_height_m])
+        omega_beam = thetadot_rad_s * axis
+        offset = rot @ rel
+        q = self._ball_qpos
+        d.qpos[q : q + 3] = pivot + offset
+        d.qpos[q + 3 : q + 7] = [1.0, 0.0, 0.0, 0.0]
+        v = self._ball_dof
+        d.qvel[v : v + 3] = rot @ np.array([xdot_m_s, 0.0, 0.0]) + np.cross(omega_beam, offset)
+        # Rolling without slipping (eq 3.1.13): spin relative to the beam about the hinge axis = -ẋ/r*.
+        d.qvel[v + 3 : v + 6] = omega_beam + (-xdot_m_s / p.rolling_radius_m) * axis
+        d.ctrl[:] = 0.0
+        mujoco.mj_forward(m, d)
+        self.ball_lost = False
+        self.ball_lost_time_s = None
+
+    def ball_kinematics(self) -> BallKinematics:
+        d = self.data
+        rot = d.xmat[self._beam].reshape(3, 3)
+        pivot = d.xpos[self._beam]
+        axis = rot @ mdl.HINGE_AXIS_BEAM
+        theta_dot = self._theta_dot()
+        omega_beam = theta_dot * axis
+        offset = d.xpos[self._ball] - pivot
+        v = self._ball_dof
+        v_rel = d.qvel[v : v + 3] - np.cross(omega_beam, offset)
+        ball_rot = d.xmat[self._ball].reshape(3, 3)
+        omega_ball = ball_rot @ d.qvel[v + 3 : v + 6]  # free-joint angular velocity is in the body frame
+        return BallKinematics(
+            position_m=rot.T @ offset,
+            velocity_m_s=rot.T @ v_rel,
+            spin_rad_s=float((omega_ball - omega_beam) @ axis),
+        )
+
+    def _theta(self) -> float:
+        if self._hinge_qpos is None:
+            return float(self.held_angle_rad)
+        return float(self.data.qpos[self._hinge_qpos])
+
+    def _theta_dot(self) -> float:
+        if self._hinge_dof is None:
+            return 0.0
+        return float(self.data.qvel[self._hinge_dof])
+
+    def state(self) -> np.ndarray:
+        """(x_m, θ_rad, ẋ_m_s, θ̇_rad_s) in the thesis's coordinates (eq 3.1.28)."""
+        kin = self.ball_kinematics()
+        return np.array([kin.position_m[0], self._theta(), kin.velocity_m_s[0], self._theta_dot()])
+
+    def ball_on_track(self) -> bool:
+        """Whether the ball still sits on both wires within the track's length."""
+        p = self.params
+        pos = self.ball_kinematics().position_m
+        return bool(
+            abs(pos[0]) <= p.track.half_length_m + p.ball.radius_m
+            and abs(pos[1]) < p.track.contact_spacing_m / 2
+            and abs(pos[2] - p.ball_centre_height_m) < LOST_HEIGHT_TOLERANCE_M
+        )
+
+    # --- stepping ---------------------------------------------------------------------------------
+    def step(self, motor_volts: float, n_steps: int = 1) -> None:
+        """Advance ``n_steps`` physics steps with the motor's terminal volts held (the dcmotor clamps them to
+        the amplifier's rails). Then updates the latched ``ball_lost`` flag."""
+        if not math.isfinite(motor_volts):
+            raise ValueError(f"motor_volts = {motor_volts!r} is not finite")
+        if self.model.nu:
+            self.data.ctrl[0] = motor_volts
+        for _ in range(n_steps):
+            mujoco.mj_step(self.model, self.data)
+        # Checked once per call (a control tick), not per physics step: a Python-side check costs 4x a step.
+        if not self.ball_lost and not self.ball_on_track():
+            self.ball_lost = True
+            self.ball_lost_time_s = self.time_s
+        if not np.all(np.isfinite(self.data.qpos)):
+            raise FloatingPointError(f"MuJoCo state is not finite at t = {self.time_s:.3f} s")
+
+    def motor_torque_nm(self) -> float:
+        """Joint torque the motor applies to the beam now (N·m): gear × motor torque, eq 3.3.1."""
+        if self._hinge_dof is None:
+            return 0.0
+        return float(self.data.qfrc_actuator[self._hinge_dof])
+
+    def warnings(self) -> dict[str, int]:
+        """MuJoCo warnings raised so far (name -> count), empty when there were none."""
+        return {
+            mujoco.mjtWarning(i).name: int(w.number) for i, w in enumerate(self.data.warning) if w.number
+        }
