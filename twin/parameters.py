@@ -25,6 +25,9 @@ __all__ = [
     "Motor",
     "Amplifier",
     "Physics",
+    "AngleSensor",
+    "BallSensor",
+    "Daq",
     "Parameters",
 ]
 
@@ -50,10 +53,19 @@ def param(
     )
 
 
+def flag(default: bool, source: str) -> Any:
+    """A boolean dataclass field (a switch) with its provenance."""
+    return field(default=default, metadata={"unit": "on/off", "source": source, "flag": True})
+
+
 def _check_fields(obj: Any, group: str) -> None:
     for f in fields(obj):
         value = getattr(obj, f.name)
         name = f"{group}.{f.name}"
+        if f.metadata.get("flag"):
+            if not isinstance(value, bool):
+                raise ParameterError(f"{name} = {value!r} is not true/false")
+            continue
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ParameterError(f"{name} = {value!r} is not a number")
         value = float(value)
@@ -219,6 +231,81 @@ class Physics:
             )
 
 
+@dataclass(frozen=True)
+class AngleSensor:
+    """Beam-angle chain (§6.2): motor encoder → 10-bit up/down counter → AD561 DAC → I/O card ADC."""
+
+    encoder_pulses_per_rev: float = param(256.0, "pulses/rev", "§6.2: HEDS 5540, 256 pulses per turn", gt=0.0)
+    counter_bits: float = param(10.0, "bit", "§6.2: 10-bit counter (three 74LS193, top 2 bits unused)", ge=1.0)
+    counter_zero_count: float = param(512.0, "count", "§6.6: counters set to 512 at 0° by the zero switch", ge=0.0)
+    dac_volts_per_count: float = param(0.009818, "V/count", "eq 6.2.6 (fit of the measured eq 6.2.4)", gt=0.0)
+    dac_offset_v: float = param(-5.042, "V", "eq 6.2.6: Va at DI = 0 (measured, eq 6.2.4)")
+    zeroing_error_rad: float = param(
+        0.0, "rad", "Fig 7.20: beam angle at which the counter was zeroed (0 = beam level)"
+    )
+
+    def __post_init__(self) -> None:
+        _check_fields(self, "angle_sensor")
+
+
+@dataclass(frozen=True)
+class BallSensor:
+    """Ball-position chain (§6.3): resistive wire wiper → contact noise → RC low-pass → I/O card ADC.
+
+    The static curve is the measured Table 6.3 (twin.sensors); the contact-noise numbers are not in the
+    thesis (its Figs 6.10/6.11 are not numeric): defaults are assumptions to be fitted from a rig log."""
+
+    rc_resistance_ohm: float = param(147.0, "Ω", "§6.3: low-pass filter resistor", gt=0.0)
+    rc_capacitance_f: float = param(22e-6, "F", "§6.3: low-pass filter capacitor", gt=0.0)
+    dropout_rate_hz: float = param(
+        5.0, "1/s", "assumed: rate of contact losses between ball and spring (§6.3), fit from a log", ge=0.0
+    )
+    dropout_mean_duration_s: float = param(
+        0.5e-3, "s", "assumed: mean duration of a contact loss, fit from a log", gt=0.0
+    )
+    dropout_voltage_v: float = param(
+        0.0, "V", "assumed: the open wiper floats to ground through the measurement circuit (Fig 6.9)"
+    )
+    noise_enabled: bool = flag(True, "switch: False turns the contact noise off")
+
+    def __post_init__(self) -> None:
+        _check_fields(self, "ball_sensor")
+
+
+@dataclass(frozen=True)
+class Daq:
+    """Advantech PCI-1712 as the thesis software used it (Table 6.4, appendix A)."""
+
+    sample_rate_hz: float = param(40000.0, "Hz", "Table 6.4: data acquisition rate", gt=0.0)
+    period_s: float = param(0.02, "s", "Table 6.4: timer period (control at 50 Hz)", gt=0.0)
+    adc_bits: float = param(12.0, "bit", "§6.5: 12-bit A/D", ge=1.0)
+    adc_min_v: float = param(-5.0, "V", "Table 6.4: analog input interval −5 V…5 V")
+    adc_max_v: float = param(5.0, "V", "Table 6.4: analog input interval −5 V…5 V")
+    dac_bits: float = param(12.0, "bit", "§6.5: 12-bit analog outputs", ge=1.0)
+    dac_min_v: float = param(0.0, "V", "Table 6.4: analog output interval 0…5 V")
+    dac_max_v: float = param(5.0, "V", "Table 6.4: analog output interval 0…5 V")
+    output_latency_s: float = param(
+        0.0, "s", "assumed: delay from reading a block to the DAC update (computation time), 0…period", ge=0.0
+    )
+
+    def __post_init__(self) -> None:
+        _check_fields(self, "daq")
+        if self.adc_max_v <= self.adc_min_v:
+            raise ParameterError(f"daq.adc_max_v = {self.adc_max_v!r} V must exceed daq.adc_min_v = {self.adc_min_v!r} V")
+        if self.dac_max_v <= self.dac_min_v:
+            raise ParameterError(f"daq.dac_max_v = {self.dac_max_v!r} V must exceed daq.dac_min_v = {self.dac_min_v!r} V")
+        if self.output_latency_s >= self.period_s:
+            raise ParameterError(
+                f"daq.output_latency_s = {self.output_latency_s!r} s is impossible: it must be shorter than "
+                f"the period {self.period_s!r} s"
+            )
+
+    @property
+    def block_size(self) -> int:
+        """Samples per block: 40 kHz × 20 ms = 800 (appendix A: bsize = SampleRate·TimerPeriod)."""
+        return int(round(self.sample_rate_hz * self.period_s))
+
+
 _GROUPS: dict[str, type] = {
     "ball": Ball,
     "beam": Beam,
@@ -226,6 +313,9 @@ _GROUPS: dict[str, type] = {
     "motor": Motor,
     "amplifier": Amplifier,
     "physics": Physics,
+    "angle_sensor": AngleSensor,
+    "ball_sensor": BallSensor,
+    "daq": Daq,
 }
 
 
@@ -239,6 +329,9 @@ class Parameters:
     motor: Motor = field(default_factory=Motor)
     amplifier: Amplifier = field(default_factory=Amplifier)
     physics: Physics = field(default_factory=Physics)
+    angle_sensor: AngleSensor = field(default_factory=AngleSensor)
+    ball_sensor: BallSensor = field(default_factory=BallSensor)
+    daq: Daq = field(default_factory=Daq)
 
     def __post_init__(self) -> None:
         r, d = self.ball.radius_m, self.track.contact_spacing_m
@@ -333,7 +426,9 @@ class Parameters:
         for group, values in self.to_dict().items():
             lines.append(f"[{group}]")
             for f in fields(_GROUPS[group]):
-                lines.append(f"{f.name} = {values[f.name]!r}  # {f.metadata['unit']}; {f.metadata['source']}")
+                value = values[f.name]
+                text = ("true" if value else "false") if isinstance(value, bool) else repr(value)
+                lines.append(f"{f.name} = {text}  # {f.metadata['unit']}; {f.metadata['source']}")
             lines.append("")
         path.write_text("\n".join(lines))
 
