@@ -55,6 +55,8 @@ class Plant:
             self._hinge_qpos = self._hinge_dof = None
         self.ball_lost = False
         self.ball_lost_time_s: float | None = None
+        mujoco.mj_kinematics(self.model, self.data)
+        self._pivot = tuple(float(v) for v in self.data.xpos[self._beam])  # the beam body's origin is P
         self.reset()
 
     # --- state ------------------------------------------------------------------------------------
@@ -103,21 +105,26 @@ class Plant:
         self.ball_lost = False
         self.ball_lost_time_s = None
 
+    def _beam_axes(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The beam frame's unit vectors in world coordinates: a rotation by θ about (0, −1, 0).
+
+        Computed from qpos, not from MjData.xmat, which mj_step leaves one step behind."""
+        c, s = math.cos(self._theta()), math.sin(self._theta())
+        return np.array([c, 0.0, s]), np.array([0.0, 1.0, 0.0]), np.array([-s, 0.0, c])
+
     def ball_kinematics(self) -> BallKinematics:
         d = self.data
-        rot = d.xmat[self._beam].reshape(3, 3)
-        pivot = d.xpos[self._beam]
-        axis = rot @ mdl.HINGE_AXIS_BEAM
-        theta_dot = self._theta_dot()
-        omega_beam = theta_dot * axis
-        offset = d.xpos[self._ball] - pivot
-        v = self._ball_dof
+        ex, ey, ez = self._beam_axes()
+        axis = -ey  # the hinge axis, world frame
+        omega_beam = self._theta_dot() * axis
+        q, v = self._ball_qpos, self._ball_dof
+        offset = d.qpos[q : q + 3] - np.asarray(self._pivot)
         v_rel = d.qvel[v : v + 3] - np.cross(omega_beam, offset)
-        ball_rot = d.xmat[self._ball].reshape(3, 3)
-        omega_ball = ball_rot @ d.qvel[v + 3 : v + 6]  # free-joint angular velocity is in the body frame
+        omega_ball = np.zeros(3)
+        mujoco.mju_rotVecQuat(omega_ball, d.qvel[v + 3 : v + 6], d.qpos[q + 3 : q + 7])  # body → world
         return BallKinematics(
-            position_m=rot.T @ offset,
-            velocity_m_s=rot.T @ v_rel,
+            position_m=np.array([offset @ ex, offset @ ey, offset @ ez]),
+            velocity_m_s=np.array([v_rel @ ex, v_rel @ ey, v_rel @ ez]),
             spin_rad_s=float((omega_ball - omega_beam) @ axis),
         )
 
@@ -136,30 +143,41 @@ class Plant:
         kin = self.ball_kinematics()
         return np.array([kin.position_m[0], self._theta(), kin.velocity_m_s[0], self._theta_dot()])
 
+    def ball_in_beam_frame(self) -> tuple[float, float, float]:
+        """Ball centre (along, lateral, height) in the beam frame from qpos alone: cheap enough to call
+        every physics step (the beam frame is a rotation by θ about the hinge axis (0, −1, 0))."""
+        theta = self._theta()
+        q = self._ball_qpos
+        pivot = self._pivot
+        dx = float(self.data.qpos[q]) - pivot[0]
+        dy = float(self.data.qpos[q + 1]) - pivot[1]
+        dz = float(self.data.qpos[q + 2]) - pivot[2]
+        c, s = math.cos(theta), math.sin(theta)
+        return c * dx + s * dz, dy, -s * dx + c * dz
+
     def ball_on_track(self) -> bool:
         """Whether the ball still sits on both wires within the track's length."""
         p = self.params
-        pos = self.ball_kinematics().position_m
+        along, lateral, height = self.ball_in_beam_frame()
         return bool(
-            abs(pos[0]) <= p.track.half_length_m + p.ball.radius_m
-            and abs(pos[1]) < p.track.contact_spacing_m / 2
-            and abs(pos[2] - p.ball_centre_height_m) < LOST_HEIGHT_TOLERANCE_M
+            abs(along) <= p.track.half_length_m + p.ball.radius_m
+            and abs(lateral) < p.track.contact_spacing_m / 2
+            and abs(height - p.ball_centre_height_m) < LOST_HEIGHT_TOLERANCE_M
         )
 
     # --- stepping ---------------------------------------------------------------------------------
     def step(self, motor_volts: float, n_steps: int = 1) -> None:
         """Advance ``n_steps`` physics steps with the motor's terminal volts held (the dcmotor clamps them to
-        the amplifier's rails). Then updates the latched ``ball_lost`` flag."""
+        the amplifier's rails), updating the latched ``ball_lost`` flag after each."""
         if not math.isfinite(motor_volts):
             raise ValueError(f"motor_volts = {motor_volts!r} is not finite")
         if self.model.nu:
             self.data.ctrl[0] = motor_volts
         for _ in range(n_steps):
             mujoco.mj_step(self.model, self.data)
-        # Checked once per call (a control tick), not per physics step: a Python-side check costs 4x a step.
-        if not self.ball_lost and not self.ball_on_track():
-            self.ball_lost = True
-            self.ball_lost_time_s = self.time_s
+            if not self.ball_lost and not self.ball_on_track():
+                self.ball_lost = True
+                self.ball_lost_time_s = self.time_s
         if not np.all(np.isfinite(self.data.qpos)):
             raise FloatingPointError(f"MuJoCo state is not finite at t = {self.time_s:.3f} s")
 
