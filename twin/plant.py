@@ -65,9 +65,17 @@ class Plant:
         return float(self.data.time)
 
     def reset(
-        self, x_m: float = 0.0, theta_rad: float = 0.0, xdot_m_s: float = 0.0, thetadot_rad_s: float = 0.0
+        self,
+        x_m: float = 0.0,
+        theta_rad: float = 0.0,
+        xdot_m_s: float = 0.0,
+        thetadot_rad_s: float = 0.0,
+        *,
+        keep_time: bool = False,
     ) -> None:
-        """Put the ball on the wires at x, rolling without slipping at ẋ, and the beam at θ, θ̇."""
+        """Put the ball on the wires at x, rolling without slipping at ẋ, and the beam at θ, θ̇.
+
+        ``keep_time`` keeps the simulation clock running (a disturbance mid-run rather than a new run)."""
         for name, value in (("x_m", x_m), ("theta_rad", theta_rad), ("xdot_m_s", xdot_m_s),
                             ("thetadot_rad_s", thetadot_rad_s)):
             if not math.isfinite(value):
@@ -82,7 +90,10 @@ class Plant:
                 f"initial theta_rad = {theta_rad!r} is beyond the stops (|θ| ≤ {p.beam.stop_angle_rad:.4f} rad)"
             )
         m, d = self.model, self.data
+        time_s = d.time
         mujoco.mj_resetData(m, d)
+        if keep_time:
+            d.time = time_s
         if self._hinge_qpos is not None:
             d.qpos[self._hinge_qpos] = theta_rad
             d.qvel[self._hinge_dof] = thetadot_rad_s
@@ -127,6 +138,10 @@ class Plant:
             velocity_m_s=np.array([v_rel @ ex, v_rel @ ey, v_rel @ ez]),
             spin_rad_s=float((omega_ball - omega_beam) @ axis),
         )
+
+    def state_angle_rad(self) -> float:
+        """θ alone, cheaply (rad)."""
+        return self._theta()
 
     def _theta(self) -> float:
         if self._hinge_qpos is None:

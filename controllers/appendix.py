@@ -1,0 +1,97 @@
+"""The two TimerFcn callbacks of appendix A, ported line by line: the code that ran on the rig.
+
+``d_cb_state_feedback`` and ``d_cb_control_law`` (file "d_cb_computed_torque.m") in their ``control == 5``
+(Drive Motor) branch, with their numbers, conversions, clipping and the signal each feeds its observer:
+state feedback feeds back the clipped motor volts (u(k) = (adat − 2.5)·9.6), control-law partitioning the
+computed torque T. The ``control == 1``/``4`` branches (Start, Clear Buffer) only set x1(1), x2(1), which is
+``start``. These numbers differ from chapters 4–5 in places (e.g. β's 0.17 vs 0.1849, kp 40/38 vs
+29.77/37.94, the observer's G = [[4, 8], [−15, 12]] vs the printed [[4, −8], [−15, 12]]); they are kept
+exactly as printed because they are what stabilised the real rig.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from twin.converters import ball_position_m, beam_angle_rad
+from twin.interface import Controller, DaqSample, Telemetry
+
+__all__ = ["AppendixStateFeedback", "AppendixControlLaw"]
+
+
+class _AppendixCallback(Controller):
+    """Shared bookkeeping of the callbacks: tick index k (1 at start) and the MATLAB values at k − 1
+    (x1(k−1) … x4(k−1), u(k−1)), the only ones the callbacks read back."""
+
+    def start(self, sample: DaqSample, true_state: np.ndarray | None = None) -> None:
+        # control == 1 / 4: x1(1), x2(1) from the measurements; x3(1) = x4(1) = u(1) = 0 (zeros(...)).
+        self.k = 1
+        x1, x2 = ball_position_m(sample.ball_v), beam_angle_rad(sample.angle_v)
+        self.prev = (x1, x2, 0.0, 0.0, 0.0)
+        self.telemetry = Telemetry(np.array([x1, x2, 0.0, 0.0]), 0.0, 0.0)
+
+    def _measure(self, sample: DaqSample) -> tuple[float, float]:
+        self.k += 1
+        x1_k = (0.0693 * sample.ball_v) + 0.0018
+        x2_temp_2 = (143.22657649 * (sample.angle_v - 5.002) + 718.59375) / 7
+        x2_k = x2_temp_2 * (3.141592654 / 180)
+        return x1_k, x2_k
+
+    @staticmethod
+    def _clip(adat: float) -> float:
+        if adat > 3.75:
+            adat = 3.75
+        elif adat < 1.25:
+            adat = 1.25
+        return adat
+
+
+class AppendixStateFeedback(_AppendixCallback):
+    """``d_cb_state_feedback`` (appendix A)."""
+
+    name = "appendix-sf"
+
+    def update(self, sample: DaqSample, true_state: np.ndarray | None = None) -> float:
+        x1_k, x2_k = self._measure(sample)
+        x1, x2, x3, x4, u = self.prev
+        x3_k = 0.9207 * x3 - 0.1601 * x4 - 3.9409 * x1 - 8.0826 * x2 - 0.0055 * u + 4 * x1_k + 8 * x2_k
+        x4_k = 0.2927 * x3 + 0.7494 * x4 + 14.257 * x1 - 11.945 * x2 + 0.0717 * u - 15 * x1_k + 12 * x2_k
+        u_temp = -1 * (-36.3437 * x1_k + 24.5992 * x2_k - 15.9593 * x3_k + 3.9815 * x4_k)
+        adat = self._clip((u_temp / 9.6) + 2.5)
+        u_k = (adat - 2.5) * 9.6
+        self.prev = (x1_k, x2_k, x3_k, x4_k, u_k)
+        self.telemetry = Telemetry(np.array([x1_k, x2_k, x3_k, x4_k]), u_k, u_temp)
+        return adat
+
+
+class AppendixControlLaw(_AppendixCallback):
+    """``d_cb_control_law`` (appendix A, file "d_cb_computed_torque.m")."""
+
+    name = "appendix-clp"
+
+    def update(self, sample: DaqSample, true_state: np.ndarray | None = None) -> float:
+        x1_k, x2_k = self._measure(sample)
+        x1, x2, x3, x4, u = self.prev
+        # REDUCED ORDER OBSERVER
+        x3_k = ((u * 0.066) + ((x1 * -40.011) + (x2 * 0.1797)) + ((x3 * 0.2) + (x4 * 0.0036))
+                + ((x1_k * 39.9998) + (x2_k * -0.227)))
+        x4_k = ((u * 3.0244) + ((x1 * -0.462) + (x2 * -39.563)) + ((x3 * -0.0036) + (x4 * 0.2))
+                + ((x1_k * -0.0452) + (x2_k * 39.608)))
+        # FIND_BETA
+        beta = ((-0.0137 * math.sin(x2_k)) + (0.17 * x1_k * math.cos(x2_k)) + (0.0346 * x1_k * x3_k * x4_k)
+                + (-0.000373 * x1_k * (x4_k**2)))
+        # FIND_FPRIME: D = -[-40 0; 0 38]*[x1; x2]; E = -[-23.5604 0; 0 5.1736]*[x3; x4]
+        d = (-(-40.0) * x1_k, -(38.0) * x2_k)
+        e = (-(-23.5604) * x3_k, -(5.1736) * x4_k)
+        b = (d[0] + e[0], d[1] + e[1])
+        c = (x1_k**2 * 0.01732) + 0.004
+        f_prime = 0.003833 * b[0] + c * b[1]
+        # FIND_TORQUE, then voltage
+        t = beta + f_prime
+        v_temp = ((t * 9.4) / (0.022 * 7)) + (x4_k * 0.022 * 7)
+        adat = self._clip((v_temp / 9.6) + 2.5)
+        self.prev = (x1_k, x2_k, x3_k, x4_k, t)
+        self.telemetry = Telemetry(np.array([x1_k, x2_k, x3_k, x4_k]), t, v_temp)
+        return adat

@@ -1,0 +1,157 @@
+"""Controller and observer design (thesis chapters 4–5), separate from the code that runs at 50 Hz.
+
+Every function takes the model matrices and the poles (or specification) it is asked for and returns gains;
+nothing here reads a sensor. The designs are computed with python-control.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import control
+import numpy as np
+
+__all__ = [
+    "DesignError",
+    "state_feedback_gain",
+    "ReducedObserver",
+    "reduced_order_observer",
+    "clp_gains",
+    "clp_effective_gain",
+    "SlidingSurface",
+    "sliding_surface",
+    "continuous_poles_to_discrete",
+    "check_poles",
+]
+
+
+class DesignError(ValueError):
+    """A design that cannot be done as asked (uncontrollable pair, poles not placeable, …)."""
+
+
+def check_poles(matrix: np.ndarray, poles: np.ndarray, tol: float = 1e-6) -> float:
+    """Largest distance between the eigenvalues of ``matrix`` and the requested ``poles`` (matched)."""
+    eig = np.sort_complex(np.linalg.eigvals(matrix))
+    want = np.sort_complex(np.asarray(poles, dtype=complex))
+    remaining = list(want)
+    worst = 0.0
+    for e in eig:
+        j = int(np.argmin([abs(e - w) for w in remaining]))
+        worst = max(worst, abs(e - remaining.pop(j)))
+    return worst
+
+
+def state_feedback_gain(a: np.ndarray, b: np.ndarray, poles: np.ndarray | list[complex]) -> np.ndarray:
+    """K (1×n) with eig(A − B·K) = poles, for u = −K·x (continuous A, B or discrete Φ, Γ alike).
+
+    Single input: Ackermann's formula, which also places repeated poles (the thesis's −7.5, −7.5)."""
+    a, b = np.atleast_2d(a), np.atleast_2d(b)
+    poles = np.asarray(poles, dtype=complex)
+    if np.linalg.matrix_rank(control.ctrb(a, b)) < a.shape[0]:
+        raise DesignError("the pair (A, B) is not controllable: the poles cannot be placed")
+    k = np.real(control.acker(a, b, poles)) if b.shape[1] == 1 else np.real(control.place(a, b, poles))
+    k = np.atleast_2d(k)
+    worst = check_poles(a - b @ k, poles)
+    if worst > 1e-6 * max(1.0, np.max(np.abs(poles))):
+        raise DesignError(f"placed poles are off by {worst:.3g} (numerically ill-conditioned request)")
+    return k
+
+
+@dataclass(frozen=True)
+class ReducedObserver:
+    """Reduced-order prediction observer of eq 5.2.19 for x = (x_a, x_b), x_a measured.
+
+        x̂_b[k] = F·x̂_b[k−1] + Ga·x_a[k−1] + G·x_a[k] + H·u[k−1]
+
+    with F = Φ_bb − G·Φ_ab, Ga = Φ_ba − G·Φ_aa, H = Γ_b − G·Γ_a (eq 5.2.19 regrouped)."""
+
+    gain: np.ndarray  # G (n_b × n_a)
+    f: np.ndarray
+    ga: np.ndarray
+    h: np.ndarray
+
+    @classmethod
+    def from_gain(cls, phi: np.ndarray, gamma: np.ndarray, gain: np.ndarray, n_measured: int = 2) -> "ReducedObserver":
+        na = n_measured
+        paa, pab, pba, pbb = phi[:na, :na], phi[:na, na:], phi[na:, :na], phi[na:, na:]
+        ga_, gb_ = gamma[:na], gamma[na:]
+        g = np.asarray(gain, dtype=float)
+        return cls(gain=g, f=pbb - g @ pab, ga=pba - g @ paa, h=gb_ - g @ ga_)
+
+    def error_poles(self) -> np.ndarray:
+        """Eigenvalues of Φ_bb − G·Φ_ab (eq 5.2.21): the estimation error's dynamics."""
+        return np.linalg.eigvals(self.f)
+
+
+def reduced_order_observer(
+    phi: np.ndarray, gamma: np.ndarray, poles: np.ndarray | list[complex], n_measured: int = 2
+) -> ReducedObserver:
+    """G with eig(Φ_bb − G·Φ_ab) = poles (§5.2): pole placement on the dual pair (Φ_bbᵀ, Φ_abᵀ)."""
+    na = n_measured
+    pab, pbb = phi[:na, na:], phi[na:, na:]
+    poles = np.asarray(poles, dtype=complex)
+    if np.linalg.matrix_rank(control.obsv(pbb, pab)) < pbb.shape[0]:
+        raise DesignError("(Φ_bb, Φ_ab) is not observable: the observer poles cannot be placed")
+    if pab.shape[0] == 1:
+        g = np.real(control.acker(pbb.T, pab.T, poles)).T
+    else:
+        g = np.real(control.place(pbb.T, pab.T, poles)).T
+    obs = ReducedObserver.from_gain(phi, gamma, g, na)
+    worst = check_poles(obs.f, poles)
+    if worst > 1e-6:
+        raise DesignError(f"observer poles are off by {worst:.3g}")
+    return obs
+
+
+def clp_effective_gain(alpha0: np.ndarray, kp: np.ndarray, kv: np.ndarray) -> np.ndarray:
+    """The state feedback the control-law-partitioning servo law is at the origin (eq 4.3.5–4.3.6):
+
+        τ = α·(−kp·(x, θ) − kv·(ẋ, θ̇)) + β   ⇒   K = [α₁kp₁, α₂kp₂, α₁kv₁, α₂kv₂] (plus β's linear part)."""
+    a1, a2 = np.asarray(alpha0, dtype=float).ravel()
+    kp, kv = np.diag(kp), np.diag(kv)
+    return np.array([[a1 * kp[0], a2 * kp[1], a1 * kv[0], a2 * kv[1]]])
+
+
+def clp_gains(
+    a: np.ndarray, b: np.ndarray, alpha0: np.ndarray, beta_lin: np.ndarray, poles: np.ndarray | list[complex]
+) -> tuple[np.ndarray, np.ndarray]:
+    """Diagonal kp, kv such that the linearized loop τ = α₀·τ̄ + β_lin·x, τ̄ = −kp·ζ − kv·ζ̇ has the
+    requested four poles (eq 4.3.5–4.3.10 applied to the torque-input model A, B).
+
+    The servo law has exactly four gains for four poles, so the placement is a state feedback in disguise:
+    K_total = α-weighted (kp, kv) − β_lin, solved for the diagonal entries."""
+    k = state_feedback_gain(a + b @ np.atleast_2d(beta_lin), b, poles)[0]
+    a1, a2 = np.asarray(alpha0, dtype=float).ravel()
+    kp = np.diag([k[0] / a1, k[1] / a2])
+    kv = np.diag([k[2] / a1, k[3] / a2])
+    return kp, kv
+
+
+@dataclass(frozen=True)
+class SlidingSurface:
+    """Sliding-mode design of §4.4 in original coordinates: s(x) = S·x, u_eq = −K_eq·x (eq 4.4.6)."""
+
+    surface: np.ndarray  # S̄ (1×n)
+    equivalent_gain: np.ndarray  # K_eq (1×n), u_eq = −K_eq·x
+    transform: np.ndarray  # T_r of eq 4.4.11
+    sliding_poles: np.ndarray  # eig(A11 − A12·M)
+
+
+def sliding_surface(a: np.ndarray, b: np.ndarray, poles: np.ndarray | list[complex]) -> SlidingSurface:
+    """Regular form by QR of B (eq 4.4.11), M placing eig(A11 − A12·M) = poles (eq 4.4.19), S₂ = 1."""
+    n = a.shape[0]
+    q, _ = np.linalg.qr(b, mode="complete")
+    tr = q.T[::-1]  # last row along B: T_r·B = [0; B₂]
+    ar = tr @ a @ tr.T
+    a11, a12 = ar[: n - 1, : n - 1], ar[: n - 1, n - 1 :]
+    m = state_feedback_gain(a11, a12, poles)
+    s_reg = np.hstack([m, np.ones((1, 1))])
+    s = s_reg @ tr
+    k_eq = np.linalg.solve(s @ b, s @ a)
+    return SlidingSurface(surface=s, equivalent_gain=k_eq, transform=tr,
+                          sliding_poles=np.linalg.eigvals(a11 - a12 @ m))
+
+
+def continuous_poles_to_discrete(poles: np.ndarray | list[complex], period_s: float) -> np.ndarray:
+    """z = e^{sT} (§5.2.1)."""
+    return np.exp(np.asarray(poles, dtype=complex) * period_s)

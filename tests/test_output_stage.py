@@ -1,0 +1,49 @@
+"""DAC → power amplifier → motor volts (§6.4, Table 6.4)."""
+
+import math
+
+import numpy as np
+import pytest
+
+from twin.output_stage import amplifier_volts, motor_volts
+from twin.parameters import Parameters
+
+P = Parameters()
+DAC_LSB = 5.0 / 4096
+# A command off the DAC grid moves by at most half a DAC step, ×9.6 at the motor: 5.86 mV.
+DAC_TOLERANCE_V = 9.6 * DAC_LSB / 2
+
+
+def test_full_scale_commands_of_section_6_4():
+    # 1.25 / 2.5 / 3.75 V → −12 / 0 / +12 V (§6.4). These commands are exact DAC codes, so exact volts.
+    assert motor_volts(1.25, P) == -12.0
+    assert motor_volts(2.5, P) == 0.0
+    assert motor_volts(3.75, P) == 12.0
+
+
+def test_amplifier_rails_clip_beyond_the_software_limits():
+    assert motor_volts(0.0, P) == -12.0
+    assert motor_volts(5.0, P) == 12.0
+    assert motor_volts(-3.0, P) == -12.0  # below the card's range: the DAC clips to 0 V first
+    np.testing.assert_array_equal(motor_volts(np.array([1.0, 4.0]), P), [-12.0, 12.0])
+
+
+def test_dac_quantization_shows_between_codes():
+    commands = np.random.default_rng(3).uniform(1.3, 3.7, 500)
+    ideal = 9.6 * (commands - 2.5)
+    got = motor_volts(commands, P)
+    err = np.abs(got - ideal)
+    assert err.max() <= DAC_TOLERANCE_V + 1e-12
+    assert err.max() > 0.5 * DAC_TOLERANCE_V  # the quantization is really there
+    assert motor_volts(2.6, P) == 9.6 * (2130 * DAC_LSB - 2.5)  # code round(2.6/LSB) = 2130 (2129.92)
+
+
+def test_amplifier_alone():
+    assert amplifier_volts(3.0, P.amplifier) == pytest.approx(4.8, abs=1e-12)
+    assert amplifier_volts(4.9, P.amplifier) == 12.0
+
+
+@pytest.mark.parametrize("bad", [math.nan, math.inf, -math.inf])
+def test_non_finite_command_raises_naming_it(bad):
+    with pytest.raises(ValueError, match=f"command_v contains {bad!r}"):
+        motor_volts(bad, P)

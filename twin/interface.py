@@ -1,0 +1,81 @@
+"""The two contracts of the rig, free of MuJoCo so that hardware code can import them alone.
+
+``Rig`` is what a controller talks to: the I/O card (raw volts in, a DAC command out, one block per tick).
+``TwinRig`` (twin.rig) implements it on the MuJoCo twin; a hardware backend implements the same three calls
+on the PCI-1712 (``getdata``/``putsample`` in the thesis's MATLAB software, appendix A).
+
+``Controller`` is what runs at each tick: ``start`` once with the first block (the software's Start and
+Clear Buffer phase, which sets x1(1), x2(1)), then ``update`` with each block, returning the DAC command.
+The controller that passes on the twin is the controller that drives the rig.
+"""
+
+from __future__ import annotations
+
+import math
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = ["DaqSample", "Rig", "Controller", "Telemetry"]
+
+
+@dataclass(frozen=True)
+class DaqSample:
+    """One block of the I/O card as the thesis software reduces it (appendix A, Table 6.4)."""
+
+    time_s: float  # time of the block's last sample: time(blocksize)
+    ball_v: float  # ball channel, last sample of the block: data(blocksize,1), ADC volts
+    angle_v: float  # angle channel, mean of the block: mean(data(:,2)), ADC volts
+
+
+class Rig(ABC):
+    """The I/O card as a controller sees it, on the twin or on the hardware."""
+
+    @property
+    @abstractmethod
+    def period_s(self) -> float:
+        """Control period: the card's timer period (0.02 s, Table 6.4)."""
+
+    @abstractmethod
+    def read(self) -> DaqSample:
+        """Wait for the next block and return it."""
+
+    @abstractmethod
+    def write(self, command_v: float) -> None:
+        """Set the analog output (0–5 V; the amplifier maps 1.25/2.5/3.75 V to −12/0/+12 V)."""
+
+
+def _nan4() -> np.ndarray:
+    return np.full(4, math.nan)
+
+
+@dataclass
+class Telemetry:
+    """What the thesis software logs each tick besides the raw data (appendix A)."""
+
+    estimate: np.ndarray = field(default_factory=_nan4)  # x1…x4: x (m), θ (rad), ẋ (m/s), θ̇ (rad/s)
+    u: float = math.nan  # u(k): torque (N·m) or motor volts, as the controller's software logs it
+    u_computed: float = math.nan  # uhesap/Vhesap: the computed value before the command limits
+
+
+class Controller(ABC):
+    """A controller of the rig: raw volts in, DAC command volts out, every ``period_s``.
+
+    ``uses_true_state`` marks simulation-only controllers (the thesis's chapter 4 designs assume all four
+    states are measured); the runner then passes the twin's true state, which no hardware can provide."""
+
+    name: str = "controller"
+    period_s: float = 0.02
+    uses_true_state: bool = False
+
+    def __init__(self) -> None:
+        self.telemetry = Telemetry()
+
+    @abstractmethod
+    def start(self, sample: DaqSample, true_state: np.ndarray | None = None) -> None:
+        """The first block, before the motor is driven: initialise the estimates from it."""
+
+    @abstractmethod
+    def update(self, sample: DaqSample, true_state: np.ndarray | None = None) -> float:
+        """One tick: the block just acquired → the DAC command (V). Updates ``self.telemetry``."""

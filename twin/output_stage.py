@@ -1,0 +1,37 @@
+"""The output side of the rig (§6.4): the I/O card's DAC, then the power amplifier, then the motor.
+
+    command (software volts) → DAC: 12 bit, 0…5 V, clipped to the card's range (twin.daq)
+                             → amplifier: V_motor = 9.6·(V_dac − 2.5), limited to ±12 V (§6.4)
+
+The software's own command limits (1.25…3.75 V, appendix A; 2…3 V on a first run, appendix B) are the
+controller's business (``twin.converters.clip_command_v``) and are not applied here: a controller that
+forgets them still cannot drive the motor beyond the amplifier's ±12 V.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from twin.converters import finite_values
+from twin.daq import dac_quantize_v
+from twin.parameters import Amplifier, Parameters
+
+__all__ = ["amplifier_volts", "motor_volts"]
+
+
+def amplifier_volts(dac_output_v: float | np.ndarray, amplifier: Amplifier) -> float | np.ndarray:
+    """Motor volts for the DAC's actual output: 9.6·(V − 2.5) clipped to ±12 V (§6.4)."""
+    v = finite_values(dac_output_v, "dac_output_v")
+    out = np.clip(
+        amplifier.gain_v_per_v * (v - amplifier.zero_command_v), -amplifier.rail_v, amplifier.rail_v
+    )
+    return float(out) if np.ndim(dac_output_v) == 0 else out
+
+
+def motor_volts(command_v: float | np.ndarray, params: Parameters) -> float | np.ndarray:
+    """Motor volts for a command written to the DAC: DAC quantization and range, then the amplifier.
+
+    NaN or infinite commands raise ValueError naming the value (the card cannot output them)."""
+    c = finite_values(command_v, "command_v")
+    out = amplifier_volts(dac_quantize_v(c, params.daq), params.amplifier)
+    return float(out) if np.ndim(command_v) == 0 else out

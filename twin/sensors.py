@@ -1,0 +1,445 @@
+"""The rig's two measurement chains in pure numpy: beam angle (§6.2) and ball position (§6.3).
+
+Beam angle (no randomness)::
+
+    θ → encoder on the motor shaft, 256 pulses/rev, gearbox 1:7: one count = 2π/(256·7) rad at the beam
+      → 10-bit up/down counter, set to 512 by the zero switch at the beam angle θ_zero (§6.6, Fig 7.20)
+      → AD561 DAC: Va = 0.009818·DI − 5.042 V (eq 6.2.6)
+      → ADC (12 bit, ±5 V), 800 samples per 20 ms block; the software uses the block MEAN (appendix A)
+
+  Counting convention: DI = 512 + floor((θ − θ_zero)/Δ + 0.5), i.e. the count changes half a count either
+  side of the zeroing angle. The counter is three 4-bit 74LS193 of which the DAC sees the low 10 bits
+  (§6.2), so outside 0…1023 the value wraps modulo 1024 (at the ±43.4° stops the count stays within
+  512 ± 216 unless the zeroing error exceeds ≈ 59°). Unmodelled: the direction-dependent switching point of
+  a real up/down pulse decoder (hysteresis below one count) and gearbox backlash.
+
+Ball position (seeded randomness)::
+
+    x → wiper on the resistance wire, measured static curve Table 6.3 (interpolated piecewise linearly)
+      → contact noise: dropouts start as a Poisson process (rate λ), last Exp(mean μ); during a dropout,
+        or when the ball is off the track, the wiper is at ``dropout_voltage_v``
+      → RC low-pass 147 Ω / 22 µF (τ = 3.234 ms), integrated exactly
+      → ADC; the software uses the LAST sample of the block (appendix A)
+
+  Static curve beyond the table's ends (only reachable if ``track.half_length_m`` is set above 0.323 m):
+  clamped to the end values, because the table's end points are the wire's ends, where the ball is in the
+  last place it can touch the wire; beyond ``track.half_length_m`` the ball has no contact at all.
+"""
+
+from __future__ import annotations
+
+import functools
+import itertools
+import math
+
+import numpy as np
+
+from twin.converters import finite_values
+from twin.daq import adc_quantize_v
+from twin.parameters import AngleSensor, Daq, Parameters
+
+__all__ = [
+    "CONTINUITY_TOLERANCE_SAMPLES",
+    "SNAP_TOLERANCE_SAMPLES",
+    "TABLE_6_3_POSITION_M",
+    "TABLE_6_3_VOLTAGE_V",
+    "AngleChain",
+    "BallPositionChain",
+    "angle_block_mean_bruteforce_v",
+    "angle_block_mean_v",
+    "angle_count_step_rad",
+    "angle_sensor_v",
+    "counter_dac_v",
+    "counter_value",
+    "wiper_static_v",
+]
+
+# Table 6.3: ball position (m) and the voltage measured at the I/O card (V), the rig's only hardware data
+# for this sensor. Not a straight line (the thesis's own remark); eq 6.3.1 is a least-squares fit of it.
+TABLE_6_3_POSITION_M = np.array(
+    [-0.323, -0.30, -0.27, -0.24, -0.21, -0.18, -0.15, -0.12, -0.09, -0.06, -0.03, 0.0,
+     0.03, 0.06, 0.09, 0.12, 0.15, 0.18, 0.21, 0.24, 0.27, 0.30, 0.323]
+)  # fmt: skip
+TABLE_6_3_VOLTAGE_V = np.array(
+    [-4.620, -4.410, -3.925, -3.460, -3.045, -2.620, -2.170, -1.747, -1.325, -0.895, -0.487, 0.0012,
+     0.428, 0.840, 1.280, 1.716, 2.113, 2.470, 3.000, 3.460, 3.890, 4.340, 4.600]
+)  # fmt: skip
+
+# A knot time within this many sample periods (25 ps at 40 kHz) of a sample instant is that instant: knot
+# times like k·1 ms accumulate rounding, and θ is continuous there, so the choice only removes float noise.
+SNAP_TOLERANCE_SAMPLES = 1e-6
+# A block must start where the previous one ended, within this fraction of a sample period (0.25 µs): the
+# caller's clock (MuJoCo's time += timestep) accumulates float rounding over long runs.
+CONTINUITY_TOLERANCE_SAMPLES = 0.01
+# Above this many count changes within one block (a beam faster than ≈ 16 rad/s) the 800-sample evaluation
+# is cheaper than per-crossing bookkeeping (measured crossover ≈ 90 crossings, ~80 µs); both are exact.
+_MAX_CROSSINGS_FAST = 90
+
+
+# --- beam angle ------------------------------------------------------------------------------------------
+def angle_count_step_rad(params: Parameters) -> float:
+    """One counter count at the beam: 2π/(256·7) = 3.506e-3 rad = 0.2009° (eq 6.2.1)."""
+    return 2.0 * math.pi / (params.angle_sensor.encoder_pulses_per_rev * params.motor.gear_ratio)
+
+
+def _counts_unwrapped(theta: np.ndarray, params: Parameters) -> np.ndarray:
+    s = params.angle_sensor
+    return s.counter_zero_count + np.floor((theta - s.zeroing_error_rad) / angle_count_step_rad(params) + 0.5)
+
+
+def _counter_modulus(params: Parameters) -> int:
+    return 2 ** int(params.angle_sensor.counter_bits)
+
+
+def counter_value(theta_rad: float | np.ndarray, params: Parameters) -> int | np.ndarray:
+    """The 10-bit counter's value DI for beam angle(s): 512 + floor((θ − θ_zero)/Δ + 0.5), modulo 1024."""
+    theta = finite_values(theta_rad, "theta_rad")
+    di = np.mod(_counts_unwrapped(theta, params), _counter_modulus(params)).astype(np.int64)
+    return int(di) if np.ndim(theta_rad) == 0 else di
+
+
+def counter_dac_v(di: int | np.ndarray, params: Parameters) -> float | np.ndarray:
+    """AD561 output for counter value(s) DI: Va = 0.009818·DI − 5.042 V (eq 6.2.6)."""
+    d = finite_values(di, "di")
+    if np.any(d != np.floor(d)) or np.any(d < 0) or np.any(d >= _counter_modulus(params)):
+        raise ValueError(
+            f"di = {di!r} is impossible: counter values are integers 0…{_counter_modulus(params) - 1}"
+        )
+    s = params.angle_sensor
+    out = s.dac_volts_per_count * d + s.dac_offset_v
+    return float(out) if np.ndim(di) == 0 else out
+
+
+def angle_sensor_v(theta_rad: float | np.ndarray, params: Parameters) -> float | np.ndarray:
+    """The angle circuit's analog output (before the ADC) for beam angle(s)."""
+    theta = finite_values(theta_rad, "theta_rad")
+    out = counter_dac_v(np.asarray(counter_value(theta, params)), params)
+    return float(out) if np.ndim(theta_rad) == 0 else out
+
+
+def _level_v(counts_unwrapped: np.ndarray, params: Parameters) -> np.ndarray:
+    """What the ADC reads for unwrapped counter values: wrap, DAC, quantize."""
+    s = params.angle_sensor
+    di = np.mod(counts_unwrapped, _counter_modulus(params))
+    return np.asarray(adc_quantize_v(s.dac_volts_per_count * di + s.dac_offset_v, params.daq))
+
+
+def _check_trajectory(
+    times_s: np.ndarray, values: np.ndarray, value_name: str
+) -> tuple[np.ndarray, np.ndarray]:
+    t = finite_values(times_s, "times_s")
+    v = finite_values(values, value_name)
+    if t.ndim != 1 or t.size < 2:
+        raise ValueError(f"times_s has shape {t.shape}: it must be 1-D with at least 2 times")
+    if v.shape != t.shape:
+        raise ValueError(f"{value_name} has shape {v.shape}: it must match times_s {t.shape}")
+    increasing = t[1:] > t[:-1]
+    if not increasing.all():
+        j = int(np.argmin(increasing))
+        raise ValueError(
+            f"times_s must increase strictly: times_s[{j + 1}] = {t[j + 1]!r} ≤ times_s[{j}] = {t[j]!r}"
+        )
+    return t, v
+
+
+def _sample_positions(t: np.ndarray, daq: Daq) -> list[float]:
+    """Knot times in sample periods from the block start, snapped to sample instants within tolerance."""
+    t0, fs = float(t[0]), daq.sample_rate_hz
+    positions = []
+    for tk in t.tolist():
+        sk = (tk - t0) * fs
+        nearest = round(sk)
+        positions.append(float(nearest) if abs(sk - nearest) < SNAP_TOLERANCE_SAMPLES else sk)
+    if positions[-1] < daq.block_size:
+        raise ValueError(
+            f"times_s ends at {t[-1]!r} s, before the block's last sample at "
+            f"{t0 + daq.block_size / fs!r} s: it must cover the whole block"
+        )
+    return positions
+
+
+@functools.lru_cache(maxsize=16)
+def _level_table(sensor: AngleSensor, daq: Daq) -> tuple[float, ...]:
+    """ADC reading for every counter value 0…1023 (the DAC output is constant between count changes)."""
+    di = np.arange(2 ** int(sensor.counter_bits), dtype=np.float64)
+    return tuple(
+        np.asarray(adc_quantize_v(sensor.dac_volts_per_count * di + sensor.dac_offset_v, daq)).tolist()
+    )
+
+
+def angle_block_mean_bruteforce_v(times_s: np.ndarray, theta_rad: np.ndarray, params: Parameters) -> float:
+    """Reference: the block mean computed sample by sample at 40 kHz.
+
+    θ is interpolated linearly between ``times_s`` at the 800 sample times t0 + (i + 1)/f_s (t0 = times_s[0]);
+    each sample is counted, converted by the DAC, quantized by the ADC, then averaged (appendix A)."""
+    t, theta = _check_trajectory(times_s, theta_rad, "theta_rad")
+    _sample_positions(t, params.daq)  # coverage check
+    daq = params.daq
+    sample_t = t[0] + np.arange(1, daq.block_size + 1) / daq.sample_rate_hz
+    return float(np.mean(_level_v(_counts_unwrapped(np.interp(sample_t, t, theta), params), params)))
+
+
+def angle_block_mean_v(times_s: np.ndarray, theta_rad: np.ndarray, params: Parameters) -> float:
+    """The angle channel as the software reads it: the mean of the block's 800 ADC samples (appendix A).
+
+    ``times_s`` starts at the block start t0 and reaches at least the block's last sample t0 + 800/f_s;
+    θ is linear between the given times (the physics steps). Exact, without per-sample work: when the
+    count is the same at every knot (a still or slow beam, the common case) the mean is that level;
+    otherwise the samples of each level are counted from the times θ crosses each count boundary (the
+    800-sample evaluation is kept for beams crossing more than ``_MAX_CROSSINGS_FAST`` counts per block).
+    Equal to ``angle_block_mean_bruteforce_v`` up to float rounding: a sample within ~1e-13 counts of a
+    boundary could fall on the other side."""
+    t, theta = _check_trajectory(times_s, theta_rad, "theta_rad")
+    sensor = params.angle_sensor
+    u = ((theta - sensor.zeroing_error_rad) / angle_count_step_rad(params) + 0.5).tolist()
+    return _block_mean(_sample_positions(t, params.daq), u, _level_table(sensor, params.daq), params)
+
+
+def _block_mean(s: list[float], u: list[float], levels: tuple[float, ...], params: Parameters) -> float:
+    """Block mean from knot positions ``s`` (sample periods) and ``u`` = (θ − θ_zero)/Δ + 0.5 at the knots.
+
+    Sample i (i = 1…800) in the knot interval (s_j, s_j+1] reads levels[(512 + floor(u(i))) mod 1024]."""
+    zero = int(params.angle_sensor.counter_zero_count)
+    modulus = len(levels)
+    n = params.daq.block_size
+    c = [math.floor(v) for v in u]
+    if min(c) == max(c):
+        return levels[(zero + c[0]) % modulus]
+    if sum(abs(b - a) for a, b in itertools.pairwise(c)) > _MAX_CROSSINGS_FAST:
+        return _block_mean_samplewise(s, u, levels, zero, n)
+    total = 0.0
+    for j in range(len(s) - 1):
+        first = math.floor(s[j]) + 1
+        last = min(math.floor(s[j + 1]), n)
+        if last < first:
+            continue
+        c0, c1 = c[j], c[j + 1]
+        total += (last - first + 1) * levels[(zero + c0) % modulus]
+        if c1 == c0:
+            continue
+        # u is linear on the interval; it reaches boundary m at s* = s_j + (m − u_j)/(u_j+1 − u_j)·(s_j+1 − s_j).
+        ds_du = (s[j + 1] - s[j]) / (u[j + 1] - u[j])
+        if c1 > c0:  # rising: the count is ≥ m at samples s ≥ s*
+            for m in range(c0 + 1, c1 + 1):
+                start = max(first, math.ceil(s[j] + (m - u[j]) * ds_du))
+                if start <= last:
+                    total += (last - start + 1) * (
+                        levels[(zero + m) % modulus] - levels[(zero + m - 1) % modulus]
+                    )
+        else:  # falling: the count is < m at samples s > s*
+            for m in range(c0, c1, -1):
+                start = max(first, math.floor(s[j] + (m - u[j]) * ds_du) + 1)
+                if start <= last:
+                    total += (last - start + 1) * (
+                        levels[(zero + m - 1) % modulus] - levels[(zero + m) % modulus]
+                    )
+    return total / n
+
+
+def _block_mean_samplewise(
+    s: list[float], u: list[float], levels: tuple[float, ...], zero: int, n: int
+) -> float:
+    """The 800-sample evaluation in sample units (fallback for very fast beams)."""
+    u_samples = np.interp(np.arange(1, n + 1, dtype=np.float64), s, u)
+    di = (zero + np.floor(u_samples).astype(np.int64)) % len(levels)
+    return float(np.mean(np.asarray(levels)[di]))
+
+
+class AngleChain:
+    """The beam-angle chain as one object (no randomness, no state besides the last reading)."""
+
+    def __init__(self, params: Parameters) -> None:
+        self.params = params
+        self.step_rad = angle_count_step_rad(params)
+        self.last_reading_v: float | None = None
+
+    def counter_value(self, theta_rad: float | np.ndarray) -> int | np.ndarray:
+        return counter_value(theta_rad, self.params)
+
+    def sensor_v(self, theta_rad: float | np.ndarray) -> float | np.ndarray:
+        """The analog output before the ADC."""
+        return angle_sensor_v(theta_rad, self.params)
+
+    def read_v(self, times_s: np.ndarray, theta_rad: np.ndarray) -> float:
+        """The block-mean ADC volts for one block (see ``angle_block_mean_v``)."""
+        self.last_reading_v = angle_block_mean_v(times_s, theta_rad, self.params)
+        return self.last_reading_v
+
+
+# --- ball position ---------------------------------------------------------------------------------------
+def wiper_static_v(x_m: float | np.ndarray) -> float | np.ndarray:
+    """Wiper volts for a ball touching the wire at x: Table 6.3 interpolated linearly, clamped at its ends."""
+    x = finite_values(x_m, "x_m")
+    out = np.interp(x, TABLE_6_3_POSITION_M, TABLE_6_3_VOLTAGE_V)
+    return float(out) if np.ndim(x_m) == 0 else out
+
+
+class BallPositionChain:
+    """Ball-position chain with its RC filter state and its seeded contact-noise process.
+
+    ``seed`` is an int (or a ``np.random.Generator``; ``None`` draws fresh entropy — not reproducible). The
+    dropout process is generated in time order, two draws per dropout (duration, then the wait to the next
+    start), so its realization does not depend on how the run is cut into blocks: the same seed and the
+    same calls give bit-identical readings.
+    """
+
+    def __init__(
+        self, params: Parameters, seed: int | np.random.Generator | None, *, x_m: float = 0.0
+    ) -> None:
+        self.params = params
+        self._rng = self._make_rng(seed)
+        s = params.ball_sensor
+        self.tau_s = s.rc_resistance_ohm * s.rc_capacitance_f
+        # Positions where the wiper's slope or the contact changes: Table 6.3's points and the track's ends.
+        half = params.track.half_length_m
+        self._breakpoints_m = np.unique(np.concatenate([TABLE_6_3_POSITION_M, [-half, half]]))
+        self.reset(x_m)
+
+    @staticmethod
+    def _make_rng(seed: int | np.random.Generator | None) -> np.random.Generator:
+        if isinstance(seed, np.random.Generator):
+            return seed
+        if seed is not None and (
+            isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0
+        ):
+            raise ValueError(f"seed = {seed!r} is not a non-negative integer, a numpy Generator or None")
+        return np.random.default_rng(seed)
+
+    @property
+    def _noise_on(self) -> bool:
+        s = self.params.ball_sensor
+        return bool(s.noise_enabled) and s.dropout_rate_hz > 0.0
+
+    def _connected_v(self, x: float, in_contact: bool) -> float:
+        """Wiper volts with no dropout: the static curve on the track, else the open-wiper voltage."""
+        if in_contact and abs(x) <= self.params.track.half_length_m:
+            return float(wiper_static_v(x))
+        return self.params.ball_sensor.dropout_voltage_v
+
+    def reset(
+        self,
+        x_m: float,
+        t_s: float = 0.0,
+        *,
+        in_contact: bool = True,
+        seed: int | np.random.Generator | None = None,
+    ) -> None:
+        """Ball at rest at ``x_m`` since long ago: the capacitor at the wiper's steady state, no dropouts so far.
+
+        ``seed`` (optional) restarts the noise process from that seed."""
+        x = float(finite_values(x_m, "x_m"))
+        t = float(finite_values(t_s, "t_s"))
+        if seed is not None:
+            self._rng = self._make_rng(seed)
+        self.time_s = t
+        self.wiper_v = self._connected_v(x, in_contact)
+        self.filtered_v = self.wiper_v
+        self.reading_v = float(adc_quantize_v(self.filtered_v, self.params.daq))
+        self._dropouts: list[tuple[float, float]] = []
+        self._first_open = 0
+        self._next_start_s = (
+            t + self._rng.exponential(1.0 / self.params.ball_sensor.dropout_rate_hz)
+            if self._noise_on
+            else math.inf
+        )
+
+    def set_params(self, params: Parameters) -> None:
+        """New sensor parameters from now on (e.g. noise switched on or off mid-run); the filter keeps its
+        charge and the noise process its seed."""
+        was_on = self._noise_on
+        self.params = params
+        s = params.ball_sensor
+        self.tau_s = s.rc_resistance_ohm * s.rc_capacitance_f
+        if not self._noise_on:
+            self._next_start_s = math.inf
+        elif not was_on:
+            self._next_start_s = self.time_s + self._rng.exponential(1.0 / s.dropout_rate_hz)
+
+    @property
+    def dropout_count(self) -> int:
+        """Dropouts started since the last reset."""
+        return len(self._dropouts)
+
+    @property
+    def dropout_intervals(self) -> list[tuple[float, float]]:
+        """(start, end) times of every dropout since the last reset (may extend past ``time_s``)."""
+        return list(self._dropouts)
+
+    def _schedule_until(self, t_end: float) -> None:
+        mean_s = self.params.ball_sensor.dropout_mean_duration_s
+        rate = self.params.ball_sensor.dropout_rate_hz
+        while self._next_start_s <= t_end:
+            start = self._next_start_s
+            self._dropouts.append((start, start + self._rng.exponential(mean_s)))
+            self._next_start_s = start + self._rng.exponential(1.0 / rate)
+
+    def advance(self, times_s: np.ndarray, x_m: np.ndarray, in_contact: bool | np.ndarray = True) -> float:
+        """Advance over one block and return the ADC reading of the ball channel at its end.
+
+        ``times_s`` runs from the chain's current time (the previous block's end) to this block's last
+        sample; ``x_m`` is the ball position there (linear in between). ``in_contact`` is one flag for the
+        block or one per time: the interval (times_s[j], times_s[j+1]] uses ``in_contact[j+1]`` (the state
+        at the end of that physics step). The block is split at table breakpoints and track ends crossed and
+        at dropout starts/ends, so the wiper is exactly linear or constant on each piece, and the RC update
+        is exact (closed form, not a numerical integration).
+        """
+        t, x = _check_trajectory(times_s, x_m, "x_m")
+        if abs(t[0] - self.time_s) > CONTINUITY_TOLERANCE_SAMPLES / self.params.daq.sample_rate_hz:
+            raise ValueError(
+                f"times_s[0] = {t[0]!r} s: the block must start at the chain's time {self.time_s!r} s"
+            )
+        contact = np.asarray(in_contact)
+        if contact.dtype != np.bool_ or contact.shape not in ((), t.shape):
+            raise ValueError(
+                f"in_contact = {in_contact!r}: it must be a bool or one bool per time in times_s"
+            )
+        t0, t_end = float(t[0]), float(t[-1])
+        self._schedule_until(t_end)
+        while self._first_open < len(self._dropouts) and self._dropouts[self._first_open][1] <= t0:
+            self._first_open += 1
+        drops = [d for d in self._dropouts[self._first_open :] if d[1] > t0]
+
+        # Extra breakpoints: where x crosses a table point or a track end (the wiper's slope or contact
+        # changes there) and where a dropout starts or ends.
+        segment = np.searchsorted(self._breakpoints_m, x)
+        extra = [edge for d in drops for edge in d if t0 < edge < t_end]
+        for j in np.flatnonzero(segment[1:] != segment[:-1]).tolist():
+            lo, hi = sorted((segment[j], segment[j + 1]))
+            crossed = self._breakpoints_m[lo:hi]
+            extra.extend((t[j] + (crossed - x[j]) / (x[j + 1] - x[j]) * (t[j + 1] - t[j])).tolist())
+        if extra:
+            knots = np.unique(np.concatenate([t, extra]))
+            xk = np.interp(knots, t, x)
+        else:
+            knots, xk = t, x
+        mid = 0.5 * (knots[:-1] + knots[1:])
+        connected = np.abs(0.5 * (xk[:-1] + xk[1:])) <= self.params.track.half_length_m
+        if contact.ndim == 0:
+            connected &= bool(contact)
+        elif not contact.all():
+            connected &= contact[np.searchsorted(t, mid, side="left")]
+        if drops:
+            d = np.array(drops)
+            connected &= ~((d[None, :, 0] < mid[:, None]) & (mid[:, None] < d[None, :, 1])).any(axis=1)
+        vk = np.interp(xk, TABLE_6_3_POSITION_M, TABLE_6_3_VOLTAGE_V)
+        v_drop = self.params.ball_sensor.dropout_voltage_v
+        v_start = np.where(connected, vk[:-1], v_drop)
+        v_end = np.where(connected, vk[1:], v_drop)
+
+        # τ·y' = v − y with v linear on a piece of length h from v_k to v_k+1 gives exactly
+        #   y_k+1 = E·y_k + (1 − E)·v_k + (v_k+1 − v_k)·(1 − (1 − E)/(h/τ)),  E = e^(−h/τ)
+        # (the last factor by its series for tiny h/τ, to avoid cancellation). Chained over all pieces:
+        #   y_end = e^(−T/τ)·y_0 + Σ_k e^(−(t_end − t_k+1)/τ)·[(1 − E_k)·v_k + (v_k+1 − v_k)·ramp_k].
+        a = np.diff(knots) / self.tau_s
+        one_minus = -np.expm1(-a)
+        ramp = np.where(
+            a < 1e-4, a / 2.0 - a * a / 6.0 + a**3 / 24.0, 1.0 - one_minus / np.maximum(a, 1e-300)
+        )
+        drive = one_minus * v_start + (v_end - v_start) * ramp
+        weight = np.exp((knots[1:] - t_end) / self.tau_s)
+        y = math.exp((t0 - t_end) / self.tau_s) * self.filtered_v + float(np.dot(weight, drive))
+        self.filtered_v = y
+        self.wiper_v = float(v_end[-1])
+        self.time_s = t_end
+        self.reading_v = float(adc_quantize_v(y, self.params.daq))
+        return self.reading_v
