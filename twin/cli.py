@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
+from pathlib import Path
 from typing import Sequence
 
 import numpy as np
@@ -57,6 +59,40 @@ def _cmd_params(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_run(args: argparse.Namespace) -> int:
+    from controllers import registry
+    from twin.log import save_csv, save_mat
+    from twin.runner import run_closed_loop
+
+    params = _load_params(args.params)
+    for name, value in (("--x0", args.x0), ("--theta0", args.theta0), ("--duration", args.duration)):
+        if not math.isfinite(value):
+            raise ParameterError(f"{name} = {value!r} is not a finite number")
+    if args.duration <= 0:
+        raise ParameterError(f"--duration = {args.duration!r} must be positive")
+    for path in (args.log, args.plot):
+        if path and Path(path).exists() and not args.overwrite:
+            raise ParameterError(f"{path}: exists; not overwritten (pass --overwrite)")
+    controller = registry.make(args.controller, params)
+    result = run_closed_loop(controller, x0_m=args.x0, theta0_rad=args.theta0, duration_s=args.duration,
+                             seed=args.seed, noise=not args.no_noise, params=params)
+    if args.log:
+        save = save_csv if Path(args.log).suffix.lower() == ".csv" else save_mat
+        save(result.log, args.log, overwrite=args.overwrite)
+    if args.plot:
+        from twin.plots import plot_run
+
+        plot_run(result, args.plot)
+    summary = {"controller": args.controller, "x0_m": args.x0, "theta0_rad": args.theta0, "seed": args.seed,
+               "noise": not args.no_noise, **result.metrics}
+    if args.json:
+        print(json.dumps(summary))
+    else:
+        for key, value in summary.items():
+            print(f"{key:<22} {value}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="ballbeam", description="Digital twin of the two-wire ball-and-beam rig.")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -68,6 +104,22 @@ def build_parser() -> argparse.ArgumentParser:
     lin.add_argument("--params", metavar="FILE", help="parameter file (TOML or JSON) overriding the defaults")
     lin.add_argument("--json", action="store_true", help="print JSON")
     lin.set_defaults(func=_cmd_linearize)
+
+    from controllers.registry import NAMES
+
+    run = sub.add_parser("run", help="run a controller on the twin in closed loop and report the verdict")
+    run.add_argument("--controller", required=True, choices=NAMES)
+    run.add_argument("--x0", type=float, required=True, metavar="M", help="initial ball position (m)")
+    run.add_argument("--theta0", type=float, required=True, metavar="RAD", help="initial beam angle (rad)")
+    run.add_argument("--duration", type=float, default=15.0, metavar="S", help="simulated seconds (default 15)")
+    run.add_argument("--seed", type=int, default=0, help="seed of the sensor noise (default 0)")
+    run.add_argument("--no-noise", action="store_true", help="switch the ball sensor's contact noise off")
+    run.add_argument("--log", metavar="FILE", help="save the run: .mat (thesis data_file format) or .csv")
+    run.add_argument("--plot", metavar="FILE", help="save a PNG of the run")
+    run.add_argument("--overwrite", action="store_true", help="replace existing --log/--plot files")
+    run.add_argument("--params", metavar="FILE", help="parameter file (TOML or JSON) overriding the defaults")
+    run.add_argument("--json", action="store_true", help="print the verdict as JSON")
+    run.set_defaults(func=_cmd_run)
 
     par = sub.add_parser("params", help="list every parameter with its unit and source")
     par.add_argument("--params", metavar="FILE", help="parameter file (TOML or JSON) overriding the defaults")
@@ -81,7 +133,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         return int(args.func(args))
-    except ParameterError as exc:
+    except (ParameterError, FileExistsError) as exc:
         print(f"ballbeam: error: {exc}", file=sys.stderr)
         return 2
     except BrokenPipeError:  # output piped into e.g. head
