@@ -93,6 +93,23 @@ def _cmd_run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_view(args: argparse.Namespace) -> int:
+    from twin.viewer import ViewerError, serve
+
+    params = _load_params(args.params)
+    if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
+        raise ParameterError(f"--duration = {args.duration!r} must be a positive number of seconds")
+    try:
+        stats = serve(host=args.host, port=args.port, controller=args.controller, speed=args.speed, seed=args.seed,
+                      duration_s=args.duration, params=params)
+    except ViewerError as exc:
+        print(f"ballbeam view: error: {exc}", file=sys.stderr)
+        return 2
+    if args.duration is not None and stats:
+        print(json.dumps(stats))
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="ballbeam", description="Digital twin of the two-wire ball-and-beam rig.")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -120,6 +137,16 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--params", metavar="FILE", help="parameter file (TOML or JSON) overriding the defaults")
     run.add_argument("--json", action="store_true", help="print the verdict as JSON")
     run.set_defaults(func=_cmd_run)
+
+    view = sub.add_parser("view", help="live 3D view of the twin in the browser (viser)")
+    view.add_argument("--host", default="127.0.0.1", help="interface to serve on (default 127.0.0.1: this machine only)")
+    view.add_argument("--port", type=int, default=8080, help="port (default 8080); a taken port is an error")
+    view.add_argument("--controller", default="appendix-clp", choices=NAMES)
+    view.add_argument("--speed", type=float, default=1.0, help="simulated seconds per wall second (default 1.0)")
+    view.add_argument("--seed", type=int, default=0, help="seed of the sensor noise (default 0)")
+    view.add_argument("--duration", type=float, metavar="S", help="stop after S wall-clock seconds (headless runs)")
+    view.add_argument("--params", metavar="FILE", help="parameter file (TOML or JSON) overriding the defaults")
+    view.set_defaults(func=_cmd_view)
 
     par = sub.add_parser("params", help="list every parameter with its unit and source")
     par.add_argument("--params", metavar="FILE", help="parameter file (TOML or JSON) overriding the defaults")

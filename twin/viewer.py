@@ -1,0 +1,377 @@
+"""Live browser view of the twin (viser): the rig in 3D at 50 Hz, controls, and live plots.
+
+The simulation loop owns the twin and the controller. GUI callbacks run on viser's thread pool and only
+enqueue actions, which the loop applies between ticks; each frame's scene updates are sent together.
+"""
+
+from __future__ import annotations
+
+import math
+import queue
+import socket
+import threading
+import time
+from collections import deque
+from dataclasses import dataclass, field
+from typing import Any
+
+import mujoco
+import numpy as np
+import trimesh
+import viser
+import viser.uplot
+
+from controllers import registry
+from twin import converters
+from twin.interface import Controller, DaqSample
+from twin.parameters import Parameters
+from twin.rig import TwinRig
+
+__all__ = ["LiveTwin", "ViewerError", "serve"]
+
+FRAME_S = 0.02  # scene updates at 50 Hz (the rig's tick)
+PLOT_EVERY_FRAMES = 5  # plots at 10 Hz: enough for the eye, a fifth of the traffic
+HISTORY_S = 10.0  # live plots show the last 10 s
+MAX_CATCH_UP_S = 0.25  # after a stall longer than this the pacing restarts instead of racing to catch up
+DEFAULT_CONTROLLER = "appendix-clp"
+
+
+class ViewerError(RuntimeError):
+    """The viewer cannot start (port taken, bad host, …)."""
+
+
+@dataclass
+class History:
+    """Bounded histories for the live plots (the last ``HISTORY_S`` seconds at 50 Hz)."""
+
+    size: int = int(HISTORY_S / FRAME_S)
+    columns: dict[str, deque] = field(default_factory=dict)
+
+    def append(self, **values: float) -> None:
+        for key, value in values.items():
+            self.columns.setdefault(key, deque(maxlen=self.size)).append(value)
+
+    def array(self, key: str) -> np.ndarray:
+        return np.asarray(self.columns.get(key, ()), dtype=float)
+
+    def clear(self) -> None:
+        self.columns.clear()
+
+
+class LiveTwin:
+    """The simulation side of the viewer: a twin, a controller, and the actions the GUI asks for.
+
+    Everything here runs on the loop's thread; ``enqueue`` is the only method other threads call."""
+
+    def __init__(self, params: Parameters, controller: str, seed: int, speed: float) -> None:
+        self.params = params
+        self.seed = seed
+        self.speed = speed
+        self.x0_m, self.theta0_rad = 0.15, 0.1
+        self.noise = params.ball_sensor.noise_enabled
+        self.reference_x_m = 0.0
+        self.running = True
+        self.history = History()
+        self.actions: queue.Queue[tuple[str, Any]] = queue.Queue()
+        self.ticks = 0
+        self._select(controller)
+
+    # --- called from any thread ---------------------------------------------------------------------
+    def enqueue(self, action: str, value: Any = None) -> None:
+        self.actions.put((action, value))
+
+    # --- loop thread --------------------------------------------------------------------------------
+    def _select(self, name: str) -> None:
+        self.controller_name = name
+        self._restart()
+
+    def _restart(self) -> None:
+        """A fresh run from the set initial state: new controller, twin at (x0, θ0) at rest."""
+        self.controller: Controller = registry.make(self.controller_name, self.params)
+        params = self.params.with_overrides({"daq.period_s": self.controller.period_s,
+                                             "ball_sensor.noise_enabled": self.noise})
+        self.rig = TwinRig(params, seed=self.seed)
+        self.rig.reset(self.x0_m, self.theta0_rad)
+        self._apply_reference()
+        first = self.rig.read()
+        self.controller.start(first, self.rig.true_state() if self.controller.uses_true_state else None)
+        self.last_sample: DaqSample = first
+        self.history.clear()
+        self._record()
+
+    @property
+    def supports_reference(self) -> bool:
+        return hasattr(getattr(self.controller, "law", None), "ref_x_m")
+
+    def _apply_reference(self) -> None:
+        if self.supports_reference:
+            self.controller.law.ref_x_m = self.reference_x_m
+
+    def apply_actions(self) -> None:
+        while True:
+            try:
+                action, value = self.actions.get_nowait()
+            except queue.Empty:
+                return
+            if action == "controller":
+                self._select(str(value))
+            elif action == "reset":
+                self._restart()
+            elif action == "run":
+                self.running = bool(value)
+            elif action == "step":
+                self.running = False
+                self.tick()
+            elif action == "initial":
+                self.x0_m, self.theta0_rad = float(value[0]), float(value[1])
+            elif action == "flick":
+                self.rig.kick_ball(float(value))
+            elif action == "noise":
+                self.noise = bool(value)
+                self.rig.set_noise(self.noise)
+            elif action == "speed":
+                self.speed = float(value)
+            elif action == "reference":
+                self.reference_x_m = float(value)
+                self._apply_reference()
+
+    def tick(self) -> None:
+        """One 20 ms frame of simulated time: as many controller periods as fit in it."""
+        n = max(1, int(round(FRAME_S / self.rig.period_s)))
+        truth_needed = self.controller.uses_true_state
+        for _ in range(n):
+            sample = self.rig.read()
+            command = self.controller.update(sample, self.rig.true_state() if truth_needed else None)
+            self.rig.write(command)
+            self.last_sample = sample
+        self.ticks += 1
+        self._record()
+
+    def _record(self) -> None:
+        x, theta, xdot, thetadot = self.rig.true_state()
+        est = self.controller.telemetry.estimate
+        s = self.last_sample
+        self.history.append(
+            t=self.rig.time_s, x_true=x, x_meas=converters.ball_position_m(s.ball_v), x_est=est[0],
+            th_true=theta, th_meas=converters.beam_angle_rad(s.angle_v), volts=self.rig.motor_volts_v,
+            err_xdot=est[2] - xdot, err_thdot=est[3] - thetadot,
+        )
+
+    def status_markdown(self) -> str:
+        state = "running" if self.running else "paused"
+        ball = f"**ball lost** at {self.rig.ball_lost_time_s:.2f} s" if self.rig.ball_lost else "ball on the beam"
+        return (f"**t = {self.rig.time_s:.2f} s** · {state} · controller: **{self.controller_name}** · {ball}  \n"
+                f"noise {'on' if self.noise else 'off'} · speed ×{self.speed:g} · "
+                f"motor {self.rig.motor_volts_v:+.2f} V")
+
+
+# --- scene ------------------------------------------------------------------------------------------------
+def _rgb(model: mujoco.MjModel, geom: int) -> tuple[int, int, int]:
+    mat = model.geom_matid[geom]
+    rgba = model.mat_rgba[mat] if mat >= 0 else model.geom_rgba[geom]
+    return tuple(int(round(255 * c)) for c in rgba[:3])
+
+
+def build_scene(server: viser.ViserServer, model: mujoco.MjModel) -> dict[int, Any]:
+    """Every geom of the MuJoCo model as a viser node under a frame per body; returns body id → frame."""
+    frames: dict[int, Any] = {}
+    for body in range(model.nbody):
+        name = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, body) or "world"
+        frames[body] = server.scene.add_frame(f"/{name}", show_axes=False)
+    for g in range(model.ngeom):
+        body = model.geom_bodyid[g]
+        body_name = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, body) or "world"
+        name = f"/{body_name}/{mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, g)}"
+        pose = {"position": tuple(model.geom_pos[g]), "wxyz": tuple(model.geom_quat[g])}
+        size, color, kind = model.geom_size[g], _rgb(model, g), model.geom_type[g]
+        if kind == mujoco.mjtGeom.mjGEOM_PLANE:
+            server.scene.add_box(name, color=color, dimensions=(2 * size[0], 2 * size[1], 0.002),
+                                 position=(pose["position"][0], pose["position"][1], -0.001), wxyz=pose["wxyz"])
+        elif kind == mujoco.mjtGeom.mjGEOM_BOX:
+            server.scene.add_box(name, color=color, dimensions=tuple(2 * size), **pose)
+        elif kind == mujoco.mjtGeom.mjGEOM_SPHERE:
+            server.scene.add_icosphere(name, radius=float(size[0]), color=color, subdivisions=3, **pose)
+        elif kind == mujoco.mjtGeom.mjGEOM_CYLINDER:
+            server.scene.add_cylinder(name, radius=float(size[0]), height=float(2 * size[1]), color=color, **pose)
+        elif kind == mujoco.mjtGeom.mjGEOM_CAPSULE:
+            mesh = trimesh.creation.capsule(height=float(2 * size[1]), radius=float(size[0]), count=[12, 12])
+            server.scene.add_mesh_simple(name, vertices=np.asarray(mesh.vertices, dtype=np.float32),
+                                         faces=np.asarray(mesh.faces, dtype=np.uint32), color=color, **pose)
+    return frames
+
+
+def _free_port_or_raise(host: str, port: int) -> None:
+    """viser moves silently to the next free port; a taken port is an error here instead."""
+    try:
+        infos = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)
+    except socket.gaierror as exc:
+        raise ViewerError(f"--host {host!r} cannot be resolved: {exc}") from None
+    family, _, _, _, address = infos[0]
+    with socket.socket(family, socket.SOCK_STREAM) as probe:
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            probe.bind(address)
+        except OSError as exc:
+            raise ViewerError(f"port {port} on {host} is taken ({exc.strerror}); choose another with --port") from None
+
+
+# --- server -----------------------------------------------------------------------------------------------
+class Viewer:
+    """viser server + GUI around a ``LiveTwin``, paced by the wall clock."""
+
+    def __init__(self, live: LiveTwin, host: str, port: int) -> None:
+        _free_port_or_raise(host, port)
+        self.live = live
+        self.server = viser.ViserServer(host=host, port=port, verbose=False)
+        if self.server.get_port() != port:
+            self.server.stop()
+            raise ViewerError(f"port {port} on {host} is taken; choose another with --port")
+        self.host, self.port = host, port
+        self.server.gui.configure_theme(show_share_button=False, control_width="large")
+        self.server.initial_camera.position = (0.16, -0.58, 0.36)
+        self.server.initial_camera.look_at = (0.16, 0.0, 0.25)
+        self.frames = build_scene(self.server, live.rig.plant.model)
+        self._build_gui()
+        self._frame_count = 0
+
+    def _build_gui(self) -> None:
+        gui, live = self.server.gui, self.live
+        self.status = gui.add_markdown(live.status_markdown())
+        with gui.add_folder("Run"):
+            controller = gui.add_dropdown("Controller", options=registry.NAMES, initial_value=live.controller_name)
+            run = gui.add_button("Pause")
+            step = gui.add_button("Step 20 ms")
+            reset = gui.add_button("Reset")
+            speed = gui.add_slider("Speed", min=0.1, max=4.0, step=0.1, initial_value=live.speed)
+            noise = gui.add_checkbox("Sensor noise", initial_value=live.noise)
+        with gui.add_folder("Initial state"):
+            x0 = gui.add_slider("x0 (m)", min=-0.3, max=0.3, step=0.01, initial_value=live.x0_m)
+            th0 = gui.add_slider("θ0 (rad)", min=-0.7, max=0.7, step=0.01, initial_value=live.theta0_rad)
+        with gui.add_folder("Disturb"):
+            kick = gui.add_slider("Flick (m/s)", min=0.02, max=0.5, step=0.01, initial_value=0.1)
+            flick_left = gui.add_button("Flick ◀")
+            flick_right = gui.add_button("Flick ▶")
+            reference = gui.add_slider("Setpoint x (m)", min=-0.2, max=0.2, step=0.01, initial_value=0.0,
+                                       disabled=not live.supports_reference)
+        self.reference_slider = reference
+        self.run_button = run
+
+        controller.on_update(lambda _: live.enqueue("controller", controller.value))
+        run.on_click(lambda _: live.enqueue("run", not live.running))
+        step.on_click(lambda _: live.enqueue("step"))
+        reset.on_click(lambda _: live.enqueue("reset"))
+        speed.on_update(lambda _: live.enqueue("speed", speed.value))
+        noise.on_update(lambda _: live.enqueue("noise", noise.value))
+        x0.on_update(lambda _: live.enqueue("initial", (x0.value, th0.value)))
+        th0.on_update(lambda _: live.enqueue("initial", (x0.value, th0.value)))
+        flick_left.on_click(lambda _: live.enqueue("flick", -kick.value))
+        flick_right.on_click(lambda _: live.enqueue("flick", kick.value))
+        reference.on_update(lambda _: live.enqueue("reference", reference.value))
+
+        empty = np.zeros(2)
+        series = viser.uplot.Series
+        scales = {"x": {"time": False, "auto": True}}
+        with gui.add_folder("Plots (last 10 s)"):
+            self.plot_x = gui.add_uplot(
+                (empty, empty, empty, empty),
+                (series(label="t (s)"), series(label="x true", stroke="#1f77b4"),
+                 series(label="x measured", stroke="#ff7f0e"), series(label="x estimated", stroke="#2ca02c")),
+                title="Ball position (m)", aspect=2.0, scales=scales)
+            self.plot_theta = gui.add_uplot(
+                (empty, empty, empty),
+                (series(label="t (s)"), series(label="θ true", stroke="#1f77b4"),
+                 series(label="θ measured", stroke="#ff7f0e")),
+                title="Beam angle (rad)", aspect=2.0, scales=scales)
+            self.plot_volts = gui.add_uplot(
+                (empty, empty), (series(label="t (s)"), series(label="motor V", stroke="#d62728")),
+                title="Motor voltage (V)", aspect=2.0, scales=scales)
+            self.plot_error = gui.add_uplot(
+                (empty, empty, empty),
+                (series(label="t (s)"), series(label="ẋ error (m/s)", stroke="#9467bd"),
+                 series(label="θ̇ error (rad/s)", stroke="#8c564b")),
+                title="Observer error (estimate − true)", aspect=2.0, scales=scales)
+
+    def publish(self) -> None:
+        """Send one frame: body poses (and every fifth frame the plots and status), as one batch."""
+        live = self.live
+        model, data = live.rig.plant.model, live.rig.plant.data
+        mujoco.mj_kinematics(model, data)  # poses of the current state (mj_step leaves xpos one step behind)
+        self._frame_count += 1
+        with self.server.atomic():
+            for body, frame in self.frames.items():
+                if body == 0:
+                    continue
+                frame.position = tuple(data.xpos[body])
+                frame.wxyz = tuple(data.xquat[body])
+            if self._frame_count % PLOT_EVERY_FRAMES == 0 or not live.running:
+                h = live.history
+                t = h.array("t")
+                if t.size >= 2:
+                    self.plot_x.data = (t, h.array("x_true"), h.array("x_meas"), h.array("x_est"))
+                    self.plot_theta.data = (t, h.array("th_true"), h.array("th_meas"))
+                    self.plot_volts.data = (t, h.array("volts"))
+                    self.plot_error.data = (t, h.array("err_xdot"), h.array("err_thdot"))
+                self.status.content = live.status_markdown()
+                self.run_button.label = "Pause" if live.running else "Start"
+                self.reference_slider.disabled = not live.supports_reference
+
+    def loop(self, duration_s: float | None, stop: threading.Event) -> dict[str, float]:
+        """Run until ``stop`` is set or ``duration_s`` of wall time passed; return pacing figures."""
+        live = self.live
+        start = time.perf_counter()
+        cpu_start = time.process_time()
+        sim_ticks = 0
+        next_frame = start
+        owed_s = 0.0  # simulated time owed to the wall clock at the current speed
+        while not stop.is_set():
+            now = time.perf_counter()
+            if duration_s is not None and now - start >= duration_s:
+                break
+            live.apply_actions()
+            if live.running:
+                owed_s += FRAME_S * live.speed
+                while owed_s >= FRAME_S - 1e-12:
+                    live.tick()
+                    sim_ticks += 1
+                    owed_s -= FRAME_S
+            self.publish()
+            next_frame += FRAME_S
+            delay = next_frame - time.perf_counter()
+            if delay > 0:
+                stop.wait(delay)
+            elif -delay > MAX_CATCH_UP_S:
+                next_frame = time.perf_counter()
+        wall = time.perf_counter() - start
+        return {"wall_s": wall, "ticks": sim_ticks, "tick_rate_hz": sim_ticks / wall if wall else 0.0,
+                "cpu_s_per_tick": (time.process_time() - cpu_start) / max(sim_ticks, 1),
+                "sim_time_s": live.rig.time_s}
+
+
+def serve(
+    *,
+    host: str = "127.0.0.1",
+    port: int = 8080,
+    controller: str = DEFAULT_CONTROLLER,
+    speed: float = 1.0,
+    seed: int = 0,
+    duration_s: float | None = None,
+    params: Parameters | None = None,
+    announce: bool = True,
+) -> dict[str, float]:
+    """Start the live view and block until interrupted (or ``duration_s`` of wall time passed)."""
+    if not (math.isfinite(speed) and 0 < speed <= 10):
+        raise ViewerError(f"--speed = {speed!r} must be in (0, 10]")
+    if controller not in registry.NAMES:
+        raise ViewerError(f"unknown controller {controller!r}; known: {', '.join(registry.NAMES)}")
+    live = LiveTwin(params or Parameters(), controller, seed, speed)
+    viewer = Viewer(live, host, port)
+    if announce:
+        print(f"ballbeam view: http://{host}:{viewer.server.get_port()} (controller {controller}, speed ×{speed:g})",
+              flush=True)
+    stop = threading.Event()
+    try:
+        return viewer.loop(duration_s, stop)
+    except KeyboardInterrupt:
+        return {}
+    finally:
+        viewer.server.stop()
