@@ -107,6 +107,15 @@ def test_page_shows_the_running_twin_and_its_controls(view: int) -> None:
         page.get_by_role("combobox", name="Controller").click()
         page.get_by_role("option", name="lqr", exact=True).click()
         page.wait_for_function("() => document.body.innerText.includes('controller: lqr')", timeout=15000)
+
+        # A second browser watches too; when it leaves, the first keeps receiving the running twin.
+        other = browser.new_page(viewport={"width": 1400, "height": 900})
+        other.goto(f"http://127.0.0.1:{view}")
+        other.wait_for_function("() => document.body.innerText.includes('controller: lqr')", timeout=15000)
+        other.close()
+        before = _sim_time(page)
+        page.wait_for_function(f"() => {{ const m = /t = ([0-9.]+) s/.exec(document.body.innerText);"
+                               f" return m && parseFloat(m[1]) > {before} + 1.0; }}", timeout=15000)
         browser.close()
 
 

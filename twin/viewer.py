@@ -35,6 +35,16 @@ HISTORY_S = 10.0  # live plots show the last 10 s
 MAX_CATCH_UP_S = 0.25  # after a stall longer than this the pacing restarts instead of racing to catch up
 DEFAULT_CONTROLLER = "appendix-clp"
 
+# Live plots: title, then (legend label, history key, colour) per trace.
+PLOTS = (
+    ("Ball position (m)", (("x true", "x_true", "#1f77b4"), ("x measured", "x_meas", "#ff7f0e"),
+                           ("x estimated", "x_est", "#2ca02c"))),
+    ("Beam angle (rad)", (("θ true", "th_true", "#1f77b4"), ("θ measured", "th_meas", "#ff7f0e"))),
+    ("Motor voltage (V)", (("motor V", "volts", "#d62728"),)),
+    ("Observer error (estimate − true)", (("ẋ error (m/s)", "err_xdot", "#9467bd"),
+                                          ("θ̇ error (rad/s)", "err_thdot", "#8c564b"))),
+)
+
 
 class ViewerError(RuntimeError):
     """The viewer cannot start (port taken, bad host, …)."""
@@ -268,28 +278,15 @@ class Viewer:
         flick_right.on_click(lambda _: live.enqueue("flick", kick.value))
         reference.on_update(lambda _: live.enqueue("reference", reference.value))
 
-        empty = np.zeros(2)
-        series = viser.uplot.Series
         scales = {"x": {"time": False, "auto": True}}
+        self.plots = []
         with gui.add_folder("Plots (last 10 s)"):
-            self.plot_x = gui.add_uplot(
-                (empty, empty, empty, empty),
-                (series(label="t (s)"), series(label="x true", stroke="#1f77b4"),
-                 series(label="x measured", stroke="#ff7f0e"), series(label="x estimated", stroke="#2ca02c")),
-                title="Ball position (m)", aspect=2.0, scales=scales)
-            self.plot_theta = gui.add_uplot(
-                (empty, empty, empty),
-                (series(label="t (s)"), series(label="θ true", stroke="#1f77b4"),
-                 series(label="θ measured", stroke="#ff7f0e")),
-                title="Beam angle (rad)", aspect=2.0, scales=scales)
-            self.plot_volts = gui.add_uplot(
-                (empty, empty), (series(label="t (s)"), series(label="motor V", stroke="#d62728")),
-                title="Motor voltage (V)", aspect=2.0, scales=scales)
-            self.plot_error = gui.add_uplot(
-                (empty, empty, empty),
-                (series(label="t (s)"), series(label="ẋ error (m/s)", stroke="#9467bd"),
-                 series(label="θ̇ error (rad/s)", stroke="#8c564b")),
-                title="Observer error (estimate − true)", aspect=2.0, scales=scales)
+            for title, traces in PLOTS:
+                series = [viser.uplot.Series(label="t (s)")] + [
+                    viser.uplot.Series(label=label, stroke=colour) for label, _, colour in traces]
+                data = tuple(np.zeros(2) for _ in series)
+                handle = gui.add_uplot(data, tuple(series), title=title, aspect=2.0, scales=scales)
+                self.plots.append((handle, [key for _, key, _ in traces]))
 
     def publish(self) -> None:
         """Send one frame: body poses (and every fifth frame the plots and status), as one batch."""
@@ -307,10 +304,8 @@ class Viewer:
                 h = live.history
                 t = h.array("t")
                 if t.size >= 2:
-                    self.plot_x.data = (t, h.array("x_true"), h.array("x_meas"), h.array("x_est"))
-                    self.plot_theta.data = (t, h.array("th_true"), h.array("th_meas"))
-                    self.plot_volts.data = (t, h.array("volts"))
-                    self.plot_error.data = (t, h.array("err_xdot"), h.array("err_thdot"))
+                    for handle, keys in self.plots:
+                        handle.data = (t, *(h.array(key) for key in keys))
                 self.status.content = live.status_markdown()
                 self.run_button.label = "Pause" if live.running else "Start"
                 self.reference_slider.disabled = not live.supports_reference
