@@ -15,7 +15,7 @@ import math
 
 import numpy as np
 
-from twin.converters import ball_position_m, beam_angle_rad
+from twin.converters import ball_position_m, beam_angle_rad, clip_command_v, dac_command_v
 from twin.interface import Controller, DaqSample, Telemetry
 
 __all__ = ["AppendixStateFeedback", "AppendixControlLaw"]
@@ -33,19 +33,15 @@ class _AppendixCallback(Controller):
         self.telemetry = Telemetry(np.array([x1, x2, 0.0, 0.0]), 0.0, 0.0)
 
     def _measure(self, sample: DaqSample) -> tuple[float, float]:
+        # x1(k) = (0.0693 * x1_temp) + 0.0018; x2(k) = ((143.22657649*(x2_temp - 5.002) + 718.59375)/7)
+        # * (3.141592654/180): the converters are these lines, operation for operation.
         self.k += 1
-        x1_k = (0.0693 * sample.ball_v) + 0.0018
-        x2_temp_2 = (143.22657649 * (sample.angle_v - 5.002) + 718.59375) / 7
-        x2_k = x2_temp_2 * (3.141592654 / 180)
-        return x1_k, x2_k
+        return ball_position_m(sample.ball_v), beam_angle_rad(sample.angle_v)
 
     @staticmethod
-    def _clip(adat: float) -> float:
-        if adat > 3.75:
-            adat = 3.75
-        elif adat < 1.25:
-            adat = 1.25
-        return adat
+    def _command(value_v: float) -> float:
+        # adat = (value/9.6) + 2.5, then clipped to 1.25…3.75 V.
+        return clip_command_v(dac_command_v(value_v))
 
 
 class AppendixStateFeedback(_AppendixCallback):
@@ -59,7 +55,7 @@ class AppendixStateFeedback(_AppendixCallback):
         x3_k = 0.9207 * x3 - 0.1601 * x4 - 3.9409 * x1 - 8.0826 * x2 - 0.0055 * u + 4 * x1_k + 8 * x2_k
         x4_k = 0.2927 * x3 + 0.7494 * x4 + 14.257 * x1 - 11.945 * x2 + 0.0717 * u - 15 * x1_k + 12 * x2_k
         u_temp = -1 * (-36.3437 * x1_k + 24.5992 * x2_k - 15.9593 * x3_k + 3.9815 * x4_k)
-        adat = self._clip((u_temp / 9.6) + 2.5)
+        adat = self._command(u_temp)
         u_k = (adat - 2.5) * 9.6
         self.prev = (x1_k, x2_k, x3_k, x4_k, u_k)
         self.telemetry = Telemetry(np.array([x1_k, x2_k, x3_k, x4_k]), u_k, u_temp)
@@ -91,7 +87,7 @@ class AppendixControlLaw(_AppendixCallback):
         # FIND_TORQUE, then voltage
         t = beta + f_prime
         v_temp = ((t * 9.4) / (0.022 * 7)) + (x4_k * 0.022 * 7)
-        adat = self._clip((v_temp / 9.6) + 2.5)
+        adat = self._command(v_temp)
         self.prev = (x1_k, x2_k, x3_k, x4_k, t)
         self.telemetry = Telemetry(np.array([x1_k, x2_k, x3_k, x4_k]), t, v_temp)
         return adat
