@@ -160,7 +160,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         return int(args.func(args))
-    except (ParameterError, FileExistsError) as exc:
+    except (ValueError, FileExistsError) as exc:  # bad input (ParameterError is a ValueError): no traceback
         print(f"ballbeam: error: {exc}", file=sys.stderr)
         return 2
     except BrokenPipeError:  # output piped into e.g. head

@@ -212,6 +212,8 @@ def build_scene(server: viser.ViserServer, model: mujoco.MjModel) -> dict[int, A
 
 def _free_port_or_raise(host: str, port: int) -> None:
     """viser moves silently to the next free port; a taken port is an error here instead."""
+    if not 1 <= port <= 65535:
+        raise ViewerError(f"--port {port} is not a TCP port (1–65535)")
     try:
         infos = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)
     except socket.gaierror as exc:
