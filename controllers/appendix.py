@@ -79,8 +79,8 @@ class AppendixControlLaw(_AppendixCallback):
         beta = ((-0.0137 * math.sin(x2_k)) + (0.17 * x1_k * math.cos(x2_k)) + (0.0346 * x1_k * x3_k * x4_k)
                 + (-0.000373 * x1_k * (x4_k**2)))
         # FIND_FPRIME: D = -[-40 0; 0 38]*[x1; x2]; E = -[-23.5604 0; 0 5.1736]*[x3; x4]
-        d = (-(-40.0) * x1_k, -(38.0) * x2_k)
-        e = (-(-23.5604) * x3_k, -(5.1736) * x4_k)
+        d = (40.0 * x1_k, -38.0 * x2_k)  # negating the literals is exact: same bits as MATLAB
+        e = (23.5604 * x3_k, -5.1736 * x4_k)
         b = (d[0] + e[0], d[1] + e[1])
         c = (x1_k**2 * 0.01732) + 0.004
         f_prime = 0.003833 * b[0] + c * b[1]

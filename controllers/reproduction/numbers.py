@@ -216,7 +216,6 @@ def _eq32_coefficients(p: Parameters) -> list[Entry]:
     xdd_n, _, _ = noK2.numerators(p)
     keys = list(EQ323)
     printed = [EQ323[k] for k in keys]
-    full = [xdd[k] for k in keys]
     dropped = [xdd_n[k] for k in keys]
     errs_full = {k: abs(xdd[k] - EQ323[k]) / abs(EQ323[k]) for k in keys}
     errs_drop = {k: abs(xdd_n[k] - EQ323[k]) / abs(EQ323[k]) for k in keys}
@@ -278,7 +277,6 @@ def _eq328(p: Parameters, a_m: np.ndarray, b_m: np.ndarray) -> list[Entry]:
         a, b = thesis_equations_linear(p, **kw)
         return np.array([a[2, 0], a[2, 1], b[2, 0]])
 
-    m = p.ball.mass_kg
     hyps["model (twin, r*=4.676 mm, J=2/5 m r²)"] = row3_m
     hyps["printed r* = 4.264 mm"] = row3(rs=tn.R_STAR_PRINTED_M)
     hyps["J = 0.455e-6 (Table 3.1)"] = row3(j=tn.J_BALL_PRINTED_KGM2)
@@ -359,7 +357,6 @@ def _tf_and_motor(p: Parameters, model: ReferenceModel) -> list[Entry]:
         f"consistent ({100 * e_p:.2f} %). From the model: ({num_m[0]:.4f}s² {num_m[-1]:+.1f})/(s⁴ {den_m[2]:+.4f}s² "
         f"{den_m[4]:+.2f}) ({100 * e_m:.0f} % off), inheriting the ẍ-row error of eq 3.2.8.",
     ))
-    poles_p = _match(tn.POLES_TORQUE, np.roots(tn.TF_TORQUE_DEN))
     poles_a = _match(tn.POLES_TORQUE, np.linalg.eigvals(tn.A_TORQUE))
     poles_m = _match(tn.POLES_TORQUE, np.linalg.eigvals(a_m))
     out.append(Entry(
@@ -552,7 +549,6 @@ def _controllability(p: Parameters, model: ReferenceModel) -> list[Entry]:
         "case, so the conclusion (controllable) holds.",
     ))
     wc_p = control.obsv(a_p, C_OUT)
-    wc_m = control.obsv(a_m, C_OUT)
     out.append(Entry(
         "§3.5 W_C", "observability matrix [C; CA; CA²; CA³] (continuous, y = x)", tn.WC_TORQUE.tolist(), _r(wc_p),
         rel_error(tn.WC_TORQUE, wc_p), "agrees",
@@ -882,7 +878,6 @@ def _chapter5(p: Parameters) -> list[Entry]:
     for k, (ph, ga) in ts.items():
         kk = np.real(control.acker(ph + ga @ beta_lin, ga, [zc] * 4)).ravel()
         recon[k] = np.r_[kk[0] / al0[0], kk[1] / al0[1], kk[2] / al0[0], kk[3] / al0[1]]
-    printed_gains = [tn.CLP_DISC_KP[0, 0], tn.CLP_DISC_KP[1, 1], tn.CLP_DISC_KV[0, 0], tn.CLP_DISC_KV[1, 1]]
     rz = recon["ZOH of printed A, B"]
     out.append(Entry(
         "§5.2.2 kp", "discrete CLP position gains for poles 0.9608", np.diag(tn.CLP_DISC_KP).tolist(), _r(rz[:2], 4),
@@ -957,7 +952,6 @@ def _appendix(p: Parameters) -> list[Entry]:
     for k, (ph, ga) in ts.items():
         r3, r4 = _clp_obs_coeffs(ReducedObserver.from_gain(ph, ga, APPX_CLP_G))
         cands[k] = [r3, r4]
-    pa = np.array(printed)
     descr = []
     for k, v in cands.items():
         va = np.array(v)
@@ -973,7 +967,7 @@ def _appendix(p: Parameters) -> list[Entry]:
         "and F21 ≈ −0.004…−0.006; Ga21 = −0.462 vs −0.513 (10 %). Mixed sources; partly unexplained.",
     ))
     # CLP gains
-    m, g = p.ball.mass_kg, p.physics.gravity_m_s2
+    g = p.physics.gravity_m_s2
     m_from_beta = APPX_CLP_BETA[0] / g
     c_from_b4 = -APPX_CLP_BETA[2] / APPX_CLP_ALPHA_THDD_X2
     chap = [tn.CLP_BETA[1], tn.CLP_BETA[2], tn.CLP_BETA[3]]
