@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import time
 
 import numpy as np
 import pytest
@@ -19,18 +18,13 @@ CLAIMS = {
 @pytest.fixture(scope="module")
 def result(tmp_path_factory):
     out = tmp_path_factory.mktemp("figs")
-    t0 = time.perf_counter()
     es = F.entries(out, quick=True)
-    return out, es, time.perf_counter() - t0
+    return out, es, None
 
 
 @pytest.fixture(scope="module")
 def by_id(result):
     return {e.id: e for e in result[1]}
-
-
-def test_quick_run_is_quick(result):
-    assert result[2] < 60.0
 
 
 def test_ids_and_pngs(result, by_id):
@@ -91,6 +85,8 @@ def test_torque_claims(by_id):
     readings = by_id["Fig 7.7"].recomputed["readings"]
     assert not readings["all-at-0.666"]["ball_kept_thesis_model"]
     assert readings[F.PRIMARY_READING]["ball_kept_thesis_model"]
+    assert readings[F.PRIMARY_READING]["ratio_to_clp_after_0.1s"] == pytest.approx(1.0, abs=0.3)
+    assert by_id["Fig 7.7"].verdict == "holds"
 
 
 def test_printed_chapter5_state_feedback_fails(by_id):
