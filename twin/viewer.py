@@ -30,7 +30,7 @@ from twin.rig import TwinRig
 __all__ = ["LiveTwin", "ViewerError", "serve"]
 
 FRAME_S = 0.02  # scene updates at 50 Hz (the rig's tick)
-PLOT_EVERY_FRAMES = 5  # plots at 10 Hz: enough for the eye, a fifth of the traffic
+PLOT_EVERY_FRAMES = 10  # plots and status at 5 Hz: enough for the eye, a tenth of the traffic
 HISTORY_S = 10.0  # live plots show the last 10 s
 MAX_CATCH_UP_S = 0.25  # after a stall longer than this the pacing restarts instead of racing to catch up
 DEFAULT_CONTROLLER = "appendix-clp"
@@ -62,7 +62,8 @@ class History:
             self.columns.setdefault(key, deque(maxlen=self.size)).append(value)
 
     def array(self, key: str) -> np.ndarray:
-        return np.asarray(self.columns.get(key, ()), dtype=float)
+        # float32: plenty for a plot, half the bytes on the wire.
+        return np.asarray(self.columns.get(key, ()), dtype=np.float32)
 
     def clear(self) -> None:
         self.columns.clear()
@@ -84,6 +85,7 @@ class LiveTwin:
         self.history = History()
         self.actions: queue.Queue[tuple[str, Any]] = queue.Queue()
         self.ticks = 0
+        self.runs = 0  # runs started (each reset or controller change starts one)
         self._select(controller)
 
     # --- called from any thread ---------------------------------------------------------------------
@@ -97,6 +99,7 @@ class LiveTwin:
 
     def _restart(self) -> None:
         """A fresh run from the set initial state: new controller, twin at (x0, θ0) at rest."""
+        self.runs += 1
         self.controller: Controller = registry.make(self.controller_name, self.params)
         params = self.params.with_overrides({"daq.period_s": self.controller.period_s,
                                              "ball_sensor.noise_enabled": self.noise})
@@ -123,6 +126,7 @@ class LiveTwin:
                 action, value = self.actions.get_nowait()
             except queue.Empty:
                 return
+            print(f"ballbeam view: t = {self.rig.time_s:.2f} s: {action} {'' if value is None else value}", flush=True)
             if action == "controller":
                 self._select(str(value))
             elif action == "reset":
@@ -170,7 +174,8 @@ class LiveTwin:
     def status_markdown(self) -> str:
         state = "running" if self.running else "paused"
         ball = f"**ball lost** at {self.rig.ball_lost_time_s:.2f} s" if self.rig.ball_lost else "ball on the beam"
-        return (f"**t = {self.rig.time_s:.2f} s** · {state} · controller: **{self.controller_name}** · {ball}  \n"
+        return (f"run {self.runs} · **t = {self.rig.time_s:.2f} s** · {state} · controller: "
+                f"**{self.controller_name}** · {ball}  \n"
                 f"noise {'on' if self.noise else 'off'} · speed ×{self.speed:g} · "
                 f"motor {self.rig.motor_volts_v:+.2f} V")
 
@@ -291,7 +296,7 @@ class Viewer:
                 self.plots.append((handle, [key for _, key, _ in traces]))
 
     def publish(self) -> None:
-        """Send one frame: body poses (and every fifth frame the plots and status), as one batch."""
+        """Send one frame: body poses (and every tenth frame the plots and status), as one batch."""
         live = self.live
         model, data = live.rig.plant.model, live.rig.plant.data
         mujoco.mj_kinematics(model, data)  # poses of the current state (mj_step leaves xpos one step behind)
@@ -309,8 +314,12 @@ class Viewer:
                     for handle, keys in self.plots:
                         handle.data = (t, *(h.array(key) for key in keys))
                 self.status.content = live.status_markdown()
-                self.run_button.label = "Pause" if live.running else "Start"
-                self.reference_slider.disabled = not live.supports_reference
+                # Only send what changed: re-sending a button's props re-renders it under the user's click.
+                label = "Pause" if live.running else "Start"
+                if self.run_button.label != label:
+                    self.run_button.label = label
+                if self.reference_slider.disabled == live.supports_reference:
+                    self.reference_slider.disabled = not live.supports_reference
 
     def loop(self, duration_s: float | None, stop: threading.Event) -> dict[str, float]:
         """Run until ``stop`` is set or ``duration_s`` of wall time passed; return pacing figures."""
