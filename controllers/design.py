@@ -29,7 +29,7 @@ class DesignError(ValueError):
     """A design that cannot be done as asked (uncontrollable pair, poles not placeable, …)."""
 
 
-def check_poles(matrix: np.ndarray, poles: np.ndarray, tol: float = 1e-6) -> float:
+def check_poles(matrix: np.ndarray, poles: np.ndarray) -> float:
     """Largest distance between the eigenvalues of ``matrix`` and the requested ``poles`` (matched)."""
     eig = np.sort_complex(np.linalg.eigvals(matrix))
     want = np.sort_complex(np.asarray(poles, dtype=complex))

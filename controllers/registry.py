@@ -31,7 +31,7 @@ from twin.interface import Controller
 from twin.parameters import Parameters
 from twin.reference import ReferenceModel
 
-__all__ = ["NAMES", "DESCRIPTIONS", "make", "UnknownControllerError"]
+__all__ = ["NAMES", "make", "UnknownControllerError"]
 
 FAST_PERIOD_S = 0.001  # chapter 4 designs run "continuously": every physics step
 
@@ -172,8 +172,3 @@ def make(name: str, params: Parameters | None = None) -> Controller:
         raise UnknownControllerError(name) from None
     return factory(params or Parameters())
 
-
-DESCRIPTIONS: dict[str, str] = {
-    "appendix-sf": "appendix A d_cb_state_feedback, ported exactly (ran on the rig)",
-    "appendix-clp": "appendix A d_cb_control_law, ported exactly (ran on the rig)",
-}

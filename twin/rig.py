@@ -73,7 +73,7 @@ class TwinRig(Rig):
         xs = np.empty(n + 1)
         thetas = np.empty(n + 1)
         contact = np.empty(n + 1, dtype=bool)
-        times[0], thetas[0] = t0, self._theta()
+        times[0], thetas[0] = t0, plant.state_angle_rad()
         xs[0] = plant.ball_in_beam_frame()[0]
         contact[0] = not plant.ball_lost
         for i in range(n):
@@ -82,13 +82,12 @@ class TwinRig(Rig):
             plant.step(self._applied_motor_v)
             times[i + 1] = t0 + (i + 1) * plant.model.opt.timestep
             xs[i + 1] = plant.ball_in_beam_frame()[0]
-            thetas[i + 1] = self._theta()
+            thetas[i + 1] = plant.state_angle_rad()
             contact[i + 1] = not plant.ball_lost
         angle_v = self._angle.read_v(times, thetas)
         ball_v = self._ball.advance(times, xs, contact)
         self._ticks += 1
-        self._last = DaqSample(time_s=block_time_s(t0, self.params.daq), ball_v=ball_v, angle_v=angle_v)
-        return self._last
+        return DaqSample(time_s=block_time_s(t0, self.params.daq), ball_v=ball_v, angle_v=angle_v)
 
     def write(self, command_v: float) -> None:
         if not isinstance(command_v, (int, float, np.floating, np.integer)) or not math.isfinite(command_v):
@@ -116,10 +115,7 @@ class TwinRig(Rig):
         self._ticks = 0
         self.command_v = self.params.amplifier.zero_command_v
         self._pending_motor_v = self._applied_motor_v = float(motor_volts(self.command_v, self.params))
-        self._last: DaqSample | None = None
 
-    def _theta(self) -> float:
-        return float(self.plant.state_angle_rad())
 
     def true_state(self) -> np.ndarray:
         """The twin's true (x_m, θ_rad, ẋ_m_s, θ̇_rad_s): for validation and logs, never for a controller."""
@@ -167,6 +163,4 @@ class TwinRig(Rig):
         x, theta, xdot, thetadot = self.plant.state()
         if self.plant.ball_lost:
             return
-        t = self.plant.time_s
         self.plant.reset(x, theta, xdot + dv_m_s, thetadot, keep_time=True)
-        assert abs(self.plant.time_s - t) < 1e-12

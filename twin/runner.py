@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from twin.interface import Controller
-from twin.log import RunLog
+from twin.log import THESIS_FIELDS, TRUTH_FIELDS, RunLog
 from twin.parameters import Parameters
 from twin.rig import TwinRig
 
@@ -83,9 +83,7 @@ def run_closed_loop(
     rig.reset(x0_m, theta0_rad)
     ticks = int(round(duration_s / rig.period_s))
     n = ticks + 1
-    cols = {name: np.zeros(n) for name in ("timem", "datam1", "datam2", "aout", "x1", "x2", "x3", "x4", "u",
-                                           "uhesap", "true_time_s", "true_x_m", "true_theta_rad",
-                                           "true_xdot_m_s", "true_thetadot_rad_s", "motor_volts_v")}
+    cols = {name: np.zeros(n) for name in THESIS_FIELDS + TRUTH_FIELDS if name != "ball_lost"}
     lost = np.zeros(n, dtype=bool)
     uses_truth = controller.uses_true_state
 

@@ -84,7 +84,6 @@ class LiveTwin:
         self.running = True
         self.history = History()
         self.actions: queue.Queue[tuple[str, Any]] = queue.Queue()
-        self.ticks = 0
         self.runs = 0  # runs started (each reset or controller change starts one)
         self._select(controller)
 
@@ -158,7 +157,6 @@ class LiveTwin:
             command = self.controller.update(sample, self.rig.true_state() if truth_needed else None)
             self.rig.write(command)
             self.last_sample = sample
-        self.ticks += 1
         self._record()
 
     def _record(self) -> None:
