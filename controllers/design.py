@@ -80,7 +80,9 @@ class ReducedObserver:
     h: np.ndarray
 
     @classmethod
-    def from_gain(cls, phi: np.ndarray, gamma: np.ndarray, gain: np.ndarray, n_measured: int = 2) -> "ReducedObserver":
+    def from_gain(
+        cls, phi: np.ndarray, gamma: np.ndarray, gain: np.ndarray, n_measured: int = 2
+    ) -> ReducedObserver:
         na = n_measured
         paa, pab, pba, pbb = phi[:na, :na], phi[:na, na:], phi[na:, :na], phi[na:, na:]
         ga_, gb_ = gamma[:na], gamma[na:]
@@ -113,7 +115,7 @@ def reduced_order_observer(
 def clp_effective_gain(alpha0: np.ndarray, kp: np.ndarray, kv: np.ndarray) -> np.ndarray:
     """The state feedback the control-law-partitioning servo law is at the origin (eq 4.3.5–4.3.6):
 
-        τ = α·(−kp·(x, θ) − kv·(ẋ, θ̇)) + β   ⇒   K = [α₁kp₁, α₂kp₂, α₁kv₁, α₂kv₂] (plus β's linear part)."""
+    τ = α·(−kp·(x, θ) − kv·(ẋ, θ̇)) + β   ⇒   K = [α₁kp₁, α₂kp₂, α₁kv₁, α₂kv₂] (plus β's linear part)."""
     a1, a2 = np.asarray(alpha0, dtype=float).ravel()
     kp, kv = np.diag(kp), np.diag(kv)
     return np.array([[a1 * kp[0], a2 * kp[1], a1 * kv[0], a2 * kv[1]]])
@@ -157,8 +159,9 @@ def sliding_surface(a: np.ndarray, b: np.ndarray, poles: np.ndarray | list[compl
     s = s_reg @ tr
     s = s / (s @ b)  # scale (S₂, free per §4.4) so that S̄·B = 1: ṡ = u_n on the surface, as eq 4.4.27 assumes
     k_eq = np.linalg.solve(s @ b, s @ a)
-    return SlidingSurface(surface=s, equivalent_gain=k_eq, transform=tr,
-                          sliding_poles=np.linalg.eigvals(a11 - a12 @ m))
+    return SlidingSurface(
+        surface=s, equivalent_gain=k_eq, transform=tr, sliding_poles=np.linalg.eigvals(a11 - a12 @ m)
+    )
 
 
 def continuous_poles_to_discrete(poles: np.ndarray | list[complex], period_s: float) -> np.ndarray:

@@ -46,15 +46,20 @@ class ClpTerms:
     def beta_value(self, x: np.ndarray) -> float:
         b1, b2, b3, b4 = self.beta
         xm, th, xd, thd = x
-        return (b1 * math.sin(th) + b2 * xm * math.cos(th) + b3 * xm * xd * thd + b4 * xm * thd**2
-                + self.beta_thetadot * thd)
+        return (
+            b1 * math.sin(th)
+            + b2 * xm * math.cos(th)
+            + b3 * xm * xd * thd
+            + b4 * xm * thd**2
+            + self.beta_thetadot * thd
+        )
 
     def beta_linear(self) -> np.ndarray:
         """∂β/∂x at the origin (1×4)."""
         return np.array([[self.beta[1], self.beta[0], 0.0, self.beta_thetadot]])
 
     @classmethod
-    def from_params(cls, params) -> "ClpTerms":
+    def from_params(cls, params) -> ClpTerms:
         """Recomputed from the rig's parameters (eq 3.1.27 with θ̇², plus the motor's reflected inertia and
         damping, which act on the beam like J_BP and a viscous term)."""
         p = params

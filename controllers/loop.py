@@ -10,8 +10,9 @@ A torque law is turned into motor volts by inverting the motor law (eq 3.3.1), a
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable, Literal, Protocol
+from typing import Literal, Protocol
 
 import numpy as np
 

@@ -11,7 +11,7 @@
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 import control
 import numpy as np
@@ -53,46 +53,82 @@ def _motor(params: Parameters) -> MotorInverse:
 
 
 def _thesis_sf_continuous(params: Parameters) -> Controller:
-    return LoopController("thesis-sf-continuous", TrueState(), StateFeedbackLaw(T.SF_CONT_K.copy()),
-                          u_kind="volts", command_limits_v=None, period_s=FAST_PERIOD_S,
-                          description="§4.2 state feedback, K as printed, true state at 1 kHz")
+    return LoopController(
+        "thesis-sf-continuous",
+        TrueState(),
+        StateFeedbackLaw(T.SF_CONT_K.copy()),
+        u_kind="volts",
+        command_limits_v=None,
+        period_s=FAST_PERIOD_S,
+        description="§4.2 state feedback, K as printed, true state at 1 kHz",
+    )
 
 
 def _thesis_clp_continuous(params: Parameters) -> Controller:
     law = ClpLaw(_THESIS_CLP_TERMS, T.CLP_CONT_KP.copy(), T.CLP_CONT_KV.copy())
-    return LoopController("thesis-clp-continuous", TrueState(), law, u_kind="torque", motor=_THESIS_MOTOR,
-                          command_limits_v=None, period_s=FAST_PERIOD_S,
-                          description="§4.3 control law partitioning, kp/kv as printed, true state at 1 kHz")
+    return LoopController(
+        "thesis-clp-continuous",
+        TrueState(),
+        law,
+        u_kind="torque",
+        motor=_THESIS_MOTOR,
+        command_limits_v=None,
+        period_s=FAST_PERIOD_S,
+        description="§4.3 control law partitioning, kp/kv as printed, true state at 1 kHz",
+    )
 
 
 def _thesis_smc_continuous(params: Parameters) -> Controller:
     law = SlidingModeLaw(T.SMC_S.copy(), T.SMC_KEQ.copy(), T.SMC_K_MINUS, T.SMC_K_PLUS, T.SMC_ETA)
-    return LoopController("thesis-smc-continuous", TrueState(), law, u_kind="torque", motor=_THESIS_MOTOR,
-                          command_limits_v=None, period_s=FAST_PERIOD_S,
-                          description="§4.4 sliding mode, S̄/K_eq as printed, true state at 1 kHz")
+    return LoopController(
+        "thesis-smc-continuous",
+        TrueState(),
+        law,
+        u_kind="torque",
+        motor=_THESIS_MOTOR,
+        command_limits_v=None,
+        period_s=FAST_PERIOD_S,
+        description="§4.4 sliding mode, S̄/K_eq as printed, true state at 1 kHz",
+    )
 
 
 def _thesis_sf(params: Parameters) -> Controller:
     observer = ReducedObserver.from_gain(T.PHI_VOLTAGE, T.GAMMA_VOLTAGE, T.SF_OBS_G)
-    return LoopController("thesis-sf", ObserverState(observer), StateFeedbackLaw(T.SF_DISC_K.copy()),
-                          u_kind="volts", description="§5.2.1 state feedback + observer G as printed, 50 Hz")
+    return LoopController(
+        "thesis-sf",
+        ObserverState(observer),
+        StateFeedbackLaw(T.SF_DISC_K.copy()),
+        u_kind="volts",
+        description="§5.2.1 state feedback + observer G as printed, 50 Hz",
+    )
 
 
 def _thesis_clp(params: Parameters) -> Controller:
     observer = ReducedObserver.from_gain(T.PHI_TORQUE, T.GAMMA_TORQUE, T.CLP_OBS_G)
     law = ClpLaw(_THESIS_CLP_TERMS, T.CLP_DISC_KP.copy(), T.CLP_DISC_KV.copy())
-    return LoopController("thesis-clp", ObserverState(observer), law, u_kind="torque", motor=_THESIS_MOTOR,
-                          observer_input="law",
-                          description="§5.2.2 control law partitioning + observer G as printed, 50 Hz")
+    return LoopController(
+        "thesis-clp",
+        ObserverState(observer),
+        law,
+        u_kind="torque",
+        motor=_THESIS_MOTOR,
+        observer_input="law",
+        description="§5.2.2 control law partitioning + observer G as printed, 50 Hz",
+    )
 
 
 def _sf(params: Parameters) -> Controller:
     phi, gamma = ReferenceModel(params).discretize("voltage", params.daq.period_s)
     gain = state_feedback_gain(phi, gamma, T.SF_DISC_POLES)
     observer = reduced_order_observer(phi, gamma, T.SF_OBS_POLES_Z)
-    return LoopController("sf", ObserverState(observer), StateFeedbackLaw(gain), u_kind="volts",
-                          description="§5.2.1 procedure re-run: poles 0.969±0.0504i, 0.861², observer "
-                                      "0.835±0.199i, on the reference model")
+    return LoopController(
+        "sf",
+        ObserverState(observer),
+        StateFeedbackLaw(gain),
+        u_kind="volts",
+        description="§5.2.1 procedure re-run: poles 0.969±0.0504i, 0.861², observer "
+        "0.835±0.199i, on the reference model",
+    )
 
 
 def _torque_model_observer(params: Parameters, poles) -> tuple[ReducedObserver, np.ndarray, np.ndarray]:
@@ -105,10 +141,15 @@ def _clp(params: Parameters) -> Controller:
     observer, phi_t, gamma_t = _torque_model_observer(params, T.CLP_OBS_POLES_Z)
     terms = ClpTerms.from_params(params)
     kp, kv = clp_gains(phi_t, gamma_t, terms.alpha(0.0), terms.beta_linear(), _CLP_POLES_Z)
-    return LoopController("clp", ObserverState(observer), ClpLaw(terms, kp, kv), u_kind="torque",
-                          motor=_motor(params),
-                          description="§5.2.2 procedure re-run: four poles at z = 0.9608 (ω_n = 2, ζ = 1), "
-                                      "observer poles 0.2, on the reference model")
+    return LoopController(
+        "clp",
+        ObserverState(observer),
+        ClpLaw(terms, kp, kv),
+        u_kind="torque",
+        motor=_motor(params),
+        description="§5.2.2 procedure re-run: four poles at z = 0.9608 (ω_n = 2, ζ = 1), "
+        "observer poles 0.2, on the reference model",
+    )
 
 
 def _smc(params: Parameters) -> Controller:
@@ -116,9 +157,15 @@ def _smc(params: Parameters) -> Controller:
     design = sliding_surface(a, b, T.SMC_SLIDING_POLES)
     observer, _, _ = _torque_model_observer(params, T.CLP_OBS_POLES_Z)
     law = SlidingModeLaw(design.surface, design.equivalent_gain, T.SMC_K_MINUS, T.SMC_K_PLUS, T.SMC_ETA)
-    return LoopController("smc", ObserverState(observer), law, u_kind="torque", motor=_motor(params),
-                          description="§4.4 procedure re-run: sliding poles −2, −2, −10, k± = ±0.5, "
-                                      "η = 0.001, at 50 Hz with the observer of clp")
+    return LoopController(
+        "smc",
+        ObserverState(observer),
+        law,
+        u_kind="torque",
+        motor=_motor(params),
+        description="§4.4 procedure re-run: sliding poles −2, −2, −10, k± = ±0.5, "
+        "η = 0.001, at 50 Hz with the observer of clp",
+    )
 
 
 # LQR weights (Bryson's rule): 10 cm of ball, 0.2 rad of beam, 0.5 m/s, 2 rad/s, against 12 V of motor.
@@ -143,9 +190,14 @@ def _lqr(params: Parameters) -> Controller:
     # Current-estimator gain: L = P⁻Hᵀ(HP⁻Hᵀ + R)⁻¹ with P⁻ the a-priori steady-state covariance.
     _, p_prior, _ = control.dlqe(phi, gamma, h, qn, rn)
     kalman = p_prior @ h.T @ np.linalg.inv(h @ p_prior @ h.T + rn)
-    return LoopController("lqr", KalmanState(phi, gamma, kalman), StateFeedbackLaw(np.atleast_2d(gain)),
-                          u_kind="volts", description="discrete LQR (Bryson weights) + steady-state Kalman "
-                                                      "filter on the reference model, 50 Hz")
+    return LoopController(
+        "lqr",
+        KalmanState(phi, gamma, kalman),
+        StateFeedbackLaw(np.atleast_2d(gain)),
+        u_kind="volts",
+        description="discrete LQR (Bryson weights) + steady-state Kalman "
+        "filter on the reference model, 50 Hz",
+    )
 
 
 _FACTORIES: dict[str, Callable[[Parameters], Controller]] = {
@@ -171,4 +223,3 @@ def make(name: str, params: Parameters | None = None) -> Controller:
     except KeyError:
         raise UnknownControllerError(name) from None
     return factory(params or Parameters())
-

@@ -39,12 +39,22 @@ def main() -> None:
     rows = []
     for name in registry.NAMES:
         for x0, theta0 in starts:
-            result = run_closed_loop(registry.make(name), x0_m=x0, theta0_rad=theta0, duration_s=args.duration,
-                                     seed=args.seed, noise=True)
-            rows.append({"controller": name, "x0_m": x0, "theta0_rad": theta0, "seed": args.seed, **result.metrics})
+            result = run_closed_loop(
+                registry.make(name),
+                x0_m=x0,
+                theta0_rad=theta0,
+                duration_s=args.duration,
+                seed=args.seed,
+                noise=True,
+            )
+            rows.append(
+                {"controller": name, "x0_m": x0, "theta0_rad": theta0, "seed": args.seed, **result.metrics}
+            )
             m = result.metrics
-            print(f"{name:22s} ({x0:+.2f}, {theta0:+.2f}): "
-                  f"{'LOST' if m['ball_lost'] else ('settled' if m['settled'] else 'not settled')}")
+            print(
+                f"{name:22s} ({x0:+.2f}, {theta0:+.2f}): "
+                f"{'LOST' if m['ball_lost'] else ('settled' if m['settled'] else 'not settled')}"
+            )
     (args.out / "controllers.json").write_text(json.dumps(rows, indent=1) + "\n")
 
     lines = [

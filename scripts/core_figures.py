@@ -1,6 +1,6 @@
 """Print the physical core's acceptance figures: rolling, motor law, linearization, trajectory, lost ball.
 
-    python scripts/core_figures.py
+python scripts/core_figures.py
 """
 
 from __future__ import annotations
@@ -24,12 +24,19 @@ def rolling(params: Parameters) -> None:
         for _ in range(300):
             plant.step(0.0)
             s = plant.state()
-            t.append(plant.time_s), x.append(s[0]), v.append(s[2]), w.append(plant.ball_kinematics().spin_rad_s)
+            (
+                t.append(plant.time_s),
+                x.append(s[0]),
+                v.append(s[2]),
+                w.append(plant.ball_kinematics().spin_rad_s),
+            )
         accel = 2 * np.polyfit(t, x, 2)[0]
         theory = -params.physics.gravity_m_s2 * math.sin(theta) / (1 + params.rolling_inertia_ratio)
         ratio = np.array(v[50:]) / (-params.rolling_radius_m * np.array(w[50:]))
-        print(f"rolling θ={theta:.2f} rad: accel/theory = {accel / theory:.6f}, "
-              f"v/(r*ω) in [{ratio.min():.6f}, {ratio.max():.6f}]")
+        print(
+            f"rolling θ={theta:.2f} rad: accel/theory = {accel / theory:.6f}, "
+            f"v/(r*ω) in [{ratio.min():.6f}, {ratio.max():.6f}]"
+        )
 
 
 def motor(params: Parameters) -> None:
@@ -48,8 +55,10 @@ def motor(params: Parameters) -> None:
     plant.reset()
     plant.data.ctrl[0] = 20.0
     mujoco.mj_forward(plant.model, plant.data)
-    print(f"motor: worst |τ/(0.016383(V−0.154θ̇)) − 1| = {worst:.2e}; 20 V → {plant.motor_torque_nm():.6f} N·m "
-          f"(12 V: {0.016383 * 12:.6f})")
+    print(
+        f"motor: worst |τ/(0.016383(V−0.154θ̇)) − 1| = {worst:.2e}; 20 V → {plant.motor_torque_nm():.6f} N·m "
+        f"(12 V: {0.016383 * 12:.6f})"
+    )
 
 
 def linearization(params: Parameters) -> None:
@@ -58,7 +67,8 @@ def linearization(params: Parameters) -> None:
         a, b = linearize_mujoco(params, kind)
         ar, br = ref.linearize(kind)
         worst = max(
-            (np.abs(g - w)[np.abs(w) > 1e-3] / np.abs(w)[np.abs(w) > 1e-3]).max() for g, w in ((a, ar), (b, br))
+            (np.abs(g - w)[np.abs(w) > 1e-3] / np.abs(w)[np.abs(w) > 1e-3]).max()
+            for g, w in ((a, ar), (b, br))
         )
         print(f"linearization ({kind}): worst relative error over entries > 1e-3 = {100 * worst:.3f} %")
 
@@ -81,8 +91,10 @@ def trajectory(params: Parameters) -> None:
                 plant.step(u)
                 ts.append(plant.state())
         ts = np.array(ts)
-        print(f"trajectory from {x0[:2]}: max |Δx| = {1e3 * np.abs(ts[:, 0] - rs[:, 0]).max():.3f} mm, "
-              f"max |Δθ| = {1e3 * np.abs(ts[:, 1] - rs[:, 1]).max():.3f} mrad")
+        print(
+            f"trajectory from {x0[:2]}: max |Δx| = {1e3 * np.abs(ts[:, 0] - rs[:, 0]).max():.3f} mm, "
+            f"max |Δθ| = {1e3 * np.abs(ts[:, 1] - rs[:, 1]).max():.3f} mrad"
+        )
 
 
 def lost(params: Parameters) -> None:
@@ -90,8 +102,10 @@ def lost(params: Parameters) -> None:
     plant.reset()
     for _ in range(200):
         plant.step(0.0, 20)
-    print(f"lost ball: lost={plant.ball_lost} at t={plant.ball_lost_time_s:.2f} s, "
-          f"state finite={bool(np.all(np.isfinite(plant.state())))}, warnings={plant.warnings()}")
+    print(
+        f"lost ball: lost={plant.ball_lost} at t={plant.ball_lost_time_s:.2f} s, "
+        f"state finite={bool(np.all(np.isfinite(plant.state())))}, warnings={plant.warnings()}"
+    )
 
 
 if __name__ == "__main__":

@@ -30,13 +30,17 @@ def angle() -> None:
     counts = np.arange(-216, 217)
     volts = np.array([sensors.angle_block_mean_v(KNOTS, np.full(21, c * STEP), P) for c in counts])
     steps = np.diff(converters.beam_angle_rad(volts)) / STEP
-    print(f"angle staircase: mean step {steps.mean():.5f} Δ; {np.sum(abs(steps - 1) < 0.01)}/{steps.size} steps "
-          f"within ±1 % (the others are 5-LSB steps: {np.unique(np.round(steps[abs(steps - 1) >= 0.01], 4))} Δ)")
+    print(
+        f"angle staircase: mean step {steps.mean():.5f} Δ; {np.sum(abs(steps - 1) < 0.01)}/{steps.size} steps "
+        f"within ±1 % (the others are 5-LSB steps: {np.unique(np.round(steps[abs(steps - 1) >= 0.01], 4))} Δ)"
+    )
     for di, measured in ((0, -5.042), (512, -0.014), (1023, 5.002)):
         dac_v = sensors.counter_dac_v(di, P)
         read = daq.adc_quantize_v(dac_v, P.daq)
-        print(f"  DI={di:4d}: eq 6.2.6 {dac_v:+.5f} V vs measured {measured:+.3f} V ({abs(dac_v - measured) / LSB:.2f} "
-              f"LSB); after the ±5 V ADC {read:+.5f} V ({abs(read - measured) / LSB:.2f} LSB)")
+        print(
+            f"  DI={di:4d}: eq 6.2.6 {dac_v:+.5f} V vs measured {measured:+.3f} V ({abs(dac_v - measured) / LSB:.2f} "
+            f"LSB); after the ±5 V ADC {read:+.5f} V ({abs(read - measured) / LSB:.2f} LSB)"
+        )
 
 
 def ball() -> None:
@@ -62,7 +66,9 @@ def ball() -> None:
     for _ in range(10000):  # 200 s
         chain.advance(chain.time_s + np.arange(21) * 1e-3, np.zeros(21))
     n = chain.dropout_count
-    print(f"dropouts over 200 s at {P.ball_sensor.dropout_rate_hz} Hz: {n} (expected 1000 ± {3 * math.sqrt(1000):.0f} at 3σ)")
+    print(
+        f"dropouts over 200 s at {P.ball_sensor.dropout_rate_hz} Hz: {n} (expected 1000 ± {3 * math.sqrt(1000):.0f} at 3σ)"
+    )
 
 
 def output() -> None:
@@ -75,8 +81,11 @@ def determinism() -> None:
         rig = TwinRig(P, seed=seed)
         rig.reset(0.1, 0.02)
         return np.array([rig.read().ball_v for _ in range(500)])
+
     a, b, c = readings(1), readings(1), readings(2)
-    print(f"seeds: same seed identical = {np.array_equal(a, b)}, different seed differs = {not np.array_equal(a, c)}")
+    print(
+        f"seeds: same seed identical = {np.array_equal(a, b)}, different seed differs = {not np.array_equal(a, c)}"
+    )
     log = run_closed_loop(AppendixControlLaw(), x0_m=0.1, theta0_rad=0.1, duration_s=2.0, seed=3).log
     with tempfile.TemporaryDirectory() as d:
         save_mat(log, Path(d) / "data_file.mat")

@@ -1,6 +1,6 @@
 """Screenshot of the live view as a person sees it, taken by headless Chromium (Debian's) via Playwright.
 
-    python scripts/screenshot.py [--out docs/view.png] [--wait 8]
+python scripts/screenshot.py [--out docs/view.png] [--wait 8]
 """
 
 from __future__ import annotations
@@ -15,8 +15,15 @@ from pathlib import Path
 
 from playwright.sync_api import sync_playwright
 
-ARGS = ["--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader", "--disable-background-networking",
-        "--disable-component-update", "--disable-sync", "--no-first-run"]
+ARGS = [
+    "--no-sandbox",
+    "--use-angle=swiftshader",
+    "--enable-unsafe-swiftshader",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--no-first-run",
+]
 
 
 def main() -> None:
@@ -31,9 +38,23 @@ def main() -> None:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
-    server = subprocess.Popen([sys.executable, "-m", "twin.cli", "view", "--port", str(port), "--controller",
-                               args.controller, "--duration", str(args.wait + 60)],
-                              stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    server = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "twin.cli",
+            "view",
+            "--port",
+            str(port),
+            "--controller",
+            args.controller,
+            "--duration",
+            str(args.wait + 60),
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
     try:
         for line in server.stdout:
             if line.startswith("ballbeam view:"):
@@ -45,7 +66,9 @@ def main() -> None:
             page.get_by_text("Connected").wait_for(timeout=30000)
             time.sleep(args.wait)
             # The software-WebGL notice is about this headless browser, not about the twin.
-            page.evaluate("() => document.querySelectorAll('.mantine-Notification-root').forEach(n => n.remove())")
+            page.evaluate(
+                "() => document.querySelectorAll('.mantine-Notification-root').forEach(n => n.remove())"
+            )
             args.out.parent.mkdir(parents=True, exist_ok=True)
             page.screenshot(path=str(args.out))
             browser.close()

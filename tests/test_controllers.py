@@ -23,8 +23,16 @@ def test_every_named_controller_runs_on_the_twin(name: str) -> None:
     log = run.log
     assert np.all(np.isfinite(log.aout)) and np.all(np.isfinite(log.true_x_m))
     assert np.all(np.abs(log.motor_volts_v) <= 12.0)
-    assert set(run.metrics) >= {"settled", "settling_time_s", "ball_lost", "ball_lost_time_s",
-                                "peak_motor_voltage_v", "peak_theta_rad", "final_x_m", "final_theta_rad"}
+    assert set(run.metrics) >= {
+        "settled",
+        "settling_time_s",
+        "ball_lost",
+        "ball_lost_time_s",
+        "peak_motor_voltage_v",
+        "peak_theta_rad",
+        "final_x_m",
+        "final_theta_rad",
+    }
 
 
 def test_unknown_controller_is_named_in_the_error() -> None:
@@ -36,8 +44,13 @@ def _reference_settling_time(x0: float) -> float:
     """§4.2's loop on the analytic reference model: continuous V = −K x, the same 2 % (4 mm) criterion."""
     ref = ReferenceModel(Parameters())
     k = T.SF_CONT_K[0]
-    sol = scipy.integrate.solve_ivp(lambda t, s: ref.derivative(s, float(-k @ s), "voltage"), (0.0, 8.0),
-                                    [x0, 0.3, 0.0, 0.0], max_step=1e-3, rtol=1e-8)
+    sol = scipy.integrate.solve_ivp(
+        lambda t, s: ref.derivative(s, float(-k @ s), "voltage"),
+        (0.0, 8.0),
+        [x0, 0.3, 0.0, 0.0],
+        max_step=1e-3,
+        rtol=1e-8,
+    )
     outside = np.flatnonzero(np.abs(sol.y[0]) > 0.004)
     return float(sol.t[outside[-1] + 1])
 
@@ -68,15 +81,63 @@ def test_redone_designs_bring_the_ball_back_from_the_chapter_4_start(name: str) 
 
 def test_cli_run_prints_the_verdict_and_saves_the_log(tmp_path) -> None:
     log = tmp_path / "data_file.mat"
-    out = subprocess.run([sys.executable, "-m", "twin.cli", "run", "--controller", "appendix-clp", "--x0", "0.1",
-                          "--theta0", "0.1", "--duration", "3", "--seed", "4", "--log", str(log), "--json"],
-                         capture_output=True, text=True, timeout=120, check=True)
+    out = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "twin.cli",
+            "run",
+            "--controller",
+            "appendix-clp",
+            "--x0",
+            "0.1",
+            "--theta0",
+            "0.1",
+            "--duration",
+            "3",
+            "--seed",
+            "4",
+            "--log",
+            str(log),
+            "--json",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=True,
+    )
     verdict = json.loads(out.stdout)
-    for key in ("settled", "settling_time_s", "ball_lost", "ball_lost_time_s", "peak_motor_voltage_v",
-                "peak_theta_rad", "final_x_m", "final_theta_rad"):
+    for key in (
+        "settled",
+        "settling_time_s",
+        "ball_lost",
+        "ball_lost_time_s",
+        "peak_motor_voltage_v",
+        "peak_theta_rad",
+        "final_x_m",
+        "final_theta_rad",
+    ):
         assert key in verdict
     assert verdict["ball_lost"] is False and log.exists()
-    again = subprocess.run([sys.executable, "-m", "twin.cli", "run", "--controller", "appendix-clp", "--x0", "0.1",
-                            "--theta0", "0.1", "--duration", "1", "--log", str(log)],
-                           capture_output=True, text=True, timeout=120)
+    again = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "twin.cli",
+            "run",
+            "--controller",
+            "appendix-clp",
+            "--x0",
+            "0.1",
+            "--theta0",
+            "0.1",
+            "--duration",
+            "1",
+            "--log",
+            str(log),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert again.returncode == 2 and "not overwritten" in again.stderr

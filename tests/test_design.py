@@ -22,8 +22,9 @@ DISTINCT_S = [-1.5 + 2.6j, -1.5 - 2.6j, -7.0, -8.0]
 DISTINCT_Z = [0.969 + 0.0504j, 0.969 - 0.0504j, 0.86, 0.87]
 
 
-@pytest.mark.parametrize("params", [Parameters(), Parameters().with_overrides({"ball.mass_kg": 0.03,
-                                                                               "beam.cog_height_m": 0.005})])
+@pytest.mark.parametrize(
+    "params", [Parameters(), Parameters().with_overrides({"ball.mass_kg": 0.03, "beam.cog_height_m": 0.005})]
+)
 def test_state_feedback_places_poles_continuous_and_discrete(params: Parameters) -> None:
     ref = ReferenceModel(params)
     a, b = ref.linearize("voltage")
@@ -72,11 +73,21 @@ def test_clp_gains_place_the_linearized_loop() -> None:
     params = Parameters()
     ref = ReferenceModel(params)
     terms = ClpTerms.from_params(params)
-    for a, b, poles in ((*ref.linearize("torque"), [-2.0, -2.5, -3.0, -3.5]),
-                        (*ref.discretize("torque"), [0.95, 0.955, 0.96, 0.965])):
+    for a, b, poles in (
+        (*ref.linearize("torque"), [-2.0, -2.5, -3.0, -3.5]),
+        (*ref.discretize("torque"), [0.95, 0.955, 0.96, 0.965]),
+    ):
         kp, kv = clp_gains(a, b, terms.alpha(0.0), terms.beta_linear(), poles)
-        k_eff = np.array([[terms.alpha_xdd * kp[0, 0], terms.alpha_thdd * kp[1, 1],
-                           terms.alpha_xdd * kv[0, 0], terms.alpha_thdd * kv[1, 1]]])
+        k_eff = np.array(
+            [
+                [
+                    terms.alpha_xdd * kp[0, 0],
+                    terms.alpha_thdd * kp[1, 1],
+                    terms.alpha_xdd * kv[0, 0],
+                    terms.alpha_thdd * kv[1, 1],
+                ]
+            ]
+        )
         assert check_poles(a + b @ terms.beta_linear() - b @ k_eff, poles) < 1e-6
 
 

@@ -29,12 +29,26 @@ def test_steps_two_seconds_of_random_volts_without_warnings() -> None:
 
 def test_every_element_is_named() -> None:
     m = mdl.build_model()
-    for kind, count in (("body", m.nbody), ("jnt", m.njnt), ("geom", m.ngeom), ("site", m.nsite),
-                        ("actuator", m.nu), ("sensor", m.nsensor), ("cam", m.ncam), ("light", m.nlight)):
-        obj = {"body": mujoco.mjtObj.mjOBJ_BODY, "jnt": mujoco.mjtObj.mjOBJ_JOINT,
-               "geom": mujoco.mjtObj.mjOBJ_GEOM, "site": mujoco.mjtObj.mjOBJ_SITE,
-               "actuator": mujoco.mjtObj.mjOBJ_ACTUATOR, "sensor": mujoco.mjtObj.mjOBJ_SENSOR,
-               "cam": mujoco.mjtObj.mjOBJ_CAMERA, "light": mujoco.mjtObj.mjOBJ_LIGHT}[kind]
+    for kind, count in (
+        ("body", m.nbody),
+        ("jnt", m.njnt),
+        ("geom", m.ngeom),
+        ("site", m.nsite),
+        ("actuator", m.nu),
+        ("sensor", m.nsensor),
+        ("cam", m.ncam),
+        ("light", m.nlight),
+    ):
+        obj = {
+            "body": mujoco.mjtObj.mjOBJ_BODY,
+            "jnt": mujoco.mjtObj.mjOBJ_JOINT,
+            "geom": mujoco.mjtObj.mjOBJ_GEOM,
+            "site": mujoco.mjtObj.mjOBJ_SITE,
+            "actuator": mujoco.mjtObj.mjOBJ_ACTUATOR,
+            "sensor": mujoco.mjtObj.mjOBJ_SENSOR,
+            "cam": mujoco.mjtObj.mjOBJ_CAMERA,
+            "light": mujoco.mjtObj.mjOBJ_LIGHT,
+        }[kind]
         start = 1 if kind == "body" else 0  # body 0 is the world
         for i in range(start, count):
             assert mujoco.mj_id2name(m, obj, i), f"unnamed {kind} {i}"
@@ -44,12 +58,28 @@ def test_xml_holds_the_same_values_as_the_parameters() -> None:
     """The XML alone (for viewers and tools) and the twin's build agree: one source of truth."""
     raw = mujoco.MjModel.from_xml_path(str(mdl.model_path()))
     built = mdl.build_model(Parameters())
-    for field in ("body_mass", "body_inertia", "body_ipos", "body_pos", "geom_size", "geom_pos",
-                  "geom_friction", "geom_solref", "geom_solimp", "geom_margin", "jnt_range", "jnt_axis",
-                  "actuator_gear", "actuator_gainprm", "actuator_ctrlrange", "actuator_armature",
-                  "actuator_damping"):
-        np.testing.assert_allclose(getattr(raw, field), getattr(built, field), rtol=1e-9, atol=1e-12,
-                                   err_msg=field)
+    for field in (
+        "body_mass",
+        "body_inertia",
+        "body_ipos",
+        "body_pos",
+        "geom_size",
+        "geom_pos",
+        "geom_friction",
+        "geom_solref",
+        "geom_solimp",
+        "geom_margin",
+        "jnt_range",
+        "jnt_axis",
+        "actuator_gear",
+        "actuator_gainprm",
+        "actuator_ctrlrange",
+        "actuator_armature",
+        "actuator_damping",
+    ):
+        np.testing.assert_allclose(
+            getattr(raw, field), getattr(built, field), rtol=1e-9, atol=1e-12, err_msg=field
+        )
     assert raw.opt.timestep == built.opt.timestep
     np.testing.assert_allclose(raw.opt.gravity, built.opt.gravity)
 
@@ -107,9 +137,21 @@ def test_plain_install_ships_the_model(tmp_path) -> None:
     """A non-editable wheel carries models/ballbeam.xml inside the twin package."""
     pytest.importorskip("hatchling")
     out = subprocess.run(
-        [sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q", "-w", str(tmp_path),
-         str(REPO)],
-        capture_output=True, text=True, timeout=300,
+        [
+            sys.executable,
+            "-m",
+            "pip",
+            "wheel",
+            "--no-deps",
+            "--no-build-isolation",
+            "-q",
+            "-w",
+            str(tmp_path),
+            str(REPO),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
     )
     assert out.returncode == 0, out.stderr
     wheel = next(tmp_path.glob("ballbeam_twin-*.whl"))
@@ -121,7 +163,11 @@ def test_plain_install_ships_the_model(tmp_path) -> None:
         zf.extractall(target)
     probe = subprocess.run(
         [sys.executable, "-c", "import twin.model as m; print(m.model_path()); m.build_model()"],
-        capture_output=True, text=True, cwd=tmp_path, env={"PYTHONPATH": str(target), "PATH": ""}, timeout=120,
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        env={"PYTHONPATH": str(target), "PATH": ""},
+        timeout=120,
     )
     assert probe.returncode == 0, probe.stderr
     assert Path(probe.stdout.strip()).is_relative_to(target)

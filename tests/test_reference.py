@@ -10,7 +10,9 @@ from twin.parameters import Parameters
 from twin.reference import ReferenceModel, discretize_zoh
 
 
-def _thesis_residuals(p: Parameters, state: np.ndarray, acc: np.ndarray, torque: float) -> tuple[float, float]:
+def _thesis_residuals(
+    p: Parameters, state: np.ndarray, acc: np.ndarray, torque: float
+) -> tuple[float, float]:
     """Residuals of eq 3.1.26 and eq 3.1.27 (θ̇² in place of the printed ẋ²), written as printed."""
     x, th, xd, thd = state
     xdd, thdd = acc
@@ -19,8 +21,16 @@ def _thesis_residuals(p: Parameters, state: np.ndarray, acc: np.ndarray, torque:
     k1 = 2 * r**2 / (5 * rs**2)
     k2 = 2 * r**2 / (5 * rs)
     e26 = (k1 + 1) * xdd - x * thd**2 + g * math.sin(th) - (k2 + hs + rs) * thdd
-    e27 = ((jbp - k2 * m * hs) * thdd + m * x**2 * thdd - mb * g * h * math.sin(th) + m * g * x * math.cos(th)
-           + 2 * m * x * xd * thd - m * (hs + rs) * x * thd**2 + k1 * m * hs * xdd - torque)
+    e27 = (
+        (jbp - k2 * m * hs) * thdd
+        + m * x**2 * thdd
+        - mb * g * h * math.sin(th)
+        + m * g * x * math.cos(th)
+        + 2 * m * x * xd * thd
+        - m * (hs + rs) * x * thd**2
+        + k1 * m * hs * xdd
+        - torque
+    )
     return e26, e27
 
 
@@ -40,11 +50,16 @@ def test_linearization_equals_finite_differences_of_the_nonlinear_model(referenc
     for kind in ("torque", "voltage"):
         a, b = reference.linearize(kind)
         eps = 1e-6
-        fd_a = np.column_stack([
-            (reference.derivative(eps * e, 0.0, kind) - reference.derivative(-eps * e, 0.0, kind)) / (2 * eps)
-            for e in np.eye(4)
-        ])
-        fd_b = (reference.derivative(np.zeros(4), eps, kind) - reference.derivative(np.zeros(4), -eps, kind)) / (2 * eps)
+        fd_a = np.column_stack(
+            [
+                (reference.derivative(eps * e, 0.0, kind) - reference.derivative(-eps * e, 0.0, kind))
+                / (2 * eps)
+                for e in np.eye(4)
+            ]
+        )
+        fd_b = (
+            reference.derivative(np.zeros(4), eps, kind) - reference.derivative(np.zeros(4), -eps, kind)
+        ) / (2 * eps)
         np.testing.assert_allclose(a, fd_a, rtol=1e-6, atol=1e-8)
         np.testing.assert_allclose(b[:, 0], fd_b, rtol=1e-6, atol=1e-8)
 
@@ -63,9 +78,13 @@ def test_rows_the_thesis_got_right_are_reproduced(params: Parameters) -> None:
     assert bv[3, 0] == pytest.approx(4.0984, rel=0.005)
 
 
-def test_open_loop_is_unstable_with_the_expected_pole_structure(params: Parameters, reference: ReferenceModel) -> None:
+def test_open_loop_is_unstable_with_the_expected_pole_structure(
+    params: Parameters, reference: ReferenceModel
+) -> None:
     # Torque input, no damping: a ± pair on the real axis and an imaginary pair (thesis §3.2).
-    poles = np.sort_complex(np.linalg.eigvals(ReferenceModel(params, motor_inertia=False).linearize("torque")[0]))
+    poles = np.sort_complex(
+        np.linalg.eigvals(ReferenceModel(params, motor_inertia=False).linearize("torque")[0])
+    )
     real = poles[np.abs(poles.imag) < 1e-9].real
     assert len(real) == 2 and real[0] == pytest.approx(-real[1], rel=1e-6) and real[1] > 3.5
     # Voltage input: back-EMF damps, one pole remains in the right half plane (thesis §3.3).
@@ -90,8 +109,11 @@ def test_simulation_conserves_energy_without_motor_and_damping(params: Parameter
 
     def energy(s: np.ndarray) -> float:
         x, th, xd, thd = s
-        kinetic = 0.5 * m * ((xd - c * thd) ** 2 + (x * thd) ** 2) + 0.5 * j * (thd - xd / rs) ** 2 \
+        kinetic = (
+            0.5 * m * ((xd - c * thd) ** 2 + (x * thd) ** 2)
+            + 0.5 * j * (thd - xd / rs) ** 2
             + 0.5 * params.beam.inertia_pivot_kgm2 * thd**2
+        )
         potential = m * g * (x * math.sin(th) + c * math.cos(th)) + mb * g * h * math.cos(th)
         return kinetic + potential
 

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-
 import numpy as np
 import pytest
 
@@ -10,8 +9,14 @@ from controllers.reproduction import VERDICTS, Entry
 from controllers.reproduction import figures as F
 
 CLAIMS = {
-    "§7 claim SMC torque", "§7 claim CLP torque lower", "§7 SF redesign spec", "§7 claim SF settling",
-    "§7 claim CLP settling", "§7 claim SF range", "§7 claim CLP range", "§7 claim CLP range larger",
+    "§7 claim SMC torque",
+    "§7 claim CLP torque lower",
+    "§7 SF redesign spec",
+    "§7 claim SF settling",
+    "§7 claim CLP settling",
+    "§7 claim SF range",
+    "§7 claim CLP range",
+    "§7 claim CLP range larger",
 }
 
 

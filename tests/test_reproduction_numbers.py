@@ -30,17 +30,66 @@ def by_id():
 
 
 REQUIRED = [
-    "Table 3.1 r*", "Table 3.1 J", "eq 3.2.3 coefficients", "eq 3.2.4 coefficients", "eq 3.2.3/3.2.4 denominator",
-    "eq 3.2.8 A θ̈ row", "eq 3.2.8 A ẍ row", "eq 3.2.8 A", "eq 3.2.9 B", "eq 3.2.11 TF", "§3.2 poles", "§3.2 zeros",
-    "eq 3.3.2", "eq 3.3.5 Ā", "eq 3.3.6 B̄", "eq 3.3.8 TF", "§3.3 poles", "§3.3 zeros",
-    "eq 3.4.8 Φ", "eq 3.4.9 Γ", "§3.4 eig Φ", "eq 3.4.13 Φ̄", "eq 3.4.14 Γ̄", "§3.4 eig Φ̄",
-    "§3.5 Q_C", "§3.5 det Q_C", "§3.5 Q_D", "§3.5 det Q_D", "§3.5 W_C", "§3.5 W_D",
-    "§4.2 char poly", "§4.2 poles", "§4.2 t_s, ζ", "§4.2 K", "§4.2 closed-loop poles",
-    "§4.3 α", "§4.3 β", "§4.3 kp", "§4.3 kv", "§4.3 closed-loop poles",
-    "§4.4 T_r", "§4.4 A11 A12 A21 A22 B2", "§4.4 M", "§4.4 S̄", "§4.4 K_eq",
-    "§5.2.1 poles", "§5.2.1 K", "§5.2.1 observer poles", "§5.2.1 G",
-    "§5.2.2 poles", "§5.2.2 kp", "§5.2.2 kv", "§5.2.2 closed-loop poles", "§5.2.2 observer poles", "§5.2.2 G",
-    "appendix A SF observer", "appendix A SF K", "appendix A CLP observer", "appendix A β", "appendix A α",
+    "Table 3.1 r*",
+    "Table 3.1 J",
+    "eq 3.2.3 coefficients",
+    "eq 3.2.4 coefficients",
+    "eq 3.2.3/3.2.4 denominator",
+    "eq 3.2.8 A θ̈ row",
+    "eq 3.2.8 A ẍ row",
+    "eq 3.2.8 A",
+    "eq 3.2.9 B",
+    "eq 3.2.11 TF",
+    "§3.2 poles",
+    "§3.2 zeros",
+    "eq 3.3.2",
+    "eq 3.3.5 Ā",
+    "eq 3.3.6 B̄",
+    "eq 3.3.8 TF",
+    "§3.3 poles",
+    "§3.3 zeros",
+    "eq 3.4.8 Φ",
+    "eq 3.4.9 Γ",
+    "§3.4 eig Φ",
+    "eq 3.4.13 Φ̄",
+    "eq 3.4.14 Γ̄",
+    "§3.4 eig Φ̄",
+    "§3.5 Q_C",
+    "§3.5 det Q_C",
+    "§3.5 Q_D",
+    "§3.5 det Q_D",
+    "§3.5 W_C",
+    "§3.5 W_D",
+    "§4.2 char poly",
+    "§4.2 poles",
+    "§4.2 t_s, ζ",
+    "§4.2 K",
+    "§4.2 closed-loop poles",
+    "§4.3 α",
+    "§4.3 β",
+    "§4.3 kp",
+    "§4.3 kv",
+    "§4.3 closed-loop poles",
+    "§4.4 T_r",
+    "§4.4 A11 A12 A21 A22 B2",
+    "§4.4 M",
+    "§4.4 S̄",
+    "§4.4 K_eq",
+    "§5.2.1 poles",
+    "§5.2.1 K",
+    "§5.2.1 observer poles",
+    "§5.2.1 G",
+    "§5.2.2 poles",
+    "§5.2.2 kp",
+    "§5.2.2 kv",
+    "§5.2.2 closed-loop poles",
+    "§5.2.2 observer poles",
+    "§5.2.2 G",
+    "appendix A SF observer",
+    "appendix A SF K",
+    "appendix A CLP observer",
+    "appendix A β",
+    "appendix A α",
     "appendix A kp kv",
 ]
 
@@ -68,7 +117,10 @@ def test_rolling_radius(by_id):
 
 def test_theta_row_of_a_agrees(by_id):
     a, b = ReferenceModel(Parameters(), motor_inertia=False).linearize("torque")
-    assert rel_error([tn.A_TORQUE[3, 0], tn.A_TORQUE[3, 1], tn.B_TORQUE[3, 0]], [a[3, 0], a[3, 1], b[3, 0]]) < 5e-3
+    assert (
+        rel_error([tn.A_TORQUE[3, 0], tn.A_TORQUE[3, 1], tn.B_TORQUE[3, 0]], [a[3, 0], a[3, 1], b[3, 0]])
+        < 5e-3
+    )
     assert by_id["eq 3.2.8 A θ̈ row"].verdict == "agrees"
     assert by_id["eq 3.2.8 A ẍ row"].verdict in ("inconsistent", "unexplained")
 

@@ -14,8 +14,15 @@ def test_period_must_be_whole_physics_steps() -> None:
     with pytest.raises(RigError, match="daq.period_s = 0.0205"):
         TwinRig(Parameters().with_overrides({"daq.period_s": 0.0205}))
     with pytest.raises(RigError, match="daq.output_latency_s = 0.0025"):
-        TwinRig(Parameters().with_overrides({"daq.output_latency_s": 0.0025, "physics.timestep_s": 0.002,
-                                             "physics.contact_timeconst_s": 0.004}))
+        TwinRig(
+            Parameters().with_overrides(
+                {
+                    "daq.output_latency_s": 0.0025,
+                    "physics.timestep_s": 0.002,
+                    "physics.contact_timeconst_s": 0.004,
+                }
+            )
+        )
 
 
 def test_blocks_are_stamped_at_their_last_sample() -> None:

@@ -24,8 +24,11 @@ def test_rolling_acceleration_and_spin_on_a_held_beam(params: Parameters, theta_
     assert not plant.ball_lost
     # Acceleration along the beam from a quadratic fit of x(t) (independent of the velocity readout).
     accel = 2.0 * np.polyfit(times, xs, 2)[0]
-    theory = -params.physics.gravity_m_s2 * math.sin(theta_rad) / (1.0 + 2.0 * params.ball.radius_m**2
-                                                                    / (5.0 * params.rolling_radius_m**2))
+    theory = (
+        -params.physics.gravity_m_s2
+        * math.sin(theta_rad)
+        / (1.0 + 2.0 * params.ball.radius_m**2 / (5.0 * params.rolling_radius_m**2))
+    )
     assert accel == pytest.approx(theory, rel=0.005)
     # No slip: v = r*·ω, with the spin about the hinge axis opposite to the motion (eq 3.1.13).
     speed, spin = np.array(speeds[50:]), np.array(spins[50:])

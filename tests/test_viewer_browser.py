@@ -14,16 +14,26 @@ from pathlib import Path
 import pytest
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
-sync_api = pytest.importorskip("playwright.sync_api") if not os.environ.get("CI") else __import__(
-    "playwright.sync_api", fromlist=["sync_playwright"])
+sync_api = (
+    pytest.importorskip("playwright.sync_api")
+    if not os.environ.get("CI")
+    else __import__("playwright.sync_api", fromlist=["sync_playwright"])
+)
 if CHROMIUM is None:
     if os.environ.get("CI"):
         raise RuntimeError("CI must install Debian's chromium for the browser tests (.ci/run does)")
     pytest.skip("Debian chromium is not installed", allow_module_level=True)
 
-CHROMIUM_ARGS = ["--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
-                 "--disable-background-networking", "--disable-component-update", "--disable-sync",
-                 "--no-first-run", "--disable-quic"]
+CHROMIUM_ARGS = [
+    "--no-sandbox",
+    "--use-angle=swiftshader",
+    "--enable-unsafe-swiftshader",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--no-first-run",
+    "--disable-quic",
+]
 
 
 def _free_port() -> int:
@@ -35,8 +45,12 @@ def _free_port() -> int:
 def _start_view(port: int, log_path: Path) -> subprocess.Popen:
     """``ballbeam view`` in the background, its output to a file (a full pipe would stall the server)."""
     log = open(log_path, "w")
-    proc = subprocess.Popen([sys.executable, "-m", "twin.cli", "view", "--port", str(port), "--duration", "90"],
-                            stdout=log, stderr=subprocess.STDOUT, text=True)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "twin.cli", "view", "--port", str(port), "--duration", "90"],
+        stdout=log,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
     deadline = time.time() + 60
     while time.time() < deadline and proc.poll() is None:
         if "ballbeam view: http://" in log_path.read_text():
@@ -75,15 +89,19 @@ def _sim_time(page) -> float:
 
 
 def _ball_position(page) -> list[float]:
-    return page.evaluate("() => { const n = window.__viserMutable.nodeRefFromName['/ball'];"
-                         " return [n.position.x, n.position.y, n.position.z]; }")
+    return page.evaluate(
+        "() => { const n = window.__viserMutable.nodeRefFromName['/ball'];"
+        " return [n.position.x, n.position.y, n.position.z]; }"
+    )
 
 
 def _wait_ball_moved(page, reference: list[float], distance_m: float) -> None:
     page.wait_for_function(
         "([ref, d]) => { const p = window.__viserMutable.nodeRefFromName['/ball'].position;"
         " return Math.hypot(p.x - ref[0], p.y - ref[1], p.z - ref[2]) > d; }",
-        arg=[reference, distance_m], timeout=30000)
+        arg=[reference, distance_m],
+        timeout=30000,
+    )
 
 
 def test_page_shows_the_running_twin_and_its_controls(view: int) -> None:
@@ -93,8 +111,9 @@ def test_page_shows_the_running_twin_and_its_controls(view: int) -> None:
         page = browser.new_page(viewport={"width": 1100, "height": 800})
         page.goto(f"http://127.0.0.1:{view}")
         page.get_by_text("Connected").wait_for(timeout=30000)
-        page.wait_for_function("() => window.__viserMutable && window.__viserMutable.nodeRefFromName['/ball']",
-                               timeout=30000)
+        page.wait_for_function(
+            "() => window.__viserMutable && window.__viserMutable.nodeRefFromName['/ball']", timeout=30000
+        )
         assert page.get_by_text("Share").count() == 0  # the public share button is hidden
 
         # Pause, then Reset: the twin restarts from its initial state and waits (the status counts runs;
@@ -132,8 +151,11 @@ def test_page_shows_the_running_twin_and_its_controls(view: int) -> None:
         other.close()
         page.bring_to_front()  # a background tab is throttled by Chromium; the server is not the cause
         before = _sim_time(page)
-        page.wait_for_function(f"() => {{ const m = /t = ([0-9.]+) s/.exec(document.body.innerText);"
-                               f" return m && parseFloat(m[1]) > {before} + 1.0; }}", timeout=30000)
+        page.wait_for_function(
+            f"() => {{ const m = /t = ([0-9.]+) s/.exec(document.body.innerText);"
+            f" return m && parseFloat(m[1]) > {before} + 1.0; }}",
+            timeout=30000,
+        )
         browser.close()
 
 
@@ -142,7 +164,11 @@ def test_a_taken_port_is_reported_not_changed() -> None:
         taken.bind(("127.0.0.1", 0))
         taken.listen()
         port = taken.getsockname()[1]
-        out = subprocess.run([sys.executable, "-m", "twin.cli", "view", "--port", str(port), "--duration", "1"],
-                             capture_output=True, text=True, timeout=60)
+        out = subprocess.run(
+            [sys.executable, "-m", "twin.cli", "view", "--port", str(port), "--duration", "1"],
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
     assert out.returncode == 2
     assert f"port {port} on 127.0.0.1 is taken" in out.stderr

@@ -6,8 +6,8 @@ import argparse
 import json
 import math
 import sys
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Sequence
 
 import numpy as np
 
@@ -74,8 +74,15 @@ def _cmd_run(args: argparse.Namespace) -> int:
         if path and Path(path).exists() and not args.overwrite:
             raise ParameterError(f"{path}: exists; not overwritten (pass --overwrite)")
     controller = registry.make(args.controller, params)
-    result = run_closed_loop(controller, x0_m=args.x0, theta0_rad=args.theta0, duration_s=args.duration,
-                             seed=args.seed, noise=not args.no_noise, params=params)
+    result = run_closed_loop(
+        controller,
+        x0_m=args.x0,
+        theta0_rad=args.theta0,
+        duration_s=args.duration,
+        seed=args.seed,
+        noise=not args.no_noise,
+        params=params,
+    )
     if args.log:
         save = save_csv if Path(args.log).suffix.lower() == ".csv" else save_mat
         save(result.log, args.log, overwrite=args.overwrite)
@@ -83,8 +90,14 @@ def _cmd_run(args: argparse.Namespace) -> int:
         from twin.plots import plot_run
 
         plot_run(result, args.plot)
-    summary = {"controller": args.controller, "x0_m": args.x0, "theta0_rad": args.theta0, "seed": args.seed,
-               "noise": not args.no_noise, **result.metrics}
+    summary = {
+        "controller": args.controller,
+        "x0_m": args.x0,
+        "theta0_rad": args.theta0,
+        "seed": args.seed,
+        "noise": not args.no_noise,
+        **result.metrics,
+    }
     if args.json:
         print(json.dumps(summary))
     else:
@@ -100,8 +113,15 @@ def _cmd_view(args: argparse.Namespace) -> int:
     if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
         raise ParameterError(f"--duration = {args.duration!r} must be a positive number of seconds")
     try:
-        stats = serve(host=args.host, port=args.port, controller=args.controller, speed=args.speed, seed=args.seed,
-                      duration_s=args.duration, params=params)
+        stats = serve(
+            host=args.host,
+            port=args.port,
+            controller=args.controller,
+            speed=args.speed,
+            seed=args.seed,
+            duration_s=args.duration,
+            params=params,
+        )
     except ViewerError as exc:
         print(f"ballbeam view: error: {exc}", file=sys.stderr)
         return 2
@@ -111,13 +131,19 @@ def _cmd_view(args: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="ballbeam", description="Digital twin of the two-wire ball-and-beam rig.")
+    parser = argparse.ArgumentParser(
+        prog="ballbeam", description="Digital twin of the two-wire ball-and-beam rig."
+    )
     sub = parser.add_subparsers(dest="command", required=True)
 
     lin = sub.add_parser("linearize", help="continuous-time A, B at the origin")
     lin.add_argument("--input", choices=("torque", "voltage"), default="torque")
-    lin.add_argument("--source", choices=("twin", "reference"), default="twin",
-                     help="the MuJoCo twin (reduced to its 4 slow modes) or the analytic reference model")
+    lin.add_argument(
+        "--source",
+        choices=("twin", "reference"),
+        default="twin",
+        help="the MuJoCo twin (reduced to its 4 slow modes) or the analytic reference model",
+    )
     lin.add_argument("--params", metavar="FILE", help="parameter file (TOML or JSON) overriding the defaults")
     lin.add_argument("--json", action="store_true", help="print JSON")
     lin.set_defaults(func=_cmd_linearize)
@@ -128,7 +154,9 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--controller", required=True, choices=NAMES)
     run.add_argument("--x0", type=float, required=True, metavar="M", help="initial ball position (m)")
     run.add_argument("--theta0", type=float, required=True, metavar="RAD", help="initial beam angle (rad)")
-    run.add_argument("--duration", type=float, default=15.0, metavar="S", help="simulated seconds (default 15)")
+    run.add_argument(
+        "--duration", type=float, default=15.0, metavar="S", help="simulated seconds (default 15)"
+    )
     run.add_argument("--seed", type=int, default=0, help="seed of the sensor noise (default 0)")
     run.add_argument("--no-noise", action="store_true", help="switch the ball sensor's contact noise off")
     run.add_argument("--log", metavar="FILE", help="save the run: .mat (thesis data_file format) or .csv")
@@ -139,13 +167,21 @@ def build_parser() -> argparse.ArgumentParser:
     run.set_defaults(func=_cmd_run)
 
     view = sub.add_parser("view", help="live 3D view of the twin in the browser (viser)")
-    view.add_argument("--host", default="127.0.0.1", help="interface to serve on (default 127.0.0.1: this machine only)")
+    view.add_argument(
+        "--host", default="127.0.0.1", help="interface to serve on (default 127.0.0.1: this machine only)"
+    )
     view.add_argument("--port", type=int, default=8080, help="port (default 8080); a taken port is an error")
     view.add_argument("--controller", default="appendix-clp", choices=NAMES)
-    view.add_argument("--speed", type=float, default=1.0, help="simulated seconds per wall second (default 1.0)")
+    view.add_argument(
+        "--speed", type=float, default=1.0, help="simulated seconds per wall second (default 1.0)"
+    )
     view.add_argument("--seed", type=int, default=0, help="seed of the sensor noise (default 0)")
-    view.add_argument("--duration", type=float, metavar="S", help="stop after S wall-clock seconds (headless runs)")
-    view.add_argument("--params", metavar="FILE", help="parameter file (TOML or JSON) overriding the defaults")
+    view.add_argument(
+        "--duration", type=float, metavar="S", help="stop after S wall-clock seconds (headless runs)"
+    )
+    view.add_argument(
+        "--params", metavar="FILE", help="parameter file (TOML or JSON) overriding the defaults"
+    )
     view.set_defaults(func=_cmd_view)
 
     par = sub.add_parser("params", help="list every parameter with its unit and source")

@@ -17,4 +17,6 @@ def beam_torque_nm(
     With the thesis's values this is 0.016383·(V − 0.154·θ̇) N·m. The motor's own viscous damping and
     rotor inertia are not part of this law (they act on the joint, see ``twin.reference``)."""
     v = np.clip(volts, -amplifier.rail_v, amplifier.rail_v)
-    return motor.torque_per_volt_nm_per_v * (v - motor.backemf_at_beam_v_s_per_rad * np.asarray(beam_rate_rad_s))
+    return motor.torque_per_volt_nm_per_v * (
+        v - motor.backemf_at_beam_v_s_per_rad * np.asarray(beam_rate_rad_s)
+    )

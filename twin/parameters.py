@@ -13,9 +13,10 @@ import dataclasses
 import json
 import math
 import tomllib
+from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 __all__ = [
     "ParameterError",
@@ -131,7 +132,9 @@ class Track:
     contact_height_m: float = param(
         17.281e-3, "m", "Table 3.1 (h*): the wires' contact line above the pivot", gt=0.0
     )
-    contact_spacing_m: float = param(13.785e-3, "m", "Table 3.1 (d): distance between the two contacts", gt=0.0)
+    contact_spacing_m: float = param(
+        13.785e-3, "m", "Table 3.1 (d): distance between the two contacts", gt=0.0
+    )
     half_length_m: float = param(0.323, "m", "§3: |x| ≤ 0.323 m, the ball leaves the track beyond", gt=0.0)
     wire_radius_m: float = param(
         1.0e-3,
@@ -145,7 +148,6 @@ class Track:
         "not given; rolling without slipping (thesis §1) needs μ > ≈0.3 up to the 43.4° stop",
         gt=0.0,
     )
-
 
     def __post_init__(self) -> None:
         _check_fields(self, "track")
@@ -203,7 +205,9 @@ class Physics:
     gravity_m_s2: float = param(9.81, "m/s²", "standard gravity, as used by the thesis", gt=0.0)
     timestep_s: float = param(1e-3, "s", "design.md: 1 ms with implicitfast", gt=0.0, le=0.02)
     contact_timeconst_s: float = param(
-        2e-3, "s", "design.md: solref time constant = 2·timestep (stiff enough that the ball does not sink)",
+        2e-3,
+        "s",
+        "design.md: solref time constant = 2·timestep (stiff enough that the ball does not sink)",
         gt=0.0,
     )
     contact_impedance: float = param(
@@ -236,8 +240,12 @@ class AngleSensor:
     """Beam-angle chain (§6.2): motor encoder → 10-bit up/down counter → AD561 DAC → I/O card ADC."""
 
     encoder_pulses_per_rev: float = param(256.0, "pulses/rev", "§6.2: HEDS 5540, 256 pulses per turn", gt=0.0)
-    counter_bits: float = param(10.0, "bit", "§6.2: 10-bit counter (three 74LS193, top 2 bits unused)", ge=1.0)
-    counter_zero_count: float = param(512.0, "count", "§6.6: counters set to 512 at 0° by the zero switch", ge=0.0)
+    counter_bits: float = param(
+        10.0, "bit", "§6.2: 10-bit counter (three 74LS193, top 2 bits unused)", ge=1.0
+    )
+    counter_zero_count: float = param(
+        512.0, "count", "§6.6: counters set to 512 at 0° by the zero switch", ge=0.0
+    )
     dac_volts_per_count: float = param(0.009818, "V/count", "eq 6.2.6 (fit of the measured eq 6.2.4)", gt=0.0)
     dac_offset_v: float = param(-5.042, "V", "eq 6.2.6: Va at DI = 0 (measured, eq 6.2.4)")
     zeroing_error_rad: float = param(
@@ -291,9 +299,13 @@ class Daq:
     def __post_init__(self) -> None:
         _check_fields(self, "daq")
         if self.adc_max_v <= self.adc_min_v:
-            raise ParameterError(f"daq.adc_max_v = {self.adc_max_v!r} V must exceed daq.adc_min_v = {self.adc_min_v!r} V")
+            raise ParameterError(
+                f"daq.adc_max_v = {self.adc_max_v!r} V must exceed daq.adc_min_v = {self.adc_min_v!r} V"
+            )
         if self.dac_max_v <= self.dac_min_v:
-            raise ParameterError(f"daq.dac_max_v = {self.dac_max_v!r} V must exceed daq.dac_min_v = {self.dac_min_v!r} V")
+            raise ParameterError(
+                f"daq.dac_max_v = {self.dac_max_v!r} V must exceed daq.dac_min_v = {self.dac_min_v!r} V"
+            )
         if self.output_latency_s >= self.period_s:
             raise ParameterError(
                 f"daq.output_latency_s = {self.output_latency_s!r} s is impossible: it must be shorter than "
@@ -361,7 +373,7 @@ class Parameters:
         return 0.4 * self.ball.radius_m**2 / self.rolling_radius_m**2
 
     # --- overrides and files ----------------------------------------------------------------------
-    def with_overrides(self, overrides: Mapping[str, Any], *, origin: str = "overrides") -> "Parameters":
+    def with_overrides(self, overrides: Mapping[str, Any], *, origin: str = "overrides") -> Parameters:
         """A copy with some values replaced.
 
         ``overrides`` is nested (``{"ball": {"mass_kg": 0.02}}``) or dotted (``{"ball.mass_kg": 0.02}``).
@@ -374,15 +386,21 @@ class Parameters:
             elif isinstance(value, Mapping):
                 nested.setdefault(key, {}).update(value)
             else:
-                raise ParameterError(f"{origin}: '{key}' is not a parameter group (expected one of {sorted(_GROUPS)})")
+                raise ParameterError(
+                    f"{origin}: '{key}' is not a parameter group (expected one of {sorted(_GROUPS)})"
+                )
         changes: dict[str, Any] = {}
         for group, values in nested.items():
             if group not in _GROUPS:
-                raise ParameterError(f"{origin}: unknown parameter group '{group}' (expected one of {sorted(_GROUPS)})")
+                raise ParameterError(
+                    f"{origin}: unknown parameter group '{group}' (expected one of {sorted(_GROUPS)})"
+                )
             known = {f.name for f in fields(_GROUPS[group])}
             for name in values:
                 if name not in known:
-                    raise ParameterError(f"{origin}: unknown parameter '{group}.{name}' (known: {sorted(known)})")
+                    raise ParameterError(
+                        f"{origin}: unknown parameter '{group}.{name}' (known: {sorted(known)})"
+                    )
             try:
                 changes[group] = dataclasses.replace(getattr(self, group), **values)
             except ParameterError as exc:
@@ -393,7 +411,7 @@ class Parameters:
             raise ParameterError(f"{origin}: {exc}") from None
 
     @classmethod
-    def from_file(cls, path: str | Path) -> "Parameters":
+    def from_file(cls, path: str | Path) -> Parameters:
         """Defaults overridden by a TOML or JSON file (groups as tables/objects, e.g. ``[ball] mass_kg = …``)."""
         path = Path(path)
         try:
@@ -406,7 +424,9 @@ class Parameters:
             else:
                 data = tomllib.loads(text.decode("utf-8"))
         except (json.JSONDecodeError, tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-            raise ParameterError(f"{path}: not a valid {path.suffix.lstrip('.').upper() or 'TOML'} file: {exc}") from None
+            raise ParameterError(
+                f"{path}: not a valid {path.suffix.lstrip('.').upper() or 'TOML'} file: {exc}"
+            ) from None
         if not isinstance(data, dict):
             raise ParameterError(f"{path}: expected a table of parameter groups at the top level")
         return cls().with_overrides(data, origin=str(path))

@@ -76,8 +76,12 @@ class Plant:
         """Put the ball on the wires at x, rolling without slipping at ẋ, and the beam at θ, θ̇.
 
         ``keep_time`` keeps the simulation clock running (a disturbance mid-run rather than a new run)."""
-        for name, value in (("x_m", x_m), ("theta_rad", theta_rad), ("xdot_m_s", xdot_m_s),
-                            ("thetadot_rad_s", thetadot_rad_s)):
+        for name, value in (
+            ("x_m", x_m),
+            ("theta_rad", theta_rad),
+            ("xdot_m_s", xdot_m_s),
+            ("thetadot_rad_s", thetadot_rad_s),
+        ):
             if not math.isfinite(value):
                 raise ValueError(f"initial state {name} = {value!r} is not finite")
         p = self.params
@@ -204,6 +208,4 @@ class Plant:
 
     def warnings(self) -> dict[str, int]:
         """MuJoCo warnings raised so far (name -> count), empty when there were none."""
-        return {
-            mujoco.mjtWarning(i).name: int(w.number) for i, w in enumerate(self.data.warning) if w.number
-        }
+        return {mujoco.mjtWarning(i).name: int(w.number) for i, w in enumerate(self.data.warning) if w.number}

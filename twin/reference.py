@@ -16,8 +16,9 @@ drops them to give the thesis's model.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable, Literal
+from typing import Literal
 
 import numpy as np
 import scipy.integrate
@@ -69,7 +70,10 @@ class ReferenceModel:
         return np.array(
             [
                 [m + j / rs**2, coupling],
-                [coupling, p.beam.inertia_pivot_kgm2 + self.reflected_inertia_kgm2 + j + m * c**2 + m * x_m**2],
+                [
+                    coupling,
+                    p.beam.inertia_pivot_kgm2 + self.reflected_inertia_kgm2 + j + m * c**2 + m * x_m**2,
+                ],
             ]
         )
 
@@ -123,7 +127,9 @@ class ReferenceModel:
             raise ValueError(f"input = {input!r}: expected 'torque' or 'voltage'")
         return a, b
 
-    def discretize(self, input: InputKind = "torque", period_s: float = 0.02) -> tuple[np.ndarray, np.ndarray]:
+    def discretize(
+        self, input: InputKind = "torque", period_s: float = 0.02
+    ) -> tuple[np.ndarray, np.ndarray]:
         """(Φ, Γ) at ``period_s`` (eq 3.4.8/3.4.9 and 3.4.13/3.4.14 at T = 20 ms)."""
         return discretize_zoh(*self.linearize(input), period_s)
 

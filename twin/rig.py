@@ -55,7 +55,9 @@ class TwinRig(Rig):
         self._steps_per_tick = _whole_steps(p.daq.period_s, p.physics.timestep_s, "daq.period_s")
         if self._steps_per_tick < 1:
             raise RigError(f"daq.period_s = {p.daq.period_s!r} s is shorter than one physics step")
-        self._latency_steps = _whole_steps(p.daq.output_latency_s, p.physics.timestep_s, "daq.output_latency_s")
+        self._latency_steps = _whole_steps(
+            p.daq.output_latency_s, p.physics.timestep_s, "daq.output_latency_s"
+        )
         self.plant = Plant(p)
         self._angle = AngleChain(p)
         self._ball = BallPositionChain(p, seed)
@@ -115,7 +117,6 @@ class TwinRig(Rig):
         self._ticks = 0
         self.command_v = self.params.amplifier.zero_command_v
         self._pending_motor_v = self._applied_motor_v = float(motor_volts(self.command_v, self.params))
-
 
     def true_state(self) -> np.ndarray:
         """The twin's true (x_m, θ_rad, ẋ_m_s, θ̇_rad_s): for validation and logs, never for a controller."""

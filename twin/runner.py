@@ -38,8 +38,12 @@ def metrics(log: RunLog, x0_m: float, duration_s: float) -> dict[str, Any]:
     lost_time = float(t[lost_idx[0]]) if lost else None
     on_track = slice(0, lost_idx[0]) if lost else slice(None)
     tail = t >= t[-1] - SETTLE_WINDOW_S + 1e-9
-    settled = (not lost and t[-1] >= SETTLE_WINDOW_S and bool(np.all(np.abs(x[tail]) < SETTLED_X_M))
-               and bool(np.all(np.abs(th[tail]) < SETTLED_THETA_RAD)))
+    settled = (
+        not lost
+        and t[-1] >= SETTLE_WINDOW_S
+        and bool(np.all(np.abs(x[tail]) < SETTLED_X_M))
+        and bool(np.all(np.abs(th[tail]) < SETTLED_THETA_RAD))
+    )
     threshold = max(SETTLING_FRACTION * abs(x0_m), SETTLING_FLOOR_M)
     outside = np.flatnonzero(np.abs(x) > threshold)
     if lost or (outside.size and outside[-1] == len(x) - 1):
@@ -95,8 +99,12 @@ def run_closed_loop(
         cols["x1"][k], cols["x2"][k], cols["x3"][k], cols["x4"][k] = tel.estimate
         cols["u"][k], cols["uhesap"][k] = tel.u, tel.u_computed
         cols["true_time_s"][k] = rig.time_s
-        (cols["true_x_m"][k], cols["true_theta_rad"][k], cols["true_xdot_m_s"][k],
-         cols["true_thetadot_rad_s"][k]) = truth
+        (
+            cols["true_x_m"][k],
+            cols["true_theta_rad"][k],
+            cols["true_xdot_m_s"][k],
+            cols["true_thetadot_rad_s"][k],
+        ) = truth
         cols["motor_volts_v"][k] = rig.motor_volts_v
         lost[k] = rig.ball_lost
 

@@ -37,12 +37,20 @@ DEFAULT_CONTROLLER = "appendix-clp"
 
 # Live plots: title, then (legend label, history key, colour) per trace.
 PLOTS = (
-    ("Ball position (m)", (("x true", "x_true", "#1f77b4"), ("x measured", "x_meas", "#ff7f0e"),
-                           ("x estimated", "x_est", "#2ca02c"))),
+    (
+        "Ball position (m)",
+        (
+            ("x true", "x_true", "#1f77b4"),
+            ("x measured", "x_meas", "#ff7f0e"),
+            ("x estimated", "x_est", "#2ca02c"),
+        ),
+    ),
     ("Beam angle (rad)", (("θ true", "th_true", "#1f77b4"), ("θ measured", "th_meas", "#ff7f0e"))),
     ("Motor voltage (V)", (("motor V", "volts", "#d62728"),)),
-    ("Observer error (estimate − true)", (("ẋ error (m/s)", "err_xdot", "#9467bd"),
-                                          ("θ̇ error (rad/s)", "err_thdot", "#8c564b"))),
+    (
+        "Observer error (estimate − true)",
+        (("ẋ error (m/s)", "err_xdot", "#9467bd"), ("θ̇ error (rad/s)", "err_thdot", "#8c564b")),
+    ),
 )
 
 
@@ -100,8 +108,9 @@ class LiveTwin:
         """A fresh run from the set initial state: new controller, twin at (x0, θ0) at rest."""
         self.runs += 1
         self.controller: Controller = registry.make(self.controller_name, self.params)
-        params = self.params.with_overrides({"daq.period_s": self.controller.period_s,
-                                             "ball_sensor.noise_enabled": self.noise})
+        params = self.params.with_overrides(
+            {"daq.period_s": self.controller.period_s, "ball_sensor.noise_enabled": self.noise}
+        )
         self.rig = TwinRig(params, seed=self.seed)
         self.rig.reset(self.x0_m, self.theta0_rad)
         self._apply_reference()
@@ -125,7 +134,10 @@ class LiveTwin:
                 action, value = self.actions.get_nowait()
             except queue.Empty:
                 return
-            print(f"ballbeam view: t = {self.rig.time_s:.2f} s: {action} {'' if value is None else value}", flush=True)
+            print(
+                f"ballbeam view: t = {self.rig.time_s:.2f} s: {action} {'' if value is None else value}",
+                flush=True,
+            )
             if action == "controller":
                 self._select(str(value))
             elif action == "reset":
@@ -164,18 +176,30 @@ class LiveTwin:
         est = self.controller.telemetry.estimate
         s = self.last_sample
         self.history.append(
-            t=self.rig.time_s, x_true=x, x_meas=converters.ball_position_m(s.ball_v), x_est=est[0],
-            th_true=theta, th_meas=converters.beam_angle_rad(s.angle_v), volts=self.rig.motor_volts_v,
-            err_xdot=est[2] - xdot, err_thdot=est[3] - thetadot,
+            t=self.rig.time_s,
+            x_true=x,
+            x_meas=converters.ball_position_m(s.ball_v),
+            x_est=est[0],
+            th_true=theta,
+            th_meas=converters.beam_angle_rad(s.angle_v),
+            volts=self.rig.motor_volts_v,
+            err_xdot=est[2] - xdot,
+            err_thdot=est[3] - thetadot,
         )
 
     def status_markdown(self) -> str:
         state = "running" if self.running else "paused"
-        ball = f"**ball lost** at {self.rig.ball_lost_time_s:.2f} s" if self.rig.ball_lost else "ball on the beam"
-        return (f"run {self.runs} · **t = {self.rig.time_s:.2f} s** · {state} · controller: "
-                f"**{self.controller_name}** · {ball}  \n"
-                f"noise {'on' if self.noise else 'off'} · speed ×{self.speed:g} · "
-                f"motor {self.rig.motor_volts_v:+.2f} V")
+        ball = (
+            f"**ball lost** at {self.rig.ball_lost_time_s:.2f} s"
+            if self.rig.ball_lost
+            else "ball on the beam"
+        )
+        return (
+            f"run {self.runs} · **t = {self.rig.time_s:.2f} s** · {state} · controller: "
+            f"**{self.controller_name}** · {ball}  \n"
+            f"noise {'on' if self.noise else 'off'} · speed ×{self.speed:g} · "
+            f"motor {self.rig.motor_volts_v:+.2f} V"
+        )
 
 
 # --- scene ------------------------------------------------------------------------------------------------
@@ -198,18 +222,30 @@ def build_scene(server: viser.ViserServer, model: mujoco.MjModel) -> dict[int, A
         pose = {"position": tuple(model.geom_pos[g]), "wxyz": tuple(model.geom_quat[g])}
         size, color, kind = model.geom_size[g], _rgb(model, g), model.geom_type[g]
         if kind == mujoco.mjtGeom.mjGEOM_PLANE:
-            server.scene.add_box(name, color=color, dimensions=(2 * size[0], 2 * size[1], 0.002),
-                                 position=(pose["position"][0], pose["position"][1], -0.001), wxyz=pose["wxyz"])
+            server.scene.add_box(
+                name,
+                color=color,
+                dimensions=(2 * size[0], 2 * size[1], 0.002),
+                position=(pose["position"][0], pose["position"][1], -0.001),
+                wxyz=pose["wxyz"],
+            )
         elif kind == mujoco.mjtGeom.mjGEOM_BOX:
             server.scene.add_box(name, color=color, dimensions=tuple(2 * size), **pose)
         elif kind == mujoco.mjtGeom.mjGEOM_SPHERE:
             server.scene.add_icosphere(name, radius=float(size[0]), color=color, subdivisions=3, **pose)
         elif kind == mujoco.mjtGeom.mjGEOM_CYLINDER:
-            server.scene.add_cylinder(name, radius=float(size[0]), height=float(2 * size[1]), color=color, **pose)
+            server.scene.add_cylinder(
+                name, radius=float(size[0]), height=float(2 * size[1]), color=color, **pose
+            )
         elif kind == mujoco.mjtGeom.mjGEOM_CAPSULE:
             mesh = trimesh.creation.capsule(height=float(2 * size[1]), radius=float(size[0]), count=[12, 12])
-            server.scene.add_mesh_simple(name, vertices=np.asarray(mesh.vertices, dtype=np.float32),
-                                         faces=np.asarray(mesh.faces, dtype=np.uint32), color=color, **pose)
+            server.scene.add_mesh_simple(
+                name,
+                vertices=np.asarray(mesh.vertices, dtype=np.float32),
+                faces=np.asarray(mesh.faces, dtype=np.uint32),
+                color=color,
+                **pose,
+            )
     return frames
 
 
@@ -227,7 +263,9 @@ def _free_port_or_raise(host: str, port: int) -> None:
         try:
             probe.bind(address)
         except OSError as exc:
-            raise ViewerError(f"port {port} on {host} is taken ({exc.strerror}); choose another with --port") from None
+            raise ViewerError(
+                f"port {port} on {host} is taken ({exc.strerror}); choose another with --port"
+            ) from None
 
 
 # --- server -----------------------------------------------------------------------------------------------
@@ -253,7 +291,9 @@ class Viewer:
         gui, live = self.server.gui, self.live
         self.status = gui.add_markdown(live.status_markdown())
         with gui.add_folder("Run"):
-            controller = gui.add_dropdown("Controller", options=registry.NAMES, initial_value=live.controller_name)
+            controller = gui.add_dropdown(
+                "Controller", options=registry.NAMES, initial_value=live.controller_name
+            )
             run = gui.add_button("Pause")
             step = gui.add_button("Step 20 ms")
             reset = gui.add_button("Reset")
@@ -266,8 +306,14 @@ class Viewer:
             kick = gui.add_slider("Flick (m/s)", min=0.02, max=0.5, step=0.01, initial_value=0.1)
             flick_left = gui.add_button("Flick ◀")
             flick_right = gui.add_button("Flick ▶")
-            reference = gui.add_slider("Setpoint x (m)", min=-0.2, max=0.2, step=0.01, initial_value=0.0,
-                                       disabled=not live.supports_reference)
+            reference = gui.add_slider(
+                "Setpoint x (m)",
+                min=-0.2,
+                max=0.2,
+                step=0.01,
+                initial_value=0.0,
+                disabled=not live.supports_reference,
+            )
         self.reference_slider = reference
         self.run_button = run
 
@@ -288,7 +334,8 @@ class Viewer:
         with gui.add_folder("Plots (last 10 s)"):
             for title, traces in PLOTS:
                 series = [viser.uplot.Series(label="t (s)")] + [
-                    viser.uplot.Series(label=label, stroke=colour) for label, _, colour in traces]
+                    viser.uplot.Series(label=label, stroke=colour) for label, _, colour in traces
+                ]
                 data = tuple(np.zeros(2) for _ in series)
                 handle = gui.add_uplot(data, tuple(series), title=title, aspect=2.0, scales=scales)
                 self.plots.append((handle, [key for _, key, _ in traces]))
@@ -346,9 +393,13 @@ class Viewer:
             elif -delay > MAX_CATCH_UP_S:
                 next_frame = time.perf_counter()
         wall = time.perf_counter() - start
-        return {"wall_s": wall, "ticks": sim_ticks, "tick_rate_hz": sim_ticks / wall if wall else 0.0,
-                "cpu_s_per_tick": (time.process_time() - cpu_start) / max(sim_ticks, 1),
-                "sim_time_s": live.rig.time_s}
+        return {
+            "wall_s": wall,
+            "ticks": sim_ticks,
+            "tick_rate_hz": sim_ticks / wall if wall else 0.0,
+            "cpu_s_per_tick": (time.process_time() - cpu_start) / max(sim_ticks, 1),
+            "sim_time_s": live.rig.time_s,
+        }
 
 
 def serve(
@@ -370,8 +421,10 @@ def serve(
     live = LiveTwin(params or Parameters(), controller, seed, speed)
     viewer = Viewer(live, host, port)
     if announce:
-        print(f"ballbeam view: http://{host}:{viewer.server.get_port()} (controller {controller}, speed ×{speed:g})",
-              flush=True)
+        print(
+            f"ballbeam view: http://{host}:{viewer.server.get_port()} (controller {controller}, speed ×{speed:g})",
+            flush=True,
+        )
     stop = threading.Event()
     try:
         return viewer.loop(duration_s, stop)

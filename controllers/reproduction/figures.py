@@ -91,6 +91,7 @@ def _png_name(fig_id: str) -> str:
 
 # --- the thesis's model ---------------------------------------------------------------------------------
 
+
 @dataclass
 class Trace:
     """One closed-loop response: times, true state rows (x, θ, ẋ, θ̇), motor volts, torque at the beam,
@@ -128,7 +129,10 @@ class Trace:
         if self.lost or self.t[-1] < SETTLE_WINDOW_S:
             return False
         tail = self.t >= self.t[-1] - SETTLE_WINDOW_S + 1e-9
-        return bool(np.all(np.abs(self.x[tail]) < SETTLED_X_M) and np.all(np.abs(self.theta[tail]) < SETTLED_THETA_RAD))
+        return bool(
+            np.all(np.abs(self.x[tail]) < SETTLED_X_M)
+            and np.all(np.abs(self.theta[tail]) < SETTLED_THETA_RAD)
+        )
 
     def summary(self) -> dict[str, Any]:
         ts = self.settling_time_s()
@@ -167,8 +171,15 @@ def _x_limit(x0: float, track_end_m: float | None = None) -> float:
     return max(TRACK_END_M if track_end_m is None else track_end_m, abs(x0) + 1e-6)
 
 
-def simulate_continuous(law: Callable[[np.ndarray], float], u_kind: str, x0: float, th0: float,
-                        duration_s: float, step_s: float = 0.001, track_end_m: float | None = None) -> Trace:
+def simulate_continuous(
+    law: Callable[[np.ndarray], float],
+    u_kind: str,
+    x0: float,
+    th0: float,
+    duration_s: float,
+    step_s: float = 0.001,
+    track_end_m: float | None = None,
+) -> Trace:
     """Chapter 4: continuous control on the true state, torque-input thesis model, RK4 with u held per step.
     ``u_kind='volts'``: τ = 0.0164·(V − 0.154·θ̇) (eq 3.3.2 as printed); ``'torque'``: τ = law(x).
     ``track_end_m``: |x| at which the run stops as "ball lost" (default the real track end, 0.323 m; the
@@ -197,7 +208,9 @@ def simulate_continuous(law: Callable[[np.ndarray], float], u_kind: str, x0: flo
             break
     volts.append(volts[-1])
     torques.append(torques[-1])
-    tr = Trace(np.array(ts), np.array(states), np.array(volts), np.array(torques), None, lost, lost_t, (x0, th0))
+    tr = Trace(
+        np.array(ts), np.array(states), np.array(volts), np.array(torques), None, lost, lost_t, (x0, th0)
+    )
     _track_extra(tr)
     return tr
 
@@ -211,13 +224,22 @@ def _exact_sample(t: float, x: float, th: float, zeroing_error_rad: float = 0.0)
     """The ADC volts that the rig software's converters turn back into exactly (x, θ − e)."""
     ball_v = (x - converters.BALL_OFFSET_M) / converters.BALL_GAIN_M_PER_V
     deg_motor = (th - zeroing_error_rad) / (converters.SOFTWARE_PI / 180) * converters.GEAR_RATIO
-    angle_v = (deg_motor - converters.ANGLE_REFERENCE_MOTOR_DEG) / converters.ANGLE_GAIN_DEG_PER_V \
-        + converters.ANGLE_REFERENCE_V
+    angle_v = (
+        deg_motor - converters.ANGLE_REFERENCE_MOTOR_DEG
+    ) / converters.ANGLE_GAIN_DEG_PER_V + converters.ANGLE_REFERENCE_V
     return DaqSample(time_s=t, ball_v=ball_v, angle_v=angle_v)
 
 
-def simulate_discrete(name: str, x0: float, th0: float, duration_s: float, *, substeps: int = 10,
-                      zeroing_error_rad: float = 0.0, track_end_m: float | None = None) -> Trace:
+def simulate_discrete(
+    name: str,
+    x0: float,
+    th0: float,
+    duration_s: float,
+    *,
+    substeps: int = 10,
+    zeroing_error_rad: float = 0.0,
+    track_end_m: float | None = None,
+) -> Trace:
     """Chapters 5/7 "as the thesis did": the registry controller ``name`` (observer + law + ±12 V limits) at
     its period, fed exact (x, θ), on the voltage-input thesis model (RK4, ``substeps`` per period)."""
     ctrl = registry.make(name)
@@ -232,8 +254,10 @@ def simulate_discrete(name: str, x0: float, th0: float, duration_s: float, *, su
     xlim = _x_limit(x0, track_end_m)
     mo = model.params.motor
     for k in range(n):
-        cmd = ctrl.update(_exact_sample(k * period, s[0], s[1], zeroing_error_rad),
-                          s.copy() if ctrl.uses_true_state else None)
+        cmd = ctrl.update(
+            _exact_sample(k * period, s[0], s[1], zeroing_error_rad),
+            s.copy() if ctrl.uses_true_state else None,
+        )
         v = float(np.clip(converters.motor_volts_from_command(cmd), -12.0, 12.0))
         volts.append(v)
         torques.append(mo.torque_per_volt_nm_per_v * (v - mo.backemf_at_beam_v_s_per_rad * s[3]))
@@ -249,21 +273,32 @@ def simulate_discrete(name: str, x0: float, th0: float, duration_s: float, *, su
             break
     volts.append(volts[-1] if volts else 0.0)
     torques.append(torques[-1] if torques else 0.0)
-    tr = Trace(np.array(ts), np.array(states), np.array(volts), np.array(torques), np.array(est), lost, lost_t,
-               (x0, th0))
+    tr = Trace(
+        np.array(ts),
+        np.array(states),
+        np.array(volts),
+        np.array(torques),
+        np.array(est),
+        lost,
+        lost_t,
+        (x0, th0),
+    )
     _track_extra(tr)
     return tr
 
 
 # --- the twin -------------------------------------------------------------------------------------------
 
-def twin_trace(controller_or_name, x0: float, th0: float, duration_s: float,
-               params: Parameters | None = None) -> Trace:
+
+def twin_trace(
+    controller_or_name, x0: float, th0: float, duration_s: float, params: Parameters | None = None
+) -> Trace:
     """``run_closed_loop`` on the twin (noise on, seed fixed); torque at the beam from the applied motor volts."""
     ctrl = registry.make(controller_or_name) if isinstance(controller_or_name, str) else controller_or_name
     x0_used = float(np.clip(x0, -TWIN_START_LIMIT_M, TWIN_START_LIMIT_M))
-    res = run_closed_loop(ctrl, x0_m=x0_used, theta0_rad=th0, duration_s=duration_s, seed=SEED, noise=True,
-                          params=params)
+    res = run_closed_loop(
+        ctrl, x0_m=x0_used, theta0_rad=th0, duration_s=duration_s, seed=SEED, noise=True, params=params
+    )
     log, met = res.log, res.metrics
     p = params or Parameters()
     state = np.column_stack([log.true_x_m, log.true_theta_rad, log.true_xdot_m_s, log.true_thetadot_rad_s])
@@ -284,6 +319,7 @@ def twin_trace(controller_or_name, x0: float, th0: float, duration_s: float,
 
 # --- plotting -------------------------------------------------------------------------------------------
 
+
 def _save(fig, out_dir: pathlib.Path, fig_id: str) -> pathlib.Path:
     path = out_dir / _png_name(fig_id)
     fig.suptitle(f"{fig_id}: {CAPTIONS[fig_id]}", fontsize=10)
@@ -293,8 +329,14 @@ def _save(fig, out_dir: pathlib.Path, fig_id: str) -> pathlib.Path:
     return path
 
 
-def _response_png(out_dir, fig_id, traces: dict[str, Trace], *, torque_label="torque at the beam (N·m)",
-                  show: tuple[str, ...] = ("x", "theta", "torque")) -> None:
+def _response_png(
+    out_dir,
+    fig_id,
+    traces: dict[str, Trace],
+    *,
+    torque_label="torque at the beam (N·m)",
+    show: tuple[str, ...] = ("x", "theta", "torque"),
+) -> None:
     fig, axes = plt.subplots(len(show), 1, figsize=(7, 2.2 * len(show) + 0.6), sharex=True)
     axes = np.atleast_1d(axes)
     for label, tr in traces.items():
@@ -338,14 +380,18 @@ def _observer_error_summary(tr: Trace) -> dict[str, Any]:
     err = tr.state[:, 2:] - tr.estimate[:, 2:]
     n = len(tr.t)
     late = slice(n // 2, None)
-    return {"max_abs_error_xdot_m_s": round(float(np.max(np.abs(err[:, 0]))), 4),
-            "max_abs_error_thetadot_rad_s": round(float(np.max(np.abs(err[:, 1]))), 4),
-            "late_abs_error_thetadot_rad_s": round(float(np.max(np.abs(err[late, 1]))), 4)}
+    return {
+        "max_abs_error_xdot_m_s": round(float(np.max(np.abs(err[:, 0]))), 4),
+        "max_abs_error_thetadot_rad_s": round(float(np.max(np.abs(err[:, 1]))), 4),
+        "late_abs_error_thetadot_rad_s": round(float(np.max(np.abs(err[late, 1]))), 4),
+    }
 
 
 # --- shared run cache ------------------------------------------------------------------------------------
 
-SIMULINK_TRACK_M = 1.0  # "as the thesis did": no track end in the thesis's model; stop at 1 m, report left_track
+SIMULINK_TRACK_M = (
+    1.0  # "as the thesis did": no track end in the thesis's model; stop at 1 m, report left_track
+)
 
 
 def on_track(tr: Trace) -> bool:
@@ -368,19 +414,24 @@ class _Runs:
     def cont_model(self, name: str, x0: float, th0: float, dur: float, law=None, u_kind=None) -> Trace:
         def make():
             ctrl = registry.make(name) if law is None else None
-            return simulate_continuous(law or ctrl.law, u_kind or ctrl.u_kind, x0, th0, dur,
-                                       track_end_m=SIMULINK_TRACK_M)
+            return simulate_continuous(
+                law or ctrl.law, u_kind or ctrl.u_kind, x0, th0, dur, track_end_m=SIMULINK_TRACK_M
+            )
+
         return self._get(("cont", name, x0, th0, dur), make)
 
     def disc_model(self, name: str, x0: float, th0: float, dur: float, e: float = 0.0) -> Trace:
-        return self._get(("disc", name, x0, th0, dur, e),
-                         lambda: simulate_discrete(name, x0, th0, dur, zeroing_error_rad=e,
-                                                   track_end_m=SIMULINK_TRACK_M))
+        return self._get(
+            ("disc", name, x0, th0, dur, e),
+            lambda: simulate_discrete(name, x0, th0, dur, zeroing_error_rad=e, track_end_m=SIMULINK_TRACK_M),
+        )
 
     def twin(self, name: str, x0: float, th0: float, dur: float, controller=None, e: float = 0.0) -> Trace:
         params = Parameters().with_overrides({"angle_sensor.zeroing_error_rad": e}) if e else None
-        return self._get(("twin", name, x0, th0, dur, e),
-                         lambda: twin_trace(controller if controller is not None else name, x0, th0, dur, params))
+        return self._get(
+            ("twin", name, x0, th0, dur, e),
+            lambda: twin_trace(controller if controller is not None else name, x0, th0, dur, params),
+        )
 
 
 def _range_rel_error(value: float | None, lo: float, hi: float) -> float | None:
@@ -407,18 +458,27 @@ def closed_loop_eigenvalues(law: Callable[[np.ndarray], float], u_kind: str, h: 
 
 def _eig_list(ev: np.ndarray) -> list:
     ev = sorted(ev, key=lambda z: (z.real, z.imag))
-    return [round(float(z.real), 3) if abs(z.imag) < 1e-9 else [round(float(z.real), 3), round(float(z.imag), 3)]
-            for z in ev]
+    return [
+        round(float(z.real), 3) if abs(z.imag) < 1e-9 else [round(float(z.real), 3), round(float(z.imag), 3)]
+        for z in ev
+    ]
 
 
 # --- chapter 4 ---------------------------------------------------------------------------------------------
 
+
 def _chapter4(runs: _Runs, out: pathlib.Path) -> list[Entry]:
     q = runs.quick
-    dur = {"thesis-sf-continuous": 4.0 if q else 10.0, "thesis-clp-continuous": 4.0 if q else 30.0,
-           "thesis-smc-continuous": 0.5 if q else 3.0}
-    twin_dur = {"thesis-sf-continuous": 4.0 if q else 10.0, "thesis-clp-continuous": 4.0 if q else 12.0,
-                "thesis-smc-continuous": 0.5 if q else 3.0}
+    dur = {
+        "thesis-sf-continuous": 4.0 if q else 10.0,
+        "thesis-clp-continuous": 4.0 if q else 30.0,
+        "thesis-smc-continuous": 0.5 if q else 3.0,
+    }
+    twin_dur = {
+        "thesis-sf-continuous": 4.0 if q else 10.0,
+        "thesis-clp-continuous": 4.0 if q else 12.0,
+        "thesis-smc-continuous": 0.5 if q else 3.0,
+    }
     res: list[Entry] = []
 
     def pair(name, x0, th0):
@@ -433,16 +493,29 @@ def _chapter4(runs: _Runs, out: pathlib.Path) -> list[Entry]:
         _response_png(out, fid, {"thesis model": m, "twin": w})
         ts_m, ts_w = m.settling_time_s(), w.settling_time_s()
         rel = _range_rel_error(ts_m, *T.SF_CONT_SETTLING_S)
-        ok = rel is not None and rel <= 0.05 and ts_w is not None and _range_rel_error(ts_w, *T.SF_CONT_SETTLING_S) <= 0.05
-        res.append(Entry(
-            fid, f"§4.2 state feedback from (x, θ) = ({x0} m, 0.3 rad): settling time",
-            "reaches the desired value in 2.5–3 s (t_s = 4/(ζω_n) = 2.67 s)",
-            {"thesis_model": m.summary(), "twin": w.summary(),
-             "closed_loop_eigenvalues_thesis_model": _eig_list(sf_eig)},
-            rel, "agrees" if ok else "fails",
-            "Settling time = last time |x| exceeded 2 % of |x0| (≥ 4 mm). The printed K (placed for −1.5±2.6j, "
-            "−7.5²) on the thesis's nonlinear model; the loop poles with the unrounded reference model move "
-            f"slightly ({_eig_list(sf_eig)}). Chapter 4 has no voltage limit; the twin clamps at ±12 V."))
+        ok = (
+            rel is not None
+            and rel <= 0.05
+            and ts_w is not None
+            and _range_rel_error(ts_w, *T.SF_CONT_SETTLING_S) <= 0.05
+        )
+        res.append(
+            Entry(
+                fid,
+                f"§4.2 state feedback from (x, θ) = ({x0} m, 0.3 rad): settling time",
+                "reaches the desired value in 2.5–3 s (t_s = 4/(ζω_n) = 2.67 s)",
+                {
+                    "thesis_model": m.summary(),
+                    "twin": w.summary(),
+                    "closed_loop_eigenvalues_thesis_model": _eig_list(sf_eig),
+                },
+                rel,
+                "agrees" if ok else "fails",
+                "Settling time = last time |x| exceeded 2 % of |x0| (≥ 4 mm). The printed K (placed for −1.5±2.6j, "
+                "−7.5²) on the thesis's nonlinear model; the loop poles with the unrounded reference model move "
+                f"slightly ({_eig_list(sf_eig)}). Chapter 4 has no voltage limit; the twin clamps at ±12 V.",
+            )
+        )
 
     # Figs 4.8 / 4.9: control law partitioning
     clp_eig = closed_loop_eigenvalues(registry.make("thesis-clp-continuous").law, "torque")
@@ -450,20 +523,32 @@ def _chapter4(runs: _Runs, out: pathlib.Path) -> list[Entry]:
         m, w = pair("thesis-clp-continuous", x0, 0.3)
         _response_png(out, fid, {"thesis model (no track end)": m, "twin": w})
         ts_m = m.settling_time_s()
-        ok = (ts_m is not None and not m.extra["left_track"] and not w.lost
-              and (_range_rel_error(ts_m, *T.CLP_CONT_SETTLING_S) or 0) <= 0.1)
-        res.append(Entry(
-            fid, f"§4.3 control law partitioning from ({x0} m, 0.3 rad): response / settling time",
-            "ball brought back; chapter 7: t_s between 6 and 7 s (not 4/(ζω_n) = 2 s for ω_n = 2, ζ = 1)",
-            {"thesis_model": m.summary(), "twin": w.summary(),
-             "closed_loop_eigenvalues_thesis_model": _eig_list(clp_eig)},
-            _range_rel_error(ts_m, *T.CLP_CONT_SETTLING_S), "agrees" if ok else "fails",
-            "The printed kp/kv do not give two ω_n = 2, ζ = 1 loops: one torque cannot set ẍ and θ̈ "
-            f"independently, and the linearised loop has eigenvalues {_eig_list(clp_eig)}: the slow pair's real "
-            f"part {min(abs(z.real) for z in clp_eig):.3f} 1/s makes the ball swing for tens of seconds "
-            "(2 % settling ≈ 4/0.164 ≈ 24 s ≫ 7 s; in a long run the thesis model settles at ≈ 23–28 s). From (−0.2, 0.3) "
-            "(and (0.2, −0.3)) the ball first runs out to |x| ≈ 0.36 m: past the 0.323 m track end, so the "
-            "thesis's model (no track end) brings it back but the twin loses it within 1 s."))
+        ok = (
+            ts_m is not None
+            and not m.extra["left_track"]
+            and not w.lost
+            and (_range_rel_error(ts_m, *T.CLP_CONT_SETTLING_S) or 0) <= 0.1
+        )
+        res.append(
+            Entry(
+                fid,
+                f"§4.3 control law partitioning from ({x0} m, 0.3 rad): response / settling time",
+                "ball brought back; chapter 7: t_s between 6 and 7 s (not 4/(ζω_n) = 2 s for ω_n = 2, ζ = 1)",
+                {
+                    "thesis_model": m.summary(),
+                    "twin": w.summary(),
+                    "closed_loop_eigenvalues_thesis_model": _eig_list(clp_eig),
+                },
+                _range_rel_error(ts_m, *T.CLP_CONT_SETTLING_S),
+                "agrees" if ok else "fails",
+                "The printed kp/kv do not give two ω_n = 2, ζ = 1 loops: one torque cannot set ẍ and θ̈ "
+                f"independently, and the linearised loop has eigenvalues {_eig_list(clp_eig)}: the slow pair's real "
+                f"part {min(abs(z.real) for z in clp_eig):.3f} 1/s makes the ball swing for tens of seconds "
+                "(2 % settling ≈ 4/0.164 ≈ 24 s ≫ 7 s; in a long run the thesis model settles at ≈ 23–28 s). From (−0.2, 0.3) "
+                "(and (0.2, −0.3)) the ball first runs out to |x| ≈ 0.36 m: past the 0.323 m track end, so the "
+                "thesis's model (no track end) brings it back but the twin loses it within 1 s.",
+            )
+        )
 
     # Figs 4.11 / 4.12: sliding mode
     a_t, b_t = T.A_TORQUE, T.B_TORQUE
@@ -471,30 +556,46 @@ def _chapter4(runs: _Runs, out: pathlib.Path) -> list[Entry]:
     keq_consistent = np.linalg.solve(T.SMC_S @ b_t, T.SMC_S @ a_t)
     eig_eq = np.linalg.eigvals(a_t - b_t @ T.SMC_KEQ)
     from controllers.laws import SlidingModeLaw
+
     fixed_law = SlidingModeLaw(T.SMC_S.copy(), keq_consistent, T.SMC_K_MINUS, T.SMC_K_PLUS, T.SMC_ETA)
     for fid, x0 in (("Fig 4.11", 0.2), ("Fig 4.12", -0.2)):
         m, w = pair("thesis-smc-continuous", x0, 0.3)
-        fixed = runs.cont_model("smc-keq-from-printed-S", x0, 0.3, 1.0 if q else 5.0, law=fixed_law, u_kind="torque")
-        _response_png(out, fid, {"thesis model, printed S̄/K_eq": m, "twin, printed": w,
-                                 "thesis model, K_eq=(S̄B)⁻¹S̄A": fixed})
+        fixed = runs.cont_model(
+            "smc-keq-from-printed-S", x0, 0.3, 1.0 if q else 5.0, law=fixed_law, u_kind="torque"
+        )
+        _response_png(
+            out,
+            fid,
+            {"thesis model, printed S̄/K_eq": m, "twin, printed": w, "thesis model, K_eq=(S̄B)⁻¹S̄A": fixed},
+        )
         works = not m.lost and not w.lost
-        res.append(Entry(
-            fid, f"§4.4 sliding mode from ({x0} m, 0.3 rad)",
-            "system reaches the sliding surface in a few seconds and is brought to the origin",
-            {"thesis_model": m.summary(), "twin": w.summary(),
-             "S_bar_B": round(sb, 2), "K_eq_printed": T.SMC_KEQ.round(3).tolist()[0],
-             "K_eq_from_printed_S_A_B": keq_consistent.round(4).tolist()[0],
-             "eig(A - B K_eq_printed)": _eig_list(eig_eq),
-             "thesis_model_with_consistent_K_eq": fixed.summary()},
-            None, "agrees" if works else "fails",
-            "The printed design fails on the thesis's own model too. K_eq should be (S̄B)⁻¹S̄A = "
-            f"{keq_consistent.round(3).tolist()[0]} for the printed S̄ and A, B (eq 3.2.8/3.2.9), not "
-            f"{T.SMC_KEQ.tolist()[0]}: with the printed K_eq the equivalent-control loop A − B·K_eq has an "
-            f"eigenvalue at +{max(eig_eq.real):.0f} 1/s, so the beam hits its stop within "
-            f"{m.lost_time_s:.3f} s (torques of hundreds of N·m). Moreover S̄B = {sb:.1f} < 0, so the switching "
-            "terms (k± = ∓0.5 on s·xᵢ, −η·sgn s) give s·ṡ > 0 — they push the state away from the surface; "
-            "even the consistent K_eq with the printed switching law "
-            + ("keeps the ball" if not fixed.lost else f"loses the ball (at {fixed.lost_time_s:.3f} s)") + "."))
+        res.append(
+            Entry(
+                fid,
+                f"§4.4 sliding mode from ({x0} m, 0.3 rad)",
+                "system reaches the sliding surface in a few seconds and is brought to the origin",
+                {
+                    "thesis_model": m.summary(),
+                    "twin": w.summary(),
+                    "S_bar_B": round(sb, 2),
+                    "K_eq_printed": T.SMC_KEQ.round(3).tolist()[0],
+                    "K_eq_from_printed_S_A_B": keq_consistent.round(4).tolist()[0],
+                    "eig(A - B K_eq_printed)": _eig_list(eig_eq),
+                    "thesis_model_with_consistent_K_eq": fixed.summary(),
+                },
+                None,
+                "agrees" if works else "fails",
+                "The printed design fails on the thesis's own model too. K_eq should be (S̄B)⁻¹S̄A = "
+                f"{keq_consistent.round(3).tolist()[0]} for the printed S̄ and A, B (eq 3.2.8/3.2.9), not "
+                f"{T.SMC_KEQ.tolist()[0]}: with the printed K_eq the equivalent-control loop A − B·K_eq has an "
+                f"eigenvalue at +{max(eig_eq.real):.0f} 1/s, so the beam hits its stop within "
+                f"{m.lost_time_s:.3f} s (torques of hundreds of N·m). Moreover S̄B = {sb:.1f} < 0, so the switching "
+                "terms (k± = ∓0.5 on s·xᵢ, −η·sgn s) give s·ṡ > 0 — they push the state away from the surface; "
+                "even the consistent K_eq with the printed switching law "
+                + ("keeps the ball" if not fixed.lost else f"loses the ball (at {fixed.lost_time_s:.3f} s)")
+                + ".",
+            )
+        )
     return res
 
 
@@ -505,11 +606,17 @@ REDESIGN_OMEGA_N = 0.666  # chapter 7: "settling time 0.6 second and critical da
 
 REDESIGN_READINGS = {
     # name: (poles, description)
-    "dominant-0.666-far-7.5": ([-0.666, -0.666, -7.5, -7.5],
-                               ("primary: §4.2's procedure with the dominant pair made critically damped at "
-                                "ω_n = 0.666 (t_s = 4/ω_n = 6 s), the far pair kept at −7.5 as in §4.2")),
-    "dominant-0.666-far-3.33": ([-0.666, -0.666, -3.33, -3.33],
-                                "dominant pair at −0.666, far pair at 5× (§4.2's ratio 7.5/1.5)"),
+    "dominant-0.666-far-7.5": (
+        [-0.666, -0.666, -7.5, -7.5],
+        (
+            "primary: §4.2's procedure with the dominant pair made critically damped at "
+            "ω_n = 0.666 (t_s = 4/ω_n = 6 s), the far pair kept at −7.5 as in §4.2"
+        ),
+    ),
+    "dominant-0.666-far-3.33": (
+        [-0.666, -0.666, -3.33, -3.33],
+        "dominant pair at −0.666, far pair at 5× (§4.2's ratio 7.5/1.5)",
+    ),
     "all-at-0.666": ([-0.666] * 4, "(s + 0.666)⁴: critically damped throughout"),
     "all-at-6.67": ([-4 / 0.6] * 4, "t_s = 0.6 s taken literally: ω_n = 4/0.6 = 6.67, (s + 6.67)⁴"),
 }
@@ -523,19 +630,34 @@ def redesigned_sf_gain(reading: str = PRIMARY_READING) -> tuple[np.ndarray, list
 
 
 def _redesigned_sf_controller(gain: np.ndarray) -> LoopController:
-    return LoopController("sf-redesign-7.7", TrueState(), StateFeedbackLaw(gain.copy()), u_kind="volts",
-                          command_limits_v=None, period_s=registry.FAST_PERIOD_S,
-                          description="chapter 7 SF redesign, true state at 1 kHz")
+    return LoopController(
+        "sf-redesign-7.7",
+        TrueState(),
+        StateFeedbackLaw(gain.copy()),
+        u_kind="volts",
+        command_limits_v=None,
+        period_s=registry.FAST_PERIOD_S,
+        description="chapter 7 SF redesign, true state at 1 kHz",
+    )
 
 
 def _chapter7_torque(runs: _Runs, out: pathlib.Path) -> list[Entry]:
     q = runs.quick
-    dur = {"thesis-sf-continuous": 4.0 if q else 10.0, "thesis-clp-continuous": 4.0 if q else 30.0,
-           "thesis-smc-continuous": 0.5 if q else 3.0}
-    twin_dur = {"thesis-sf-continuous": 4.0 if q else 10.0, "thesis-clp-continuous": 4.0 if q else 12.0,
-                "thesis-smc-continuous": 0.5 if q else 3.0}
-    label = {"thesis-smc-continuous": "sliding mode", "thesis-clp-continuous": "control law partitioning",
-             "thesis-sf-continuous": "state feedback"}
+    dur = {
+        "thesis-sf-continuous": 4.0 if q else 10.0,
+        "thesis-clp-continuous": 4.0 if q else 30.0,
+        "thesis-smc-continuous": 0.5 if q else 3.0,
+    }
+    twin_dur = {
+        "thesis-sf-continuous": 4.0 if q else 10.0,
+        "thesis-clp-continuous": 4.0 if q else 12.0,
+        "thesis-smc-continuous": 0.5 if q else 3.0,
+    }
+    label = {
+        "thesis-smc-continuous": "sliding mode",
+        "thesis-clp-continuous": "control law partitioning",
+        "thesis-sf-continuous": "state feedback",
+    }
     figs = {("Fig 7.1", "Fig 7.2", "Fig 7.3"): (0.2, -0.3), ("Fig 7.4", "Fig 7.5", "Fig 7.6"): (0.2, 0.3)}
     res: list[Entry] = []
     clp_eig = closed_loop_eigenvalues(registry.make("thesis-clp-continuous").law, "torque")
@@ -545,58 +667,110 @@ def _chapter7_torque(runs: _Runs, out: pathlib.Path) -> list[Entry]:
         for fid, name in zip(ids, ("thesis-smc-continuous", "thesis-clp-continuous", "thesis-sf-continuous")):
             m = runs.cont_model(name, x0, th0, dur[name])
             w = runs.twin(name, x0, th0, twin_dur[name])
-            _response_png(out, fid, {"thesis model (law's torque, no limits)": m, "twin (applied torque, ±12 V)": w},
-                          show=("torque", "x"))
+            _response_png(
+                out,
+                fid,
+                {"thesis model (law's torque, no limits)": m, "twin (applied torque, ±12 V)": w},
+                show=("torque", "x"),
+            )
             tail = m.t >= m.t[-1] - 1.0
-            rec = {"start": [x0, th0], "thesis_model": m.summary(), "twin": w.summary(),
-                   "thesis_model_final_1s_mean_abs_torque_nm": round(float(np.mean(np.abs(m.torque[tail]))), 5)}
+            rec = {
+                "start": [x0, th0],
+                "thesis_model": m.summary(),
+                "twin": w.summary(),
+                "thesis_model_final_1s_mean_abs_torque_nm": round(float(np.mean(np.abs(m.torque[tail]))), 5),
+            }
             peaks[(x0, th0)][name] = rec
             if name == "thesis-smc-continuous":
                 verdict = "fails"
-                why = ("The printed sliding-mode design diverges (see Fig 4.11): the torque grows without bound "
-                       f"until the beam hits its stop at {m.lost_time_s:.3f} s on the thesis model; it is not a "
-                       "'temporary' torque that dies out on the sliding surface.")
+                why = (
+                    "The printed sliding-mode design diverges (see Fig 4.11): the torque grows without bound "
+                    f"until the beam hits its stop at {m.lost_time_s:.3f} s on the thesis model; it is not a "
+                    "'temporary' torque that dies out on the sliding surface."
+                )
             else:
                 kept = not m.extra["left_track"] and not w.lost
                 verdict = "holds" if kept else "fails"
-                why = (f"Peak torque {rec['thesis_model']['peak_torque_nm']} N·m on the thesis model, "
-                       f"{rec['twin']['peak_torque_nm']} N·m on the twin (±12 V caps it at ≈ 0.197 N·m). "
-                       + ("Ball kept on both." if kept else
-                          "The ball runs past the 0.323 m track end (thesis model, which has no track end) "
-                          "and is lost on the twin, so the plotted torque is not that of a successful run."))
-            res.append(Entry(fid, f"required torque, {label[name]}, from ({x0} m, {th0} rad)",
-                             "required torque versus time (SF and CLP close to each other and permanent; SMC "
-                             "larger, temporary, chattering)", rec, None, verdict, why))
+                why = (
+                    f"Peak torque {rec['thesis_model']['peak_torque_nm']} N·m on the thesis model, "
+                    f"{rec['twin']['peak_torque_nm']} N·m on the twin (±12 V caps it at ≈ 0.197 N·m). "
+                    + (
+                        "Ball kept on both."
+                        if kept
+                        else "The ball runs past the 0.323 m track end (thesis model, which has no track end) "
+                        "and is lost on the twin, so the plotted torque is not that of a successful run."
+                    )
+                )
+            res.append(
+                Entry(
+                    fid,
+                    f"required torque, {label[name]}, from ({x0} m, {th0} rad)",
+                    "required torque versus time (SF and CLP close to each other and permanent; SMC "
+                    "larger, temporary, chattering)",
+                    rec,
+                    None,
+                    verdict,
+                    why,
+                )
+            )
 
     # claims
-    smc_peaks = {str(k): v["thesis-smc-continuous"]["thesis_model"]["peak_torque_nm"] for k, v in peaks.items()}
-    res.append(Entry(
-        "§7 claim SMC torque", "sliding mode's required torque vs SF and CLP",
-        "SMC torque is temporary, greater than SF/CLP, with chattering; nearly zero on the sliding surface",
-        {"smc_peak_torque_nm_thesis_model": smc_peaks,
-         "smc_lost_time_s_thesis_model": {str(k): v["thesis-smc-continuous"]["thesis_model"]["ball_lost_time_s"]
-                                          for k, v in peaks.items()}},
-        None, "fails",
-        "The torque is 'greater' only because the printed SMC loop is unstable (eigenvalue +767 1/s with the "
-        "printed K_eq, S̄B < 0): it never reaches the sliding surface, so there is no temporary torque and no "
-        "chattering on the surface to see."))
-    cmp = {str(k): {"clp_peak_nm": v["thesis-clp-continuous"]["thesis_model"]["peak_torque_nm"],
-                    "sf_peak_nm": v["thesis-sf-continuous"]["thesis_model"]["peak_torque_nm"],
-                    "clp_peak_twin_nm": v["thesis-clp-continuous"]["twin"]["peak_torque_nm"],
-                    "sf_peak_twin_nm": v["thesis-sf-continuous"]["twin"]["peak_torque_nm"]}
-           for k, v in peaks.items()}
+    smc_peaks = {
+        str(k): v["thesis-smc-continuous"]["thesis_model"]["peak_torque_nm"] for k, v in peaks.items()
+    }
+    res.append(
+        Entry(
+            "§7 claim SMC torque",
+            "sliding mode's required torque vs SF and CLP",
+            "SMC torque is temporary, greater than SF/CLP, with chattering; nearly zero on the sliding surface",
+            {
+                "smc_peak_torque_nm_thesis_model": smc_peaks,
+                "smc_lost_time_s_thesis_model": {
+                    str(k): v["thesis-smc-continuous"]["thesis_model"]["ball_lost_time_s"]
+                    for k, v in peaks.items()
+                },
+            },
+            None,
+            "fails",
+            "The torque is 'greater' only because the printed SMC loop is unstable (eigenvalue +767 1/s with the "
+            "printed K_eq, S̄B < 0): it never reaches the sliding surface, so there is no temporary torque and no "
+            "chattering on the surface to see.",
+        )
+    )
+    cmp = {
+        str(k): {
+            "clp_peak_nm": v["thesis-clp-continuous"]["thesis_model"]["peak_torque_nm"],
+            "sf_peak_nm": v["thesis-sf-continuous"]["thesis_model"]["peak_torque_nm"],
+            "clp_peak_twin_nm": v["thesis-clp-continuous"]["twin"]["peak_torque_nm"],
+            "sf_peak_twin_nm": v["thesis-sf-continuous"]["twin"]["peak_torque_nm"],
+        }
+        for k, v in peaks.items()
+    }
     lower = all(c["clp_peak_nm"] < c["sf_peak_nm"] for c in cmp.values())
-    res.append(Entry(
-        "§7 claim CLP torque lower", "maximum required torque, CLP vs SF (thesis model, both starts)",
-        "maximum required torque for control law partitioning is lower than for state feedback",
-        cmp, None, "holds" if lower else "fails",
-        "Peak |τ| of the law on the thesis model (no voltage limit), from (0.2, −0.3) and (0.2, 0.3). "
-        + "; ".join(f"{k}: CLP {c['clp_peak_nm']} vs SF {c['sf_peak_nm']} N·m "
-                    f"({'lower' if c['clp_peak_nm'] < c['sf_peak_nm'] else 'higher'})" for k, c in cmp.items())
-        + ". " + ("CLP's peak is lower at both starts." if lower else
-                  "So it depends on the start: from (0.2, 0.3) the SF's −Kx nearly cancels (x and θ errors "
-                  "of opposite effect) while CLP's kp·θ term does not. On the twin both saturate at ±12 V "
-                  "(≈ 0.197 N·m) from (0.2, −0.3).")))
+    res.append(
+        Entry(
+            "§7 claim CLP torque lower",
+            "maximum required torque, CLP vs SF (thesis model, both starts)",
+            "maximum required torque for control law partitioning is lower than for state feedback",
+            cmp,
+            None,
+            "holds" if lower else "fails",
+            "Peak |τ| of the law on the thesis model (no voltage limit), from (0.2, −0.3) and (0.2, 0.3). "
+            + "; ".join(
+                f"{k}: CLP {c['clp_peak_nm']} vs SF {c['sf_peak_nm']} N·m "
+                f"({'lower' if c['clp_peak_nm'] < c['sf_peak_nm'] else 'higher'})"
+                for k, c in cmp.items()
+            )
+            + ". "
+            + (
+                "CLP's peak is lower at both starts."
+                if lower
+                else "So it depends on the start: from (0.2, 0.3) the SF's −Kx nearly cancels (x and θ errors "
+                "of opposite effect) while CLP's kp·θ term does not. On the twin both saturate at ±12 V "
+                "(≈ 0.197 N·m) from (0.2, −0.3)."
+            ),
+        )
+    )
 
     # Fig 7.7: SF redesigned
     x0, th0 = 0.2, -0.3
@@ -604,11 +778,20 @@ def _chapter7_torque(runs: _Runs, out: pathlib.Path) -> list[Entry]:
     variants = {}
     for reading in REDESIGN_READINGS:
         gain, _ = redesigned_sf_gain(reading)
-        variants[reading] = (gain, runs.cont_model("sf-redesign-" + reading, x0, th0, d77,
-                                                   law=StateFeedbackLaw(gain.copy()), u_kind="volts"))
+        variants[reading] = (
+            gain,
+            runs.cont_model(
+                "sf-redesign-" + reading, x0, th0, d77, law=StateFeedbackLaw(gain.copy()), u_kind="volts"
+            ),
+        )
     gain_p, m_p = variants[PRIMARY_READING]
-    w_p = runs.twin("sf-redesign-" + PRIMARY_READING, x0, th0, 3.0 if q else 20.0,
-                    controller=_redesigned_sf_controller(gain_p))
+    w_p = runs.twin(
+        "sf-redesign-" + PRIMARY_READING,
+        x0,
+        th0,
+        3.0 if q else 20.0,
+        controller=_redesigned_sf_controller(gain_p),
+    )
     clp = runs.cont_model("thesis-clp-continuous", x0, th0, dur["thesis-clp-continuous"])
     traces = {f"SF {r}, thesis model": tr for r, (_, tr) in variants.items() if r != "all-at-6.67"}
     traces[f"SF {PRIMARY_READING}, twin"] = w_p
@@ -621,83 +804,150 @@ def _chapter7_torque(runs: _Runs, out: pathlib.Path) -> list[Entry]:
     for r, (gain, tr) in variants.items():
         pk = float(np.max(np.abs(tr.torque)))
         pk_late = float(np.max(np.abs(tr.torque[tr.t >= late]))) if np.any(tr.t >= late) else pk
-        table[r] = {"poles": [round(p, 3) for p in REDESIGN_READINGS[r][0]], "K": gain.round(3).tolist()[0],
-                    "peak_torque_nm": round(pk, 4), "ratio_to_clp": round(pk / pk_clp, 3),
-                    f"peak_torque_after_{late}s_nm": round(pk_late, 4),
-                    f"ratio_to_clp_after_{late}s": round(pk_late / pk_clp_late, 3),
-                    "ball_kept_thesis_model": not tr.lost, "max_abs_x_m": tr.extra["max_abs_x_m"],
-                    "settling_time_s": tr.settling_time_s()}
-    good = [r for r, v in table.items()
-            if v["ball_kept_thesis_model"] and abs(v[f"ratio_to_clp_after_{late}s"] - 1) <= 0.3]
+        table[r] = {
+            "poles": [round(p, 3) for p in REDESIGN_READINGS[r][0]],
+            "K": gain.round(3).tolist()[0],
+            "peak_torque_nm": round(pk, 4),
+            "ratio_to_clp": round(pk / pk_clp, 3),
+            f"peak_torque_after_{late}s_nm": round(pk_late, 4),
+            f"ratio_to_clp_after_{late}s": round(pk_late / pk_clp_late, 3),
+            "ball_kept_thesis_model": not tr.lost,
+            "max_abs_x_m": tr.extra["max_abs_x_m"],
+            "settling_time_s": tr.settling_time_s(),
+        }
+    good = [
+        r
+        for r, v in table.items()
+        if v["ball_kept_thesis_model"] and abs(v[f"ratio_to_clp_after_{late}s"] - 1) <= 0.3
+    ]
     prim = table[PRIMARY_READING]
-    res.append(Entry(
-        "Fig 7.7", "required torque of the redesigned SF (critically damped, ω_n = 0.666) from (0.2, −0.3)",
-        "required torque nearly the same as control law partitioning's",
-        {"readings": table, "clp_printed_peak_torque_nm": round(pk_clp, 4),
-         f"clp_printed_peak_torque_after_{late}s_nm": round(pk_clp_late, 4),
-         "primary_reading": PRIMARY_READING, "thesis_model_primary": m_p.summary(), "twin_primary": w_p.summary()},
-        abs(prim[f"ratio_to_clp_after_{late}s"] - 1.0), "holds" if PRIMARY_READING in good else "fails",
-        "Readings: " + "; ".join(f"{r}: {d}" for r, (_, d) in REDESIGN_READINGS.items())
-        + ". The primary reading follows §4.2, which specifies only the dominant pair. 'Nearly the same' is "
-        f"taken as peak |τ| within ±30 % of CLP's after the first {late} s, with the ball kept (thesis model, "
-        f"no track end): CLP's torque starts with a {pk_clp:.3f} N·m spike at t = 0 (kp·θ0 as a step), after "
-        f"which its peak is {pk_clp_late:.3f} N·m; the primary SF reading peaks at {prim['peak_torque_nm']} N·m "
-        f"overall and {prim[f'peak_torque_after_{late}s_nm']} N·m after {late} s, and its torque curve follows "
-        f"CLP's closely. Readings that satisfy the claim: {good or 'none'}. (s + 0.666)⁴ is too slow and loses "
-        "the ball; ω_n = 6.67 drives the beam into its stop. From this start the ball swings past the 0.323 m "
-        "track end with both SF-redesign and CLP on the thesis model; on the twin it is lost."))
-    res.append(Entry(
-        "§7 SF redesign spec", "settling time of a critically damped design with ω_n = 0.666",
-        "settling time 0.6 s, critically damped, ω_n = 0.666",
-        {"t_s = 4/(ζ·ω_n) with ζ = 1": round(4 / REDESIGN_OMEGA_N, 3),
-         "ω_n for t_s = 0.6 s": round(4 / 0.6, 3)},
-        abs(4 / REDESIGN_OMEGA_N - 0.6) / 0.6, "misprint",
-        "As printed the numbers contradict each other: ζ = 1 and ω_n = 0.666 give t_s = 4/(ζω_n) = 6.0 s, and "
-        "t_s = 0.6 s would need ω_n = 6.67. Chapter 7's next paragraph speaks of 'state feedback controller "
-        "with settling time 6 seconds and critical damped', so 0.6 s is a misprint of 6 s (ω_n = 4/6 = 0.666). "
-        "The other consistent reading (t_s = 0.6 s, ω_n = 6.67) is tried in Fig 7.7 and fails."))
+    res.append(
+        Entry(
+            "Fig 7.7",
+            "required torque of the redesigned SF (critically damped, ω_n = 0.666) from (0.2, −0.3)",
+            "required torque nearly the same as control law partitioning's",
+            {
+                "readings": table,
+                "clp_printed_peak_torque_nm": round(pk_clp, 4),
+                f"clp_printed_peak_torque_after_{late}s_nm": round(pk_clp_late, 4),
+                "primary_reading": PRIMARY_READING,
+                "thesis_model_primary": m_p.summary(),
+                "twin_primary": w_p.summary(),
+            },
+            abs(prim[f"ratio_to_clp_after_{late}s"] - 1.0),
+            "holds" if PRIMARY_READING in good else "fails",
+            "Readings: "
+            + "; ".join(f"{r}: {d}" for r, (_, d) in REDESIGN_READINGS.items())
+            + ". The primary reading follows §4.2, which specifies only the dominant pair. 'Nearly the same' is "
+            f"taken as peak |τ| within ±30 % of CLP's after the first {late} s, with the ball kept (thesis model, "
+            f"no track end): CLP's torque starts with a {pk_clp:.3f} N·m spike at t = 0 (kp·θ0 as a step), after "
+            f"which its peak is {pk_clp_late:.3f} N·m; the primary SF reading peaks at {prim['peak_torque_nm']} N·m "
+            f"overall and {prim[f'peak_torque_after_{late}s_nm']} N·m after {late} s, and its torque curve follows "
+            f"CLP's closely. Readings that satisfy the claim: {good or 'none'}. (s + 0.666)⁴ is too slow and loses "
+            "the ball; ω_n = 6.67 drives the beam into its stop. From this start the ball swings past the 0.323 m "
+            "track end with both SF-redesign and CLP on the thesis model; on the twin it is lost.",
+        )
+    )
+    res.append(
+        Entry(
+            "§7 SF redesign spec",
+            "settling time of a critically damped design with ω_n = 0.666",
+            "settling time 0.6 s, critically damped, ω_n = 0.666",
+            {
+                "t_s = 4/(ζ·ω_n) with ζ = 1": round(4 / REDESIGN_OMEGA_N, 3),
+                "ω_n for t_s = 0.6 s": round(4 / 0.6, 3),
+            },
+            abs(4 / REDESIGN_OMEGA_N - 0.6) / 0.6,
+            "misprint",
+            "As printed the numbers contradict each other: ζ = 1 and ω_n = 0.666 give t_s = 4/(ζω_n) = 6.0 s, and "
+            "t_s = 0.6 s would need ω_n = 6.67. Chapter 7's next paragraph speaks of 'state feedback controller "
+            "with settling time 6 seconds and critical damped', so 0.6 s is a misprint of 6 s (ω_n = 4/6 = 0.666). "
+            "The other consistent reading (t_s = 0.6 s, ω_n = 6.67) is tried in Fig 7.7 and fails.",
+        )
+    )
     # §7 settling-time claims
     starts = ((0.2, 0.3), (-0.2, 0.3), (0.2, -0.3))
-    sf = {str(st): {"thesis_model": runs.cont_model("thesis-sf-continuous", *st, dur["thesis-sf-continuous"])
-                    .settling_time_s(),
-                    "twin": runs.twin("thesis-sf-continuous", *st, twin_dur["thesis-sf-continuous"])
-                    .settling_time_s()} for st in starts}
+    sf = {
+        str(st): {
+            "thesis_model": runs.cont_model(
+                "thesis-sf-continuous", *st, dur["thesis-sf-continuous"]
+            ).settling_time_s(),
+            "twin": runs.twin(
+                "thesis-sf-continuous", *st, twin_dur["thesis-sf-continuous"]
+            ).settling_time_s(),
+        }
+        for st in starts
+    }
     vals = [v for d in sf.values() for v in d.values()]
     ok = all(v is not None and 2.0 < v < 3.0 for v in vals)
-    res.append(Entry(
-        "§7 claim SF settling", "settling time of the chapter 4 state feedback", "2 < t_s < 3 s, as expected",
-        sf, max(_range_rel_error(v, 2.0, 3.0) or 0.0 for v in vals if v is not None) if vals else None,
-        "holds" if ok else "fails", "2 % (≥ 4 mm) settling of x, thesis model and twin, three starts."))
-    clp_runs = {str(st): runs.cont_model("thesis-clp-continuous", *st, dur["thesis-clp-continuous"])
-                for st in starts}
-    clp_tab = {k: {"settling_time_s_2pct": tr.settling_time_s(), "max_abs_x_m": tr.extra["max_abs_x_m"],
-                   "left_track": tr.extra["left_track"],
-                   "first_time_|x|<2cm_s": (None if not np.any(np.abs(tr.x) < 0.02) else
-                                            round(float(tr.t[np.argmax(np.abs(tr.x) < 0.02)]), 3))}
-               for k, tr in clp_runs.items()}
-    clp_ok = all(v["settling_time_s_2pct"] is not None and 6.0 <= v["settling_time_s_2pct"] <= 7.0
-                 for v in clp_tab.values())
-    res.append(Entry(
-        "§7 claim CLP settling", "settling time of the chapter 4 control law partitioning (thesis model, "
-        "no track end)", "t_s between 6 and 7 s (Figs 4.8/4.9), not 4/(ζω_n) = 2 s",
-        {"runs": clp_tab, "closed_loop_eigenvalues": _eig_list(clp_eig)}, None, "holds" if clp_ok else "fails",
-        "The linearised loop's slow pair has real part −0.164 1/s (4/0.164 ≈ 24 s). The ball first comes "
-        "within 2 cm of the centre at " + ", ".join(f"{v['first_time_|x|<2cm_s']} s" for v in clp_tab.values())
-        + " (the 6–7 s read off the plots is probably this first approach), but keeps oscillating; the 2 % "
-        "settling time is ≈ 20–30 s" + (" (quick mode: the runs are too short to settle)" if q else "")
-        + ". Chapter 7 also refers to 'Figure 4.9 and Figure 4.10' for CLP: Fig 4.10 is the SMC block diagram; "
-        "Figs 4.8/4.9 are meant."))
+    res.append(
+        Entry(
+            "§7 claim SF settling",
+            "settling time of the chapter 4 state feedback",
+            "2 < t_s < 3 s, as expected",
+            sf,
+            max(_range_rel_error(v, 2.0, 3.0) or 0.0 for v in vals if v is not None) if vals else None,
+            "holds" if ok else "fails",
+            "2 % (≥ 4 mm) settling of x, thesis model and twin, three starts.",
+        )
+    )
+    clp_runs = {
+        str(st): runs.cont_model("thesis-clp-continuous", *st, dur["thesis-clp-continuous"]) for st in starts
+    }
+    clp_tab = {
+        k: {
+            "settling_time_s_2pct": tr.settling_time_s(),
+            "max_abs_x_m": tr.extra["max_abs_x_m"],
+            "left_track": tr.extra["left_track"],
+            "first_time_|x|<2cm_s": (
+                None
+                if not np.any(np.abs(tr.x) < 0.02)
+                else round(float(tr.t[np.argmax(np.abs(tr.x) < 0.02)]), 3)
+            ),
+        }
+        for k, tr in clp_runs.items()
+    }
+    clp_ok = all(
+        v["settling_time_s_2pct"] is not None and 6.0 <= v["settling_time_s_2pct"] <= 7.0
+        for v in clp_tab.values()
+    )
+    res.append(
+        Entry(
+            "§7 claim CLP settling",
+            "settling time of the chapter 4 control law partitioning (thesis model, no track end)",
+            "t_s between 6 and 7 s (Figs 4.8/4.9), not 4/(ζω_n) = 2 s",
+            {"runs": clp_tab, "closed_loop_eigenvalues": _eig_list(clp_eig)},
+            None,
+            "holds" if clp_ok else "fails",
+            "The linearised loop's slow pair has real part −0.164 1/s (4/0.164 ≈ 24 s). The ball first comes "
+            "within 2 cm of the centre at "
+            + ", ".join(f"{v['first_time_|x|<2cm_s']} s" for v in clp_tab.values())
+            + " (the 6–7 s read off the plots is probably this first approach), but keeps oscillating; the 2 % "
+            "settling time is ≈ 20–30 s"
+            + (" (quick mode: the runs are too short to settle)" if q else "")
+            + ". Chapter 7 also refers to 'Figure 4.9 and Figure 4.10' for CLP: Fig 4.10 is the SMC block diagram; "
+            "Figs 4.8/4.9 are meant.",
+        )
+    )
     return res
 
 
 # --- chapter 5: discrete designs with observers -----------------------------------------------------------
 
+
 def _chapter5(runs: _Runs, out: pathlib.Path) -> list[Entry]:
     dur = 5.0 if runs.quick else 15.0
     res: list[Entry] = []
-    groups = (("thesis-sf", "appendix-sf", "state feedback", ("Fig 5.3", "Fig 5.4", "Fig 5.5"), "§5.2.1"),
-              ("thesis-clp", "appendix-clp", "control law partitioning", ("Fig 5.8", "Fig 5.9", "Fig 5.10"),
-               "§5.2.2"))
+    groups = (
+        ("thesis-sf", "appendix-sf", "state feedback", ("Fig 5.3", "Fig 5.4", "Fig 5.5"), "§5.2.1"),
+        (
+            "thesis-clp",
+            "appendix-clp",
+            "control law partitioning",
+            ("Fig 5.8", "Fig 5.9", "Fig 5.10"),
+            "§5.2.2",
+        ),
+    )
     for name, appendix, label, (f_pos, f_neg, f_err), sec in groups:
         obs_poles = registry.make(name).state.observer.error_poles()
         pole_mag = [round(float(abs(z)), 4) for z in obs_poles]
@@ -707,49 +957,97 @@ def _chapter5(runs: _Runs, out: pathlib.Path) -> list[Entry]:
             w = runs.twin(name, x0, 0.3, dur)
             ma = runs.disc_model(appendix, x0, 0.3, dur)
             wa = runs.twin(appendix, x0, 0.3, dur)
-            _response_png(out, fid, {f"{name}, thesis model": m, f"{name}, twin": w,
-                                     f"{appendix}, thesis model": ma, f"{appendix}, twin": wa},
-                          show=("x", "theta", "volts"))
+            _response_png(
+                out,
+                fid,
+                {
+                    f"{name}, thesis model": m,
+                    f"{name}, twin": w,
+                    f"{appendix}, thesis model": ma,
+                    f"{appendix}, twin": wa,
+                },
+                show=("x", "theta", "volts"),
+            )
             ok = m.settled() and on_track(m) and w.settled()
-            why = (f"Printed gains with the printed observer G: observer error poles |z| = {pole_mag}. "
-                   + (f"The printed G = {T.SF_OBS_G.tolist()} puts an observer pole outside the unit circle "
-                      f"(|z| = {max(pole_mag)}; the intended 0.835 ± 0.199i needs a different G): the "
-                      "velocity estimates diverge and the loop fails on the thesis's own model as on the twin. "
-                      "The appendix A code, G = [[4, 8], [−15, 12]], works. " if unstable_obs else "")
-                   + ("" if ok else
-                      f"Ball {_status(m)} on the thesis model (no track end; final x = {m.x[-1]:.3f} m after "
-                      f"{m.t[-1]:.0f} s), {_status(w)} on the twin (final x = {w.x[-1]:.3f} m). ")
-                   + f"{appendix} (appendix A numbers) for comparison: thesis model {_status(ma)}, twin "
-                   f"{_status(wa)}.")
-            res.append(Entry(
-                fid, f"{sec} discrete {label} with reduced-order observer, 20 ms, from ({x0} m, 0.3 rad)",
-                "ball brought back to the origin (response plotted)",
-                {"thesis_model": m.summary(), "twin": w.summary(), f"{appendix}_thesis_model": ma.summary(),
-                 f"{appendix}_twin": wa.summary(), "observer_error_pole_magnitudes": pole_mag},
-                None, "agrees" if ok else "fails", why))
+            why = (
+                f"Printed gains with the printed observer G: observer error poles |z| = {pole_mag}. "
+                + (
+                    f"The printed G = {T.SF_OBS_G.tolist()} puts an observer pole outside the unit circle "
+                    f"(|z| = {max(pole_mag)}; the intended 0.835 ± 0.199i needs a different G): the "
+                    "velocity estimates diverge and the loop fails on the thesis's own model as on the twin. "
+                    "The appendix A code, G = [[4, 8], [−15, 12]], works. "
+                    if unstable_obs
+                    else ""
+                )
+                + (
+                    ""
+                    if ok
+                    else f"Ball {_status(m)} on the thesis model (no track end; final x = {m.x[-1]:.3f} m after "
+                    f"{m.t[-1]:.0f} s), {_status(w)} on the twin (final x = {w.x[-1]:.3f} m). "
+                )
+                + f"{appendix} (appendix A numbers) for comparison: thesis model {_status(ma)}, twin "
+                f"{_status(wa)}."
+            )
+            res.append(
+                Entry(
+                    fid,
+                    f"{sec} discrete {label} with reduced-order observer, 20 ms, from ({x0} m, 0.3 rad)",
+                    "ball brought back to the origin (response plotted)",
+                    {
+                        "thesis_model": m.summary(),
+                        "twin": w.summary(),
+                        f"{appendix}_thesis_model": ma.summary(),
+                        f"{appendix}_twin": wa.summary(),
+                        "observer_error_pole_magnitudes": pole_mag,
+                    },
+                    None,
+                    "agrees" if ok else "fails",
+                    why,
+                )
+            )
         m = runs.disc_model(name, -0.2, 0.3, dur)
         w = runs.twin(name, -0.2, 0.3, dur)
         ma = runs.disc_model(appendix, -0.2, 0.3, dur)
-        _observer_error_png(out, f_err, {f"{name}, thesis model": m, f"{name}, twin": w,
-                                         f"{appendix}, thesis model": ma})
+        _observer_error_png(
+            out, f_err, {f"{name}, thesis model": m, f"{name}, twin": w, f"{appendix}, thesis model": ma}
+        )
         err_m, err_a = _observer_error_summary(m), _observer_error_summary(ma)
-        converges = (not unstable_obs and err_m["late_abs_error_thetadot_rad_s"]
-                     < 0.2 * max(err_m["max_abs_error_thetadot_rad_s"], 1e-9) and not m.lost)
-        res.append(Entry(
-            f_err, f"observer error (ẋ − ẋ̂, θ̇ − θ̇̂) of the {label} observer from (−0.2 m, 0.3 rad)",
-            "observer error converges to zero", {"thesis_model": err_m, "twin": _observer_error_summary(w),
-                                                 f"{appendix}_thesis_model": err_a,
-                                                 "observer_error_pole_magnitudes": pole_mag},
-            None, "agrees" if converges else "fails",
-            f"Error poles |z| = {pole_mag}. "
-            + ("The printed G makes the error dynamics unstable (|z| > 1)." if unstable_obs else
-               "The observer's own error poles are fast and stable; " + (
-                   "the error dies out." if converges else
-                   f"yet the error does not die out (late max {err_m['late_abs_error_thetadot_rad_s']} rad/s vs "
-                   f"{err_a['late_abs_error_thetadot_rad_s']} rad/s for {appendix}): the loop itself has not "
-                   f"settled (thesis model {_status(m)}, final x = {m.x[-1]:.3f} m), and the observer runs on "
-                   "the printed torque-model Φ/Γ (eq 3.4.8/3.4.9) fed with the law's torque."))
-            + " Late error = max over the second half of the run."))
+        converges = (
+            not unstable_obs
+            and err_m["late_abs_error_thetadot_rad_s"]
+            < 0.2 * max(err_m["max_abs_error_thetadot_rad_s"], 1e-9)
+            and not m.lost
+        )
+        res.append(
+            Entry(
+                f_err,
+                f"observer error (ẋ − ẋ̂, θ̇ − θ̇̂) of the {label} observer from (−0.2 m, 0.3 rad)",
+                "observer error converges to zero",
+                {
+                    "thesis_model": err_m,
+                    "twin": _observer_error_summary(w),
+                    f"{appendix}_thesis_model": err_a,
+                    "observer_error_pole_magnitudes": pole_mag,
+                },
+                None,
+                "agrees" if converges else "fails",
+                f"Error poles |z| = {pole_mag}. "
+                + (
+                    "The printed G makes the error dynamics unstable (|z| > 1)."
+                    if unstable_obs
+                    else "The observer's own error poles are fast and stable; "
+                    + (
+                        "the error dies out."
+                        if converges
+                        else f"yet the error does not die out (late max {err_m['late_abs_error_thetadot_rad_s']} rad/s vs "
+                        f"{err_a['late_abs_error_thetadot_rad_s']} rad/s for {appendix}): the loop itself has not "
+                        f"settled (thesis model {_status(m)}, final x = {m.x[-1]:.3f} m), and the observer runs on "
+                        "the printed torque-model Φ/Γ (eq 3.4.8/3.4.9) fed with the law's torque."
+                    )
+                )
+                + " Late error = max over the second half of the run.",
+            )
+        )
     return res
 
 
@@ -807,25 +1105,37 @@ def _chapter7_ranges(runs: _Runs, out: pathlib.Path) -> list[Entry]:
         traces = {}
         for name in names:
             traces[f"{name}, thesis model"] = runs.disc_model(name, x0, th0, dur_corner)
-            traces[f"{name}, twin" + (" (x0 clamped to 0.32)" if abs(x0) > TWIN_START_LIMIT_M else "")] = \
+            traces[f"{name}, twin" + (" (x0 clamped to 0.32)" if abs(x0) > TWIN_START_LIMIT_M else "")] = (
                 runs.twin(name, x0, th0, dur_corner)
+            )
         for fid, what in zip(ids, ("volts", "x", "theta")):
             _response_png(out, fid, traces, show=(what,))
         rec = {label: tr.summary() for label, tr in traces.items()}
         primary = runs.disc_model(names[0], x0, th0, dur_corner)
         verdict = "holds" if on_track(primary) else "fails"
         for fid, what in zip(ids, ("motor voltage", "ball position", "beam angle")):
-            res.append(Entry(
-                fid, f"{what} of the discrete {'state feedback' if kind == 'sf' else 'control law partitioning'}"
-                     f" from ({x0} m, {th0} rad)",
-                "the ball rolls on the beam without dropping from this start", rec, None, verdict,
-                f"Verdict from {names[0]} (chapter 5 numbers) on the thesis model, as the thesis simulated: "
-                f"{_status(primary)}. {names[1]} (appendix A code): thesis model "
-                f"{_status(runs.disc_model(names[1], x0, th0, dur_corner))}, twin "
-                f"{_status(runs.twin(names[1], x0, th0, dur_corner))}."
-                + (" 0.33 m is beyond the 0.323 m track end: on the thesis model (no track end) the start is "
-                   "taken as printed and the ball counts as dropped only if it moves further out; the twin "
-                   "refuses such a start, so it starts at 0.32 m." if abs(x0) > TRACK_END_M else "")))
+            res.append(
+                Entry(
+                    fid,
+                    f"{what} of the discrete {'state feedback' if kind == 'sf' else 'control law partitioning'}"
+                    f" from ({x0} m, {th0} rad)",
+                    "the ball rolls on the beam without dropping from this start",
+                    rec,
+                    None,
+                    verdict,
+                    f"Verdict from {names[0]} (chapter 5 numbers) on the thesis model, as the thesis simulated: "
+                    f"{_status(primary)}. {names[1]} (appendix A code): thesis model "
+                    f"{_status(runs.disc_model(names[1], x0, th0, dur_corner))}, twin "
+                    f"{_status(runs.twin(names[1], x0, th0, dur_corner))}."
+                    + (
+                        " 0.33 m is beyond the 0.323 m track end: on the thesis model (no track end) the start is "
+                        "taken as printed and the ball counts as dropped only if it moves further out; the twin "
+                        "refuses such a start, so it starts at 0.32 m."
+                        if abs(x0) > TRACK_END_M
+                        else ""
+                    ),
+                )
+            )
 
     # claims: the printed boxes
     grid_x = (-0.3, 0.3) if q else (-0.3, -0.15, 0.0, 0.15, 0.3)
@@ -844,54 +1154,86 @@ def _chapter7_ranges(runs: _Runs, out: pathlib.Path) -> list[Entry]:
         appendix_model_ok = all(_kept(r["thesis_model"][f"appendix-{kind}"]) for r in table.values())
         appendix_twin_ok = all(_kept(r["twin"][f"appendix-{kind}"]) for r in table.values())
         label = "state feedback" if kind == "sf" else "control law partitioning"
-        res.append(Entry(
-            f"§7 claim {kind.upper()} range", f"initial states the discrete {label} brings back",
-            f"ball rolls without dropping for initial states between [{box[0][0]} m, {box[0][1]} rad] and "
-            f"[{box[1][0]} m, {box[1][1]} rad]",
-            {"table": table, "duration_s": dur_corner,
-             "all_kept": {"thesis-" + kind + " on thesis model": thesis_ok,
-                          "appendix-" + kind + " on thesis model": appendix_model_ok,
-                          "appendix-" + kind + " on twin": appendix_twin_ok}},
-            None, "holds" if thesis_ok else "fails",
-            "Tested: the printed corners, the other two corners of the box they span, Fig 7.14's −0.26 m, and "
-            "the grid points inside the box; 'kept' = ball on the track for the whole run, 'settled' = within "
-            "5 mm / 0.02 rad over the last 2 s. Verdict from the chapter 5 controller on the thesis model "
-            "(what chapter 7 simulated). 0.33 m is beyond the 0.323 m track end: as printed on the thesis "
-            "model, clamped to 0.32 m on the twin."
-            + (" The printed SF observer G is unstable (Fig 5.5), so thesis-sf cannot keep the ball."
-               if kind == "sf" and not thesis_ok else "")))
+        res.append(
+            Entry(
+                f"§7 claim {kind.upper()} range",
+                f"initial states the discrete {label} brings back",
+                f"ball rolls without dropping for initial states between [{box[0][0]} m, {box[0][1]} rad] and "
+                f"[{box[1][0]} m, {box[1][1]} rad]",
+                {
+                    "table": table,
+                    "duration_s": dur_corner,
+                    "all_kept": {
+                        "thesis-" + kind + " on thesis model": thesis_ok,
+                        "appendix-" + kind + " on thesis model": appendix_model_ok,
+                        "appendix-" + kind + " on twin": appendix_twin_ok,
+                    },
+                },
+                None,
+                "holds" if thesis_ok else "fails",
+                "Tested: the printed corners, the other two corners of the box they span, Fig 7.14's −0.26 m, and "
+                "the grid points inside the box; 'kept' = ball on the track for the whole run, 'settled' = within "
+                "5 mm / 0.02 rad over the last 2 s. Verdict from the chapter 5 controller on the thesis model "
+                "(what chapter 7 simulated). 0.33 m is beyond the 0.323 m track end: as printed on the thesis "
+                "model, clamped to 0.32 m on the twin."
+                + (
+                    " The printed SF observer G is unstable (Fig 5.5), so thesis-sf cannot keep the ball."
+                    if kind == "sf" and not thesis_ok
+                    else ""
+                ),
+            )
+        )
     # the wider grid and the comparison
-    grid_table = {"sf": _range_table(runs, "sf", grid, dur_grid), "clp": _range_table(runs, "clp", grid, dur_grid)}
+    grid_table = {
+        "sf": _range_table(runs, "sf", grid, dur_grid),
+        "clp": _range_table(runs, "clp", grid, dur_grid),
+    }
 
     counts = {}
     for model in ("thesis_model", "twin"):
         for prefix in ("thesis", "appendix"):
             counts[f"{prefix} on {model}"] = {
                 "sf_kept": len({k for k, r in grid_table["sf"].items() if _kept(r[model][f"{prefix}-sf"])}),
-                "clp_kept": len({k for k, r in grid_table["clp"].items() if _kept(r[model][f"{prefix}-clp"])}),
-                "grid_points": len(grid)}
+                "clp_kept": len(
+                    {k for k, r in grid_table["clp"].items() if _kept(r[model][f"{prefix}-clp"])}
+                ),
+                "grid_points": len(grid),
+            }
     sf_set = {k for k, r in grid_table["sf"].items() if _kept(r["thesis_model"]["thesis-sf"])}
     clp_set = {k for k, r in grid_table["clp"].items() if _kept(r["thesis_model"]["thesis-clp"])}
     larger = clp_set > sf_set
-    res.append(Entry(
-        "§7 claim CLP range larger", "range of initial states kept: CLP vs SF (discrete, with observers)",
-        "the range of controllable initial conditions for control law partitioning is larger than for state "
-        "feedback", {"grid": {"x0_m": list(grid_x), "theta0_rad": list(grid_th), "duration_s": dur_grid},
-                     "kept_counts": counts, "grid_table": grid_table},
-        None, "holds" if larger else "fails",
-        "Compared on the grid with the chapter 5 controllers on the thesis model (CLP's kept set must strictly "
-        "contain SF's; kept = on the 0.323 m track throughout). "
-        + ("thesis-sf keeps the ball from no grid start that needs control (its printed observer is unstable), "
-           "so the comparison is won by default. " if not (sf_set - {"(+0.00 m, +0.00 rad)"}) else "")
-        + f"With the appendix A controllers (what ran on the rig) SF keeps {counts['appendix on thesis_model']['sf_kept']}"
-        f" and CLP {counts['appendix on thesis_model']['clp_kept']} of {len(grid)} grid starts on the thesis model, "
-        f"{counts['appendix on twin']['sf_kept']} and {counts['appendix on twin']['clp_kept']} on the twin — "
-        "consistent with chapter 7's own remark that a re-designed state feedback gives similar ranges. "
-        ))
+    res.append(
+        Entry(
+            "§7 claim CLP range larger",
+            "range of initial states kept: CLP vs SF (discrete, with observers)",
+            "the range of controllable initial conditions for control law partitioning is larger than for state "
+            "feedback",
+            {
+                "grid": {"x0_m": list(grid_x), "theta0_rad": list(grid_th), "duration_s": dur_grid},
+                "kept_counts": counts,
+                "grid_table": grid_table,
+            },
+            None,
+            "holds" if larger else "fails",
+            "Compared on the grid with the chapter 5 controllers on the thesis model (CLP's kept set must strictly "
+            "contain SF's; kept = on the 0.323 m track throughout). "
+            + (
+                "thesis-sf keeps the ball from no grid start that needs control (its printed observer is unstable), "
+                "so the comparison is won by default. "
+                if not (sf_set - {"(+0.00 m, +0.00 rad)"})
+                else ""
+            )
+            + f"With the appendix A controllers (what ran on the rig) SF keeps {counts['appendix on thesis_model']['sf_kept']}"
+            f" and CLP {counts['appendix on thesis_model']['clp_kept']} of {len(grid)} grid starts on the thesis model, "
+            f"{counts['appendix on twin']['sf_kept']} and {counts['appendix on twin']['clp_kept']} on the twin — "
+            "consistent with chapter 7's own remark that a re-designed state feedback gives similar ranges. ",
+        )
+    )
     return res
 
 
 # --- Fig 7.20: zeroing error -----------------------------------------------------------------------------
+
 
 def _chapter7_zeroing(runs: _Runs, out: pathlib.Path) -> list[Entry]:
     q = runs.quick
@@ -903,7 +1245,11 @@ def _chapter7_zeroing(runs: _Runs, out: pathlib.Path) -> list[Entry]:
         for model in ("twin", "thesis_model"):
             xs, ths = [], []
             for e in errors:
-                tr = runs.twin(name, x0, th0, dur, e=e) if model == "twin" else runs.disc_model(name, x0, th0, dur, e=e)
+                tr = (
+                    runs.twin(name, x0, th0, dur, e=e)
+                    if model == "twin"
+                    else runs.disc_model(name, x0, th0, dur, e=e)
+                )
                 tail = tr.t >= tr.t[-1] - 1.0
                 xs.append(round(float(np.mean(tr.x[tail])), 5) if not tr.lost else float("nan"))
                 ths.append(round(float(np.mean(tr.theta[tail])), 5) if not tr.lost else float("nan"))
@@ -927,22 +1273,37 @@ def _chapter7_zeroing(runs: _Runs, out: pathlib.Path) -> list[Entry]:
 
     mono = {label: monotonic(v["final_x_m"]) for label, v in final.items()}
     holds = mono["appendix-sf twin"] and mono["appendix-clp twin"]
-    slopes = {label: round(float(np.polyfit(errors, v["final_x_m"], 1)[0]), 4)
-              for label, v in final.items() if np.all(np.isfinite(v["final_x_m"]))}
-    return [Entry(
-        "Fig 7.20", "equilibrium reached with a beam-angle zeroing error e (appendix A controllers)",
-        "setting the beam angle other than 0° at initialization makes the system stabilize at a different "
-        "equilibrium point",
-        {"zeroing_error_rad": list(errors), "start": [x0, th0], "duration_s": dur, "final": final,
-         "final_x_monotonic_in_e": mono, "slope_dx_de_m_per_rad": slopes},
-        None, "holds" if holds else "fails",
-        "The counter zeroed at beam angle e reads θ − e. At rest the ball needs the true beam level (θ = 0), so "
-        "the controller sees θ_meas = −e and holds the ball off-centre where its position term balances the "
-        "angle term: the equilibrium ball position shifts linearly with e (slopes listed) while the true beam "
-        "angle stays ≈ 0. Final values = mean over the last 1 s; twin with noise, seed 0.")]
+    slopes = {
+        label: round(float(np.polyfit(errors, v["final_x_m"], 1)[0]), 4)
+        for label, v in final.items()
+        if np.all(np.isfinite(v["final_x_m"]))
+    }
+    return [
+        Entry(
+            "Fig 7.20",
+            "equilibrium reached with a beam-angle zeroing error e (appendix A controllers)",
+            "setting the beam angle other than 0° at initialization makes the system stabilize at a different "
+            "equilibrium point",
+            {
+                "zeroing_error_rad": list(errors),
+                "start": [x0, th0],
+                "duration_s": dur,
+                "final": final,
+                "final_x_monotonic_in_e": mono,
+                "slope_dx_de_m_per_rad": slopes,
+            },
+            None,
+            "holds" if holds else "fails",
+            "The counter zeroed at beam angle e reads θ − e. At rest the ball needs the true beam level (θ = 0), so "
+            "the controller sees θ_meas = −e and holds the ball off-centre where its position term balances the "
+            "angle term: the equilibrium ball position shifts linearly with e (slopes listed) while the true beam "
+            "angle stays ≈ 0. Final values = mean over the last 1 s; twin with noise, seed 0.",
+        )
+    ]
 
 
 # --- all --------------------------------------------------------------------------------------------------
+
 
 def entries(out_dir: pathlib.Path, quick: bool = False) -> list[Entry]:
     """Recompute the closed-loop figures of chapters 4, 5 and 7; write one PNG per figure into ``out_dir``;

@@ -35,24 +35,40 @@ def _markdown(entries: list[Entry], out_dir: Path) -> str:
         "(a printed design that does not do what the thesis says), *holds* (a claim confirmed), *unexplained*.",
         "",
     ]
-    for verdict, heading in (("misprint", "Misprints"), ("inconsistent", "Inconsistencies"),
-                             ("fails", "Printed designs and claims that fail"), ("unexplained", "Unexplained")):
+    for verdict, heading in (
+        ("misprint", "Misprints"),
+        ("inconsistent", "Inconsistencies"),
+        ("fails", "Printed designs and claims that fail"),
+        ("unexplained", "Unexplained"),
+    ):
         chosen = [e for e in entries if e.verdict == verdict]
         if chosen:
             lines += [f"## {heading}", ""]
             lines += [f"- **{e.id}** ({e.quantity}): {e.explanation}" for e in chosen]
             lines.append("")
-    lines += ["## All entries", "", "| id | quantity | thesis | recomputed | rel. error | verdict | explanation |",
-              "| --- | --- | --- | --- | --- | --- | --- |"]
+    lines += [
+        "## All entries",
+        "",
+        "| id | quantity | thesis | recomputed | rel. error | verdict | explanation |",
+        "| --- | --- | --- | --- | --- | --- | --- |",
+    ]
     for e in entries:
         d = e.as_dict()
         rel = "—" if d["rel_error"] is None else f"{d['rel_error']:.3g}"
-        lines.append(f"| {e.id} | {_cell(e.quantity)} | {_cell(d['thesis'])} | {_cell(d['recomputed'])} | {rel} | "
-                     f"{e.verdict} | {_cell(e.explanation, 400)} |")
+        lines.append(
+            f"| {e.id} | {_cell(e.quantity)} | {_cell(d['thesis'])} | {_cell(d['recomputed'])} | {rel} | "
+            f"{e.verdict} | {_cell(e.explanation, 400)} |"
+        )
     pngs = sorted(out_dir.glob("*.png"))
     if pngs:
-        lines += ["", "## Figures", "", "Each figure shows the thesis's model (as the thesis simulated it) and the "
-                  "twin; its title is the thesis's caption.", ""]
+        lines += [
+            "",
+            "## Figures",
+            "",
+            "Each figure shows the thesis's model (as the thesis simulated it) and the "
+            "twin; its title is the thesis's caption.",
+            "",
+        ]
         lines += [f"![{p.stem}]({p.name})" for p in pngs]
     return "\n".join(lines) + "\n"
 
