@@ -15,20 +15,33 @@ import math
 
 import numpy as np
 
-from twin.converters import ball_position_m, beam_angle_rad, clip_command_v, dac_command_v
+from twin.converters import (
+    ball_position_m,
+    beam_angle_rad,
+    clip_command_v,
+    dac_command_v,
+    motor_volts_from_command,
+)
 from twin.interface import Controller, DaqSample, Telemetry
+from twin.parameters import SoftwareCalibration
 
 __all__ = ["AppendixStateFeedback", "AppendixControlLaw"]
 
 
 class _AppendixCallback(Controller):
     """Shared bookkeeping of the callbacks: tick index k (1 at start) and the MATLAB values at k − 1
-    (x1(k−1) … x4(k−1), u(k−1)), the only ones the callbacks read back."""
+    (x1(k−1) … x4(k−1), u(k−1)), the only ones the callbacks read back. The conversions are the software
+    calibration's (``params.software``; the defaults are the literals of the MATLAB lines)."""
 
-    def start(self, sample: DaqSample, true_state: np.ndarray | None = None) -> None:
+    def __init__(self, software: SoftwareCalibration | None = None) -> None:
+        super().__init__()
+        self.software = software or SoftwareCalibration()
+
+    def start(self, sample: DaqSample) -> None:
         # control == 1 / 4: x1(1), x2(1) from the measurements; x3(1) = x4(1) = u(1) = 0 (zeros(...)).
         self.k = 1
-        x1, x2 = ball_position_m(sample.ball_v), beam_angle_rad(sample.angle_v)
+        sw = self.software
+        x1, x2 = ball_position_m(sample.ball_v, sw), beam_angle_rad(sample.angle_v, sw)
         self.prev = (x1, x2, 0.0, 0.0, 0.0)
         self.telemetry = Telemetry(np.array([x1, x2, 0.0, 0.0]), 0.0, 0.0)
 
@@ -36,12 +49,11 @@ class _AppendixCallback(Controller):
         # x1(k) = (0.0693 * x1_temp) + 0.0018; x2(k) = ((143.22657649*(x2_temp - 5.002) + 718.59375)/7)
         # * (3.141592654/180): the converters are these lines, operation for operation.
         self.k += 1
-        return ball_position_m(sample.ball_v), beam_angle_rad(sample.angle_v)
+        return ball_position_m(sample.ball_v, self.software), beam_angle_rad(sample.angle_v, self.software)
 
-    @staticmethod
-    def _command(value_v: float) -> float:
+    def _command(self, value_v: float) -> float:
         # adat = (value/9.6) + 2.5, then clipped to 1.25…3.75 V.
-        return clip_command_v(dac_command_v(value_v))
+        return clip_command_v(dac_command_v(value_v, self.software), self.software)
 
 
 class AppendixStateFeedback(_AppendixCallback):
@@ -49,14 +61,14 @@ class AppendixStateFeedback(_AppendixCallback):
 
     name = "appendix-sf"
 
-    def update(self, sample: DaqSample, true_state: np.ndarray | None = None) -> float:
+    def update(self, sample: DaqSample) -> float:
         x1_k, x2_k = self._measure(sample)
         x1, x2, x3, x4, u = self.prev
         x3_k = 0.9207 * x3 - 0.1601 * x4 - 3.9409 * x1 - 8.0826 * x2 - 0.0055 * u + 4 * x1_k + 8 * x2_k
         x4_k = 0.2927 * x3 + 0.7494 * x4 + 14.257 * x1 - 11.945 * x2 + 0.0717 * u - 15 * x1_k + 12 * x2_k
         u_temp = -1 * (-36.3437 * x1_k + 24.5992 * x2_k - 15.9593 * x3_k + 3.9815 * x4_k)
         adat = self._command(u_temp)
-        u_k = (adat - 2.5) * 9.6
+        u_k = motor_volts_from_command(adat, self.software)  # u(k) = (adat-2.5)*9.6
         self.prev = (x1_k, x2_k, x3_k, x4_k, u_k)
         self.telemetry = Telemetry(np.array([x1_k, x2_k, x3_k, x4_k]), u_k, u_temp)
         return adat
@@ -67,7 +79,7 @@ class AppendixControlLaw(_AppendixCallback):
 
     name = "appendix-clp"
 
-    def update(self, sample: DaqSample, true_state: np.ndarray | None = None) -> float:
+    def update(self, sample: DaqSample) -> float:
         x1_k, x2_k = self._measure(sample)
         x1, x2, x3, x4, u = self.prev
         # REDUCED ORDER OBSERVER

@@ -11,8 +11,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from controllers.loop import measured_xa
-from twin.interface import DaqSample
+from twin.parameters import Parameters
+from twin.reference import EquationCoefficients
 
 __all__ = ["StateFeedbackLaw", "ClpTerms", "ClpLaw", "SlidingModeLaw", "KalmanState"]
 
@@ -59,21 +59,17 @@ class ClpTerms:
         return np.array([[self.beta[1], self.beta[0], 0.0, self.beta_thetadot]])
 
     @classmethod
-    def from_params(cls, params) -> ClpTerms:
-        """Recomputed from the rig's parameters (eq 3.1.27 with θ̇², plus the motor's reflected inertia and
-        damping, which act on the beam like J_BP and a viscous term)."""
-        p = params
-        m, r, rs, hs = p.ball.mass_kg, p.ball.radius_m, p.rolling_radius_m, p.track.contact_height_m
-        g = p.physics.gravity_m_s2
-        gear = p.motor.gear_ratio
-        k1 = 2 * r**2 / (5 * rs**2)
-        k2 = 2 * r**2 / (5 * rs)
+    def from_params(cls, params: Parameters) -> ClpTerms:
+        """Recomputed from the rig's parameters: eq 3.1.27 with θ̇² (twin.reference.EquationCoefficients),
+        including the motor's reflected inertia and damping, which act on the beam like J_BP and a viscous
+        term."""
+        q = EquationCoefficients.from_params(params)
         return cls(
-            alpha_xdd=k1 * m * hs,
-            alpha_thdd=p.beam.inertia_pivot_kgm2 + p.motor.rotor_inertia_kgm2 * gear**2 - k2 * m * hs,
-            alpha_thdd_x2=m,
-            beta=(-p.beam.mass_kg * g * p.beam.cog_height_m, m * g, 2 * m, -m * p.ball_centre_height_m),
-            beta_thetadot=p.motor.viscous_damping_nm_s_per_rad * gear**2,
+            alpha_xdd=q.alpha_xdd,
+            alpha_thdd=q.alpha_thdd,
+            alpha_thdd_x2=q.alpha_thdd_x2,
+            beta=q.beta,
+            beta_thetadot=q.beta_thetadot,
         )
 
 
@@ -113,17 +109,15 @@ class SlidingModeLaw:
 class KalmanState:
     """Full-order steady-state Kalman filter in current-estimate form on (Φ, Γ), measuring (x, θ)."""
 
-    uses_true_state = False
-
     def __init__(self, phi: np.ndarray, gamma: np.ndarray, gain: np.ndarray) -> None:
         self.phi, self.gamma, self.gain = phi, gamma, gain
         self.h = np.eye(2, 4)
 
-    def start(self, sample: DaqSample, truth: np.ndarray | None) -> np.ndarray:
-        self._x = np.concatenate([measured_xa(sample), np.zeros(2)])
+    def start(self, xa: np.ndarray) -> np.ndarray:
+        self._x = np.concatenate([xa, np.zeros(2)])
         return self._x.copy()
 
-    def update(self, sample: DaqSample, truth: np.ndarray | None, u_prev: float) -> np.ndarray:
+    def update(self, xa: np.ndarray, u_prev: float) -> np.ndarray:
         predicted = self.phi @ self._x + self.gamma[:, 0] * u_prev
-        self._x = predicted + self.gain @ (measured_xa(sample) - self.h @ predicted)
+        self._x = predicted + self.gain @ (xa - self.h @ predicted)
         return self._x.copy()

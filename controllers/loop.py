@@ -2,9 +2,11 @@
 
     measured volts ──convert──► (x, θ) ──observer──► (x, θ, ẋ̂, θ̇̂) ──law──► u (V or N·m) ──► command (V)
 
-The state comes either from the reduced-order observer (the rig's way, §5.2) or, for the chapter 4
-simulations, from the twin's true state (``TrueState``: simulation only, all four states "measured").
-A torque law is turned into motor volts by inverting the motor law (eq 3.3.1), as the rig software does.
+``LoopController`` is a hardware ``Controller`` (twin.interface): the state comes from the measured volts,
+converted with the rig software's calibration (``params.software``, received, not imported), and an
+observer (§5.2) or a Kalman filter for the velocities. ``TrueStateLaw`` is the chapter 4 path: the same
+laws on the plant's true state, simulation only (twin.engine.StateLaw), never through the hardware contract.
+A torque law is turned into motor volts by inverting the motor law (eq 3.3.1, twin.dcmotor).
 """
 
 from __future__ import annotations
@@ -18,68 +20,62 @@ import numpy as np
 
 from controllers.design import ReducedObserver
 from twin import converters
+from twin.dcmotor import volts_for_torque_v
 from twin.interface import Controller, DaqSample, Telemetry
+from twin.parameters import SoftwareCalibration
 
-__all__ = ["StateSource", "ObserverState", "TrueState", "MotorInverse", "LoopController"]
+__all__ = ["LoopController", "MotorInverse", "ObserverState", "StateSource", "TrueStateLaw", "measured_xa"]
 
 
 class StateSource(Protocol):
-    uses_true_state: bool
+    """Turns the measured (x, θ) of each tick into the full state estimate."""
 
-    def start(self, sample: DaqSample, truth: np.ndarray | None) -> np.ndarray: ...
+    def start(self, xa: np.ndarray) -> np.ndarray: ...
 
-    def update(self, sample: DaqSample, truth: np.ndarray | None, u_prev: float) -> np.ndarray: ...
+    def update(self, xa: np.ndarray, u_prev: float) -> np.ndarray: ...
 
 
-def measured_xa(sample: DaqSample) -> np.ndarray:
+def measured_xa(sample: DaqSample, sw: SoftwareCalibration) -> np.ndarray:
     """(x, θ) from the raw volts with the rig software's converters (eq 6.3.1, eq 6.2.10)."""
-    return np.array([converters.ball_position_m(sample.ball_v), converters.beam_angle_rad(sample.angle_v)])
+    return np.array([converters.ball_position_m(sample.ball_v, sw), converters.beam_angle_rad(sample.angle_v, sw)])
 
 
 class ObserverState:
     """(x, θ) measured, (ẋ, θ̇) from the reduced-order observer (eq 5.2.19), started at zero velocity."""
 
-    uses_true_state = False
-
     def __init__(self, observer: ReducedObserver) -> None:
         self.observer = observer
 
-    def start(self, sample: DaqSample, truth: np.ndarray | None) -> np.ndarray:
-        self._xa = measured_xa(sample)
+    def start(self, xa: np.ndarray) -> np.ndarray:
+        self._xa = xa
         self._xb = np.zeros(2)
         return np.concatenate([self._xa, self._xb])
 
-    def update(self, sample: DaqSample, truth: np.ndarray | None, u_prev: float) -> np.ndarray:
-        xa = measured_xa(sample)
+    def update(self, xa: np.ndarray, u_prev: float) -> np.ndarray:
         obs = self.observer
         self._xb = obs.f @ self._xb + obs.ga @ self._xa + obs.gain @ xa + obs.h[:, 0] * u_prev
         self._xa = xa
         return np.concatenate([xa, self._xb])
 
 
-class TrueState:
-    """All four states from the twin (the thesis's chapter 4 simulations). Not available on hardware."""
-
-    uses_true_state = True
-
-    def start(self, sample: DaqSample, truth: np.ndarray | None) -> np.ndarray:
-        return self.update(sample, truth, 0.0)
-
-    def update(self, sample: DaqSample, truth: np.ndarray | None, u_prev: float) -> np.ndarray:
-        if truth is None:
-            raise ValueError("this controller needs the true state (simulation only); the rig cannot give it")
-        return np.asarray(truth, dtype=float).copy()
-
-
 @dataclass(frozen=True)
 class MotorInverse:
-    """V = τ/k_τ + k_b·θ̇: the volts that give torque τ at rate θ̇ (eq 3.3.1 inverted)."""
+    """V = τ/k_τ + k_b·θ̇ with the constants a design assumes (twin.dcmotor, eq 3.3.1 inverted)."""
 
     torque_per_volt: float  # N·m/V at the beam (N·K_t/R)
     backemf_at_beam: float  # V·s/rad at the beam (N·K_b)
 
     def volts(self, torque_nm: float, thetadot_rad_s: float) -> float:
-        return torque_nm / self.torque_per_volt + self.backemf_at_beam * thetadot_rad_s
+        return float(volts_for_torque_v(torque_nm, thetadot_rad_s, self.torque_per_volt, self.backemf_at_beam))
+
+
+def _volts(law_u: float, x: np.ndarray, u_kind: str, motor: MotorInverse | None, name: str) -> float:
+    if not math.isfinite(law_u):
+        raise FloatingPointError(f"{name}: control law returned {law_u!r} for state {x.tolist()}")
+    if u_kind == "torque":
+        assert motor is not None
+        return motor.volts(law_u, float(x[3]))
+    return law_u
 
 
 class LoopController(Controller):
@@ -96,10 +92,11 @@ class LoopController(Controller):
         state: StateSource,
         law: Callable[[np.ndarray], float],
         *,
+        software: SoftwareCalibration,
         u_kind: Literal["volts", "torque"],
         motor: MotorInverse | None = None,
         observer_input: Literal["applied_volts", "law"] = "applied_volts",
-        command_limits_v: tuple[float, float] | None = (converters.COMMAND_LOW_V, converters.COMMAND_HIGH_V),
+        command_limits: bool = True,
         period_s: float = 0.02,
         description: str = "",
     ) -> None:
@@ -110,31 +107,65 @@ class LoopController(Controller):
         self.description = description
         self.state = state
         self.law = law
+        self.software = software
         self.u_kind = u_kind
         self.motor = motor
         self.observer_input = observer_input
-        self.command_limits_v = command_limits_v
+        self.command_limits = command_limits
         self.period_s = period_s
-        self.uses_true_state = state.uses_true_state
-        self.reference_x_m = 0.0
         self._u_prev = 0.0
 
-    def start(self, sample: DaqSample, true_state: np.ndarray | None = None) -> None:
-        x = self.state.start(sample, true_state)
+    def start(self, sample: DaqSample) -> None:
+        x = self.state.start(measured_xa(sample, self.software))
         self._u_prev = 0.0
         self.telemetry = Telemetry(x, 0.0, 0.0)
 
-    def update(self, sample: DaqSample, true_state: np.ndarray | None = None) -> float:
-        x = self.state.update(sample, true_state, self._u_prev)
+    def update(self, sample: DaqSample) -> float:
+        sw = self.software
+        x = self.state.update(measured_xa(sample, sw), self._u_prev)
         u = float(self.law(x))
-        if not math.isfinite(u):
-            raise FloatingPointError(f"{self.name}: control law returned {u!r} for state {x.tolist()}")
-        volts = self.motor.volts(u, x[3]) if self.u_kind == "torque" else u
-        command = converters.dac_command_v(volts)
-        if self.command_limits_v is not None:
-            command = converters.clip_command_v(command, *self.command_limits_v)
-        applied_volts = converters.motor_volts_from_command(command)
+        volts = _volts(u, x, self.u_kind, self.motor, self.name)
+        command = converters.dac_command_v(volts, sw)
+        if self.command_limits:
+            command = converters.clip_command_v(command, sw)
+        applied_volts = converters.motor_volts_from_command(command, sw)
         self._u_prev = applied_volts if self.observer_input == "applied_volts" else u
         logged_u = u if self.u_kind == "torque" else applied_volts
         self.telemetry = Telemetry(x, logged_u, u if self.u_kind == "torque" else volts)
         return command
+
+
+class TrueStateLaw:
+    """A law on the plant's true state, every ``period_s`` (the thesis's chapter 4 simulations, all four
+    states measured). Simulation only: a ``twin.engine.StateLaw``, not a ``Controller``. Its volts go to the
+    motor directly (the amplifier's rails still apply; no DAC, no command limits)."""
+
+    def __init__(
+        self,
+        name: str,
+        law: Callable[[np.ndarray], float],
+        *,
+        u_kind: Literal["volts", "torque"],
+        motor: MotorInverse | None = None,
+        period_s: float = 0.001,
+        description: str = "",
+    ) -> None:
+        if u_kind == "torque" and motor is None:
+            raise ValueError(f"{name}: a torque law needs the motor inverse to produce volts")
+        self.name = name
+        self.description = description
+        self.law = law
+        self.u_kind = u_kind
+        self.motor = motor
+        self.period_s = period_s
+        self.telemetry = Telemetry()
+
+    def reset(self) -> None:
+        self.telemetry = Telemetry()
+
+    def motor_volts(self, state: np.ndarray) -> float:
+        x = np.asarray(state, dtype=float)
+        u = float(self.law(x))
+        volts = _volts(u, x, self.u_kind, self.motor, self.name)
+        self.telemetry = Telemetry(x.copy(), u, volts)
+        return volts

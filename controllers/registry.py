@@ -1,6 +1,10 @@
-"""Named controllers: ``make(name, params)`` builds one ready to run on a ``Rig``.
+"""Named controllers: ``make(name, params)`` builds one ready to run.
 
-    thesis-*-continuous  chapter 4 designs, numbers as printed, full true state at 1 kHz (simulation only)
+This module is the controller catalogue the application layer hands to the CLI and the live view
+(``NAMES``, ``make``, ``simulation_only``, ``describe``).
+
+    thesis-*-continuous  chapter 4 designs, numbers as printed, on the true state at 1 kHz (simulation-only
+                         ``TrueStateLaw``s: they are not hardware controllers)
     thesis-sf, -clp      chapter 5 designs with their reduced-order observers, numbers as printed, 50 Hz
     appendix-sf, -clp    the appendix A callbacks that ran on the rig, ported exactly
     sf, clp, smc         the thesis's design procedures re-run correctly on the reference model, 50 Hz
@@ -11,6 +15,7 @@
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 
 import control
@@ -26,12 +31,15 @@ from controllers.design import (
     state_feedback_gain,
 )
 from controllers.laws import ClpLaw, ClpTerms, KalmanState, SlidingModeLaw, StateFeedbackLaw
-from controllers.loop import LoopController, MotorInverse, ObserverState, TrueState
+from controllers.loop import LoopController, MotorInverse, ObserverState, TrueStateLaw
 from twin.interface import Controller
 from twin.parameters import Parameters
 from twin.reference import ReferenceModel
+from twin.sensors import angle_count_step_rad
 
-__all__ = ["NAMES", "make", "UnknownControllerError"]
+__all__ = ["NAMES", "UnknownControllerError", "describe", "make", "simulation_only"]
+
+AnyController = Controller | TrueStateLaw
 
 FAST_PERIOD_S = 0.001  # chapter 4 designs run "continuously": every physics step
 
@@ -52,43 +60,37 @@ def _motor(params: Parameters) -> MotorInverse:
     return MotorInverse(params.motor.torque_per_volt_nm_per_v, params.motor.backemf_at_beam_v_s_per_rad)
 
 
-def _thesis_sf_continuous(params: Parameters) -> Controller:
-    return LoopController(
+def _thesis_sf_continuous(params: Parameters) -> TrueStateLaw:
+    return TrueStateLaw(
         "thesis-sf-continuous",
-        TrueState(),
         StateFeedbackLaw(T.SF_CONT_K.copy()),
         u_kind="volts",
-        command_limits_v=None,
         period_s=FAST_PERIOD_S,
-        description="§4.2 state feedback, K as printed, true state at 1 kHz",
+        description="§4.2 state feedback, K as printed, on the true state at 1 kHz (simulation only)",
     )
 
 
-def _thesis_clp_continuous(params: Parameters) -> Controller:
+def _thesis_clp_continuous(params: Parameters) -> TrueStateLaw:
     law = ClpLaw(_THESIS_CLP_TERMS, T.CLP_CONT_KP.copy(), T.CLP_CONT_KV.copy())
-    return LoopController(
+    return TrueStateLaw(
         "thesis-clp-continuous",
-        TrueState(),
         law,
         u_kind="torque",
         motor=_THESIS_MOTOR,
-        command_limits_v=None,
         period_s=FAST_PERIOD_S,
-        description="§4.3 control law partitioning, kp/kv as printed, true state at 1 kHz",
+        description="§4.3 control law partitioning, kp/kv as printed, on the true state at 1 kHz (simulation only)",
     )
 
 
-def _thesis_smc_continuous(params: Parameters) -> Controller:
+def _thesis_smc_continuous(params: Parameters) -> TrueStateLaw:
     law = SlidingModeLaw(T.SMC_S.copy(), T.SMC_KEQ.copy(), T.SMC_K_MINUS, T.SMC_K_PLUS, T.SMC_ETA)
-    return LoopController(
+    return TrueStateLaw(
         "thesis-smc-continuous",
-        TrueState(),
         law,
         u_kind="torque",
         motor=_THESIS_MOTOR,
-        command_limits_v=None,
         period_s=FAST_PERIOD_S,
-        description="§4.4 sliding mode, S̄/K_eq as printed, true state at 1 kHz",
+        description="§4.4 sliding mode, S̄/K_eq as printed, on the true state at 1 kHz (simulation only)",
     )
 
 
@@ -98,7 +100,9 @@ def _thesis_sf(params: Parameters) -> Controller:
         "thesis-sf",
         ObserverState(observer),
         StateFeedbackLaw(T.SF_DISC_K.copy()),
+        software=params.software,
         u_kind="volts",
+        period_s=T.PERIOD_S,
         description="§5.2.1 state feedback + observer G as printed, 50 Hz",
     )
 
@@ -110,9 +114,11 @@ def _thesis_clp(params: Parameters) -> Controller:
         "thesis-clp",
         ObserverState(observer),
         law,
+        software=params.software,
         u_kind="torque",
         motor=_THESIS_MOTOR,
         observer_input="law",
+        period_s=T.PERIOD_S,
         description="§5.2.2 control law partitioning + observer G as printed, 50 Hz",
     )
 
@@ -125,7 +131,9 @@ def _sf(params: Parameters) -> Controller:
         "sf",
         ObserverState(observer),
         StateFeedbackLaw(gain),
+        software=params.software,
         u_kind="volts",
+        period_s=params.daq.period_s,
         description="§5.2.1 procedure re-run: poles 0.969±0.0504i, 0.861², observer "
         "0.835±0.199i, on the reference model",
     )
@@ -145,8 +153,10 @@ def _clp(params: Parameters) -> Controller:
         "clp",
         ObserverState(observer),
         ClpLaw(terms, kp, kv),
+        software=params.software,
         u_kind="torque",
         motor=_motor(params),
+        period_s=params.daq.period_s,
         description="§5.2.2 procedure re-run: four poles at z = 0.9608 (ω_n = 2, ζ = 1), "
         "observer poles 0.2, on the reference model",
     )
@@ -161,8 +171,10 @@ def _smc(params: Parameters) -> Controller:
         "smc",
         ObserverState(observer),
         law,
+        software=params.software,
         u_kind="torque",
         motor=_motor(params),
+        period_s=params.daq.period_s,
         description="§4.4 procedure re-run: sliding poles −2, −2, −10, k± = ±0.5, "
         "η = 0.001, at 50 Hz with the observer of clp",
     )
@@ -173,10 +185,9 @@ def _smc(params: Parameters) -> Controller:
 LQR_STATE_SCALE = np.array([0.1, 0.2, 0.5, 2.0])
 LQR_INPUT_SCALE_V = 12.0
 # Kalman noise model: input disturbance 0.5 V; measurement: ball 2 mm (contact noise through the RC
-# filter), beam one encoder count/√12 = 1.0 mrad (quantization).
+# filter), beam one encoder count/√12 (uniform quantization: 1.0 mrad with the thesis's encoder).
 KALMAN_INPUT_NOISE_V = 0.5
 KALMAN_BALL_NOISE_M = 2e-3
-KALMAN_ANGLE_NOISE_RAD = 2 * np.pi / (256 * 7) / np.sqrt(12)
 
 
 def _lqr(params: Parameters) -> Controller:
@@ -186,7 +197,8 @@ def _lqr(params: Parameters) -> Controller:
     gain, _, _ = control.dlqr(phi, gamma, q, r)
     h = np.eye(2, 4)
     qn = np.array([[KALMAN_INPUT_NOISE_V**2]])
-    rn = np.diag([KALMAN_BALL_NOISE_M**2, KALMAN_ANGLE_NOISE_RAD**2])
+    angle_noise_rad = angle_count_step_rad(params) / np.sqrt(12)
+    rn = np.diag([KALMAN_BALL_NOISE_M**2, angle_noise_rad**2])
     # Current-estimator gain: L = P⁻Hᵀ(HP⁻Hᵀ + R)⁻¹ with P⁻ the a-priori steady-state covariance.
     _, p_prior, _ = control.dlqe(phi, gamma, h, qn, rn)
     kalman = p_prior @ h.T @ np.linalg.inv(h @ p_prior @ h.T + rn)
@@ -194,20 +206,22 @@ def _lqr(params: Parameters) -> Controller:
         "lqr",
         KalmanState(phi, gamma, kalman),
         StateFeedbackLaw(np.atleast_2d(gain)),
+        software=params.software,
         u_kind="volts",
+        period_s=params.daq.period_s,
         description="discrete LQR (Bryson weights) + steady-state Kalman "
         "filter on the reference model, 50 Hz",
     )
 
 
-_FACTORIES: dict[str, Callable[[Parameters], Controller]] = {
+_FACTORIES: dict[str, Callable[[Parameters], AnyController]] = {
     "thesis-sf-continuous": _thesis_sf_continuous,
     "thesis-clp-continuous": _thesis_clp_continuous,
     "thesis-smc-continuous": _thesis_smc_continuous,
     "thesis-sf": _thesis_sf,
     "thesis-clp": _thesis_clp,
-    "appendix-sf": lambda params: AppendixStateFeedback(),
-    "appendix-clp": lambda params: AppendixControlLaw(),
+    "appendix-sf": lambda params: AppendixStateFeedback(params.software),
+    "appendix-clp": lambda params: AppendixControlLaw(params.software),
     "sf": _sf,
     "clp": _clp,
     "smc": _smc,
@@ -216,10 +230,23 @@ _FACTORIES: dict[str, Callable[[Parameters], Controller]] = {
 NAMES: tuple[str, ...] = tuple(_FACTORIES)
 
 
-def make(name: str, params: Parameters | None = None) -> Controller:
-    """A fresh controller by name (designed now for ``params``, the rig the designs assume)."""
+def make(name: str, params: Parameters | None = None) -> AnyController:
+    """A fresh controller by name (designed now for ``params``, the rig the designs assume; it receives
+    the rig software's calibration ``params.software``)."""
     try:
         factory = _FACTORIES[name]
     except KeyError:
         raise UnknownControllerError(name) from None
     return factory(params or Parameters())
+
+
+@functools.cache
+def simulation_only(name: str) -> bool:
+    """Whether ``name`` is a law on the true state (chapter 4): it cannot drive the hardware."""
+    return isinstance(make(name), TrueStateLaw)
+
+
+def describe(name: str) -> str:
+    """One line saying what the controller is."""
+    controller = make(name)
+    return str(getattr(controller, "description", "") or "appendix A: the code that ran on the rig")

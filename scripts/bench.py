@@ -3,7 +3,9 @@
     python scripts/bench.py [--view-seconds 60] [--skip-view]
 
 - physics: µs per MuJoCo step of the rig, and per 20 ms tick of the TwinRig (sensor chains included);
-- runs: seconds of computer time per 15 s closed-loop run (50 Hz controller, and a 1 kHz chapter 4 one);
+- runs: computer time per 15 s closed-loop run (50 Hz controllers, a 1 kHz chapter 4 law on the true state,
+  the reference rig), each as a ratio to the physical floor: raw ``mujoco.rollout`` of the same physics
+  steps in one call, measured in the same run;
 - view: the live view's tick rate at speed 1.0 over the given wall time (target 50 Hz ± 1 %) and its CPU
   time per tick, headless (no browser attached).
 """
@@ -16,11 +18,14 @@ import socket
 import time
 
 import mujoco
+import numpy as np
+from mujoco import rollout
 
 from controllers import registry
+from twin.engine import run_closed_loop, update_ticks
+from twin.parameters import Parameters
 from twin.plant import Plant
 from twin.rig import TwinRig
-from twin.runner import run_closed_loop
 
 
 def bench_physics() -> dict[str, float]:
@@ -42,12 +47,42 @@ def bench_physics() -> dict[str, float]:
     return {"mj_step_us": 1e6 * raw, "twinrig_tick_ms": 1e3 * tick, "realtime_factor_50hz": 0.02 / tick}
 
 
+def rollout_floor_s(duration_s: float) -> float:
+    """Raw ``mujoco.rollout`` of the physics steps a run of ``duration_s`` takes, in one call."""
+    params = Parameters()
+    steps = int(round((update_ticks(duration_s, params) * params.daq.period_s) / params.physics.timestep_s))
+    plant = Plant(params)
+    plant.reset(0.2, 0.3)
+    state = np.empty((1, mujoco.mj_stateSize(plant.model, mujoco.mjtState.mjSTATE_FULLPHYSICS)))
+    mujoco.mj_getState(plant.model, plant.data, state[0], mujoco.mjtState.mjSTATE_FULLPHYSICS)
+    control = np.zeros((1, steps, plant.model.nu))
+    start = time.perf_counter()
+    rollout.rollout(plant.model, plant.data, state, control)
+    return time.perf_counter() - start
+
+
 def bench_runs() -> dict[str, float]:
-    out = {}
-    for name in ("appendix-clp", "thesis-sf-continuous"):
+    out: dict[str, float] = {"floor_15s_s": rollout_floor_s(15.0)}
+    for name, plant in (
+        ("appendix-clp", "twin"),
+        ("lqr", "twin"),
+        ("thesis-sf-continuous", "twin"),
+        ("appendix-clp", "reference"),
+    ):
         start = time.perf_counter()
-        run_closed_loop(registry.make(name), x0_m=0.2, theta0_rad=0.3, duration_s=15.0, seed=0)
-        out[f"run_15s_{name}_s"] = time.perf_counter() - start
+        run_closed_loop(
+            registry.make(name),
+            x0_m=0.2,
+            theta0_rad=0.3,
+            duration_s=15.0,
+            seed=0,
+            plant=plant,
+            ideal_sensors=plant == "reference",
+            stop_when_lost=False,
+        )
+        elapsed = time.perf_counter() - start
+        out[f"run_15s_{name}_{plant}_s"] = elapsed
+        out[f"run_15s_{name}_{plant}_x_floor"] = elapsed / out["floor_15s_s"]
     return out
 
 
@@ -57,7 +92,7 @@ def bench_view(seconds: float) -> dict[str, float]:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
-    stats = serve(port=port, duration_s=seconds, speed=1.0, announce=False)
+    stats = serve(registry, port=port, duration_s=seconds, speed=1.0, announce=False)
     stats["tick_rate_error_pct"] = 100.0 * (stats["tick_rate_hz"] / 50.0 - 1.0)
     stats["cpu_ms_per_tick"] = 1e3 * stats.pop("cpu_s_per_tick")
     return stats

@@ -14,11 +14,11 @@ import numpy as np
 
 from controllers.appendix import AppendixControlLaw
 from twin import converters, daq, sensors
+from twin.engine import run_closed_loop
 from twin.log import load_mat, save_mat
 from twin.output_stage import motor_volts
 from twin.parameters import Parameters
 from twin.rig import TwinRig
-from twin.runner import run_closed_loop
 
 P = Parameters()
 LSB = daq.adc_lsb_v(P.daq)
@@ -29,7 +29,7 @@ KNOTS = np.arange(21) * 1e-3
 def angle() -> None:
     counts = np.arange(-216, 217)
     volts = np.array([sensors.angle_block_mean_v(KNOTS, np.full(21, c * STEP), P) for c in counts])
-    steps = np.diff(converters.beam_angle_rad(volts)) / STEP
+    steps = np.diff(converters.beam_angle_rad(volts, P.software)) / STEP
     print(
         f"angle staircase: mean step {steps.mean():.5f} Δ; {np.sum(abs(steps - 1) < 0.01)}/{steps.size} steps "
         f"within ±1 % (the others are 5-LSB steps: {np.unique(np.round(steps[abs(steps - 1) >= 0.01], 4))} Δ)"
@@ -46,7 +46,7 @@ def angle() -> None:
 def ball() -> None:
     worst = 0.0
     rig = TwinRig(P, noise=False)
-    for x, v in zip(sensors.TABLE_6_3_POSITION_M, sensors.TABLE_6_3_VOLTAGE_V):
+    for x, v in zip(P.ball_sensor.curve_position_m, P.ball_sensor.curve_volts_v, strict=True):
         rig.reset(x_m=float(x))
         worst = max(worst, abs(rig.read().ball_v - v) / LSB)
     print(f"Table 6.3 on the twin, noise off: worst |reading − table| = {worst:.2f} LSB over 23 points")

@@ -42,7 +42,7 @@ def main() -> None:
         [
             sys.executable,
             "-m",
-            "twin.cli",
+            "twin.app.cli",
             "view",
             "--port",
             str(port),

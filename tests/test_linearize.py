@@ -25,7 +25,7 @@ def test_mujoco_linearization_matches_reference(params, reference: ReferenceMode
 
 def test_cli_prints_the_linearization_as_json() -> None:
     out = subprocess.run(
-        [sys.executable, "-m", "twin.cli", "linearize", "--input", "voltage", "--json"],
+        [sys.executable, "-m", "twin.app.cli", "linearize", "--input", "voltage", "--json"],
         capture_output=True,
         text=True,
         timeout=120,
@@ -40,7 +40,7 @@ def test_cli_prints_the_linearization_as_json() -> None:
         [
             sys.executable,
             "-m",
-            "twin.cli",
+            "twin.app.cli",
             "linearize",
             "--input",
             "voltage",
@@ -60,7 +60,7 @@ def test_cli_reports_a_bad_parameter_file(tmp_path) -> None:
     bad = tmp_path / "rig.toml"
     bad.write_text("[motor]\nresistance_ohm = 0\n")
     out = subprocess.run(
-        [sys.executable, "-m", "twin.cli", "linearize", "--params", str(bad)],
+        [sys.executable, "-m", "twin.app.cli", "linearize", "--params", str(bad)],
         capture_output=True,
         text=True,
         timeout=120,

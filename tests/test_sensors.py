@@ -13,6 +13,8 @@ from twin import daq as D
 from twin import sensors as S
 from twin.parameters import Parameters
 
+from thesis_data import TABLE_6_3_POSITION_M, TABLE_6_3_VOLTAGE_V
+
 P = Parameters()
 QUIET = P.with_overrides({"ball_sensor.noise_enabled": False})
 ADC_LSB = 10.0 / 4096
@@ -63,7 +65,7 @@ def test_read_back_angle_is_a_staircase_of_one_count():
     readings = np.array([[still_reading_v((c + f) * STEP_RAD) for f in offsets] for c in counts])
     assert np.all(readings == readings[:, :1])  # flat within each count
     volts = readings[:, 0]
-    angle = C.beam_angle_rad(volts)
+    angle = C.beam_angle_rad(volts, P.software)
     steps_lsb = np.diff(volts) / ADC_LSB
     steps_rad = np.diff(angle)
     # One DAC step (0.009818 V = 4.02 ADC LSB) shows as 4 LSB, or as 5 LSB once every ≈ 46 counts.
@@ -95,8 +97,8 @@ def test_zeroing_error_shifts_the_reading():
     error_rad = 0.05
     shifted = P.with_overrides({"angle_sensor.zeroing_error_rad": error_rad})
     for theta in np.linspace(-0.6, 0.6, 61):
-        read_shifted = C.beam_angle_rad(still_reading_v(theta, shifted))
-        assert read_shifted == C.beam_angle_rad(still_reading_v(theta - error_rad, P))
+        read_shifted = C.beam_angle_rad(still_reading_v(theta, shifted), P.software)
+        assert read_shifted == C.beam_angle_rad(still_reading_v(theta - error_rad, P), P.software)
         assert abs(read_shifted - (theta - error_rad)) <= 0.5 * STEP_RAD + 0.13 * STEP_RAD
 
 
@@ -160,21 +162,24 @@ def test_angle_chain_object_and_bad_input():
 
 # --- ball position ------------------------------------------------------------------------------------------
 def test_static_curve_is_table_6_3_interpolated():
-    assert S.wiper_static_v(0.18) == 2.470
-    assert S.wiper_static_v(0.195) == pytest.approx((2.470 + 3.000) / 2, abs=1e-12)
-    assert S.wiper_static_v(0.4) == 4.600  # clamped to the end value
-    assert np.all(np.diff(S.TABLE_6_3_VOLTAGE_V) > 0)  # the measured curve is monotone
+    assert S.wiper_static_v(0.18, P.ball_sensor) == 2.470
+    assert S.wiper_static_v(0.195, P.ball_sensor) == pytest.approx((2.470 + 3.000) / 2, abs=1e-12)
+    assert S.wiper_static_v(0.4, P.ball_sensor) == 4.600  # clamped to the end value
+    assert np.all(np.diff(TABLE_6_3_VOLTAGE_V) > 0)  # the measured curve is monotone
+    # The default curve is Table 6.3 as printed.
+    np.testing.assert_array_equal(P.ball_sensor.curve_position_m, TABLE_6_3_POSITION_M)
+    np.testing.assert_array_equal(P.ball_sensor.curve_volts_v, TABLE_6_3_VOLTAGE_V)
 
 
 def test_ball_at_rest_on_each_table_point():
     lsb_m = 0.0693 * ADC_LSB  # one ADC step in eq 6.3.1's metres: 0.17 mm
     chain = S.BallPositionChain(QUIET, seed=0)
-    for x, volts in zip(S.TABLE_6_3_POSITION_M, S.TABLE_6_3_VOLTAGE_V):
+    for x, volts in zip(TABLE_6_3_POSITION_M, TABLE_6_3_VOLTAGE_V):
         chain.reset(float(x), t_s=1.0)
         reading = chain.advance(1.0 + KNOTS, np.full(21, x))
         assert abs(reading - volts) <= ADC_LSB  # measured: ≤ 0.5 LSB
         fit_residual_m = abs(0.0693 * volts + 0.0018 - x)  # eq 6.3.1's own error at this point (≤ 7.0 mm)
-        assert abs(C.ball_position_m(reading) - x) <= fit_residual_m + lsb_m
+        assert abs(C.ball_position_m(reading, P.software) - x) <= fit_residual_m + lsb_m
 
 
 def _fit_time_constant(times: np.ndarray, v: np.ndarray, v_final: float) -> float:
@@ -227,9 +232,9 @@ def test_rc_filter_is_exact_against_an_ode_solver():
         xt = float(np.interp(t, times, x))
         if not contact[j] or abs(xt) > 0.323 or any(a < t < b for a, b in drops):
             return 0.0
-        return float(np.interp(xt, S.TABLE_6_3_POSITION_M, S.TABLE_6_3_VOLTAGE_V))
+        return float(np.interp(xt, TABLE_6_3_POSITION_M, TABLE_6_3_VOLTAGE_V))
 
-    y = float(np.interp(0.25, S.TABLE_6_3_POSITION_M, S.TABLE_6_3_VOLTAGE_V))
+    y = float(np.interp(0.25, TABLE_6_3_POSITION_M, TABLE_6_3_VOLTAGE_V))
     for (times, x, contact), expected in zip(blocks, ends):
         # Integrate piece by piece between every discontinuity of the input.
         cuts = [t for a, b in drops for t in (a, b) if times[0] < t < times[-1]]

@@ -46,7 +46,7 @@ def _start_view(port: int, log_path: Path) -> subprocess.Popen:
     """``ballbeam view`` in the background, its output to a file (a full pipe would stall the server)."""
     log = open(log_path, "w")
     proc = subprocess.Popen(
-        [sys.executable, "-m", "twin.cli", "view", "--port", str(port), "--duration", "90"],
+        [sys.executable, "-m", "twin.app.cli", "view", "--port", str(port), "--duration", "90"],
         stdout=log,
         stderr=subprocess.STDOUT,
         text=True,
@@ -165,7 +165,7 @@ def test_a_taken_port_is_reported_not_changed() -> None:
         taken.listen()
         port = taken.getsockname()[1]
         out = subprocess.run(
-            [sys.executable, "-m", "twin.cli", "view", "--port", str(port), "--duration", "1"],
+            [sys.executable, "-m", "twin.app.cli", "view", "--port", str(port), "--duration", "1"],
             capture_output=True,
             text=True,
             timeout=60,

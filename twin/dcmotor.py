@@ -1,4 +1,11 @@
-"""The geared DC motor's torque law at the beam (thesis eq 3.3.1), the same law MuJoCo's dcmotor applies."""
+"""The geared DC motor's law at the beam (thesis eq 3.3.1) and its inverse: the one home of both.
+
+    τ = k_τ·(V − k_b·θ̇),   k_τ = N·K_t/R,  k_b = N·K_b          (eq 3.3.1; 0.016383·(V − 0.154·θ̇))
+    V = τ/k_τ + k_b·θ̇                                            (the inverse a torque law uses)
+
+MuJoCo's ``dcmotor`` applies the same law in the twin; the reference model and the controllers that turn a
+torque into volts call these functions (the thesis's designs with its printed, rounded k_τ = 0.0164).
+"""
 
 from __future__ import annotations
 
@@ -6,7 +13,27 @@ import numpy as np
 
 from twin.parameters import Amplifier, Motor
 
-__all__ = ["beam_torque_nm"]
+__all__ = ["beam_torque_nm", "torque_nm", "volts_for_torque_v"]
+
+
+def torque_nm(
+    volts: float | np.ndarray,
+    rate_rad_s: float | np.ndarray,
+    torque_per_volt: float,
+    backemf_v_s_per_rad: float,
+) -> float | np.ndarray:
+    """τ = k_τ·(V − k_b·θ̇) (eq 3.3.1) with the constants given."""
+    return torque_per_volt * (volts - backemf_v_s_per_rad * rate_rad_s)
+
+
+def volts_for_torque_v(
+    torque: float | np.ndarray,
+    rate_rad_s: float | np.ndarray,
+    torque_per_volt: float,
+    backemf_v_s_per_rad: float,
+) -> float | np.ndarray:
+    """V = τ/k_τ + k_b·θ̇: the terminal volts that give torque τ at the beam at rate θ̇ (eq 3.3.1 inverted)."""
+    return torque / torque_per_volt + backemf_v_s_per_rad * rate_rad_s
 
 
 def beam_torque_nm(
@@ -17,6 +44,6 @@ def beam_torque_nm(
     With the thesis's values this is 0.016383·(V − 0.154·θ̇) N·m. The motor's own viscous damping and
     rotor inertia are not part of this law (they act on the joint, see ``twin.reference``)."""
     v = np.clip(volts, -amplifier.rail_v, amplifier.rail_v)
-    return motor.torque_per_volt_nm_per_v * (
-        v - motor.backemf_at_beam_v_s_per_rad * np.asarray(beam_rate_rad_s)
+    return torque_nm(
+        v, np.asarray(beam_rate_rad_s), motor.torque_per_volt_nm_per_v, motor.backemf_at_beam_v_s_per_rad
     )

@@ -1,12 +1,14 @@
 """The two contracts of the rig, free of MuJoCo so that hardware code can import them alone.
 
 ``Rig`` is what a controller talks to: the I/O card (raw volts in, a DAC command out, one block per tick).
-``TwinRig`` (twin.rig) implements it on the MuJoCo twin; a hardware backend implements the same three calls
+``SimRig`` (twin.rig) implements it on the simulated rigs; a hardware backend implements the same three calls
 on the PCI-1712 (``getdata``/``putsample`` in the thesis's MATLAB software, appendix A).
 
 ``Controller`` is what runs at each tick: ``start`` once with the first block (the software's Start and
 Clear Buffer phase, which sets x1(1), x2(1)), then ``update`` with each block, returning the DAC command.
-The controller that passes on the twin is the controller that drives the rig.
+The controller that passes on the twin is the controller that drives the rig. Nothing here carries
+simulation truth: laws that need all four states run on a separate, simulation-only path
+(``twin.engine.StateLaw``).
 """
 
 from __future__ import annotations
@@ -62,20 +64,20 @@ class Telemetry:
 class Controller(ABC):
     """A controller of the rig: raw volts in, DAC command volts out, every ``period_s``.
 
-    ``uses_true_state`` marks simulation-only controllers (the thesis's chapter 4 designs assume all four
-    states are measured); the runner then passes the twin's true state, which no hardware can provide."""
+    This is the contract hardware code implements: it sees only what the I/O card gives (``DaqSample``)
+    and returns only what the card accepts (a DAC voltage). ``telemetry`` is what it logs, as the rig
+    software logs x1…x4, u and uhesap."""
 
     name: str = "controller"
     period_s: float = 0.02
-    uses_true_state: bool = False
 
     def __init__(self) -> None:
         self.telemetry = Telemetry()
 
     @abstractmethod
-    def start(self, sample: DaqSample, true_state: np.ndarray | None = None) -> None:
+    def start(self, sample: DaqSample) -> None:
         """The first block, before the motor is driven: initialise the estimates from it."""
 
     @abstractmethod
-    def update(self, sample: DaqSample, true_state: np.ndarray | None = None) -> float:
+    def update(self, sample: DaqSample) -> float:
         """One tick: the block just acquired → the DAC command (V). Updates ``self.telemetry``."""

@@ -81,6 +81,9 @@ def build_spec(params: Parameters | None = None, *, hold_beam_rad: float | None 
     hinge = _find(spec, "joint", HINGE)
     hinge.range = [-p.beam.stop_angle_rad, p.beam.stop_angle_rad]
     hinge.axis = HINGE_AXIS_BEAM.tolist()
+    # The pivot bearing's own viscous and dry friction (default 0, as the thesis neglects them).
+    hinge.damping = [p.beam.pivot_damping_nm_s_per_rad, 0.0, 0.0]
+    hinge.frictionloss = p.beam.pivot_friction_nm
 
     # Wires: each contact point lies h* above P and d/2 to the side; the wire axis lies one wire radius
     # further along the line from the ball centre through the contact point.

@@ -29,6 +29,8 @@ __all__ = [
     "AngleSensor",
     "BallSensor",
     "Daq",
+    "SoftwareCalibration",
+    "Start",
     "Parameters",
 ]
 
@@ -54,6 +56,11 @@ def param(
     )
 
 
+def curve(default: tuple[float, ...], unit: str, source: str) -> Any:
+    """A dataclass field holding a measured table column (a tuple of floats) with its unit and provenance."""
+    return field(default=default, metadata={"unit": unit, "source": source, "curve": True})
+
+
 def flag(default: bool, source: str) -> Any:
     """A boolean dataclass field (a switch) with its provenance."""
     return field(default=default, metadata={"unit": "on/off", "source": source, "flag": True})
@@ -66,6 +73,9 @@ def _check_fields(obj: Any, group: str) -> None:
         if f.metadata.get("flag"):
             if not isinstance(value, bool):
                 raise ParameterError(f"{name} = {value!r} is not true/false")
+            continue
+        if f.metadata.get("curve"):
+            object.__setattr__(obj, f.name, _check_curve(name, value))
             continue
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ParameterError(f"{name} = {value!r} is not a number")
@@ -84,6 +94,19 @@ def _check_fields(obj: Any, group: str) -> None:
             if bound is not None and not ok(value, bound):
                 raise ParameterError(f"{name} = {value!r} {unit} is impossible: it must be {word} {bound}")
         object.__setattr__(obj, f.name, value)
+
+
+def _check_curve(name: str, value: Any) -> tuple[float, ...]:
+    if isinstance(value, (str, bytes, Mapping)) or not isinstance(value, (list, tuple)):
+        raise ParameterError(f"{name} = {value!r} is not a list of numbers")
+    out = []
+    for i, item in enumerate(value):
+        if isinstance(item, bool) or not isinstance(item, (int, float)) or not math.isfinite(item):
+            raise ParameterError(f"{name}[{i}] = {item!r} is not a finite number")
+        out.append(float(item))
+    if len(out) < 2:
+        raise ParameterError(f"{name} has {len(out)} values: a curve needs at least 2 points")
+    return tuple(out)
 
 
 @dataclass(frozen=True)
@@ -114,6 +137,18 @@ class Beam:
     )
     stop_angle_rad: float = param(
         math.radians(43.4), "rad", "§3 (|θ| ≤ 43.4°): mechanical stops", gt=0.0, lt=math.pi / 2
+    )
+    pivot_damping_nm_s_per_rad: float = param(
+        0.0,
+        "N·m·s/rad",
+        "viscous friction of the pivot bearing; the thesis neglects it (§3.1), to be fitted from a rig log",
+        ge=0.0,
+    )
+    pivot_friction_nm: float = param(
+        0.0,
+        "N·m",
+        "Coulomb (dry) friction of the pivot bearing; the thesis neglects it (§3.1), to be fitted from a rig log",
+        ge=0.0,
     )
 
     def __post_init__(self) -> None:
@@ -260,8 +295,22 @@ class AngleSensor:
 class BallSensor:
     """Ball-position chain (§6.3): resistive wire wiper → contact noise → RC low-pass → I/O card ADC.
 
-    The static curve is the measured Table 6.3 (twin.sensors); the contact-noise numbers are not in the
-    thesis (its Figs 6.10/6.11 are not numeric): defaults are assumptions to be fitted from a rig log."""
+    The static curve is the measured Table 6.3 (ball position against the volts read at the I/O card),
+    interpolated piecewise linearly; the contact-noise numbers are not in the thesis (its Figs 6.10/6.11
+    are not numeric): defaults are assumptions to be fitted from a rig log."""
+
+    curve_position_m: tuple[float, ...] = curve(
+        (-0.323, -0.30, -0.27, -0.24, -0.21, -0.18, -0.15, -0.12, -0.09, -0.06, -0.03, 0.0,
+         0.03, 0.06, 0.09, 0.12, 0.15, 0.18, 0.21, 0.24, 0.27, 0.30, 0.323),
+        "m",
+        "Table 6.3: ball positions of the static calibration (measured on the rig), strictly increasing",
+    )  # fmt: skip
+    curve_volts_v: tuple[float, ...] = curve(
+        (-4.620, -4.410, -3.925, -3.460, -3.045, -2.620, -2.170, -1.747, -1.325, -0.895, -0.487, 0.0012,
+         0.428, 0.840, 1.280, 1.716, 2.113, 2.470, 3.000, 3.460, 3.890, 4.340, 4.600),
+        "V",
+        "Table 6.3: volts measured at the I/O card for each position (not a straight line; eq 6.3.1 fits it)",
+    )  # fmt: skip
 
     rc_resistance_ohm: float = param(147.0, "Ω", "§6.3: low-pass filter resistor", gt=0.0)
     rc_capacitance_f: float = param(22e-6, "F", "§6.3: low-pass filter capacitor", gt=0.0)
@@ -278,6 +327,18 @@ class BallSensor:
 
     def __post_init__(self) -> None:
         _check_fields(self, "ball_sensor")
+        pos, volts = self.curve_position_m, self.curve_volts_v
+        if len(pos) != len(volts):
+            raise ParameterError(
+                f"ball_sensor.curve_volts_v has {len(volts)} values but ball_sensor.curve_position_m has "
+                f"{len(pos)}: one volt reading per position"
+            )
+        for i in range(1, len(pos)):
+            if not pos[i] > pos[i - 1]:
+                raise ParameterError(
+                    f"ball_sensor.curve_position_m[{i}] = {pos[i]!r} m is impossible: positions must increase "
+                    f"strictly (previous {pos[i - 1]!r} m)"
+                )
 
 
 @dataclass(frozen=True)
@@ -318,6 +379,65 @@ class Daq:
         return int(round(self.sample_rate_hz * self.period_s))
 
 
+@dataclass(frozen=True)
+class SoftwareCalibration:
+    """The rig software's conversion constants (appendix A), which controllers receive rather than import.
+
+    These are the numbers typed into the MATLAB callbacks, not properties of the hardware: the hardware's
+    own curves are ``ball_sensor`` and ``angle_sensor``. A controller converts the card's volts with these
+    (twin.converters); the ideal sensors (twin.sensors.IdealSensors) invert them. A recalibrated rig
+    changes them here instead of editing controller code."""
+
+    ball_gain_m_per_v: float = param(0.0693, "m/V", "eq 6.3.1 / appendix A: x1 = 0.0693·V + 0.0018", gt=0.0)
+    ball_offset_m: float = param(0.0018, "m", "eq 6.3.1 / appendix A: x1 = 0.0693·V + 0.0018")
+    angle_gain_deg_per_v: float = param(
+        143.22657649,
+        "deg/V",
+        "eq 6.2.9–6.2.10 / appendix A: (360/256)/(5 kΩ·2.0108 mA/1024), motor degrees per volt",
+        gt=0.0,
+    )
+    angle_reference_v: float = param(5.002, "V", "eq 6.2.4 / appendix A: measured DAC output at DI = 1023")
+    angle_reference_motor_deg: float = param(
+        718.59375, "deg", "§6.2 / appendix A: motor angle at DI = 1023, (1023 − 512)·360/256"
+    )
+    angle_gear_ratio: float = param(7.0, "-", "appendix A: the literal '/ 7' (gearbox 1:7, §6.2)", gt=0.0)
+    software_pi: float = param(
+        3.141592654, "-", "appendix A: x2 = x2_temp_2·(3.141592654/180), π as typed", gt=3.14, lt=3.15
+    )
+    command_gain_v_per_v: float = param(9.6, "V/V", "§6.4 / appendix A: adat = u/9.6 + 2.5", gt=0.0)
+    command_zero_v: float = param(2.5, "V", "§6.4 / appendix A: 2.5 V is zero volts at the motor")
+    command_low_v: float = param(1.25, "V", "appendix A: adat clipped to 1.25…3.75 V (−12 V…+12 V)")
+    command_high_v: float = param(3.75, "V", "appendix A: adat clipped to 1.25…3.75 V (−12 V…+12 V)")
+
+    def __post_init__(self) -> None:
+        _check_fields(self, "software")
+        if not self.command_low_v < self.command_high_v:
+            raise ParameterError(
+                f"software.command_low_v = {self.command_low_v!r} V must be below "
+                f"software.command_high_v = {self.command_high_v!r} V"
+            )
+
+
+@dataclass(frozen=True)
+class Start:
+    """How a run starts (appendix A's button sequence, §6.6): the rig is held at its initial state while the
+    software reads it (Start, Clear Buffer), then Drive Motor is pressed and the rig released."""
+
+    free_run_s: float = param(
+        0.01,
+        "s",
+        "not in the thesis: time the released rig runs at 0 V before the first command reaches the amplifier. "
+        "The timer callback that sends it fires 0…20 ms after Drive Motor is pressed (one 20 ms period, "
+        "Table 6.4); 10 ms is the mean of that wait with the rig released at the press. 0 = released "
+        "exactly when the first command arrives (as the thesis's simulations start)",
+        ge=0.0,
+        le=1.0,
+    )
+
+    def __post_init__(self) -> None:
+        _check_fields(self, "start")
+
+
 _GROUPS: dict[str, type] = {
     "ball": Ball,
     "beam": Beam,
@@ -328,6 +448,8 @@ _GROUPS: dict[str, type] = {
     "angle_sensor": AngleSensor,
     "ball_sensor": BallSensor,
     "daq": Daq,
+    "software": SoftwareCalibration,
+    "start": Start,
 }
 
 
@@ -344,6 +466,8 @@ class Parameters:
     angle_sensor: AngleSensor = field(default_factory=AngleSensor)
     ball_sensor: BallSensor = field(default_factory=BallSensor)
     daq: Daq = field(default_factory=Daq)
+    software: SoftwareCalibration = field(default_factory=SoftwareCalibration)
+    start: Start = field(default_factory=Start)
 
     def __post_init__(self) -> None:
         r, d = self.ball.radius_m, self.track.contact_spacing_m
@@ -431,7 +555,7 @@ class Parameters:
             raise ParameterError(f"{path}: expected a table of parameter groups at the top level")
         return cls().with_overrides(data, origin=str(path))
 
-    def to_dict(self) -> dict[str, dict[str, float]]:
+    def to_dict(self) -> dict[str, dict[str, Any]]:
         return {group: dataclasses.asdict(getattr(self, group)) for group in _GROUPS}
 
     def save(self, path: str | Path, *, overwrite: bool = False) -> None:
@@ -447,7 +571,12 @@ class Parameters:
             lines.append(f"[{group}]")
             for f in fields(_GROUPS[group]):
                 value = values[f.name]
-                text = ("true" if value else "false") if isinstance(value, bool) else repr(value)
+                if isinstance(value, bool):
+                    text = "true" if value else "false"
+                elif isinstance(value, tuple):
+                    text = "[" + ", ".join(repr(v) for v in value) + "]"
+                else:
+                    text = repr(value)
                 lines.append(f"{f.name} = {text}  # {f.metadata['unit']}; {f.metadata['source']}")
             lines.append("")
         path.write_text("\n".join(lines))

@@ -2,6 +2,11 @@
 
 State (eq 3.1.28): x = (x, θ, ẋ, θ̇) with x the ball centre along the beam from the pivot's normal (m),
 θ the beam angle (rad, > 0 lifts the +x end), ẋ the ball's speed relative to the beam.
+
+``advance`` runs a whole control period in one C call (``mujoco.rollout``, one thread) and computes the
+ball's position, the beam angle and the lost-ball test for every step in numpy from the returned states:
+no Python per physics step. The state is carried from call to call with MuJoCo's solver warm start, so the
+trajectory is bit-identical to stepping ``mj_step`` one step at a time.
 """
 
 from __future__ import annotations
@@ -11,11 +16,16 @@ from dataclasses import dataclass
 
 import mujoco
 import numpy as np
+from mujoco import rollout
 
 from twin import model as mdl
 from twin.parameters import Parameters
+from twin.physics import PhysicsBlock, check_initial_state
 
 __all__ = ["Plant", "BallKinematics"]
+
+_FULL = mujoco.mjtState.mjSTATE_FULLPHYSICS
+_CTRL = mujoco.mjtState.mjSTATE_CTRL
 
 # The ball counts as lost once its centre has dropped this far below (or risen above) its seat on the wires.
 # 2 mm is 40x the largest transient lift seen in fast combined rolling and tilting (design.md: µm).
@@ -57,6 +67,10 @@ class Plant:
         self.ball_lost_time_s: float | None = None
         mujoco.mj_kinematics(self.model, self.data)
         self._pivot = tuple(float(v) for v in self.data.xpos[self._beam])  # the beam body's origin is P
+        self._nstate = mujoco.mj_stateSize(m, _FULL)
+        self._state0 = np.empty((1, self._nstate))
+        self._rollout = rollout.Rollout(nthread=0)
+        self._buffers: dict[int, tuple[np.ndarray, np.ndarray]] = {}
         self.reset()
 
     # --- state ------------------------------------------------------------------------------------
@@ -76,23 +90,10 @@ class Plant:
         """Put the ball on the wires at x, rolling without slipping at ẋ, and the beam at θ, θ̇.
 
         ``keep_time`` keeps the simulation clock running (a disturbance mid-run rather than a new run)."""
-        for name, value in (
-            ("x_m", x_m),
-            ("theta_rad", theta_rad),
-            ("xdot_m_s", xdot_m_s),
-            ("thetadot_rad_s", thetadot_rad_s),
-        ):
-            if not math.isfinite(value):
-                raise ValueError(f"initial state {name} = {value!r} is not finite")
         p = self.params
-        if abs(x_m) > p.track.half_length_m:
-            raise ValueError(f"initial x_m = {x_m!r} is off the track (|x| ≤ {p.track.half_length_m} m)")
         if self.held_angle_rad is not None:
             theta_rad, thetadot_rad_s = self.held_angle_rad, 0.0
-        elif abs(theta_rad) > p.beam.stop_angle_rad:
-            raise ValueError(
-                f"initial theta_rad = {theta_rad!r} is beyond the stops (|θ| ≤ {p.beam.stop_angle_rad:.4f} rad)"
-            )
+        check_initial_state(p, x_m, theta_rad, xdot_m_s, thetadot_rad_s)
         m, d = self.model, self.data
         time_s = d.time
         mujoco.mj_resetData(m, d)
@@ -185,20 +186,90 @@ class Plant:
         )
 
     # --- stepping ---------------------------------------------------------------------------------
+    @property
+    def timestep_s(self) -> float:
+        return float(self.model.opt.timestep)
+
     def step(self, motor_volts: float, n_steps: int = 1) -> None:
         """Advance ``n_steps`` physics steps with the motor's terminal volts held (the dcmotor clamps them to
-        the amplifier's rails), updating the latched ``ball_lost`` flag after each."""
+        the amplifier's rails), updating the latched ``ball_lost`` flag."""
         if not math.isfinite(motor_volts):
             raise ValueError(f"motor_volts = {motor_volts!r} is not finite")
-        if self.model.nu:
-            self.data.ctrl[0] = motor_volts
-        for _ in range(n_steps):
-            mujoco.mj_step(self.model, self.data)
-            if not self.ball_lost and not self.ball_on_track():
+        self.advance(np.full(n_steps, float(motor_volts)))
+
+    def advance(self, motor_volts: np.ndarray) -> PhysicsBlock:
+        """One physics step per entry of ``motor_volts`` in one C call; the ball and beam at every step.
+
+        The ``ball_lost`` flag latches at the first step after which the ball no longer sits on both wires
+        within the track (see ``ball_on_track``)."""
+        m, d = self.model, self.data
+        volts = np.asarray(motor_volts, dtype=np.float64)
+        n = volts.size
+        if not np.isfinite(volts).all():
+            raise ValueError(f"motor_volts contains {volts[~np.isfinite(volts)][0]!r}: it must be finite")
+        if n not in self._buffers:
+            self._buffers[n] = (np.zeros((1, n, m.nu)), np.empty((1, n, self._nstate)))
+        control, states = self._buffers[n]
+        t0 = float(d.time)
+        mujoco.mj_getState(m, d, self._state0[0], _FULL)
+        if n:
+            if m.nu:
+                control[0, :, 0] = volts
+            self._rollout.rollout(
+                [m],
+                [d],
+                self._state0,
+                control,
+                control_spec=_CTRL.value,
+                skip_checks=True,
+                nstep=n,
+                initial_warmstart=d.qacc_warmstart[None].copy(),
+                state=states,
+                sensordata=None,
+                chunk_size=None,
+            )
+        rows = np.concatenate([self._state0, states[0]])  # (n + 1, nstate): time, qpos, qvel
+        if not np.isfinite(rows[-1]).all():
+            raise FloatingPointError(f"MuJoCo state is not finite at t = {float(rows[-1, 0]):.3f} s")
+        q = 1 + self._ball_qpos
+        if self._hinge_qpos is None:
+            theta = np.full(n + 1, float(self.held_angle_rad))
+        else:
+            theta = rows[:, 1 + self._hinge_qpos].copy()
+        c, s = np.cos(theta), np.sin(theta)
+        dx = rows[:, q] - self._pivot[0]
+        dy = rows[:, q + 1] - self._pivot[1]
+        dz = rows[:, q + 2] - self._pivot[2]
+        along = c * dx + s * dz
+        on = self._on_track(along, dy, -s * dx + c * dz)
+        if self.ball_lost:
+            on[:] = False
+        else:
+            on[0] = True
+            off = np.flatnonzero(~on)
+            if off.size:  # latched from the first step off the track
                 self.ball_lost = True
-                self.ball_lost_time_s = self.time_s
-        if not np.all(np.isfinite(self.data.qpos)):
-            raise FloatingPointError(f"MuJoCo state is not finite at t = {self.time_s:.3f} s")
+                self.ball_lost_time_s = float(rows[off[0], 0])
+                on[off[0] :] = False
+        times = t0 + np.arange(n + 1) * m.opt.timestep
+        return PhysicsBlock(time_s=times, x_m=along, theta_rad=theta, on_track=on)
+
+    def _on_track(self, along: np.ndarray, lateral: np.ndarray, height: np.ndarray) -> np.ndarray:
+        p = self.params
+        return (
+            (np.abs(along) <= p.track.half_length_m + p.ball.radius_m)
+            & (np.abs(lateral) < p.track.contact_spacing_m / 2)
+            & (np.abs(height - p.ball_centre_height_m) < LOST_HEIGHT_TOLERANCE_M)
+        )
+
+    def kick_ball(self, dv_m_s: float) -> None:
+        """Give the ball a velocity kick along the beam (a flick with a finger), keeping it rolling."""
+        if not math.isfinite(dv_m_s):
+            raise ValueError(f"dv_m_s = {dv_m_s!r} is not finite")
+        if self.ball_lost:
+            return
+        x, theta, xdot, thetadot = self.state()
+        self.reset(x, theta, xdot + dv_m_s, thetadot, keep_time=True)
 
     def motor_torque_nm(self) -> float:
         """Joint torque the motor applies to the beam now (N·m): gear × motor torque, eq 3.3.1."""

@@ -9,7 +9,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
-from twin.runner import RunResult  # noqa: E402
+from twin.engine import RunResult  # noqa: E402
 
 __all__ = ["plot_run"]
 
@@ -32,9 +32,7 @@ def plot_run(result: RunResult, path: str | Path, title: str | None = None) -> N
     ax.plot(log.true_time_s, log.motor_volts_v)
     ax.set_ylabel("motor (V)")
     ax.set_xlabel("time (s)")
-    m = result.metrics
-    verdict = "ball lost" if m["ball_lost"] else ("settled" if m["settled"] else "not settled")
-    fig.suptitle(title or f"{result.controller}: {verdict}")
+    fig.suptitle(title or f"{result.controller}: {'held' if result.verdict.held else result.verdict.reason}")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

@@ -1,16 +1,18 @@
-"""Analytic reference model of the rig (thesis §3.1–3.4): the independent check on the MuJoCo model and the
-model controllers are designed on.
+"""Analytic reference model of the rig (thesis §3.1–3.4): the independent check on the MuJoCo model, the model
+controllers are designed on, and the plant of the reference rig (``ReferencePlant``).
 
-Equations of motion (Lagrange; identical to the thesis's Newton derivation 3.1.16–3.1.25), q = (x, θ):
+Equations of motion, q = (x, θ), in the thesis's own form (the one home of their coefficients):
 
-    (m + J/r*²)·ẍ − (m·c + J/r*)·θ̈ = m·x·θ̇² − m·g·sin θ                                    (3.1.26 × m)
-    −(m·c + J/r*)·ẍ + (J_BP + J_a + J + m·c² + m·x²)·θ̈
-        = τ − B_a·θ̇ − 2·m·x·ẋ·θ̇ − m·g·x·cos θ + m·g·c·sin θ + M_B·g·h·sin θ
+    (1 + k₁)·ẍ − (k₂ + c)·θ̈ = x·θ̇² − g·sin θ                                                  (eq 3.1.26)
+    τ = α₁·ẍ + (α₂ + α₃·x²)·θ̈ + β₁·sin θ + β₂·x·cos θ + β₃·x·ẋ·θ̇ + β₄·x·θ̇² + β₅·θ̇ + τ_f(θ̇)     (eq 3.1.27)
 
-with c = h* + r*, J = 2/5·m·r². Eliminating ẍ with 3.1.26 turns the second line into the thesis's eq 3.1.27
-with its printed "x·ẋ²" read as x·θ̇² (design.md). J_a = J_m·N² and B_a = B_m·N² are the motor's reflected
-rotor inertia and viscous damping (Table 3.2), which the thesis neglects (§3.3); ``motor_inertia=False``
-drops them to give the thesis's model.
+with k₁ = 2r²/(5r*²), k₂ = 2r²/(5r*), c = h* + r*, α₁ = k₁·m·h*, α₂ = J_BP + J_a − k₂·m·h*, α₃ = m,
+β₁ = −M_B·g·h, β₂ = m·g, β₃ = 2m, β₄ = −m·c (eq 3.1.27's printed "x·ẋ²" read as x·θ̇², as the Newton
+derivation 3.1.16/3.1.24 gives), β₅ = B_a + B_p. J_a = J_m·N² and B_a = B_m·N² are the motor's reflected
+rotor inertia and viscous damping (Table 3.2), which the thesis neglects (§3.3; ``motor_inertia=False``
+drops them); B_p and τ_f are the pivot bearing's viscous and Coulomb friction (parameters, default 0).
+τ_f = F·sat(θ̇/ω_f) with ω_f = ``COULOMB_REGULARIZATION_RAD_S``: MuJoCo's ``frictionloss`` is a soft
+constraint too, and a fixed-step integrator cannot follow an exact sign function.
 """
 
 from __future__ import annotations
@@ -24,13 +26,85 @@ import numpy as np
 import scipy.integrate
 import scipy.linalg
 
-from twin.dcmotor import beam_torque_nm
+from twin.dcmotor import beam_torque_nm, torque_nm
 from twin.parameters import Parameters
+from twin.physics import PhysicsBlock, check_initial_state
 
-__all__ = ["ReferenceModel", "discretize_zoh", "STATE_NAMES"]
+__all__ = [
+    "COULOMB_REGULARIZATION_RAD_S",
+    "STATE_NAMES",
+    "EquationCoefficients",
+    "ReferenceModel",
+    "ReferencePlant",
+    "discretize_zoh",
+]
 
 STATE_NAMES = ("x", "theta", "xdot", "thetadot")
 InputKind = Literal["torque", "voltage"]
+
+# Below this beam rate the pivot's dry friction falls linearly to zero (0.01 rad/s = 0.57°/s).
+COULOMB_REGULARIZATION_RAD_S = 0.01
+
+
+@dataclass(frozen=True)
+class EquationCoefficients:
+    """The coefficients of eq 3.1.26 and eq 3.1.27 for a parameter set (see the module docstring)."""
+
+    k1: float  # 2r²/(5r*²)
+    k2: float  # 2r²/(5r*)  (m)
+    c: float  # h* + r*  (m)
+    g: float  # m/s²
+    alpha_xdd: float  # α₁ (kg·m)
+    alpha_thdd: float  # α₂ (kg·m²)
+    alpha_thdd_x2: float  # α₃ (kg)
+    beta: tuple[float, float, float, float]  # β₁ sin θ, β₂ x cos θ, β₃ x ẋ θ̇, β₄ x θ̇²
+    beta_thetadot: float  # β₅: viscous damping at the beam (N·m·s/rad)
+    coulomb_nm: float  # F: the pivot's dry friction (N·m)
+
+    @classmethod
+    def from_params(cls, params: Parameters, *, motor_inertia: bool = True) -> EquationCoefficients:
+        p = params
+        m, r, rs, hs = p.ball.mass_kg, p.ball.radius_m, p.rolling_radius_m, p.track.contact_height_m
+        g = p.physics.gravity_m_s2
+        gear2 = p.motor.gear_ratio**2
+        j_a = p.motor.rotor_inertia_kgm2 * gear2 if motor_inertia else 0.0
+        b_a = p.motor.viscous_damping_nm_s_per_rad * gear2 if motor_inertia else 0.0
+        k1 = 2 * r**2 / (5 * rs**2)
+        k2 = 2 * r**2 / (5 * rs)
+        c = p.ball_centre_height_m
+        return cls(
+            k1=k1,
+            k2=k2,
+            c=c,
+            g=g,
+            alpha_xdd=k1 * m * hs,
+            alpha_thdd=p.beam.inertia_pivot_kgm2 + j_a - k2 * m * hs,
+            alpha_thdd_x2=m,
+            beta=(-p.beam.mass_kg * g * p.beam.cog_height_m, m * g, 2 * m, -m * c),
+            beta_thetadot=b_a + p.beam.pivot_damping_nm_s_per_rad,
+            coulomb_nm=p.beam.pivot_friction_nm,
+        )
+
+    def accelerations(self, x: float, th: float, xd: float, thd: float, torque_nm: float) -> tuple[float, float]:
+        """(ẍ, θ̈) from eq 3.1.26 and 3.1.27 for a motor torque at the beam."""
+        s, co = math.sin(th), math.cos(th)
+        b1, b2, b3, b4 = self.beta
+        friction = self.coulomb_nm * max(-1.0, min(1.0, thd / COULOMB_REGULARIZATION_RAD_S))
+        rhs_ball = x * thd * thd - self.g * s
+        rhs_beam = (
+            torque_nm
+            - b1 * s
+            - b2 * x * co
+            - b3 * x * xd * thd
+            - b4 * x * thd * thd
+            - self.beta_thetadot * thd
+            - friction
+        )
+        # [[1 + k1, −(k2 + c)], [α₁, α₂ + α₃x²]]·(ẍ, θ̈) = (rhs_ball, rhs_beam), solved by Cramer's rule.
+        m11, m12 = 1.0 + self.k1, -(self.k2 + self.c)
+        m21, m22 = self.alpha_xdd, self.alpha_thdd + self.alpha_thdd_x2 * x * x
+        det = m11 * m22 - m12 * m21
+        return (rhs_ball * m22 - m12 * rhs_beam) / det, (m11 * rhs_beam - m21 * rhs_ball) / det
 
 
 def discretize_zoh(a: np.ndarray, b: np.ndarray, period_s: float) -> tuple[np.ndarray, np.ndarray]:
@@ -48,54 +122,15 @@ class ReferenceModel:
     params: Parameters
     motor_inertia: bool = True
 
-    # --- constants ----------------------------------------------------------------------------------
     @property
-    def _c(self) -> float:
-        return self.params.ball_centre_height_m
-
-    @property
-    def reflected_inertia_kgm2(self) -> float:
-        mo = self.params.motor
-        return mo.rotor_inertia_kgm2 * mo.gear_ratio**2 if self.motor_inertia else 0.0
-
-    @property
-    def reflected_damping_nm_s_per_rad(self) -> float:
-        mo = self.params.motor
-        return mo.viscous_damping_nm_s_per_rad * mo.gear_ratio**2 if self.motor_inertia else 0.0
-
-    def mass_matrix(self, x_m: float) -> np.ndarray:
-        p = self.params
-        m, j, rs, c = p.ball.mass_kg, p.ball.inertia_kgm2, p.rolling_radius_m, self._c
-        coupling = -(m * c + j / rs)
-        return np.array(
-            [
-                [m + j / rs**2, coupling],
-                [
-                    coupling,
-                    p.beam.inertia_pivot_kgm2 + self.reflected_inertia_kgm2 + j + m * c**2 + m * x_m**2,
-                ],
-            ]
-        )
+    def coefficients(self) -> EquationCoefficients:
+        return EquationCoefficients.from_params(self.params, motor_inertia=self.motor_inertia)
 
     # --- nonlinear dynamics -------------------------------------------------------------------------
     def accelerations(self, state: np.ndarray, torque_nm: float) -> np.ndarray:
         """(ẍ, θ̈) for state (x, θ, ẋ, θ̇) and motor torque at the beam."""
-        p = self.params
-        x, th, xd, thd = state
-        m, g, c = p.ball.mass_kg, p.physics.gravity_m_s2, self._c
-        s, co = math.sin(th), math.cos(th)
-        rhs = np.array(
-            [
-                m * x * thd**2 - m * g * s,
-                torque_nm
-                - self.reflected_damping_nm_s_per_rad * thd
-                - 2.0 * m * x * xd * thd
-                - m * g * x * co
-                + m * g * c * s
-                + p.beam.mass_kg * g * p.beam.cog_height_m * s,
-            ]
-        )
-        return np.linalg.solve(self.mass_matrix(x), rhs)
+        x, th, xd, thd = (float(v) for v in state)
+        return np.array(self.coefficients.accelerations(x, th, xd, thd, torque_nm))
 
     def torque_from_voltage(self, volts: float, thetadot_rad_s: float) -> float:
         return float(beam_torque_nm(self.params.motor, self.params.amplifier, volts, thetadot_rad_s))
@@ -107,12 +142,15 @@ class ReferenceModel:
 
     # --- linear models ------------------------------------------------------------------------------
     def linearize(self, input: InputKind = "torque") -> tuple[np.ndarray, np.ndarray]:
-        """Continuous-time (A, B) at the origin (eq 3.2.8/3.2.9 for torque, 3.3.5/3.3.6 for voltage)."""
-        p = self.params
-        m, g, c = p.ball.mass_kg, p.physics.gravity_m_s2, self._c
-        minv = np.linalg.inv(self.mass_matrix(0.0))
-        stiffness = np.array([[0.0, -m * g], [-m * g, m * g * c + p.beam.mass_kg * g * p.beam.cog_height_m]])
-        damping = np.array([[0.0, 0.0], [0.0, -self.reflected_damping_nm_s_per_rad]])
+        """Continuous-time (A, B) at the origin (eq 3.2.8/3.2.9 for torque, 3.3.5/3.3.6 for voltage).
+
+        The pivot's dry friction has no derivative at θ̇ = 0 and is left out."""
+        q = self.coefficients
+        b1, b2, _, _ = q.beta
+        mass = np.array([[1.0 + q.k1, -(q.k2 + q.c)], [q.alpha_xdd, q.alpha_thdd]])
+        stiffness = np.array([[0.0, -q.g], [-b2, -b1]])
+        damping = np.array([[0.0, 0.0], [0.0, -q.beta_thetadot]])
+        minv = np.linalg.inv(mass)
         a = np.zeros((4, 4))
         a[0, 2] = a[1, 3] = 1.0
         a[2:, :2] = minv @ stiffness
@@ -120,16 +158,14 @@ class ReferenceModel:
         b = np.zeros((4, 1))
         b[2:, 0] = minv[:, 1]
         if input == "voltage":
-            k_v = p.motor.torque_per_volt_nm_per_v
-            a[:, 3] -= k_v * p.motor.backemf_at_beam_v_s_per_rad * b[:, 0]
+            k_v = self.params.motor.torque_per_volt_nm_per_v
+            a[:, 3] -= k_v * self.params.motor.backemf_at_beam_v_s_per_rad * b[:, 0]
             b = k_v * b
         elif input != "torque":
             raise ValueError(f"input = {input!r}: expected 'torque' or 'voltage'")
         return a, b
 
-    def discretize(
-        self, input: InputKind = "torque", period_s: float = 0.02
-    ) -> tuple[np.ndarray, np.ndarray]:
+    def discretize(self, input: InputKind = "torque", period_s: float = 0.02) -> tuple[np.ndarray, np.ndarray]:
         """(Φ, Γ) at ``period_s`` (eq 3.4.8/3.4.9 and 3.4.13/3.4.14 at T = 20 ms)."""
         return discretize_zoh(*self.linearize(input), period_s)
 
@@ -161,3 +197,95 @@ class ReferenceModel:
             state = sol.y[:, -1]
             t += hold_s
         return np.array(times), np.array(states)
+
+
+class ReferencePlant:
+    """The reference model as a physics backend (``twin.physics.Physics``): fixed-step RK4 at
+    ``physics.timestep_s`` with the motor volts held over each step (eq 3.3.1 through the amplifier's rails).
+
+    What the equations leave out is handled at the step boundary: the beam meets its stops inelastically
+    (θ clamped, an outward θ̇ set to zero), and the ball is lost once |x| passes the track's end; the
+    state then stays where it was (the reference model cannot fall off a beam)."""
+
+    def __init__(self, params: Parameters | None = None, *, motor_inertia: bool = True) -> None:
+        self.params = params or Parameters()
+        self.model = ReferenceModel(self.params, motor_inertia=motor_inertia)
+        self._q = self.model.coefficients
+        self.reset(0.0, 0.0)
+
+    @property
+    def time_s(self) -> float:
+        return self._time_s
+
+    @property
+    def timestep_s(self) -> float:
+        return self.params.physics.timestep_s
+
+    @property
+    def ball_lost(self) -> bool:
+        return self._lost_time_s is not None
+
+    @property
+    def ball_lost_time_s(self) -> float | None:
+        return self._lost_time_s
+
+    def reset(self, x_m: float, theta_rad: float, xdot_m_s: float = 0.0, thetadot_rad_s: float = 0.0) -> None:
+        check_initial_state(self.params, x_m, theta_rad, xdot_m_s, thetadot_rad_s)
+        self._s = (float(x_m), float(theta_rad), float(xdot_m_s), float(thetadot_rad_s))
+        self._time_s = 0.0
+        self._lost_time_s: float | None = None
+
+    def state(self) -> np.ndarray:
+        return np.array(self._s)
+
+    def kick_ball(self, dv_m_s: float) -> None:
+        if not math.isfinite(dv_m_s):
+            raise ValueError(f"dv_m_s = {dv_m_s!r} is not finite")
+        if not self.ball_lost:
+            x, th, xd, thd = self._s
+            self._s = (x, th, xd + dv_m_s, thd)
+
+    def advance(self, motor_volts: np.ndarray) -> PhysicsBlock:
+        p = self.params
+        h = p.physics.timestep_s
+        rail, stop, half = p.amplifier.rail_v, p.beam.stop_angle_rad, p.track.half_length_m
+        k_tau, k_b = p.motor.torque_per_volt_nm_per_v, p.motor.backemf_at_beam_v_s_per_rad
+        acc = self._q.accelerations
+        volts = np.asarray(motor_volts, dtype=np.float64)
+        n = volts.size
+        t0 = self._time_s
+        times = np.empty(n + 1)
+        xs = np.empty(n + 1)
+        thetas = np.empty(n + 1)
+        on = np.empty(n + 1, dtype=bool)
+        x, th, xd, thd = self._s
+        times[0], xs[0], thetas[0], on[0] = t0, x, th, not self.ball_lost
+
+        def f(x: float, th: float, xd: float, thd: float, v: float) -> tuple[float, float, float, float]:
+            xdd, thdd = acc(x, th, xd, thd, float(torque_nm(v, thd, k_tau, k_b)))
+            return xd, thd, xdd, thdd
+
+        for i in range(n):
+            if self._lost_time_s is None:
+                v = min(max(float(volts[i]), -rail), rail)
+                a1 = f(x, th, xd, thd, v)
+                a2 = f(x + 0.5 * h * a1[0], th + 0.5 * h * a1[1], xd + 0.5 * h * a1[2], thd + 0.5 * h * a1[3], v)
+                a3 = f(x + 0.5 * h * a2[0], th + 0.5 * h * a2[1], xd + 0.5 * h * a2[2], thd + 0.5 * h * a2[3], v)
+                a4 = f(x + h * a3[0], th + h * a3[1], xd + h * a3[2], thd + h * a3[3], v)
+                x += h / 6.0 * (a1[0] + 2 * a2[0] + 2 * a3[0] + a4[0])
+                th += h / 6.0 * (a1[1] + 2 * a2[1] + 2 * a3[1] + a4[1])
+                xd += h / 6.0 * (a1[2] + 2 * a2[2] + 2 * a3[2] + a4[2])
+                thd += h / 6.0 * (a1[3] + 2 * a2[3] + 2 * a3[3] + a4[3])
+                if abs(th) > stop:
+                    th = math.copysign(stop, th)
+                    if thd * th > 0:
+                        thd = 0.0
+                if not all(math.isfinite(v_) for v_ in (x, th, xd, thd)):
+                    raise FloatingPointError(f"reference model state is not finite at t = {t0 + (i + 1) * h:.3f} s")
+                if abs(x) > half:
+                    self._lost_time_s = t0 + (i + 1) * h
+            times[i + 1] = t0 + (i + 1) * h
+            xs[i + 1], thetas[i + 1], on[i + 1] = x, th, self._lost_time_s is None
+        self._s = (x, th, xd, thd)
+        self._time_s = float(times[-1])
+        return PhysicsBlock(time_s=times, x_m=xs, theta_rad=thetas, on_track=on)

@@ -1,27 +1,45 @@
-"""The rig simulated: ``TwinRig`` implements the ``Rig`` interface (twin.interface) on the MuJoCo twin.
+"""The rig simulated: ``SimRig`` implements the ``Rig`` interface (twin.interface) on a physics backend.
 
-Per tick (Table 6.4, appendix A): ``read()`` advances the twin by one control period with the amplifier
+Per tick (Table 6.4, appendix A): ``read()`` advances the physics by one control period with the amplifier
 following the last command, and returns the block reduced as the thesis software reduces it (last sample
 of the ball channel, mean of the angle channel, time of the last sample); the controller computes;
 ``write()`` sets the DAC, which the amplifier follows from then on (after the optional output latency).
+
+Three rigs share this code (``make_rig``):
+
+    TwinRig        the MuJoCo twin with the full I/O chain (encoder, counter, DAC, wiper curve, contact
+                   noise, RC filter, 12-bit ADC and DAC, block semantics)
+    ideal sensors  the MuJoCo twin with ideal converters (twin.sensors.IdealSensors, an exact DAC)
+    ReferenceRig   the analytic reference model (twin.reference.ReferencePlant) with ideal converters
+
+Start timing (``params.start``, appendix A's button sequence): after ``reset`` the rig is held at its
+initial state while the software reads it; it is released at t = 0 and runs at 0 V until the first command
+reaches the amplifier at t = ``start.free_run_s``. The DAQ's blocks end at t = free_run + k·T: block k = −1
+is the one ``Controller.start`` reads, block 0 the first ``update`` (its command acts from t = free_run).
+Blocks, or parts of blocks, before t = 0 see the held rig.
 """
 
 from __future__ import annotations
 
 import math
+from typing import Literal
 
 import numpy as np
 
 from twin.daq import block_time_s
 from twin.interface import DaqSample, Rig
-from twin.output_stage import motor_volts
+from twin.output_stage import amplifier_volts, motor_volts
 from twin.parameters import Parameters
+from twin.physics import Physics, PhysicsBlock
 from twin.plant import Plant
-from twin.sensors import AngleChain, BallPositionChain
+from twin.reference import ReferencePlant
+from twin.sensors import AngleChain, BallPositionChain, IdealSensors
 
-__all__ = ["DaqSample", "Rig", "TwinRig", "RigError"]
+__all__ = ["DaqSample", "PlantKind", "ReferenceRig", "Rig", "RigError", "SimRig", "TwinRig", "make_rig"]
 
-# A control period or latency must be a whole number of physics steps to this relative precision.
+PlantKind = Literal["twin", "reference"]
+
+# A control period, latency or free-run time must be a whole number of physics steps to this precision.
 _STEP_TOLERANCE = 1e-9
 
 
@@ -29,7 +47,8 @@ class RigError(ValueError):
     """A configuration the rig cannot run (period or latency not a whole number of physics steps, …)."""
 
 
-def _whole_steps(duration_s: float, step_s: float, name: str) -> int:
+def whole_steps(duration_s: float, step_s: float, name: str) -> int:
+    """``duration_s`` in physics steps; ``RigError`` naming ``name`` unless it is a whole number of them."""
     n = duration_s / step_s
     steps = int(round(n))
     if abs(n - steps) > _STEP_TOLERANCE * max(1.0, n):
@@ -40,27 +59,42 @@ def _whole_steps(duration_s: float, step_s: float, name: str) -> int:
     return steps
 
 
-class TwinRig(Rig):
-    """The rig simulated: MuJoCo plant + output stage + sensor chains + DAQ block semantics.
+class SimRig(Rig):
+    """A simulated rig: a physics backend + output stage + sensors + DAQ block semantics + start timing.
 
     ``seed`` seeds the ball sensor's contact noise (same seed → bit-identical readings). ``noise`` overrides
-    ``params.ball_sensor.noise_enabled``."""
+    ``params.ball_sensor.noise_enabled``. ``ideal_sensors`` replaces the sensor chains and the DAC's
+    quantization by ideal converters."""
 
-    def __init__(self, params: Parameters | None = None, *, seed: int = 0, noise: bool | None = None) -> None:
+    def __init__(
+        self,
+        params: Parameters | None = None,
+        *,
+        seed: int = 0,
+        noise: bool | None = None,
+        plant: PlantKind = "twin",
+        ideal_sensors: bool = False,
+    ) -> None:
         p = params or Parameters()
         if noise is not None:
             p = p.with_overrides({"ball_sensor.noise_enabled": bool(noise)})
+        if plant not in ("twin", "reference"):
+            raise RigError(f"plant = {plant!r}: expected 'twin' or 'reference'")
         self.params = p
         self.seed = seed
-        self._steps_per_tick = _whole_steps(p.daq.period_s, p.physics.timestep_s, "daq.period_s")
+        self.plant_kind: PlantKind = plant
+        self.ideal_sensors = bool(ideal_sensors)
+        dt = p.physics.timestep_s
+        self._steps_per_tick = whole_steps(p.daq.period_s, dt, "daq.period_s")
         if self._steps_per_tick < 1:
             raise RigError(f"daq.period_s = {p.daq.period_s!r} s is shorter than one physics step")
-        self._latency_steps = _whole_steps(
-            p.daq.output_latency_s, p.physics.timestep_s, "daq.output_latency_s"
-        )
-        self.plant = Plant(p)
+        self._latency_steps = whole_steps(p.daq.output_latency_s, dt, "daq.output_latency_s")
+        self._free_run_steps = whole_steps(p.start.free_run_s, dt, "start.free_run_s")
+        self.physics: Physics = Plant(p) if plant == "twin" else ReferencePlant(p)
         self._angle = AngleChain(p)
         self._ball = BallPositionChain(p, seed)
+        self._ideal = IdealSensors(p)
+        self.last_block: PhysicsBlock | None = None
         self.reset()
 
     # --- the Rig interface ----------------------------------------------------------------------------
@@ -69,37 +103,21 @@ class TwinRig(Rig):
         return self.params.daq.period_s
 
     def read(self) -> DaqSample:
-        plant, n = self.plant, self._steps_per_tick
-        t0 = plant.time_s
-        times = np.empty(n + 1)
-        xs = np.empty(n + 1)
-        thetas = np.empty(n + 1)
-        contact = np.empty(n + 1, dtype=bool)
-        times[0], thetas[0] = t0, plant.state_angle_rad()
-        xs[0] = plant.ball_in_beam_frame()[0]
-        contact[0] = not plant.ball_lost
-        for i in range(n):
-            if i == self._latency_steps:
-                self._applied_motor_v = self._pending_motor_v
-            plant.step(self._applied_motor_v)
-            times[i + 1] = t0 + (i + 1) * plant.model.opt.timestep
-            xs[i + 1] = plant.ball_in_beam_frame()[0]
-            thetas[i + 1] = plant.state_angle_rad()
-            contact[i + 1] = not plant.ball_lost
-        angle_v = self._angle.read_v(times, thetas)
-        ball_v = self._ball.advance(times, xs, contact)
-        self._ticks += 1
-        return DaqSample(time_s=block_time_s(t0, self.params.daq), ball_v=ball_v, angle_v=angle_v)
+        return self._read(None)
 
     def write(self, command_v: float) -> None:
         if not isinstance(command_v, (int, float, np.floating, np.integer)) or not math.isfinite(command_v):
             raise ValueError(f"command_v = {command_v!r}: the DAC command must be a finite number of volts")
         self.command_v = float(command_v)
-        self._pending_motor_v = float(motor_volts(self.command_v, self.params))
-        if self._latency_steps == 0:
-            self._applied_motor_v = self._pending_motor_v
+        self._set_motor_volts(self._motor_volts_for(self.command_v))
 
-    # --- twin-only ------------------------------------------------------------------------------------
+    # --- simulation only ------------------------------------------------------------------------------
+    def read_with_state_law(self, law_volts, law_period_s: float) -> DaqSample:
+        """One tick in which the motor volts are recomputed every ``law_period_s`` from the plant's true
+        state: ``law_volts(state) -> terminal volts`` (clamped to the amplifier's rails, no DAC). This is
+        the chapter 4 designs' path (all four states measured): simulation only, never a ``Controller``."""
+        return self._read((law_volts, whole_steps(law_period_s, self.params.physics.timestep_s, "period_s")))
+
     def reset(
         self,
         x_m: float = 0.0,
@@ -109,22 +127,36 @@ class TwinRig(Rig):
         *,
         seed: int | None = None,
     ) -> None:
-        """Put the rig in a state; the DAC at 2.5 V (zero volts at the motor, as the Start button does)."""
-        self.plant.reset(x_m, theta_rad, xdot_m_s, thetadot_rad_s)
+        """Hold the rig in a state (released at t = 0); the DAC at 2.5 V (zero volts at the motor, as the
+        Start button does)."""
+        self.physics.reset(x_m, theta_rad, xdot_m_s, thetadot_rad_s)
         if seed is not None:
             self.seed = seed
-        self._ball.reset(x_m, 0.0, seed=self.seed)
+        self._held = np.array([x_m, theta_rad, xdot_m_s, thetadot_rad_s], dtype=float)
+        # The next block (the one Controller.start reads) ends one period before the first command.
+        self._next_end_step = self._free_run_steps - self._steps_per_tick
+        self._ball.reset(x_m, self._step_time(self._next_end_step - self._steps_per_tick), seed=self.seed)
         self._ticks = 0
         self.command_v = self.params.amplifier.zero_command_v
-        self._pending_motor_v = self._applied_motor_v = float(motor_volts(self.command_v, self.params))
+        self._pending_motor_v = self._applied_motor_v = self._motor_volts_for(self.command_v)
+        self._switch_in_steps: int | None = None
+        self.last_block = None
 
     def true_state(self) -> np.ndarray:
-        """The twin's true (x_m, θ_rad, ẋ_m_s, θ̇_rad_s): for validation and logs, never for a controller."""
-        return self.plant.state()
+        """The true (x_m, θ_rad, ẋ_m_s, θ̇_rad_s): for validation and logs, never for a controller."""
+        return self._held.copy() if self.held else self.physics.state()
+
+    @property
+    def held(self) -> bool:
+        """Whether the rig is still held at its initial state (the blocks read so far end before release)."""
+        return self._next_end_step - self._steps_per_tick < 0
 
     @property
     def time_s(self) -> float:
-        return self.plant.time_s
+        """Simulated time since release (negative while the rig is held)."""
+        if self.held:
+            return self._step_time(self._next_end_step - self._steps_per_tick)
+        return self.physics.time_s
 
     @property
     def ticks(self) -> int:
@@ -132,25 +164,25 @@ class TwinRig(Rig):
 
     @property
     def ball_lost(self) -> bool:
-        return self.plant.ball_lost
+        return self.physics.ball_lost
 
     @property
     def ball_lost_time_s(self) -> float | None:
-        return self.plant.ball_lost_time_s
+        return self.physics.ball_lost_time_s
 
     @property
     def motor_volts_v(self) -> float:
-        """Volts across the motor now (after DAC quantization and the amplifier's ±12 V)."""
+        """Volts across the motor now (after the DAC and the amplifier's ±12 V)."""
         return self._applied_motor_v
 
     @property
     def dropout_count(self) -> int:
-        """Contact losses of the ball-position wire since the last reset."""
-        return self._ball.dropout_count
+        """Contact losses of the ball-position wire since the last reset (0 with ideal sensors)."""
+        return 0 if self.ideal_sensors else self._ball.dropout_count
 
     @property
     def noise_enabled(self) -> bool:
-        return self.params.ball_sensor.noise_enabled
+        return self.params.ball_sensor.noise_enabled and not self.ideal_sensors
 
     def set_noise(self, enabled: bool) -> None:
         """Switch the ball sensor's contact noise on or off from now on."""
@@ -159,9 +191,131 @@ class TwinRig(Rig):
 
     def kick_ball(self, dv_m_s: float) -> None:
         """Give the ball a velocity kick along the beam (a flick with a finger), keeping it rolling."""
-        if not math.isfinite(dv_m_s):
-            raise ValueError(f"dv_m_s = {dv_m_s!r} is not finite")
-        x, theta, xdot, thetadot = self.plant.state()
-        if self.plant.ball_lost:
+        if self.held:
+            if not math.isfinite(dv_m_s):
+                raise ValueError(f"dv_m_s = {dv_m_s!r} is not finite")
+            self._held[2] += dv_m_s
+            self.physics.reset(*self._held)
             return
-        self.plant.reset(x, theta, xdot + dv_m_s, thetadot, keep_time=True)
+        self.physics.kick_ball(dv_m_s)
+
+    # --- internals --------------------------------------------------------------------------------------
+    def _step_time(self, step: int) -> float:
+        """Time of a physics step index relative to release: after release the physics clock itself."""
+        return step * self.params.physics.timestep_s
+
+    def _motor_volts_for(self, command_v: float) -> float:
+        if self.ideal_sensors:  # an exact DAC: the card's range, then the amplifier
+            daq = self.params.daq
+            return float(amplifier_volts(min(max(command_v, daq.dac_min_v), daq.dac_max_v), self.params.amplifier))
+        return float(motor_volts(command_v, self.params))
+
+    def _set_motor_volts(self, volts: float) -> None:
+        self._pending_motor_v = volts
+        if self._latency_steps == 0:
+            self._applied_motor_v = volts
+            self._switch_in_steps = None
+        else:
+            self._switch_in_steps = self._latency_steps
+
+    def _step_volts(self, n: int) -> np.ndarray:
+        """Terminal volts for the next ``n`` physics steps (the output latency switches within them)."""
+        volts = np.full(n, self._applied_motor_v)
+        if self._switch_in_steps is not None:
+            k = self._switch_in_steps
+            if k < n:
+                volts[k:] = self._pending_motor_v
+                self._applied_motor_v = self._pending_motor_v
+                self._switch_in_steps = None
+            else:
+                self._switch_in_steps = k - n
+        return volts
+
+    def _advance_with_law(self, n: int, law, law_steps: int) -> PhysicsBlock:
+        rail = self.params.amplifier.rail_v
+        parts = []
+        done = 0
+        while done < n:
+            m = min(law_steps, n - done)
+            volts = float(law(self.physics.state()))
+            if not math.isfinite(volts):
+                raise FloatingPointError(f"the state law returned {volts!r} volts at t = {self.physics.time_s:.3f} s")
+            self._applied_motor_v = self._pending_motor_v = min(max(volts, -rail), rail)
+            parts.append(self.physics.advance(np.full(m, self._applied_motor_v)))
+            done += m
+        return _join(parts)
+
+    def _read(self, law) -> DaqSample:
+        p = self.params
+        end = self._next_end_step
+        start = end - self._steps_per_tick
+        t_start = self._step_time(start) if start < 0 else self.physics.time_s
+        n_free = end - max(start, 0) if end > 0 else 0
+        pieces: list[PhysicsBlock] = []
+        if start < 0:  # the held rig, until release at t = 0 (or the block's end)
+            if self._switch_in_steps is not None:  # a command's latency runs on while the rig is held
+                self._switch_in_steps = max(0, self._switch_in_steps - (min(end, 0) - start))
+            x, th = float(self._held[0]), float(self._held[1])
+            held_end = self._step_time(min(end, 0))
+            pieces.append(
+                PhysicsBlock(
+                    time_s=np.array([t_start, held_end]),
+                    x_m=np.array([x, x]),
+                    theta_rad=np.array([th, th]),
+                    on_track=np.array([True, True]),
+                )
+            )
+        if n_free:
+            if law is None:
+                pieces.append(self.physics.advance(self._step_volts(n_free)))
+            else:
+                pieces.append(self._advance_with_law(n_free, *law))
+        block = _join(pieces)
+        self.last_block = block
+        if self.ideal_sensors:
+            ball_v, angle_v = self._ideal.read_v(float(block.x_m[-1]), float(block.theta_rad[-1]))
+        else:
+            angle_v = self._angle.read_v(block.time_s, block.theta_rad)
+            ball_v = self._ball.advance(block.time_s, block.x_m, block.on_track)
+        self._next_end_step = end + self._steps_per_tick
+        self._ticks += 1
+        return DaqSample(time_s=block_time_s(t_start, p.daq), ball_v=ball_v, angle_v=angle_v)
+
+
+def _join(parts: list[PhysicsBlock]) -> PhysicsBlock:
+    """Consecutive blocks as one (each part's first entry repeats the previous part's last)."""
+    if len(parts) == 1:
+        return parts[0]
+    return PhysicsBlock(
+        time_s=np.concatenate([parts[0].time_s] + [b.time_s[1:] for b in parts[1:]]),
+        x_m=np.concatenate([parts[0].x_m] + [b.x_m[1:] for b in parts[1:]]),
+        theta_rad=np.concatenate([parts[0].theta_rad] + [b.theta_rad[1:] for b in parts[1:]]),
+        on_track=np.concatenate([parts[0].on_track] + [b.on_track[1:] for b in parts[1:]]),
+    )
+
+
+class TwinRig(SimRig):
+    """The MuJoCo twin with the full I/O chain."""
+
+    def __init__(self, params: Parameters | None = None, *, seed: int = 0, noise: bool | None = None) -> None:
+        super().__init__(params, seed=seed, noise=noise, plant="twin", ideal_sensors=False)
+
+
+class ReferenceRig(SimRig):
+    """The analytic reference model with ideal converters."""
+
+    def __init__(self, params: Parameters | None = None, *, seed: int = 0) -> None:
+        super().__init__(params, seed=seed, plant="reference", ideal_sensors=True)
+
+
+def make_rig(
+    params: Parameters | None = None,
+    *,
+    plant: PlantKind = "twin",
+    ideal_sensors: bool = False,
+    seed: int = 0,
+    noise: bool | None = None,
+) -> SimRig:
+    """The simulated rig asked for: ``plant`` 'twin' (MuJoCo) or 'reference' (analytic model), with the full
+    sensor chain or ideal converters."""
+    return SimRig(params, seed=seed, noise=noise, plant=plant, ideal_sensors=ideal_sensors)

@@ -34,17 +34,16 @@ import math
 
 import numpy as np
 
-from twin.converters import finite_values
+from twin.converters import angle_volts_v, ball_volts_v, finite_values
 from twin.daq import adc_quantize_v
-from twin.parameters import AngleSensor, Daq, Parameters
+from twin.parameters import AngleSensor, BallSensor, Daq, Parameters
 
 __all__ = [
     "CONTINUITY_TOLERANCE_SAMPLES",
     "SNAP_TOLERANCE_SAMPLES",
-    "TABLE_6_3_POSITION_M",
-    "TABLE_6_3_VOLTAGE_V",
     "AngleChain",
     "BallPositionChain",
+    "IdealSensors",
     "angle_block_mean_bruteforce_v",
     "angle_block_mean_v",
     "angle_count_step_rad",
@@ -53,17 +52,6 @@ __all__ = [
     "counter_value",
     "wiper_static_v",
 ]
-
-# Table 6.3: ball position (m) and the voltage measured at the I/O card (V), the rig's only hardware data
-# for this sensor. Not a straight line (the thesis's own remark); eq 6.3.1 is a least-squares fit of it.
-TABLE_6_3_POSITION_M = np.array(
-    [-0.323, -0.30, -0.27, -0.24, -0.21, -0.18, -0.15, -0.12, -0.09, -0.06, -0.03, 0.0,
-     0.03, 0.06, 0.09, 0.12, 0.15, 0.18, 0.21, 0.24, 0.27, 0.30, 0.323]
-)  # fmt: skip
-TABLE_6_3_VOLTAGE_V = np.array(
-    [-4.620, -4.410, -3.925, -3.460, -3.045, -2.620, -2.170, -1.747, -1.325, -0.895, -0.487, 0.0012,
-     0.428, 0.840, 1.280, 1.716, 2.113, 2.470, 3.000, 3.460, 3.890, 4.340, 4.600]
-)  # fmt: skip
 
 # A knot time within this many sample periods (25 ps at 40 kHz) of a sample instant is that instant: knot
 # times like k·1 ms accumulate rounding, and θ is continuous there, so the choice only removes float noise.
@@ -267,10 +255,11 @@ class AngleChain:
 
 
 # --- ball position ---------------------------------------------------------------------------------------
-def wiper_static_v(x_m: float | np.ndarray) -> float | np.ndarray:
-    """Wiper volts for a ball touching the wire at x: Table 6.3 interpolated linearly, clamped at its ends."""
+def wiper_static_v(x_m: float | np.ndarray, sensor: BallSensor) -> float | np.ndarray:
+    """Wiper volts for a ball touching the wire at x: the measured curve (Table 6.3 by default)
+    interpolated linearly, clamped at its ends."""
     x = finite_values(x_m, "x_m")
-    out = np.interp(x, TABLE_6_3_POSITION_M, TABLE_6_3_VOLTAGE_V)
+    out = np.interp(x, sensor.curve_position_m, sensor.curve_volts_v)
     return float(out) if np.ndim(x_m) == 0 else out
 
 
@@ -288,12 +277,18 @@ class BallPositionChain:
     ) -> None:
         self.params = params
         self._rng = self._make_rng(seed)
+        self._use_params(params)
+        self.reset(x_m)
+
+    def _use_params(self, params: Parameters) -> None:
+        self.params = params
         s = params.ball_sensor
         self.tau_s = s.rc_resistance_ohm * s.rc_capacitance_f
-        # Positions where the wiper's slope or the contact changes: Table 6.3's points and the track's ends.
+        self._curve_x = np.asarray(s.curve_position_m)
+        self._curve_v = np.asarray(s.curve_volts_v)
+        # Positions where the wiper's slope or the contact changes: the curve's points and the track's ends.
         half = params.track.half_length_m
-        self._breakpoints_m = np.unique(np.concatenate([TABLE_6_3_POSITION_M, [-half, half]]))
-        self.reset(x_m)
+        self._breakpoints_m = np.unique(np.concatenate([self._curve_x, [-half, half]]))
 
     @staticmethod
     def _make_rng(seed: int | np.random.Generator | None) -> np.random.Generator:
@@ -313,7 +308,7 @@ class BallPositionChain:
     def _connected_v(self, x: float, in_contact: bool) -> float:
         """Wiper volts with no dropout: the static curve on the track, else the open-wiper voltage."""
         if in_contact and abs(x) <= self.params.track.half_length_m:
-            return float(wiper_static_v(x))
+            return float(np.interp(x, self._curve_x, self._curve_v))
         return self.params.ball_sensor.dropout_voltage_v
 
     def reset(
@@ -347,9 +342,8 @@ class BallPositionChain:
         """New sensor parameters from now on (e.g. noise switched on or off mid-run); the filter keeps its
         charge and the noise process its seed."""
         was_on = self._noise_on
-        self.params = params
+        self._use_params(params)
         s = params.ball_sensor
-        self.tau_s = s.rc_resistance_ohm * s.rc_capacitance_f
         if not self._noise_on:
             self._next_start_s = math.inf
         elif not was_on:
@@ -421,7 +415,7 @@ class BallPositionChain:
         if drops:
             d = np.array(drops)
             connected &= ~((d[None, :, 0] < mid[:, None]) & (mid[:, None] < d[None, :, 1])).any(axis=1)
-        vk = np.interp(xk, TABLE_6_3_POSITION_M, TABLE_6_3_VOLTAGE_V)
+        vk = np.interp(xk, self._curve_x, self._curve_v)
         v_drop = self.params.ball_sensor.dropout_voltage_v
         v_start = np.where(connected, vk[:-1], v_drop)
         v_end = np.where(connected, vk[1:], v_drop)
@@ -443,3 +437,22 @@ class BallPositionChain:
         self.time_s = t_end
         self.reading_v = float(adc_quantize_v(y, self.params.daq))
         return self.reading_v
+
+
+class IdealSensors:
+    """Ideal converters: the exact x and θ at the block's end, in the volts the rig software reads as them.
+
+    No quantization, no nonlinearity, no RC filter, no noise, no block averaging: the inverse of the
+    software's conversions (``params.software``, eq 6.3.1 and eq 6.2.10) applied to the true state. The
+    encoder's zeroing error is kept (the counter was zeroed at that angle: an offset, not a converter
+    effect). Used to tell a design flaw from a sensor-chain effect, for the reference rig, and for smooth
+    identification."""
+
+    def __init__(self, params: Parameters) -> None:
+        self.params = params
+
+    def read_v(self, x_m: float, theta_rad: float) -> tuple[float, float]:
+        """(ball volts, angle volts) for a ball at ``x_m`` and a beam at ``theta_rad``."""
+        sw = self.params.software
+        angle = theta_rad - self.params.angle_sensor.zeroing_error_rad
+        return float(ball_volts_v(x_m, sw)), float(angle_volts_v(angle, sw))

@@ -21,11 +21,12 @@ import trimesh
 import viser
 import viser.uplot
 
-from controllers import registry
 from twin import converters
-from twin.interface import Controller, DaqSample
+from twin.engine import Catalogue, ClosedLoop, ControllerError
+from twin.interface import DaqSample
 from twin.parameters import Parameters
-from twin.rig import TwinRig
+from twin.plant import Plant
+from twin.rig import PlantKind, make_rig
 
 __all__ = ["LiveTwin", "ViewerError", "serve"]
 
@@ -78,18 +79,33 @@ class History:
 
 
 class LiveTwin:
-    """The simulation side of the viewer: a twin, a controller, and the actions the GUI asks for.
+    """The simulation side of the viewer: a closed loop (twin.engine), and the actions the GUI asks for.
 
-    Everything here runs on the loop's thread; ``enqueue`` is the only method other threads call."""
+    Everything here runs on the loop's thread; ``enqueue`` is the only method other threads call. The
+    controllers come from the catalogue the application hands in (the core never imports them)."""
 
-    def __init__(self, params: Parameters, controller: str, seed: int, speed: float) -> None:
+    def __init__(
+        self,
+        params: Parameters,
+        catalogue: Catalogue,
+        controller: str,
+        seed: int,
+        speed: float,
+        *,
+        plant: PlantKind = "twin",
+        ideal_sensors: bool = False,
+    ) -> None:
         self.params = params
+        self.catalogue = catalogue
         self.seed = seed
         self.speed = speed
+        self.plant: PlantKind = plant
+        self.ideal_sensors = ideal_sensors
         self.x0_m, self.theta0_rad = 0.15, 0.1
         self.noise = params.ball_sensor.noise_enabled
         self.reference_x_m = 0.0
         self.running = True
+        self.error: str | None = None
         self.history = History()
         self.actions: queue.Queue[tuple[str, Any]] = queue.Queue()
         self.runs = 0  # runs started (each reset or controller change starts one)
@@ -105,20 +121,26 @@ class LiveTwin:
         self._restart()
 
     def _restart(self) -> None:
-        """A fresh run from the set initial state: new controller, twin at (x0, θ0) at rest."""
+        """A fresh run from the set initial state: new controller, rig held at (x0, θ0), then released."""
         self.runs += 1
-        self.controller: Controller = registry.make(self.controller_name, self.params)
-        params = self.params.with_overrides(
-            {"daq.period_s": self.controller.period_s, "ball_sensor.noise_enabled": self.noise}
-        )
-        self.rig = TwinRig(params, seed=self.seed)
+        self.error = None
+        controller = self.catalogue.make(self.controller_name, self.params)
+        params = self.params.with_overrides({"ball_sensor.noise_enabled": self.noise})
+        self.rig = make_rig(params, plant=self.plant, ideal_sensors=self.ideal_sensors, seed=self.seed)
         self.rig.reset(self.x0_m, self.theta0_rad)
+        self.loop = ClosedLoop(self.rig, controller, record=False)
         self._apply_reference()
-        first = self.rig.read()
-        self.controller.start(first, self.rig.true_state() if self.controller.uses_true_state else None)
-        self.last_sample: DaqSample = first
         self.history.clear()
+        self._guarded(self.loop.start)
         self._record()
+
+    @property
+    def controller(self) -> Any:
+        return self.loop.controller
+
+    @property
+    def last_sample(self) -> DaqSample | None:
+        return self.loop.last_sample
 
     @property
     def supports_reference(self) -> bool:
@@ -128,22 +150,28 @@ class LiveTwin:
         if self.supports_reference:
             self.controller.law.ref_x_m = self.reference_x_m
 
+    def _guarded(self, step: Any) -> None:
+        """Run one step of the loop; a failing controller pauses the run with its message."""
+        try:
+            step()
+        except ControllerError as exc:
+            self.error = str(exc)
+            self.running = False
+            print(f"ballbeam view: {exc}", flush=True)
+
     def apply_actions(self) -> None:
         while True:
             try:
                 action, value = self.actions.get_nowait()
             except queue.Empty:
                 return
-            print(
-                f"ballbeam view: t = {self.rig.time_s:.2f} s: {action} {'' if value is None else value}",
-                flush=True,
-            )
+            print(f"ballbeam view: t = {self.rig.time_s:.2f} s: {action} {'' if value is None else value}", flush=True)
             if action == "controller":
                 self._select(str(value))
             elif action == "reset":
                 self._restart()
             elif action == "run":
-                self.running = bool(value)
+                self.running = bool(value) and self.error is None
             elif action == "step":
                 self.running = False
                 self.tick()
@@ -161,27 +189,28 @@ class LiveTwin:
                 self._apply_reference()
 
     def tick(self) -> None:
-        """One 20 ms frame of simulated time: as many controller periods as fit in it."""
+        """One 20 ms frame of simulated time: as many control periods as fit in it."""
+        if self.error is not None:
+            return
         n = max(1, int(round(FRAME_S / self.rig.period_s)))
-        truth_needed = self.controller.uses_true_state
         for _ in range(n):
-            sample = self.rig.read()
-            command = self.controller.update(sample, self.rig.true_state() if truth_needed else None)
-            self.rig.write(command)
-            self.last_sample = sample
+            self._guarded(self.loop.tick)
         self._record()
 
     def _record(self) -> None:
         x, theta, xdot, thetadot = self.rig.true_state()
         est = self.controller.telemetry.estimate
         s = self.last_sample
+        sw = self.rig.params.software
+        x_meas = converters.ball_position_m(s.ball_v, sw) if s is not None else float("nan")
+        th_meas = converters.beam_angle_rad(s.angle_v, sw) if s is not None else float("nan")
         self.history.append(
             t=self.rig.time_s,
             x_true=x,
-            x_meas=converters.ball_position_m(s.ball_v),
+            x_meas=x_meas,
             x_est=est[0],
             th_true=theta,
-            th_meas=converters.beam_angle_rad(s.angle_v),
+            th_meas=th_meas,
             volts=self.rig.motor_volts_v,
             err_xdot=est[2] - xdot,
             err_thdot=est[3] - thetadot,
@@ -194,11 +223,12 @@ class LiveTwin:
             if self.rig.ball_lost
             else "ball on the beam"
         )
+        error = f"  \n**controller failed**: {self.error}" if self.error else ""
         return (
             f"run {self.runs} · **t = {self.rig.time_s:.2f} s** · {state} · controller: "
             f"**{self.controller_name}** · {ball}  \n"
             f"noise {'on' if self.noise else 'off'} · speed ×{self.speed:g} · "
-            f"motor {self.rig.motor_volts_v:+.2f} V"
+            f"motor {self.rig.motor_volts_v:+.2f} V{error}"
         )
 
 
@@ -283,7 +313,9 @@ class Viewer:
         self.server.gui.configure_theme(show_share_button=False, control_width="large")
         self.server.initial_camera.position = (0.16, -0.58, 0.36)
         self.server.initial_camera.look_at = (0.16, 0.0, 0.25)
-        self.frames = build_scene(self.server, live.rig.plant.model)
+        # The reference model has no geometry: a MuJoCo model of the same rig shows its state.
+        self._display = Plant(live.params)
+        self.frames = build_scene(self.server, self._display.model)
         self._build_gui()
         self._frame_count = 0
 
@@ -292,7 +324,7 @@ class Viewer:
         self.status = gui.add_markdown(live.status_markdown())
         with gui.add_folder("Run"):
             controller = gui.add_dropdown(
-                "Controller", options=registry.NAMES, initial_value=live.controller_name
+                "Controller", options=live.catalogue.NAMES, initial_value=live.controller_name
             )
             run = gui.add_button("Pause")
             step = gui.add_button("Step 20 ms")
@@ -343,7 +375,17 @@ class Viewer:
     def publish(self) -> None:
         """Send one frame: body poses (and every tenth frame the plots and status), as one batch."""
         live = self.live
-        model, data = live.rig.plant.model, live.rig.plant.data
+        physics = live.rig.physics
+        if isinstance(physics, Plant):
+            model, data = physics.model, physics.data
+        else:
+            x, theta = (float(v) for v in live.rig.true_state()[:2])
+            p = live.params
+            model, data = self._display.model, self._display.data
+            self._display.reset(
+                float(np.clip(x, -p.track.half_length_m, p.track.half_length_m)),
+                float(np.clip(theta, -p.beam.stop_angle_rad, p.beam.stop_angle_rad)),
+            )
         mujoco.mj_kinematics(model, data)  # poses of the current state (mj_step leaves xpos one step behind)
         self._frame_count += 1
         with self.server.atomic():
@@ -403,6 +445,7 @@ class Viewer:
 
 
 def serve(
+    catalogue: Catalogue,
     *,
     host: str = "127.0.0.1",
     port: int = 8080,
@@ -411,14 +454,18 @@ def serve(
     seed: int = 0,
     duration_s: float | None = None,
     params: Parameters | None = None,
+    plant: PlantKind = "twin",
+    ideal_sensors: bool = False,
     announce: bool = True,
 ) -> dict[str, float]:
     """Start the live view and block until interrupted (or ``duration_s`` of wall time passed)."""
     if not (math.isfinite(speed) and 0 < speed <= 10):
         raise ViewerError(f"--speed = {speed!r} must be in (0, 10]")
-    if controller not in registry.NAMES:
-        raise ViewerError(f"unknown controller {controller!r}; known: {', '.join(registry.NAMES)}")
-    live = LiveTwin(params or Parameters(), controller, seed, speed)
+    if controller not in catalogue.NAMES:
+        raise ViewerError(f"unknown controller {controller!r}; known: {', '.join(catalogue.NAMES)}")
+    live = LiveTwin(
+        params or Parameters(), catalogue, controller, seed, speed, plant=plant, ideal_sensors=ideal_sensors
+    )
     viewer = Viewer(live, host, port)
     if announce:
         print(

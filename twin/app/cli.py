@@ -1,4 +1,9 @@
-"""The ``ballbeam`` command."""
+"""The ``ballbeam`` command (application layer: it sees the controllers and hands their catalogue down).
+
+Exit codes: 0 success (for ``run``: the ball was held), 1 a run whose ball was lost or not held, or whose
+controller failed, 2 bad input (arguments, parameter files, output paths), each with a one-line message
+and no traceback.
+"""
 
 from __future__ import annotations
 
@@ -15,12 +20,30 @@ from twin.parameters import ParameterError, Parameters
 from twin.reference import STATE_NAMES, ReferenceModel
 
 
-def _load_params(path: str | None) -> Parameters:
-    return Parameters.from_file(path) if path else Parameters()
+def _load_params(args: argparse.Namespace) -> Parameters:
+    params = Parameters.from_file(args.params) if args.params else Parameters()
+    overrides: dict[str, object] = {}
+    for item in getattr(args, "set", None) or ():
+        name, sep, text = item.partition("=")
+        if not sep or "." not in name:
+            raise ParameterError(f"--set {item!r}: expected GROUP.NAME=VALUE, e.g. start.free_run_s=0.02")
+        overrides[name.strip()] = _parse_value(text.strip(), item)
+    return params.with_overrides(overrides, origin="--set") if overrides else params
+
+
+def _parse_value(text: str, item: str) -> object:
+    """A --set value: true/false, a number, or a JSON list of numbers."""
+    if text in ("true", "false"):
+        return text == "true"
+    try:
+        value = json.loads(text)
+    except json.JSONDecodeError:
+        raise ParameterError(f"--set {item!r}: {text!r} is not a number, true/false or a list of numbers") from None
+    return value
 
 
 def _cmd_linearize(args: argparse.Namespace) -> int:
-    params = _load_params(args.params)
+    params = _load_params(args)
     if args.source == "reference":
         a, b = ReferenceModel(params).linearize(args.input)
     else:
@@ -48,7 +71,7 @@ def _cmd_linearize(args: argparse.Namespace) -> int:
 
 
 def _cmd_params(args: argparse.Namespace) -> int:
-    params = _load_params(args.params)
+    params = _load_params(args)
     if args.json:
         print(json.dumps(params.to_dict(), indent=2))
     else:
@@ -61,10 +84,10 @@ def _cmd_params(args: argparse.Namespace) -> int:
 
 def _cmd_run(args: argparse.Namespace) -> int:
     from controllers import registry
+    from twin.engine import ControllerError, run_closed_loop
     from twin.log import save_csv, save_mat
-    from twin.runner import run_closed_loop
 
-    params = _load_params(args.params)
+    params = _load_params(args)
     for name, value in (("--x0", args.x0), ("--theta0", args.theta0), ("--duration", args.duration)):
         if not math.isfinite(value):
             raise ParameterError(f"{name} = {value!r} is not a finite number")
@@ -74,15 +97,21 @@ def _cmd_run(args: argparse.Namespace) -> int:
         if path and Path(path).exists() and not args.overwrite:
             raise ParameterError(f"{path}: exists; not overwritten (pass --overwrite)")
     controller = registry.make(args.controller, params)
-    result = run_closed_loop(
-        controller,
-        x0_m=args.x0,
-        theta0_rad=args.theta0,
-        duration_s=args.duration,
-        seed=args.seed,
-        noise=not args.no_noise,
-        params=params,
-    )
+    try:
+        result = run_closed_loop(
+            controller,
+            x0_m=args.x0,
+            theta0_rad=args.theta0,
+            duration_s=args.duration,
+            seed=args.seed,
+            noise=not args.no_noise,
+            params=params,
+            plant=args.plant,
+            ideal_sensors=args.ideal_sensors or args.plant == "reference",
+        )
+    except ControllerError as exc:
+        print(f"ballbeam run: the controller failed: {exc}", file=sys.stderr)
+        return 1
     if args.log:
         save = save_csv if Path(args.log).suffix.lower() == ".csv" else save_mat
         save(result.log, args.log, overwrite=args.overwrite)
@@ -96,24 +125,29 @@ def _cmd_run(args: argparse.Namespace) -> int:
         "theta0_rad": args.theta0,
         "seed": args.seed,
         "noise": not args.no_noise,
-        **result.metrics,
+        "plant": args.plant,
+        "ideal_sensors": bool(args.ideal_sensors or args.plant == "reference"),
+        "free_run_s": params.start.free_run_s,
+        **result.verdict.to_json(),
     }
     if args.json:
         print(json.dumps(summary))
     else:
         for key, value in summary.items():
-            print(f"{key:<22} {value}")
-    return 0
+            print(f"{key:<26} {value}")
+    return 0 if result.verdict.held else 1
 
 
 def _cmd_view(args: argparse.Namespace) -> int:
+    from controllers import registry
     from twin.viewer import ViewerError, serve
 
-    params = _load_params(args.params)
+    params = _load_params(args)
     if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
         raise ParameterError(f"--duration = {args.duration!r} must be a positive number of seconds")
     try:
         stats = serve(
+            registry,
             host=args.host,
             port=args.port,
             controller=args.controller,
@@ -121,6 +155,8 @@ def _cmd_view(args: argparse.Namespace) -> int:
             seed=args.seed,
             duration_s=args.duration,
             params=params,
+            plant=args.plant,
+            ideal_sensors=args.ideal_sensors or args.plant == "reference",
         )
     except ViewerError as exc:
         print(f"ballbeam view: error: {exc}", file=sys.stderr)
@@ -130,10 +166,35 @@ def _cmd_view(args: argparse.Namespace) -> int:
     return 0
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
-        prog="ballbeam", description="Digital twin of the two-wire ball-and-beam rig."
+def _add_params_options(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--params", metavar="FILE", help="parameter file (TOML or JSON) overriding the defaults")
+    parser.add_argument(
+        "--set",
+        action="append",
+        metavar="GROUP.NAME=VALUE",
+        help="override one parameter, e.g. --set start.free_run_s=0 (repeatable; applied after --params)",
     )
+
+
+def _add_plant_options(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--plant",
+        choices=("twin", "reference"),
+        default="twin",
+        help="the MuJoCo twin (default) or the analytic reference model (always with ideal sensors)",
+    )
+    parser.add_argument(
+        "--ideal-sensors",
+        action="store_true",
+        help="ideal converters: exact x and θ in the volts the software expects, exact DAC (no quantization, "
+        "wiper curve, RC filter or noise)",
+    )
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from controllers.registry import NAMES
+
+    parser = argparse.ArgumentParser(prog="ballbeam", description="Digital twin of the two-wire ball-and-beam rig.")
     sub = parser.add_subparsers(dest="command", required=True)
 
     lin = sub.add_parser("linearize", help="continuous-time A, B at the origin")
@@ -144,25 +205,25 @@ def build_parser() -> argparse.ArgumentParser:
         default="twin",
         help="the MuJoCo twin (reduced to its 4 slow modes) or the analytic reference model",
     )
-    lin.add_argument("--params", metavar="FILE", help="parameter file (TOML or JSON) overriding the defaults")
+    _add_params_options(lin)
     lin.add_argument("--json", action="store_true", help="print JSON")
     lin.set_defaults(func=_cmd_linearize)
 
-    from controllers.registry import NAMES
-
-    run = sub.add_parser("run", help="run a controller on the twin in closed loop and report the verdict")
+    run = sub.add_parser(
+        "run",
+        help="run a controller in closed loop and report the verdict (exit 0 held, 1 lost or not held)",
+    )
     run.add_argument("--controller", required=True, choices=NAMES)
     run.add_argument("--x0", type=float, required=True, metavar="M", help="initial ball position (m)")
     run.add_argument("--theta0", type=float, required=True, metavar="RAD", help="initial beam angle (rad)")
-    run.add_argument(
-        "--duration", type=float, default=15.0, metavar="S", help="simulated seconds (default 15)"
-    )
+    run.add_argument("--duration", type=float, default=15.0, metavar="S", help="simulated seconds (default 15)")
     run.add_argument("--seed", type=int, default=0, help="seed of the sensor noise (default 0)")
     run.add_argument("--no-noise", action="store_true", help="switch the ball sensor's contact noise off")
+    _add_plant_options(run)
     run.add_argument("--log", metavar="FILE", help="save the run: .mat (thesis data_file format) or .csv")
     run.add_argument("--plot", metavar="FILE", help="save a PNG of the run")
     run.add_argument("--overwrite", action="store_true", help="replace existing --log/--plot files")
-    run.add_argument("--params", metavar="FILE", help="parameter file (TOML or JSON) overriding the defaults")
+    _add_params_options(run)
     run.add_argument("--json", action="store_true", help="print the verdict as JSON")
     run.set_defaults(func=_cmd_run)
 
@@ -172,20 +233,15 @@ def build_parser() -> argparse.ArgumentParser:
     )
     view.add_argument("--port", type=int, default=8080, help="port (default 8080); a taken port is an error")
     view.add_argument("--controller", default="appendix-clp", choices=NAMES)
-    view.add_argument(
-        "--speed", type=float, default=1.0, help="simulated seconds per wall second (default 1.0)"
-    )
+    view.add_argument("--speed", type=float, default=1.0, help="simulated seconds per wall second (default 1.0)")
     view.add_argument("--seed", type=int, default=0, help="seed of the sensor noise (default 0)")
-    view.add_argument(
-        "--duration", type=float, metavar="S", help="stop after S wall-clock seconds (headless runs)"
-    )
-    view.add_argument(
-        "--params", metavar="FILE", help="parameter file (TOML or JSON) overriding the defaults"
-    )
+    view.add_argument("--duration", type=float, metavar="S", help="stop after S wall-clock seconds (headless runs)")
+    _add_plant_options(view)
+    _add_params_options(view)
     view.set_defaults(func=_cmd_view)
 
     par = sub.add_parser("params", help="list every parameter with its unit and source")
-    par.add_argument("--params", metavar="FILE", help="parameter file (TOML or JSON) overriding the defaults")
+    _add_params_options(par)
     par.add_argument("--json", action="store_true", help="print JSON")
     par.set_defaults(func=_cmd_params)
     return parser

@@ -1,0 +1,84 @@
+"""What the simulated rig needs from a physics backend, free of MuJoCo.
+
+Two backends implement ``Physics``: the MuJoCo twin (``twin.plant.Plant``) and the analytic reference model
+(``twin.reference.ReferencePlant``). The simulated rig (``twin.rig.SimRig``) drives either with the motor
+volts of each physics step of one control period and reads back a ``PhysicsBlock``: the ball position, the
+beam angle and the ball's contact with the track at every step, which the sensor chains turn into the
+block the I/O card delivers.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+from twin.parameters import Parameters
+
+__all__ = ["Physics", "PhysicsBlock", "check_initial_state"]
+
+
+@dataclass(frozen=True)
+class PhysicsBlock:
+    """One stretch of simulated time, at the physics steps: index 0 is the state before the first step."""
+
+    time_s: np.ndarray  # (n + 1,)
+    x_m: np.ndarray  # ball centre along the beam (m)
+    theta_rad: np.ndarray  # beam angle (rad)
+    on_track: np.ndarray  # (n + 1,) bool: the ball sits on both wires within the track
+
+
+class Physics(Protocol):
+    """A physics backend of the simulated rig."""
+
+    params: Parameters
+
+    @property
+    def time_s(self) -> float: ...
+
+    @property
+    def timestep_s(self) -> float: ...
+
+    @property
+    def ball_lost(self) -> bool: ...
+
+    @property
+    def ball_lost_time_s(self) -> float | None: ...
+
+    def reset(
+        self, x_m: float, theta_rad: float, xdot_m_s: float = 0.0, thetadot_rad_s: float = 0.0
+    ) -> None: ...
+
+    def advance(self, motor_volts: np.ndarray) -> PhysicsBlock:
+        """One physics step per entry of ``motor_volts`` (terminal volts, held over the step)."""
+        ...
+
+    def state(self) -> np.ndarray:
+        """(x_m, θ_rad, ẋ_m_s, θ̇_rad_s) now, in the thesis's coordinates (eq 3.1.28)."""
+        ...
+
+    def kick_ball(self, dv_m_s: float) -> None:
+        """Add ``dv_m_s`` to the ball's speed along the beam, keeping it rolling without slipping."""
+        ...
+
+
+def check_initial_state(
+    params: Parameters, x_m: float, theta_rad: float, xdot_m_s: float, thetadot_rad_s: float
+) -> None:
+    """Refuse an initial state that is not finite, off the track or beyond the stops (ValueError naming it)."""
+    for name, value in (
+        ("x_m", x_m),
+        ("theta_rad", theta_rad),
+        ("xdot_m_s", xdot_m_s),
+        ("thetadot_rad_s", thetadot_rad_s),
+    ):
+        if not isinstance(value, (int, float, np.floating, np.integer)) or not math.isfinite(value):
+            raise ValueError(f"initial state {name} = {value!r} is not a finite number")
+    if abs(x_m) > params.track.half_length_m:
+        raise ValueError(f"initial x_m = {x_m!r} is off the track (|x| ≤ {params.track.half_length_m} m)")
+    if abs(theta_rad) > params.beam.stop_angle_rad:
+        raise ValueError(
+            f"initial theta_rad = {theta_rad!r} is beyond the stops (|θ| ≤ {params.beam.stop_angle_rad:.4f} rad)"
+        )
