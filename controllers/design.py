@@ -6,6 +6,7 @@ nothing here reads a sensor. The designs are computed with python-control.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import control
@@ -25,6 +26,9 @@ __all__ = [
 ]
 
 
+Poles = np.ndarray | Sequence[complex]  # a pole set: numbers (real poles may be floats)
+
+
 class DesignError(ValueError):
     """A design that cannot be done as asked (uncontrollable pair, poles not placeable, …)."""
 
@@ -41,7 +45,7 @@ def check_poles(matrix: np.ndarray, poles: np.ndarray) -> float:
     return worst
 
 
-def state_feedback_gain(a: np.ndarray, b: np.ndarray, poles: np.ndarray | list[complex]) -> np.ndarray:
+def state_feedback_gain(a: np.ndarray, b: np.ndarray, poles: Poles) -> np.ndarray:
     """K (1×n) with eig(A − B·K) = poles, for u = −K·x (continuous A, B or discrete Φ, Γ alike).
 
     Single input: Ackermann's formula, which also places repeated poles (the thesis's −7.5, −7.5)."""
@@ -95,7 +99,7 @@ class ReducedObserver:
 
 
 def reduced_order_observer(
-    phi: np.ndarray, gamma: np.ndarray, poles: np.ndarray | list[complex], n_measured: int = 2
+    phi: np.ndarray, gamma: np.ndarray, poles: Poles, n_measured: int = 2
 ) -> ReducedObserver:
     """G with eig(Φ_bb − G·Φ_ab) = poles (§5.2): pole placement on the dual pair (Φ_bbᵀ, Φ_abᵀ)."""
     na = n_measured
@@ -122,7 +126,7 @@ def clp_effective_gain(alpha0: np.ndarray, kp: np.ndarray, kv: np.ndarray) -> np
 
 
 def clp_gains(
-    a: np.ndarray, b: np.ndarray, alpha0: np.ndarray, beta_lin: np.ndarray, poles: np.ndarray | list[complex]
+    a: np.ndarray, b: np.ndarray, alpha0: np.ndarray, beta_lin: np.ndarray, poles: Poles
 ) -> tuple[np.ndarray, np.ndarray]:
     """Diagonal kp, kv such that the linearized loop τ = α₀·τ̄ + β_lin·x, τ̄ = −kp·ζ − kv·ζ̇ has the
     requested four poles (eq 4.3.5–4.3.10 applied to the torque-input model A, B).
@@ -146,7 +150,7 @@ class SlidingSurface:
     sliding_poles: np.ndarray  # eig(A11 − A12·M)
 
 
-def sliding_surface(a: np.ndarray, b: np.ndarray, poles: np.ndarray | list[complex]) -> SlidingSurface:
+def sliding_surface(a: np.ndarray, b: np.ndarray, poles: Poles) -> SlidingSurface:
     """Regular form by QR of B (eq 4.4.11), M placing eig(A11 − A12·M) = poles (eq 4.4.19), S̄ scaled so
     that S̄·B = 1."""
     n = a.shape[0]
@@ -164,6 +168,6 @@ def sliding_surface(a: np.ndarray, b: np.ndarray, poles: np.ndarray | list[compl
     )
 
 
-def continuous_poles_to_discrete(poles: np.ndarray | list[complex], period_s: float) -> np.ndarray:
+def continuous_poles_to_discrete(poles: Poles, period_s: float) -> np.ndarray:
     """z = e^{sT} (§5.2.1)."""
     return np.exp(np.asarray(poles, dtype=complex) * period_s)

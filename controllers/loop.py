@@ -37,7 +37,9 @@ class StateSource(Protocol):
 
 def measured_xa(sample: DaqSample, sw: SoftwareCalibration) -> np.ndarray:
     """(x, θ) from the raw volts with the rig software's converters (eq 6.3.1, eq 6.2.10)."""
-    return np.array([converters.ball_position_m(sample.ball_v, sw), converters.beam_angle_rad(sample.angle_v, sw)])
+    return np.array(
+        [converters.ball_position_m(sample.ball_v, sw), converters.beam_angle_rad(sample.angle_v, sw)]
+    )
 
 
 class ObserverState:
@@ -66,7 +68,9 @@ class MotorInverse:
     backemf_at_beam: float  # V·s/rad at the beam (N·K_b)
 
     def volts(self, torque_nm: float, thetadot_rad_s: float) -> float:
-        return float(volts_for_torque_v(torque_nm, thetadot_rad_s, self.torque_per_volt, self.backemf_at_beam))
+        return float(
+            volts_for_torque_v(torque_nm, thetadot_rad_s, self.torque_per_volt, self.backemf_at_beam)
+        )
 
 
 def _volts(law_u: float, x: np.ndarray, u_kind: str, motor: MotorInverse | None, name: str) -> float:

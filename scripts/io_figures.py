@@ -66,8 +66,10 @@ def ball() -> None:
     for _ in range(10000):  # 200 s
         chain.advance(chain.time_s + np.arange(21) * 1e-3, np.zeros(21))
     n = chain.dropout_count
+    rate = P.ball_sensor.dropout_rate_hz
+    expected = rate * 200.0
     print(
-        f"dropouts over 200 s at {P.ball_sensor.dropout_rate_hz} Hz: {n} (expected 1000 ± {3 * math.sqrt(1000):.0f} at 3σ)"
+        f"dropouts over 200 s at {rate} Hz: {n} (expected {expected:.0f} ± {3 * math.sqrt(expected):.0f} at 3σ)"
     )
 
 

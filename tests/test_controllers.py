@@ -23,7 +23,9 @@ AT_RELEASE = Parameters().with_overrides({"start.free_run_s": 0.0})
 def test_every_named_controller_runs_on_the_twin(name: str) -> None:
     controller = registry.make(name)
     assert controller.name == name
-    run = run_closed_loop(controller, x0_m=0.05, theta0_rad=0.02, duration_s=1.0, seed=0, stop_when_lost=False)
+    run = run_closed_loop(
+        controller, x0_m=0.05, theta0_rad=0.02, duration_s=1.0, seed=0, stop_when_lost=False
+    )
     log = run.log
     assert np.all(np.isfinite(log.aout)) and np.all(np.isfinite(log.true_x_m))
     assert run.verdict.duration_s == pytest.approx(1.0, abs=0.02)
@@ -118,7 +120,9 @@ def test_cli_run_exit_code_is_the_verdict(capsys) -> None:
     args = ["run", "--controller", "thesis-sf", "--x0", "0.2", "--theta0", "0.3", "--duration", "5", "--json"]
     assert main(args) == 1
     assert json.loads(capsys.readouterr().out)["ball_lost"] is True
-    rc = main(["run", "--controller", "appendix-sf", "--x0", "0", "--theta0", "0", "--set", "daq.period_s=0.01"])
+    rc = main(
+        ["run", "--controller", "appendix-sf", "--x0", "0", "--theta0", "0", "--set", "daq.period_s=0.01"]
+    )
     assert rc == 2
     err = capsys.readouterr().err
     assert "period_s = 0.02" in err and "daq.period_s = 0.01" in err

@@ -80,11 +80,15 @@ HARDWARE_STARTS = [(0.14, -0.2), (-0.13, 0.29), (-0.13, 0.23), (0.08, 0.18)]
 @pytest.mark.slow
 @pytest.mark.parametrize("controller", [AppendixStateFeedback, AppendixControlLaw])
 @pytest.mark.parametrize(("x0", "theta0"), HARDWARE_STARTS)
-def test_appendix_controllers_hold_the_ball_from_the_hardware_starts(controller, x0: float, theta0: float) -> None:
+def test_appendix_controllers_hold_the_ball_from_the_hardware_starts(
+    controller, x0: float, theta0: float
+) -> None:
     """The code that stabilised the rig holds the noisy twin from the four hardware starts, seeds 0–4, at
     the converter's offset (Table 6.3 read through eq 6.3.1: 3–4.5 mm below centre)."""
     for seed in range(5):
-        verdict = run_closed_loop(controller(), x0_m=x0, theta0_rad=theta0, duration_s=15.0, seed=seed).verdict
+        verdict = run_closed_loop(
+            controller(), x0_m=x0, theta0_rad=theta0, duration_s=15.0, seed=seed
+        ).verdict
         assert verdict.held, (seed, verdict.reason)
         assert verdict.steady_x_m is not None and -0.005 < verdict.steady_x_m < -0.0025
 
@@ -138,7 +142,9 @@ def test_a_designed_controller_runs_at_the_daq_period_of_the_parameter_file() ->
     """daq.period_s = 0.01 s: the re-designed state feedback is discretized at 10 ms and runs at 100 Hz on
     400-sample blocks."""
     params = Parameters().with_overrides({"daq.period_s": 0.01})
-    run = run_closed_loop(registry.make("sf", params), x0_m=0.1, theta0_rad=0.0, duration_s=1.0, params=params)
+    run = run_closed_loop(
+        registry.make("sf", params), x0_m=0.1, theta0_rad=0.0, duration_s=1.0, params=params
+    )
     assert np.diff(run.log.timem)[1:] == pytest.approx(0.01, abs=1e-12)
     assert params.daq.block_size == 400
 
@@ -167,7 +173,10 @@ class _Bad(Controller):
     [
         (_Bad(5), "bad.update returned nan at tick k = 6 (t = 0.090 s)"),
         (_Bad(3, value=math.inf), "bad.update returned inf at tick k = 4"),
-        (_Bad(2, raise_=True), "bad.update raised ZeroDivisionError at tick k = 3 (t = 0.030 s): division by zero"),
+        (
+            _Bad(2, raise_=True),
+            "bad.update raised ZeroDivisionError at tick k = 3 (t = 0.030 s): division by zero",
+        ),
     ],
 )
 def test_a_failing_controller_is_reported_with_its_tick(controller: Controller, fragment: str) -> None:
@@ -178,7 +187,12 @@ def test_a_failing_controller_is_reported_with_its_tick(controller: Controller, 
 
 def _steady_x(params: Parameters) -> float:
     run = run_closed_loop(
-        registry.make("appendix-sf", params), x0_m=0.1, theta0_rad=0.0, duration_s=8.0, params=params, noise=False
+        registry.make("appendix-sf", params),
+        x0_m=0.1,
+        theta0_rad=0.0,
+        duration_s=8.0,
+        params=params,
+        noise=False,
     )
     assert run.verdict.steady_x_m is not None
     return run.verdict.steady_x_m
@@ -207,6 +221,16 @@ def test_pivot_damping_changes_the_run() -> None:
     assert rates[(0.05, "twin")] == pytest.approx(rates[(0.05, "reference")], rel=0.01)
 
 
+def test_pivot_dry_friction_slows_the_beam_alike_in_both_plants() -> None:
+    """Coulomb friction at the pivot (MJCF frictionloss; a regularized sign in the reference model): 5 mN·m
+    cuts the beam's rate after 0.2 s of free fall from 0.52 to 0.30 rad/s in both plants."""
+    params = Parameters().with_overrides({"beam.pivot_friction_nm": 0.005})
+    twin, ref = _free_fall_rate(params, "twin"), _free_fall_rate(params, "reference")
+    free = _free_fall_rate(Parameters(), "reference")
+    assert abs(ref) < 0.65 * abs(free)
+    assert twin == pytest.approx(ref, abs=0.005)
+
+
 def _free_fall_rate(params: Parameters, plant: str) -> float:
     """θ̇ after 0.2 s of free fall at 0 V from (x = 0.1 m, θ = 0.3 rad)."""
     rig = make_rig(params, plant=plant, ideal_sensors=True)  # type: ignore[arg-type]
@@ -223,7 +247,10 @@ def _free_fall_rate(params: Parameters, plant: str) -> float:
         ({"software.command_low_v": 4.0}, "software.command_low_v = 4.0"),
         ({"beam.pivot_damping_nm_s_per_rad": -1.0}, "beam.pivot_damping_nm_s_per_rad = -1.0"),
         ({"ball_sensor.curve_volts_v": [0.0, 1.0]}, "ball_sensor.curve_volts_v has 2 values"),
-        ({"ball_sensor.curve_position_m": [0.0, 0.0], "ball_sensor.curve_volts_v": [0.0, 1.0]}, "curve_position_m[1]"),
+        (
+            {"ball_sensor.curve_position_m": [0.0, 0.0], "ball_sensor.curve_volts_v": [0.0, 1.0]},
+            "curve_position_m[1]",
+        ),
         ({"ball_sensor.curve_volts_v": "4.6"}, "ball_sensor.curve_volts_v = '4.6' is not a list"),
     ],
 )

@@ -2,7 +2,6 @@
 
 import numpy as np
 import pytest
-
 from thesis_data import TABLE_6_3_POSITION_M, TABLE_6_3_VOLTAGE_V
 
 from twin import converters
@@ -26,7 +25,6 @@ def test_period_must_be_whole_physics_steps() -> None:
                 }
             )
         )
-
 
     with pytest.raises(RigError, match="start.free_run_s = 0.0105"):
         TwinRig(Parameters().with_overrides({"start.free_run_s": 0.0105}))
@@ -60,7 +58,7 @@ def test_nan_command_is_refused() -> None:
         rig.write(float("nan"))
 
 
-@pytest.mark.parametrize(("x_m", "volts"), list(zip(TABLE_6_3_POSITION_M, TABLE_6_3_VOLTAGE_V)))
+@pytest.mark.parametrize(("x_m", "volts"), list(zip(TABLE_6_3_POSITION_M, TABLE_6_3_VOLTAGE_V, strict=True)))
 def test_ball_at_rest_reads_table_6_3(x_m: float, volts: float) -> None:
     """Ball placed at each measured position, noise off: the first block reads the table within 1 LSB."""
     rig = TwinRig(noise=False)

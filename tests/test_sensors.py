@@ -7,13 +7,12 @@ import math
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
+from thesis_data import TABLE_6_3_POSITION_M, TABLE_6_3_VOLTAGE_V
 
 from twin import converters as C
 from twin import daq as D
 from twin import sensors as S
 from twin.parameters import Parameters
-
-from thesis_data import TABLE_6_3_POSITION_M, TABLE_6_3_VOLTAGE_V
 
 P = Parameters()
 QUIET = P.with_overrides({"ball_sensor.noise_enabled": False})
@@ -174,7 +173,7 @@ def test_static_curve_is_table_6_3_interpolated():
 def test_ball_at_rest_on_each_table_point():
     lsb_m = 0.0693 * ADC_LSB  # one ADC step in eq 6.3.1's metres: 0.17 mm
     chain = S.BallPositionChain(QUIET, seed=0)
-    for x, volts in zip(TABLE_6_3_POSITION_M, TABLE_6_3_VOLTAGE_V):
+    for x, volts in zip(TABLE_6_3_POSITION_M, TABLE_6_3_VOLTAGE_V, strict=True):
         chain.reset(float(x), t_s=1.0)
         reading = chain.advance(1.0 + KNOTS, np.full(21, x))
         assert abs(reading - volts) <= ADC_LSB  # measured: ≤ 0.5 LSB
@@ -191,14 +190,14 @@ def _fit_time_constant(times: np.ndarray, v: np.ndarray, v_final: float) -> floa
 def test_rc_time_constant_from_a_step():
     chain = S.BallPositionChain(QUIET, seed=0, x_m=0.30)  # 4.340 V, at steady state
     times, falling = [], []
-    for k in range(150):  # the wiper opens (0 V): sample the capacitor every 0.1 ms for 15 ms
+    for _k in range(150):  # the wiper opens (0 V): sample the capacitor every 0.1 ms for 15 ms
         t = chain.time_s + np.array([0.0, 1e-4])
         chain.advance(t, np.full(2, 0.30), in_contact=False)
         times.append(t[-1])
         falling.append(chain.filtered_v)
     tau_fall = _fit_time_constant(np.array(times), np.array(falling), 0.0)
     rising = []
-    for k in range(150):  # contact again: the capacitor charges back towards 4.340 V
+    for _k in range(150):  # contact again: the capacitor charges back towards 4.340 V
         chain.advance(chain.time_s + np.array([0.0, 1e-4]), np.full(2, 0.30))
         rising.append(chain.filtered_v)
     tau_rise = _fit_time_constant(np.array(times), np.array(rising), 4.340)
@@ -235,7 +234,7 @@ def test_rc_filter_is_exact_against_an_ode_solver():
         return float(np.interp(xt, TABLE_6_3_POSITION_M, TABLE_6_3_VOLTAGE_V))
 
     y = float(np.interp(0.25, TABLE_6_3_POSITION_M, TABLE_6_3_VOLTAGE_V))
-    for (times, x, contact), expected in zip(blocks, ends):
+    for (times, x, contact), expected in zip(blocks, ends, strict=True):
         # Integrate piece by piece between every discontinuity of the input.
         cuts = [t for a, b in drops for t in (a, b) if times[0] < t < times[-1]]
         cuts = np.unique(np.concatenate([times, cuts]))
@@ -259,7 +258,7 @@ def test_rc_filter_is_exact_against_an_ode_solver():
 def _run(chain: S.BallPositionChain, seconds: float, block_s: float = 0.02) -> np.ndarray:
     steps = round(block_s / 1e-3)
     readings = []
-    for k in range(round(seconds / block_s)):
+    for _k in range(round(seconds / block_s)):
         times = chain.time_s + np.arange(steps + 1) * 1e-3
         readings.append(chain.advance(times, 0.2 * np.sin(1.3 * times)))
     return np.array(readings)
@@ -278,7 +277,7 @@ def test_dropout_rate_over_200_seconds():
 def test_noise_off_means_no_dropouts_and_the_static_reading():
     chain = S.BallPositionChain(QUIET, seed=2024, x_m=0.3)
     readings = []
-    for k in range(500):
+    for _k in range(500):
         readings.append(chain.advance(chain.time_s + KNOTS, np.full(21, 0.3)))
     assert chain.dropout_count == 0
     assert set(readings) == {D.adc_quantize_v(4.340, P.daq)}
@@ -312,7 +311,7 @@ def test_no_contact_off_the_track_or_when_flagged():
     chain = S.BallPositionChain(QUIET, seed=0, x_m=0.33)  # beyond 0.323 m: the ball has left the track
     assert chain.filtered_v == 0.0 == chain.wiper_v
     chain.reset(0.1)
-    for k in range(10):
+    for _k in range(10):
         chain.advance(chain.time_s + KNOTS, np.full(21, 0.1), in_contact=False)
     assert chain.wiper_v == 0.0 and abs(chain.filtered_v) < 1e-20  # 200 ms = 62 τ
     assert chain.reading_v == 0.0

@@ -49,9 +49,14 @@ def test_a_limit_cycle_is_measured_peak_to_peak_about_its_mean() -> None:
 
 @pytest.mark.parametrize(
     ("offset_m", "amplitude_m", "fragment"),
-    [(0.012, 0.0, "offset +12.0 mm beyond ±10 mm"), (0.0, 0.006, "ball limit cycle 12.0 mm p-p beyond 10 mm")],
+    [
+        (0.012, 0.0, "offset +12.0 mm beyond ±10 mm"),
+        (0.0, 0.006, "ball limit cycle 12.0 mm p-p beyond 10 mm"),
+    ],
 )
-def test_outside_the_bands_is_not_held_and_says_why(offset_m: float, amplitude_m: float, fragment: str) -> None:
+def test_outside_the_bands_is_not_held_and_says_why(
+    offset_m: float, amplitude_m: float, fragment: str
+) -> None:
     x = offset_m + amplitude_m * np.sin(2 * np.pi * T / 0.5 + 0.1)
     v = _verdict(x)
     assert not v.held and not v.ball_lost

@@ -104,6 +104,7 @@ def _wait_ball_moved(page, reference: list[float], distance_m: float) -> None:
     )
 
 
+@pytest.mark.slow
 def test_page_shows_the_running_twin_and_its_controls(view: int) -> None:
     assert _listening_addresses(view) == {"127.0.0.1"}
     with sync_api.sync_playwright() as pw:

@@ -139,7 +139,10 @@ def clip_command_v(
     command_v: np.ndarray, sw: SoftwareCalibration, low: float | None = ..., high: float | None = ...
 ) -> np.ndarray: ...
 def clip_command_v(
-    command_v: float | np.ndarray, sw: SoftwareCalibration, low: float | None = None, high: float | None = None
+    command_v: float | np.ndarray,
+    sw: SoftwareCalibration,
+    low: float | None = None,
+    high: float | None = None,
 ) -> float | np.ndarray:
     """The software's command limits (appendix A: 1.25…3.75 V; appendix B's first-run limits are 2…3 V).
 

@@ -29,7 +29,15 @@ from twin.parameters import Parameters
 from twin.rig import PlantKind, RigError, SimRig, make_rig, whole_steps
 from twin.verdict import Criteria, Verdict, evaluate
 
-__all__ = ["Catalogue", "ClosedLoop", "ControllerError", "RunResult", "StateLaw", "run_closed_loop", "update_ticks"]
+__all__ = [
+    "Catalogue",
+    "ClosedLoop",
+    "ControllerError",
+    "RunResult",
+    "StateLaw",
+    "run_closed_loop",
+    "update_ticks",
+]
 
 # Two periods agree when they differ by less than this (they are typed as decimal seconds).
 _PERIOD_TOLERANCE_S = 1e-12
@@ -103,7 +111,9 @@ class _Recorder:
 
     def log(self) -> RunLog:
         n = self.n
-        return RunLog(**{name: col[:n].copy() for name, col in self.cols.items()}, ball_lost=self.lost[:n].copy())
+        return RunLog(
+            **{name: col[:n].copy() for name, col in self.cols.items()}, ball_lost=self.lost[:n].copy()
+        )
 
 
 class ClosedLoop:
@@ -114,7 +124,9 @@ class ClosedLoop:
         self.controller = controller
         self.is_state_law = isinstance(controller, StateLaw) and not isinstance(controller, Controller)
         if self.is_state_law:
-            law_steps = whole_steps(controller.period_s, rig.params.physics.timestep_s, f"{controller.name} period_s")
+            law_steps = whole_steps(
+                controller.period_s, rig.params.physics.timestep_s, f"{controller.name} period_s"
+            )
             tick_steps = whole_steps(rig.period_s, rig.params.physics.timestep_s, "daq.period_s")
             if law_steps < 1 or tick_steps % law_steps:
                 raise RigError(
@@ -192,7 +204,9 @@ class ClosedLoop:
         try:
             volts = float(self.controller.motor_volts(state))  # type: ignore[union-attr]
         except Exception as exc:  # noqa: BLE001
-            raise ControllerError(f"{self.name} raised {type(exc).__name__} at t = {self.rig.time_s:.3f} s: {exc}") from exc
+            raise ControllerError(
+                f"{self.name} raised {type(exc).__name__} at t = {self.rig.time_s:.3f} s: {exc}"
+            ) from exc
         if not math.isfinite(volts):
             raise ControllerError(f"{self.name} returned {volts!r} volts at t = {self.rig.time_s:.3f} s")
         return volts

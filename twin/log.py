@@ -229,7 +229,7 @@ def load_csv(path: str | Path) -> RunLog:
     for line, row in enumerate(rows[1:], start=2):
         if len(row) != len(header):
             raise LogError(f"{path}: line {line} has {len(row)} cells, the header has {len(header)}")
-        for name, cell in zip(header, row):
+        for name, cell in zip(header, row, strict=True):
             cells[name].append(cell)
     values: dict[str, np.ndarray] = {}
     for name, column in cells.items():

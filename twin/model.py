@@ -94,7 +94,7 @@ def build_spec(params: Parameters | None = None, *, hold_beam_rad: float | None 
     timeconst = p.physics.contact_timeconst_s
     impedance = p.physics.contact_impedance
     solimp = [impedance, impedance, 0.001, 0.5, 2.0]
-    for name, side in zip(WIRES, (1.0, -1.0)):
+    for name, side in zip(WIRES, (1.0, -1.0), strict=True):
         wire = _find(spec, "geom", name)
         wire.type = mujoco.mjtGeom.mjGEOM_CAPSULE
         wire.size = [rho, 0.0, 0.0]

@@ -150,6 +150,7 @@ class Plant:
 
     def _theta(self) -> float:
         if self._hinge_qpos is None:
+            assert self.held_angle_rad is not None
             return float(self.held_angle_rad)
         return float(self.data.qpos[self._hinge_qpos])
 
@@ -233,7 +234,7 @@ class Plant:
             raise FloatingPointError(f"MuJoCo state is not finite at t = {float(rows[-1, 0]):.3f} s")
         q = 1 + self._ball_qpos
         if self._hinge_qpos is None:
-            theta = np.full(n + 1, float(self.held_angle_rad))
+            theta = np.full(n + 1, self._theta())
         else:
             theta = rows[:, 1 + self._hinge_qpos].copy()
         c, s = np.cos(theta), np.sin(theta)

@@ -18,7 +18,6 @@ constraint too, and a fixed-step integrator cannot follow an exact sign function
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Literal
 
@@ -85,7 +84,9 @@ class EquationCoefficients:
             coulomb_nm=p.beam.pivot_friction_nm,
         )
 
-    def accelerations(self, x: float, th: float, xd: float, thd: float, torque_nm: float) -> tuple[float, float]:
+    def accelerations(
+        self, x: float, th: float, xd: float, thd: float, torque_nm: float
+    ) -> tuple[float, float]:
         """(ẍ, θ̈) from eq 3.1.26 and 3.1.27 for a motor torque at the beam."""
         s, co = math.sin(th), math.cos(th)
         b1, b2, b3, b4 = self.beta
@@ -165,7 +166,9 @@ class ReferenceModel:
             raise ValueError(f"input = {input!r}: expected 'torque' or 'voltage'")
         return a, b
 
-    def discretize(self, input: InputKind = "torque", period_s: float = 0.02) -> tuple[np.ndarray, np.ndarray]:
+    def discretize(
+        self, input: InputKind = "torque", period_s: float = 0.02
+    ) -> tuple[np.ndarray, np.ndarray]:
         """(Φ, Γ) at ``period_s`` (eq 3.4.8/3.4.9 and 3.4.13/3.4.14 at T = 20 ms)."""
         return discretize_zoh(*self.linearize(input), period_s)
 
@@ -185,7 +188,10 @@ class ReferenceModel:
         times, states = [0.0], [state.copy()]
         t = 0.0
         for u in np.asarray(inputs, dtype=float):
-            fun: Callable[[float, np.ndarray], np.ndarray] = lambda _t, s, u=u: self.derivative(s, u, input)
+
+            def fun(_t: float, s: np.ndarray, u: float = float(u)) -> np.ndarray:
+                return self.derivative(s, u, input)
+
             t_eval = t + hold_s * np.arange(1, samples_per_hold + 1) / samples_per_hold
             sol = scipy.integrate.solve_ivp(
                 fun, (t, t + hold_s), state, method="DOP853", rtol=1e-10, atol=1e-12, t_eval=t_eval
@@ -269,8 +275,12 @@ class ReferencePlant:
             if self._lost_time_s is None:
                 v = min(max(float(volts[i]), -rail), rail)
                 a1 = f(x, th, xd, thd, v)
-                a2 = f(x + 0.5 * h * a1[0], th + 0.5 * h * a1[1], xd + 0.5 * h * a1[2], thd + 0.5 * h * a1[3], v)
-                a3 = f(x + 0.5 * h * a2[0], th + 0.5 * h * a2[1], xd + 0.5 * h * a2[2], thd + 0.5 * h * a2[3], v)
+                a2 = f(
+                    x + 0.5 * h * a1[0], th + 0.5 * h * a1[1], xd + 0.5 * h * a1[2], thd + 0.5 * h * a1[3], v
+                )
+                a3 = f(
+                    x + 0.5 * h * a2[0], th + 0.5 * h * a2[1], xd + 0.5 * h * a2[2], thd + 0.5 * h * a2[3], v
+                )
                 a4 = f(x + h * a3[0], th + h * a3[1], xd + h * a3[2], thd + h * a3[3], v)
                 x += h / 6.0 * (a1[0] + 2 * a2[0] + 2 * a3[0] + a4[0])
                 th += h / 6.0 * (a1[1] + 2 * a2[1] + 2 * a3[1] + a4[1])
@@ -281,7 +291,9 @@ class ReferencePlant:
                     if thd * th > 0:
                         thd = 0.0
                 if not all(math.isfinite(v_) for v_ in (x, th, xd, thd)):
-                    raise FloatingPointError(f"reference model state is not finite at t = {t0 + (i + 1) * h:.3f} s")
+                    raise FloatingPointError(
+                        f"reference model state is not finite at t = {t0 + (i + 1) * h:.3f} s"
+                    )
                 if abs(x) > half:
                     self._lost_time_s = t0 + (i + 1) * h
             times[i + 1] = t0 + (i + 1) * h

@@ -207,7 +207,9 @@ class SimRig(Rig):
     def _motor_volts_for(self, command_v: float) -> float:
         if self.ideal_sensors:  # an exact DAC: the card's range, then the amplifier
             daq = self.params.daq
-            return float(amplifier_volts(min(max(command_v, daq.dac_min_v), daq.dac_max_v), self.params.amplifier))
+            return float(
+                amplifier_volts(min(max(command_v, daq.dac_min_v), daq.dac_max_v), self.params.amplifier)
+            )
         return float(motor_volts(command_v, self.params))
 
     def _set_motor_volts(self, volts: float) -> None:
@@ -239,7 +241,9 @@ class SimRig(Rig):
             m = min(law_steps, n - done)
             volts = float(law(self.physics.state()))
             if not math.isfinite(volts):
-                raise FloatingPointError(f"the state law returned {volts!r} volts at t = {self.physics.time_s:.3f} s")
+                raise FloatingPointError(
+                    f"the state law returned {volts!r} volts at t = {self.physics.time_s:.3f} s"
+                )
             self._applied_motor_v = self._pending_motor_v = min(max(volts, -rail), rail)
             parts.append(self.physics.advance(np.full(m, self._applied_motor_v)))
             done += m

@@ -172,7 +172,9 @@ def evaluate(
     if pp_x > c.limit_cycle_band_m:
         failures.append(f"ball limit cycle {pp_x * 1e3:.1f} mm p-p beyond {c.limit_cycle_band_m * 1e3:g} mm")
     if pp_th > c.limit_cycle_band_rad:
-        failures.append(f"beam limit cycle {pp_th * 1e3:.1f} mrad p-p beyond {c.limit_cycle_band_rad * 1e3:g} mrad")
+        failures.append(
+            f"beam limit cycle {pp_th * 1e3:.1f} mrad p-p beyond {c.limit_cycle_band_rad * 1e3:g} mrad"
+        )
     return Verdict(
         held=not failures,
         reason="; ".join(failures) if failures else "held",

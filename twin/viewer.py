@@ -165,7 +165,10 @@ class LiveTwin:
                 action, value = self.actions.get_nowait()
             except queue.Empty:
                 return
-            print(f"ballbeam view: t = {self.rig.time_s:.2f} s: {action} {'' if value is None else value}", flush=True)
+            print(
+                f"ballbeam view: t = {self.rig.time_s:.2f} s: {action} {'' if value is None else value}",
+                flush=True,
+            )
             if action == "controller":
                 self._select(str(value))
             elif action == "reset":
@@ -236,7 +239,8 @@ class LiveTwin:
 def _rgb(model: mujoco.MjModel, geom: int) -> tuple[int, int, int]:
     mat = model.geom_matid[geom]
     rgba = model.mat_rgba[mat] if mat >= 0 else model.geom_rgba[geom]
-    return tuple(int(round(255 * c)) for c in rgba[:3])
+    r, g, b = (int(round(255 * c)) for c in rgba[:3])
+    return r, g, b
 
 
 def build_scene(server: viser.ViserServer, model: mujoco.MjModel) -> dict[int, Any]:
@@ -249,23 +253,33 @@ def build_scene(server: viser.ViserServer, model: mujoco.MjModel) -> dict[int, A
         body = model.geom_bodyid[g]
         body_name = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, body) or "world"
         name = f"/{body_name}/{mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, g)}"
-        pose = {"position": tuple(model.geom_pos[g]), "wxyz": tuple(model.geom_quat[g])}
+        px, py, pz = (float(v) for v in model.geom_pos[g])
+        qw, qx, qy, qz = (float(v) for v in model.geom_quat[g])
+        position, wxyz = (px, py, pz), (qw, qx, qy, qz)
         size, color, kind = model.geom_size[g], _rgb(model, g), model.geom_type[g]
         if kind == mujoco.mjtGeom.mjGEOM_PLANE:
             server.scene.add_box(
                 name,
                 color=color,
                 dimensions=(2 * size[0], 2 * size[1], 0.002),
-                position=(pose["position"][0], pose["position"][1], -0.001),
-                wxyz=pose["wxyz"],
+                position=(px, py, -0.001),
+                wxyz=wxyz,
             )
         elif kind == mujoco.mjtGeom.mjGEOM_BOX:
-            server.scene.add_box(name, color=color, dimensions=tuple(2 * size), **pose)
+            sx, sy, sz = (float(2 * v) for v in size)
+            server.scene.add_box(name, color=color, dimensions=(sx, sy, sz), position=position, wxyz=wxyz)
         elif kind == mujoco.mjtGeom.mjGEOM_SPHERE:
-            server.scene.add_icosphere(name, radius=float(size[0]), color=color, subdivisions=3, **pose)
+            server.scene.add_icosphere(
+                name, radius=float(size[0]), color=color, subdivisions=3, position=position, wxyz=wxyz
+            )
         elif kind == mujoco.mjtGeom.mjGEOM_CYLINDER:
             server.scene.add_cylinder(
-                name, radius=float(size[0]), height=float(2 * size[1]), color=color, **pose
+                name,
+                radius=float(size[0]),
+                height=float(2 * size[1]),
+                color=color,
+                position=position,
+                wxyz=wxyz,
             )
         elif kind == mujoco.mjtGeom.mjGEOM_CAPSULE:
             mesh = trimesh.creation.capsule(height=float(2 * size[1]), radius=float(size[0]), count=[12, 12])
@@ -274,7 +288,8 @@ def build_scene(server: viser.ViserServer, model: mujoco.MjModel) -> dict[int, A
                 vertices=np.asarray(mesh.vertices, dtype=np.float32),
                 faces=np.asarray(mesh.faces, dtype=np.uint32),
                 color=color,
-                **pose,
+                position=position,
+                wxyz=wxyz,
             )
     return frames
 
@@ -361,7 +376,7 @@ class Viewer:
         flick_right.on_click(lambda _: live.enqueue("flick", kick.value))
         reference.on_update(lambda _: live.enqueue("reference", reference.value))
 
-        scales = {"x": {"time": False, "auto": True}}
+        scales: dict[str, viser.uplot.Scale] = {"x": {"time": False, "auto": True}}
         self.plots = []
         with gui.add_folder("Plots (last 10 s)"):
             for title, traces in PLOTS:

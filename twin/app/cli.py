@@ -38,7 +38,9 @@ def _parse_value(text: str, item: str) -> object:
     try:
         value = json.loads(text)
     except json.JSONDecodeError:
-        raise ParameterError(f"--set {item!r}: {text!r} is not a number, true/false or a list of numbers") from None
+        raise ParameterError(
+            f"--set {item!r}: {text!r} is not a number, true/false or a list of numbers"
+        ) from None
     return value
 
 
@@ -167,7 +169,9 @@ def _cmd_view(args: argparse.Namespace) -> int:
 
 
 def _add_params_options(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--params", metavar="FILE", help="parameter file (TOML or JSON) overriding the defaults")
+    parser.add_argument(
+        "--params", metavar="FILE", help="parameter file (TOML or JSON) overriding the defaults"
+    )
     parser.add_argument(
         "--set",
         action="append",
@@ -194,7 +198,9 @@ def _add_plant_options(parser: argparse.ArgumentParser) -> None:
 def build_parser() -> argparse.ArgumentParser:
     from controllers.registry import NAMES
 
-    parser = argparse.ArgumentParser(prog="ballbeam", description="Digital twin of the two-wire ball-and-beam rig.")
+    parser = argparse.ArgumentParser(
+        prog="ballbeam", description="Digital twin of the two-wire ball-and-beam rig."
+    )
     sub = parser.add_subparsers(dest="command", required=True)
 
     lin = sub.add_parser("linearize", help="continuous-time A, B at the origin")
@@ -216,7 +222,9 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--controller", required=True, choices=NAMES)
     run.add_argument("--x0", type=float, required=True, metavar="M", help="initial ball position (m)")
     run.add_argument("--theta0", type=float, required=True, metavar="RAD", help="initial beam angle (rad)")
-    run.add_argument("--duration", type=float, default=15.0, metavar="S", help="simulated seconds (default 15)")
+    run.add_argument(
+        "--duration", type=float, default=15.0, metavar="S", help="simulated seconds (default 15)"
+    )
     run.add_argument("--seed", type=int, default=0, help="seed of the sensor noise (default 0)")
     run.add_argument("--no-noise", action="store_true", help="switch the ball sensor's contact noise off")
     _add_plant_options(run)
@@ -233,9 +241,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     view.add_argument("--port", type=int, default=8080, help="port (default 8080); a taken port is an error")
     view.add_argument("--controller", default="appendix-clp", choices=NAMES)
-    view.add_argument("--speed", type=float, default=1.0, help="simulated seconds per wall second (default 1.0)")
+    view.add_argument(
+        "--speed", type=float, default=1.0, help="simulated seconds per wall second (default 1.0)"
+    )
     view.add_argument("--seed", type=int, default=0, help="seed of the sensor noise (default 0)")
-    view.add_argument("--duration", type=float, metavar="S", help="stop after S wall-clock seconds (headless runs)")
+    view.add_argument(
+        "--duration", type=float, metavar="S", help="stop after S wall-clock seconds (headless runs)"
+    )
     _add_plant_options(view)
     _add_params_options(view)
     view.set_defaults(func=_cmd_view)
