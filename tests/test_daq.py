@@ -35,7 +35,8 @@ def test_adc_is_the_nearest_of_4096_levels_and_saturates():
     assert D.adc_code(-7.0, P.daq) == 0 and D.adc_code(7.0, P.daq) == 4095
     # The float fast path and the array path agree bit for bit.
     assert all(
-        D.adc_quantize_v(float(x), P.daq) == y for x, y in zip(v[:200], D.adc_quantize_v(v[:200], P.daq), strict=True)
+        D.adc_quantize_v(float(x), P.daq) == y
+        for x, y in zip(v[:200], D.adc_quantize_v(v[:200], P.daq), strict=True)
     )
 
 

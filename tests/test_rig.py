@@ -40,6 +40,22 @@ def test_blocks_end_at_free_run_plus_whole_periods(free_run_s: float) -> None:
     assert rig.time_s == pytest.approx(free_run_s + 0.06)
 
 
+@pytest.mark.parametrize("plant", ["twin", "reference"])
+def test_a_free_run_longer_than_the_period_runs_the_rig_before_the_start_block(plant: str) -> None:
+    """daq.period_s = 1 ms, free run 10 ms: start() reads the block (8, 9] ms of a rig released at 0; the
+    state then equals 9 ms of free fall stepped without blocks."""
+    params = Parameters().with_overrides({"daq.period_s": 0.001, "start.free_run_s": 0.01})
+    rig = SimRig(params, noise=False, plant=plant)  # type: ignore[arg-type]
+    rig.reset(0.1, 0.2)
+    assert rig.read().time_s == pytest.approx(0.009, abs=1e-12)
+    free = SimRig(params.with_overrides({"start.free_run_s": 0.0}), noise=False, plant=plant)  # type: ignore[arg-type]
+    free.reset(0.1, 0.2)
+    free.read()  # (−2, −1] ms held
+    for _ in range(10):  # (−1, 0] held, then 9 blocks of 1 ms at 0 V
+        free.read()
+    np.testing.assert_array_equal(rig.true_state(), free.true_state())
+
+
 def test_the_rig_is_held_until_release_then_falls_freely() -> None:
     """free_run = 0.02 s: the start block (−0.02, 0] sees the held rig; the next one the rig falling at 0 V."""
     rig = TwinRig(Parameters().with_overrides({"start.free_run_s": 0.02}), noise=False)

@@ -235,14 +235,21 @@ class Amplifier:
 
 @dataclass(frozen=True)
 class Physics:
-    """Numerical settings of the MuJoCo model (design.md: the values that make rolling on two wires exact)."""
+    """Numerical settings of the MuJoCo model: the values that make rolling on two wires exact (measured;
+    docs/design.md)."""
 
     gravity_m_s2: float = param(9.81, "m/s²", "standard gravity, as used by the thesis", gt=0.0)
-    timestep_s: float = param(1e-3, "s", "design.md: 1 ms with implicitfast", gt=0.0, le=0.02)
+    timestep_s: float = param(
+        1e-3,
+        "s",
+        "measured: 1 ms with implicitfast keeps rolling on two wires exact (docs/design.md)",
+        gt=0.0,
+        le=0.02,
+    )
     contact_timeconst_s: float = param(
         2e-3,
         "s",
-        "design.md: solref time constant = 2·timestep (stiff enough that the ball does not sink)",
+        "measured: solref time constant = 2·timestep, stiff enough that the ball does not sink (docs/design.md)",
         gt=0.0,
     )
     contact_impedance: float = param(

@@ -28,7 +28,7 @@ _FULL = mujoco.mjtState.mjSTATE_FULLPHYSICS
 _CTRL = mujoco.mjtState.mjSTATE_CTRL
 
 # The ball counts as lost once its centre has dropped this far below (or risen above) its seat on the wires.
-# 2 mm is 40x the largest transient lift seen in fast combined rolling and tilting (design.md: µm).
+# 2 mm is 40x the largest transient lift seen in fast combined rolling and tilting (measured: µm).
 LOST_HEIGHT_TOLERANCE_M = 2e-3
 
 

@@ -135,7 +135,11 @@ class SimRig(Rig):
         self._held = np.array([x_m, theta_rad, xdot_m_s, thetadot_rad_s], dtype=float)
         # The next block (the one Controller.start reads) ends one period before the first command.
         self._next_end_step = self._free_run_steps - self._steps_per_tick
-        self._ball.reset(x_m, self._step_time(self._next_end_step - self._steps_per_tick), seed=self.seed)
+        # The ball chain starts at the start block's beginning, or at release if the rig runs free before it
+        # (a free run longer than one period).
+        chain_start = min(self._next_end_step - self._steps_per_tick, 0)
+        self._ball.reset(x_m, self._step_time(chain_start), seed=self.seed)
+        self._steps_done = 0  # physics steps since release
         self._ticks = 0
         self.command_v = self.params.amplifier.zero_command_v
         self._pending_motor_v = self._applied_motor_v = self._motor_volts_for(self.command_v)
@@ -255,6 +259,12 @@ class SimRig(Rig):
         start = end - self._steps_per_tick
         t_start = self._step_time(start) if start < 0 else self.physics.time_s
         n_free = end - max(start, 0) if end > 0 else 0
+        if start > self._steps_done:  # released before this block begins: run free up to it, unobserved
+            pre = self.physics.advance(self._step_volts(start - self._steps_done))
+            self._steps_done = start
+            t_start = self.physics.time_s
+            if not self.ideal_sensors:
+                self._ball.advance(pre.time_s, pre.x_m, pre.on_track)
         pieces: list[PhysicsBlock] = []
         if start < 0:  # the held rig, until release at t = 0 (or the block's end)
             if self._switch_in_steps is not None:  # a command's latency runs on while the rig is held
@@ -274,6 +284,7 @@ class SimRig(Rig):
                 pieces.append(self.physics.advance(self._step_volts(n_free)))
             else:
                 pieces.append(self._advance_with_law(n_free, *law))
+            self._steps_done += n_free
         block = _join(pieces)
         self.last_block = block
         if self.ideal_sensors:

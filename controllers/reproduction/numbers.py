@@ -196,7 +196,8 @@ def _chapter3(p: Parameters) -> list[Entry]:
             rs,
             rel_error(tn.R_STAR_PRINTED_M, rs),
             "misprint",
-            f"√((8.329 mm)² − (13.785 mm)²/4) = {rs * 1e3:.3f} mm, not 4.264 mm ({100 * rel_error(tn.R_STAR_PRINTED_M, rs):.1f} %). "
+            f"√((8.329 mm)² − (13.785 mm)²/4) = {rs * 1e3:.3f} mm, not 4.264 mm "
+            f"({100 * rel_error(tn.R_STAR_PRINTED_M, rs):.1f} %). "
             "The derived coefficients use 4.676 mm: k1 + 1 = 2r²/(5r*²) + 1 = "
             f"{0.4 * r * r / rs**2 + 1:.4f} reproduces the printed 2.2691 of eq 3.2.4 (with 4.264 mm it would be "
             f"{0.4 * r * r / tn.R_STAR_PRINTED_M**2 + 1:.4f}).",
@@ -265,7 +266,7 @@ def _eq32_coefficients(p: Parameters) -> list[Entry]:
             rel_error(p4, c4),
             "agrees" if rel_error(p4, c4) < 0.01 else "inconsistent",
             "All five follow from 3.1.26/3.1.27 with r* = 4.676 mm and J = 2/5·m·r²: "
-            + ", ".join(f"{k}: {v:.5g}" for k, v in zip(keys4, c4))
+            + ", ".join(f"{k}: {v:.5g}" for k, v in zip(keys4, c4, strict=True))
             + " (2.2691 = 2r²/(5r*²) + 1; 0.000526 = (k1+1)·m·(h*+r*) − k1·m·h*, i.e. with θ̇² in 3.1.27).",
         )
     )
@@ -281,7 +282,8 @@ def _eq32_coefficients(p: Parameters) -> list[Entry]:
             rel_error(pd, cd),
             "agrees" if rel_error(pd, cd) < 0.01 else "inconsistent",
             f"(k1+1)(J_BP − k2·m·h* + m x²) + (k2 + h* + r*)·k1·m·h* = {d0:.6f} + {d2:.5f}·x² (dropping k2 in the "
-            f"second product, as in eq 3.2.3's numerator, would give {(d0_n['k1'] + 1) * d0_n['jeff'] + d0_n['c'] * d0_n['k1'] * d0_n['m'] * d0_n['hs']:.6f}: "
+            "second product, as in eq 3.2.3's numerator, would give "
+            f"{(d0_n['k1'] + 1) * d0_n['jeff'] + d0_n['c'] * d0_n['k1'] * d0_n['m'] * d0_n['hs']:.6f}: "
             "the same to the printed digits).",
         )
     )
@@ -419,7 +421,8 @@ def _tf_and_motor(p: Parameters, model: ReferenceModel) -> list[Entry]:
             e_p,
             "agrees",
             f"From the printed A, B: ({num_p[0]:.4f}s² {num_p[-1]:+.2f})/(s⁴ {den_p[2]:+.4f}s² {den_p[4]:+.2f}) — "
-            f"consistent ({100 * e_p:.2f} %). From the model: ({num_m[0]:.4f}s² {num_m[-1]:+.1f})/(s⁴ {den_m[2]:+.4f}s² "
+            f"consistent ({100 * e_p:.2f} %). From the model: ({num_m[0]:.4f}s² {num_m[-1]:+.1f})/(s⁴ "
+            f"{den_m[2]:+.4f}s² "
             f"{den_m[4]:+.2f}) ({100 * e_m:.0f} % off), inheriting the ẍ-row error of eq 3.2.8.",
         )
     )
@@ -478,7 +481,8 @@ def _tf_and_motor(p: Parameters, model: ReferenceModel) -> list[Entry]:
             "inconsistent",
             f"Ā = A − 0.0164·0.154·B·e₄ᵀ from the printed A, B: Ā34 = −2.4185·0.0164·0.154 = {av_pp[2, 3]:.5f}, "
             f"printed −0.061 (×{tn.A_VOLTAGE[2, 3] / av_pp[2, 3]:.1f}: a factor-10 slip); Ā44 = −249.9·0.0164·0.154 = "
-            f"{av_pp[3, 3]:.4f} (printed −0.6311, agrees). The slip is not only typographic: TF 3.3.8, its poles/zeros, "
+            f"{av_pp[3, 3]:.4f} (printed −0.6311, agrees). The slip is not only typographic: TF 3.3.8, its "
+            "poles/zeros, "
             "Φ̄34 = −0.002 and §4.2's K were all computed with −0.061 (the appendix observer was not). Model: "
             f"Ā34 = {av_m[2, 3]:.5f}, Ā44 = {av_m[3, 3]:.4f}, ẍ row ({av_m[2, 0]:.4f}, {av_m[2, 1]:.4f}) as in 3.2.8.",
         )
@@ -543,7 +547,8 @@ def _tf_and_motor(p: Parameters, model: ReferenceModel) -> list[Entry]:
             "inconsistent",
             f"Roots of the printed numerator 0.0397s² − 0.2249s − 16.42 (agree). The s-term exists only because of "
             f"Ā34 = −0.061: Ā = A − B·k·k_b·e₄ᵀ is a feedback through B, which cannot move "
-            f"zeros, so the voltage zeros must equal the torque zeros; with −0.0061 they are {_r(np.sort(zc.real), 3)}, the model gives "
+            "zeros, so the voltage zeros must equal the torque zeros; with −0.0061 they are "
+            f"{_r(np.sort(zc.real), 3)}, the model gives "
             f"{_r(np.sort(zm.real), 3)} (the torque zeros, unchanged).",
         )
     )
@@ -564,7 +569,8 @@ def _discrete(p: Parameters, model: ReferenceModel) -> list[Entry]:
             _r(ph_p),
             e,
             "agrees",
-            f"e^{{AT}} of the printed A agrees to the printed 4 decimals (max |Δ| = {np.max(np.abs(ph_p - tn.PHI_TORQUE)):.1e}). "
+            f"e^{{AT}} of the printed A agrees to the printed 4 decimals (max |Δ| = "
+            f"{np.max(np.abs(ph_p - tn.PHI_TORQUE)):.1e}). "
             f"From the model: Φ31 = {ph_m[2, 0]:.4f}, Φ32 = {ph_m[2, 1]:.4f} (printed −0.0087, −0.0794), the ẍ-row "
             "error of eq 3.2.8 carried over.",
         )
@@ -583,9 +589,11 @@ def _discrete(p: Parameters, model: ReferenceModel) -> list[Entry]:
             _r(ga_p.ravel(), 6),
             rel_error(tn.GAMMA_TORQUE, ga_p),
             "inconsistent",
-            f"From the printed A, B: Γ = {_r(ga_p.ravel(), 5)}; only Γ4 = 5.002 agrees ({100 * abs(ga_p[3, 0] / 5.002 - 1):.2f} %). "
+            f"From the printed A, B: Γ = {_r(ga_p.ravel(), 5)}; only Γ4 = 5.002 agrees "
+            f"({100 * abs(ga_p[3, 0] / 5.002 - 1):.2f} %). "
             f"Γ2 = 0.1 is twice T²/2·B4 = 0.05; it equals T·B3 + T²/2·B4 = {ga_shift[1, 0]:.4f} (as if B3 also drove "
-            f"the θ row). Γ3 = 0.4373 is {tn.GAMMA_TORQUE[2, 0] / ga_p[2, 0]:.1f}× the correct {ga_p[2, 0]:.4f}; Γ1 = 0.001 "
+            f"the θ row). Γ3 = 0.4373 is {tn.GAMMA_TORQUE[2, 0] / ga_p[2, 0]:.1f}× the correct "
+            f"{ga_p[2, 0]:.4f}; Γ1 = 0.001 "
             f"is 2.1× {ga_p[0, 0]:.5f}. The B that would produce the printed Γ is {_r(b_impl.ravel(), 3)}: no "
             "consistent input vector, so Γ1–Γ3 are unexplained transcription/computation errors. Model: "
             f"{_r(ga_m.ravel(), 5)}. Q_D (§3.5) was built from this printed Γ.",
@@ -637,7 +645,8 @@ def _discrete(p: Parameters, model: ReferenceModel) -> list[Entry]:
             "inconsistent",
             f"From the printed Ā, B̄: {_r(gav_p.ravel(), 6)}. Γ̄4 = 0.081 agrees; Γ̄1 = 0 is {gav_p[0, 0]:.1e} (fine). "
             f"Γ̄2 = 0.0016 is twice {gav_p[1, 0]:.6f} — the same pattern as Γ2 of eq 3.4.9: T·B̄3 + T²/2·B̄4 = "
-            f"{gav_shift[1, 0]:.6f}. Γ̄3 = 0.000841 vs {gav_p[2, 0]:.6f} (+{100 * (0.000841 / gav_p[2, 0] - 1):.0f} %), "
+            f"{gav_shift[1, 0]:.6f}. Γ̄3 = 0.000841 vs {gav_p[2, 0]:.6f} "
+            f"(+{100 * (0.000841 / gav_p[2, 0] - 1):.0f} %), "
             f"unexplained. With Ā34 = −0.0061: {_r(gav_c.ravel(), 6)}; model: {_r(gav_m.ravel(), 6)}. The appendix "
             "state-feedback observer's H = Γ̄b − GΓ̄a = (−0.0055, 0.0717) needs Γ̄2 ≈ 0.0008 (the printed Γ̄ gives "
             "H1 = −0.0120), so the rig code was computed from the correct Γ̄, and the printed one is a transcription "
@@ -657,7 +666,8 @@ def _discrete(p: Parameters, model: ReferenceModel) -> list[Entry]:
             ev,
             "agrees" if ev < 0.01 else "unexplained",
             f"e^{{λT}} for the printed Ā's poles: {_r(eigv_p, 4)} (max {100 * ev:.2f} %; the printed 1.0766 is "
-            f"e^{{{math.log(1.0766) / T:.3f}·T}}, not e^{{3.8046·T}} = {math.exp(3.8046 * T):.4f}); eig of the printed Φ̄ "
+            f"e^{{{math.log(1.0766) / T:.3f}·T}}, not e^{{3.8046·T}} = {math.exp(3.8046 * T):.4f}); eig of "
+            "the printed Φ̄ "
             f"matrix: {_r(eigv_pm, 4)}; model: {_r(eigv_m, 4)}. Small (<0.3 %) but not rounding.",
         )
     )
@@ -692,7 +702,8 @@ def _controllability(p: Parameters, model: ReferenceModel) -> list[Entry]:
             d_p,
             rel_error(tn.DET_QC_TORQUE, d_p),
             "misprint",
-            f"det of the printed Q_C (= that of the printed A, B) is {d_p:.4e}, printed −2.2631e10: the mantissa digits "
+            f"det of the printed Q_C (= that of the printed A, B) is {d_p:.4e}, printed −2.2631e10: the "
+            "mantissa digits "
             f"'.2631' agree, the leading 6 is printed as 2. Model: {d_m:.4e}. Non-zero: controllable either way.",
         )
     )
@@ -723,7 +734,8 @@ def _controllability(p: Parameters, model: ReferenceModel) -> list[Entry]:
             rel_error(tn.DET_QD_TORQUE, dd_pr),
             "inconsistent",
             f"det of the printed-Φ,Γ Q_D = {dd_pr:.4e} , exactly the printed −6.3502e-7 (the arithmetic is right, "
-            f"on the wrong Γ); with the correct Γ from the printed A, B: {dd_p:.4e}; model: {dd_m:.4e}. Non-zero in every "
+            f"on the wrong Γ); with the correct Γ from the printed A, B: {dd_p:.4e}; model: {dd_m:.4e}. "
+            "Non-zero in every "
             "case, so the conclusion (controllable) holds.",
         )
     )
@@ -823,7 +835,8 @@ def _chapter4(p: Parameters) -> list[Entry]:
             "agrees",
             f"Ackermann on the printed Ā, B̄ with ±2.6i reproduces it ({100 * e:.3f} %); with the exact ±2.598i: "
             f"{_r(k_pr.ravel(), 3)} ({100 * rel_error(tn.SF_CONT_K, k_pr):.2f} %). The design used the printed "
-            f"Ā34 = −0.061: with Ā34 = −0.0061 K = {_r(k_c.ravel(), 3)} (K2 {100 * abs(k_c[0, 1] / 27.15 - 1):.1f} % off). "
+            f"Ā34 = −0.061: with Ā34 = −0.0061 K = {_r(k_c.ravel(), 3)} (K2 "
+            f"{100 * abs(k_c[0, 1] / 27.15 - 1):.1f} % off). "
             f"On the model K = {_r(k_m.ravel(), 3)} ({100 * rel_error(tn.SF_CONT_K, k_m):.0f} % off).",
         )
     )
@@ -837,7 +850,8 @@ def _chapter4(p: Parameters) -> list[Entry]:
             "holds",
             f"On the printed Ā, B̄: {_r(cl_pr, 3)} (the double pole −7.5 splits to ±0.33i through K's rounding — "
             f"a repeated pole is ill-conditioned). On the model: {_r(cl_m, 3)}: stable, dominant pair "
-            f"ζ = {-cl_m[0].real / abs(cl_m[0]):.2f}, σ = {-cl_m[0].real:.2f} (t_s ≈ {4 / -cl_m[0].real:.1f} s), so the "
+            f"ζ = {-cl_m[0].real / abs(cl_m[0]):.2f}, σ = {-cl_m[0].real:.2f} (t_s ≈ "
+            f"{4 / -cl_m[0].real:.1f} s), so the "
             "claimed behaviour survives the model error.",
         )
     )
@@ -855,7 +869,8 @@ def _chapter4(p: Parameters) -> list[Entry]:
             _r(alpha, 7),
             rel_error(alpha_pr, alpha),
             "agrees",
-            f"k1·m·h* = {alpha[0]:.4g}, J_BP − k2·m·h* = {alpha[1]:.6f} (printed 0.004), m = {alpha[2]} (eq 3.1.27 with "
+            f"k1·m·h* = {alpha[0]:.4g}, J_BP − k2·m·h* = {alpha[1]:.6f} (printed 0.004), m = {alpha[2]} "
+            "(eq 3.1.27 with "
             "r* = 4.676 mm).",
         )
     )
@@ -931,7 +946,8 @@ def _chapter4(p: Parameters) -> list[Entry]:
             "fails",
             f"τ = α(−kp·ζ − kv·ζ̇) + β linearized on the printed A, B: {_r(cl_p, 3)}; on the model: {_r(cl_mm, 3)}. "
             f"Stable but not the spec: the slow pair σ = {-slow.real:.3f} (ζ = {-slow.real / abs(slow):.2f}) has time "
-            f"constant 1/σ ≈ {1 / -slow.real:.1f} s (chapter 7 reports 6–7 s for this controller) and a 2 % settling time "
+            f"constant 1/σ ≈ {1 / -slow.real:.1f} s (chapter 7 reports 6–7 s for this controller) and a 2 "
+            "% settling time "
             f"4/σ ≈ {4 / -slow.real:.0f} s at the linear level.",
         )
     )
@@ -971,8 +987,10 @@ def _smc(p: Parameters, model: ReferenceModel) -> list[Entry]:
             _r(d_v["tr"], 5),
             _rel_abs(tn.SMC_TR, d_v["tr"]),
             "inconsistent",
-            f"QR of B gives an orthogonal T_r whose last row is −B/|B| = (0, 0, −{tn.B_TORQUE[2, 0] / tn.B_TORQUE[3, 0]:.5f}, "
-            f"−1) for the printed B (−{bv_m[2, 0] / bv_m[3, 0]:.5f} for the model); the printed −0.011 lies between. The "
+            "QR of B gives an orthogonal T_r whose last row is −B/|B| = (0, 0, "
+            f"−{tn.B_TORQUE[2, 0] / tn.B_TORQUE[3, 0]:.5f}, "
+            f"−1) for the printed B (−{bv_m[2, 0] / bv_m[3, 0]:.5f} for the model); the printed −0.011 "
+            "lies between. The "
             f"printed T_r is not orthogonal (row2·row3 = {orth[1, 2]:.3f}) and its rows 1–3 are an ordering (θ, ẋ, x) "
             f"that MATLAB's qr does not produce (it gives {_r(d_v['tr'][:3], 4)}). The entries agree with QR only "
             "up to row order, sign and the 0.011 ≈ B3/B4 coupling; cannot be reproduced exactly.",
@@ -1022,7 +1040,8 @@ def _smc(p: Parameters, model: ReferenceModel) -> list[Entry]:
             f"M = {_r(d_v['m'].ravel(), 4)}; model: {_r(d_m['m'].ravel(), 4)}; printed torque A, B: "
             f"{_r(d_t['m'].ravel(), 4)}. In the printed T_r's row order (θ, ẋ, x) the correct M (printed Ā, B̄) is "
             f"{_r(d_v['m'].ravel()[::-1], 3)}: M1 = −13.575 agrees to 0.5 %, M2 = 9.97 is 7 % off, M3 = −45.36 is "
-            f"{-45.36 / d_v['m'][0, 0]:.1f}× too large. The printed blocks are not those of the system, so neither is M.",
+            f"{-45.36 / d_v['m'][0, 0]:.1f}× too large. The printed blocks are not those of the system, so "
+            "neither is M.",
         )
     )
     s_from_m = np.hstack([tn.SMC_M, np.ones((1, 1))]) @ tn.SMC_TR
@@ -1042,7 +1061,8 @@ def _smc(p: Parameters, model: ReferenceModel) -> list[Entry]:
             _r(d_v["s"].ravel(), 4),
             rel_error(tn.SMC_S, d_v["s"]),
             "fails",
-            f"[M 1]·T_r with the printed M and T_r = {_r(s_from_m.ravel(), 3)}: equal to the printed S̄ except the sign "
+            f"[M 1]·T_r with the printed M and T_r = {_r(s_from_m.ravel(), 3)}: equal to the printed S̄ "
+            "except the sign "
             "(and 0.5 %) of S̄1. The correct surface for −2, −2, −10 (S₂ = 1, regular coordinates of the QR T_r) is "
             f"{_r(d_v['s'].ravel(), 4)} on the printed Ā, B̄, {_r(d_m['s'].ravel(), 4)} on the model. The printed S̄ "
             "does not give the requested sliding motion: eig((I − B(S̄B)⁻¹S̄)A) (one zero for the surface) = "
@@ -1129,7 +1149,8 @@ def _chapter5(p: Parameters) -> list[Entry]:
             _r(_match(tn.SF_DISC_POLES, z_exact), 4),
             rel_error(tn.SF_DISC_POLES, _match(tn.SF_DISC_POLES, z_exact)),
             "agrees",
-            f"e^{{(−1.5 ± 2.598i)·0.02}} = {z_exact[0]:.4f}, e^{{−7.5·0.02}} = {z_exact[2].real:.4f}: the §4.2 poles mapped.",
+            f"e^{{(−1.5 ± 2.598i)·0.02}} = {z_exact[0]:.4f}, e^{{−7.5·0.02}} = {z_exact[2].real:.4f}: the "
+            "§4.2 poles mapped.",
         )
     )
     ks = {k: state_feedback_gain(ph, ga, tn.SF_DISC_POLES) for k, (ph, ga) in vs.items()}
@@ -1165,7 +1186,8 @@ def _chapter5(p: Parameters) -> list[Entry]:
             rel_error(tn.SF_OBS_POLES_Z, z_obs),
             "inconsistent",
             f"e^{{(−7.63 ± 1.685i)·0.02}} = {z_obs[0]:.4f} (conj.), not 0.835 ± 0.199i. The printed z corresponds to "
-            f"s = {s_from_z[0]:.3f} (ln z / T): the real part −7.63 matches, the imaginary part is 11.69 rad/s, not 1.685. "
+            f"s = {s_from_z[0]:.3f} (ln z / T): the real part −7.63 matches, the imaginary part is 11.69 "
+            "rad/s, not 1.685. "
             "The z values (0.835 ± 0.199i) are what G was designed for (see §5.2.1 G).",
         )
     )
@@ -1379,7 +1401,8 @@ def _appendix(p: Parameters) -> list[Entry]:
             f"Ratios appendix/chapter: {_r(np.array(appx) / np.array(chap), 3)}. 0.17 = m·g needs m = "
             f"{m_from_beta * 1e3:.2f} g, and the coded x² coefficient of α₂ is 0.01732 = the same 17.32 g (chapter: "
             f"m = 18.848 g). With m = 17.32 g: m·g = {m2 * g:.4f}, 2m = {2 * m2:.4f}, and −m(h* + r*) = "
-            f"{-m2 * c_print:.6f} with the *printed* r* = 4.264 mm (with 4.676 mm: {-m2 * (p.track.contact_height_m + p.rolling_radius_m):.6f}); "
+            f"{-m2 * c_print:.6f} with the *printed* r* = 4.264 mm (with 4.676 mm: "
+            f"{-m2 * (p.track.contact_height_m + p.rolling_radius_m):.6f}); "
             f"the x-row coefficient m(h*+r*) implies h*+r* = {c_from_b4 * 1e3:.2f} mm. The rig code uses a ball "
             "of 17.32 g (8 % lighter than Table 3.1) and the misprinted r* in β4; β1 = −0.0137 is unchanged.",
         )
@@ -1395,9 +1418,11 @@ def _appendix(p: Parameters) -> list[Entry]:
             "unexplained",
             f"α₁: 0.003833/0.000413 = {APPX_CLP_ALPHA_XDD / tn.CLP_ALPHA_XDD:.2f}. k1·m·h* with m = 17.32 g is "
             f"{k1 * m2 * p.track.contact_height_m:.6f} (r* = 4.676 mm) or "
-            f"{0.4 * p.ball.radius_m**2 / tn.R_STAR_PRINTED_M**2 * m2 * p.track.contact_height_m:.6f} (4.264 mm); 10× the "
+            f"{0.4 * p.ball.radius_m**2 / tn.R_STAR_PRINTED_M**2 * m2 * p.track.contact_height_m:.6f} "
+            "(4.264 mm); 10× the "
             "first is 0.00380 (0.8 % from 0.003833) — a decimal slip is plausible but not established. "
-            f"α₂'s x² term 0.01732 = m of the lighter ball (see appendix A β; ratio {APPX_CLP_ALPHA_THDD_X2 / tn.CLP_ALPHA_THDD_X2:.3f}).",
+            "α₂'s x² term 0.01732 = m of the lighter ball (see appendix A β; ratio "
+            f"{APPX_CLP_ALPHA_THDD_X2 / tn.CLP_ALPHA_THDD_X2:.3f}).",
         )
     )
     kp_c = np.diag(tn.CLP_DISC_KP)
@@ -1418,7 +1443,8 @@ def _appendix(p: Parameters) -> list[Entry]:
             "inconsistent",
             f"kp ratios appendix/§5.2.2: {_r(np.array(APPX_CLP_KP) / kp_c, 3)}; kv identical. Together with α₁ = "
             f"0.003833 the effective x-gains are α₁kp₁ = {k_a[0, 0]:.4f} (chapter {k_c[0, 0]:.4f}, "
-            f"×{k_a[0, 0] / k_c[0, 0]:.1f}) and α₁kv₁ = {k_a[0, 2]:.4f} (×{k_a[0, 2] / k_c[0, 2]:.1f}): the rig code is a "
+            f"×{k_a[0, 0] / k_c[0, 0]:.1f}) and α₁kv₁ = {k_a[0, 2]:.4f} (×{k_a[0, 2] / k_c[0, 2]:.1f}): "
+            "the rig code is a "
             f"re-tuned design. Its linearized closed loop on the model's Φ, Γ: {_r(cl_a, 4)} (|z| ≤ "
             f"{np.max(np.abs(cl_a)):.4f}), vs §5.2.2's printed gains (see '§5.2.2 closed-loop poles').",
         )

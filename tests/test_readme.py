@@ -1,0 +1,30 @@
+"""The README's examples run as printed."""
+
+import contextlib
+import io
+import re
+from pathlib import Path
+
+from twin.parameters import Parameters
+
+README = (Path(__file__).resolve().parent.parent / "README.md").read_text(encoding="utf-8")
+
+
+def _blocks(language: str) -> list[str]:
+    return re.findall(rf"```{language}\n(.*?)```", README, flags=re.S)
+
+
+def test_the_controller_example_holds_the_ball() -> None:
+    (code,) = [b for b in _blocks("python") if "class MyController" in b]
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        exec(compile(code, "README.md", "exec"), {"__name__": "readme"})
+    assert out.getvalue().startswith("True held")
+
+
+def test_the_parameter_file_example_loads(tmp_path: Path) -> None:
+    (text,) = _blocks("toml")
+    path = tmp_path / "rig.toml"
+    path.write_text(text)
+    params = Parameters.from_file(path)
+    assert params.beam.pivot_friction_nm == 1e-3 and params.ball_sensor.curve_volts_v == (-4.62, 0.0, 4.60)
