@@ -14,6 +14,18 @@ On the rig, index 1 of timem/datam1/datam2/aout stays 0 (only the control == 5 b
 are preallocated to sampsize + 1 = 100001 and ``sampnumber`` is declared global but never assigned, so the
 file holds it as an empty matrix. ``load_mat`` reads such files (it keeps the first k values) as well as the
 twin's own, which add the true state under separate names (``TRUTH_FIELDS``; empty for a rig log).
+
+What a loaded log must hold (``load_mat`` and ``load_csv`` alike; every refusal is a ``LogError`` naming the
+file, the variable or column and, for a bad value, its index k, 1-based as in MATLAB):
+
+* ``REQUIRED_FIELDS`` (timem, datam1, datam2, aout): present, finite.
+* ``OPTIONAL_FIELDS`` (x1…x4, u, uhesap): used when present; a missing one, or an empty one (declared but never
+  written, as ``uhesap`` on the rig), becomes NaN. A .mat may also lack ``k`` (then every value is a tick) and
+  ``sampnumber`` (never assigned by the software: it is not read).
+* ``timem`` strictly increasing from index 2 on, and from index 1 to 2 unless row 1 is the rig's unwritten
+  start row (timem, datam1, datam2, aout all exactly 0; the rig's times may start anywhere after it). Row 1 is
+  kept either way: the twin writes a real start block there (its time negative, before release).
+* ``ball_lost`` holds 0 or 1 only.
 """
 
 from __future__ import annotations
@@ -27,6 +39,8 @@ import numpy as np
 import scipy.io
 
 __all__ = [
+    "OPTIONAL_FIELDS",
+    "REQUIRED_FIELDS",
     "THESIS_FIELDS",
     "TRUTH_FIELDS",
     "LogError",
@@ -38,6 +52,9 @@ __all__ = [
 ]
 
 THESIS_FIELDS = ("timem", "datam1", "datam2", "aout", "x1", "x2", "x3", "x4", "u", "uhesap")
+# What the rig's I/O card recorded (a log without one of them is refused) and the controller's own values.
+REQUIRED_FIELDS = THESIS_FIELDS[:4]
+OPTIONAL_FIELDS = THESIS_FIELDS[4:]
 TRUTH_FIELDS = (
     "true_time_s",
     "true_x_m",
@@ -96,9 +113,11 @@ class RunLog:
         for group in (THESIS_FIELDS, TRUTH_FIELDS):
             n = getattr(self, group[0]).size
             for name in group[1:]:
-                if getattr(self, name).size != n:
+                m = getattr(self, name).size
+                if m != n:
                     raise LogError(
-                        f"field '{name}' has {getattr(self, name).size} values but '{group[0]}' has {n}"
+                        f"field '{name}' has {m} values but '{group[0]}' has {n} "
+                        f"(first unmatched index {min(m, n) + 1})"
                     )
         if self.timem.size == 0:
             raise LogError("field 'timem' is empty: a log holds at least the initial sample (k ≥ 1)")
@@ -138,8 +157,52 @@ def _vector(path: Path, name: str, value: object) -> np.ndarray:
     return arr.ravel()
 
 
+def _at(kind: str, name: str, index: int) -> str:
+    """Where a value sits: ``index`` is 1-based (the log's k); in a CSV also its line (the header is line 1)."""
+    where = f"{kind} '{name}', index {index}"
+    return f"{where} (line {index + 1})" if kind == "column" else where
+
+
+def _is_rig_start_row(values: dict[str, np.ndarray]) -> bool:
+    """Row 1 as the rig leaves it: only the ``control == 5`` branch writes timem/datam1/datam2/aout."""
+    return all(values[name].size > 0 and values[name][0] == 0.0 for name in REQUIRED_FIELDS)
+
+
+def _bools(path: Path, kind: str, name: str, arr: np.ndarray) -> np.ndarray:
+    """0/1 (MATLAB logical, or a number equal to 0 or 1) as booleans; anything else is refused."""
+    bad = np.flatnonzero((arr != 0) & (arr != 1))  # NaN compares unequal to both: refused too
+    if bad.size:
+        i = int(bad[0])
+        raise LogError(f"{path}: {_at(kind, name, i + 1)} is {float(arr[i]):g}: '{name}' must hold 0 or 1")
+    return arr == 1
+
+
+def _check_values(path: Path, kind: str, values: dict[str, np.ndarray], hint: str = "") -> None:
+    """Refuse required values that are not finite and a ``timem`` that does not increase strictly (row 1 is
+    exempt when it is the rig's unwritten start row)."""
+    for name in REQUIRED_FIELDS:
+        arr = values[name]
+        bad = np.flatnonzero(~np.isfinite(arr))
+        if bad.size:
+            i = int(bad[0])
+            raise LogError(f"{path}: {_at(kind, name, i + 1)} is {float(arr[i])!r}: '{name}' must be finite")
+    t = values["timem"]
+    increases = np.diff(t) > 0
+    if increases.size and _is_rig_start_row(values):
+        increases[0] = True
+    bad = np.flatnonzero(~increases)
+    if bad.size:
+        i = int(bad[0]) + 1  # 0-based position of the value that fails to increase
+        raise LogError(
+            f"{path}: {_at(kind, 'timem', i + 1)} is {float(t[i])!r} s, not after {float(t[i - 1])!r} s at "
+            f"index {i}: 'timem' must increase strictly{hint}"
+        )
+
+
 def load_mat(path: str | Path) -> RunLog:
-    """Read a log written by ``save_mat`` or by the rig's Plot button (``data_file.mat``)."""
+    """Read a log written by ``save_mat`` or by the rig's Plot button (``data_file.mat``).
+
+    Only timem, datam1, datam2 and aout are required (see the module docstring); the file is only read."""
     path = Path(path)
     if not path.is_file():
         raise LogError(f"{path}: no such file")
@@ -147,31 +210,43 @@ def load_mat(path: str | Path) -> RunLog:
         raw = scipy.io.loadmat(path, appendmat=False)
     except Exception as exc:  # noqa: BLE001 - for bytes that are not MAT, scipy raises many types (IndexError…)
         raise LogError(f"{path}: not a MATLAB .mat file ({exc})") from None
-    if "k" not in raw:
-        raise LogError(f"{path}: variable 'k' (the last tick index) is missing")
-    k_values = _vector(path, "k", raw["k"])
-    if k_values.size != 1 or not float(k_values[0]).is_integer() or k_values[0] < 1:
-        raise LogError(f"{path}: variable 'k' = {k_values.tolist()!r} must be one integer ≥ 1")
-    k = int(k_values[0])
+    k: int | None = None
+    if "k" in raw:
+        k_values = _vector(path, "k", raw["k"])
+        if k_values.size != 1 or not float(k_values[0]).is_integer() or k_values[0] < 1:
+            raise LogError(f"{path}: variable 'k' = {k_values.tolist()!r} must be one integer ≥ 1")
+        k = int(k_values[0])
     if "uhesap" not in raw and "Vhesap" in raw:  # the control-law callback's name for the same value
         raw["uhesap"] = raw["Vhesap"]
-    values: dict[str, np.ndarray] = {}
-    for name in THESIS_FIELDS:
+    for name in REQUIRED_FIELDS:
         if name not in raw:
             raise LogError(f"{path}: variable '{name}' is missing")
-        arr = _vector(path, name, raw[name]).astype(np.float64)
-        if name == "uhesap" and arr.size == 0:
-            arr = np.full(k, np.nan)  # declared but never written (control-law runs on the rig)
-        if arr.size < k:
-            raise LogError(f"{path}: variable '{name}' has {arr.size} values but k = {k}")
-        values[name] = arr[:k]  # the rig preallocates sampsize + 1 values
+    arrays = {
+        name: _vector(path, name, raw[name]).astype(np.float64) for name in THESIS_FIELDS if name in raw
+    }
+    n = arrays["timem"].size if k is None else k
+    values: dict[str, np.ndarray] = {}
+    for name in THESIS_FIELDS:
+        arr = arrays.get(name)
+        if arr is None or (name in OPTIONAL_FIELDS and arr.size == 0):
+            values[name] = np.full(n, np.nan)  # not saved, or declared but never written (uhesap on the rig)
+            continue
+        if arr.size < n or (k is None and arr.size != n):
+            than = f"k = {k}" if k is not None else f"'timem' has {n} (there is no 'k')"
+            raise LogError(
+                f"{path}: variable '{name}' has {arr.size} values but {than} "
+                f"(first unmatched index {min(arr.size, n) + 1})"
+            )
+        values[name] = arr[:n]  # the rig preallocates sampsize + 1 values
+    hint = "" if k is not None else " (the file has no 'k', so every stored value is taken as a tick)"
+    _check_values(path, "variable", values, hint)
     present = [name for name in TRUTH_FIELDS if name in raw]
     if present and len(present) != len(TRUTH_FIELDS):
         missing = next(name for name in TRUTH_FIELDS if name not in raw)
         raise LogError(f"{path}: variable '{missing}' is missing (the file has other true-state variables)")
     for name in present:
-        arr = _vector(path, name, raw[name])
-        values[name] = arr != 0 if name in _BOOL_FIELDS else arr.astype(np.float64)
+        arr = _vector(path, name, raw[name]).astype(np.float64)
+        values[name] = _bools(path, "variable", name, arr) if name in _BOOL_FIELDS else arr
     try:
         return RunLog(**values)
     except LogError as exc:
@@ -200,12 +275,14 @@ def save_csv(log: RunLog, path: str | Path, *, overwrite: bool = False) -> None:
 
 
 def load_csv(path: str | Path) -> RunLog:
-    """Read a log written by ``save_csv``."""
+    """Read a log written by ``save_csv`` (or by hand: only timem, datam1, datam2 and aout are required; a
+    UTF-8 byte-order mark is accepted). The file is only read."""
     path = Path(path)
     if not path.is_file():
         raise LogError(f"{path}: no such file")
     try:
-        text = path.read_text(encoding="utf-8")
+        # utf-8-sig: a leading byte-order mark (a spreadsheet's "CSV UTF-8") is dropped, none is needed
+        text = path.read_text(encoding="utf-8-sig")
     except UnicodeDecodeError:
         raise LogError(f"{path}: not a CSV text file (not UTF-8 text)") from None
     rows = list(csv.reader(io.StringIO(text, newline="")))
@@ -218,7 +295,7 @@ def load_csv(path: str | Path) -> RunLog:
             raise LogError(f"{path}: unknown column '{name}' (expected {', '.join(known)})")
     if len(set(header)) != len(header):
         raise LogError(f"{path}: a column appears twice in the header")
-    for name in THESIS_FIELDS:
+    for name in REQUIRED_FIELDS:
         if name not in header:
             raise LogError(f"{path}: column '{name}' is missing")
     present_truth = [name for name in TRUTH_FIELDS if name in header]
@@ -245,9 +322,12 @@ def load_csv(path: str | Path) -> RunLog:
             ) from None
         values[name] = np.array(numbers, dtype=np.float64)
         if name in _BOOL_FIELDS:
-            if not np.all((values[name] == 0) | (values[name] == 1)):
-                raise LogError(f"{path}: column '{name}' must hold 0 or 1")
-            values[name] = values[name] == 1
+            values[name] = _bools(path, "column", name, values[name])
+    ticks = values["timem"].size
+    for name in OPTIONAL_FIELDS:
+        if name not in values or values[name].size == 0:
+            values[name] = np.full(ticks, np.nan)  # not recorded: as a .mat without the variable
+    _check_values(path, "column", values)
     try:
         return RunLog(**values)
     except LogError as exc:

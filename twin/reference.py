@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 import scipy.integrate
@@ -84,13 +84,16 @@ class EquationCoefficients:
             coulomb_nm=p.beam.pivot_friction_nm,
         )
 
-    def accelerations(
-        self, x: float, th: float, xd: float, thd: float, torque_nm: float
-    ) -> tuple[float, float]:
-        """(ẍ, θ̈) from eq 3.1.26 and 3.1.27 for a motor torque at the beam."""
-        s, co = math.sin(th), math.cos(th)
+    def accelerations(self, x: Any, th: Any, xd: Any, thd: Any, torque_nm: Any) -> tuple[Any, Any]:
+        """(ẍ, θ̈) from eq 3.1.26 and 3.1.27 for a motor torque at the beam: floats, or numpy arrays of
+        states (a batch, e.g. identification windows) with the same arithmetic."""
         b1, b2, b3, b4 = self.beta
-        friction = self.coulomb_nm * max(-1.0, min(1.0, thd / COULOMB_REGULARIZATION_RAD_S))
+        if isinstance(th, float):
+            s, co = math.sin(th), math.cos(th)
+            friction = self.coulomb_nm * max(-1.0, min(1.0, thd / COULOMB_REGULARIZATION_RAD_S))
+        else:
+            s, co = np.sin(th), np.cos(th)
+            friction = self.coulomb_nm * np.clip(thd / COULOMB_REGULARIZATION_RAD_S, -1.0, 1.0)
         rhs_ball = x * thd * thd - self.g * s
         rhs_beam = (
             torque_nm

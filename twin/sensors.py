@@ -46,6 +46,7 @@ __all__ = [
     "IdealSensors",
     "angle_block_mean_bruteforce_v",
     "angle_block_mean_v",
+    "angle_counter_mean",
     "angle_count_step_rad",
     "angle_sensor_v",
     "counter_dac_v",
@@ -153,6 +154,19 @@ def _level_table(sensor: AngleSensor, daq: Daq) -> tuple[float, ...]:
     return tuple(
         np.asarray(adc_quantize_v(sensor.dac_volts_per_count * di + sensor.dac_offset_v, daq)).tolist()
     )
+
+
+def angle_counter_mean(angle_v: float | np.ndarray, params: Parameters) -> float | np.ndarray:
+    """The mean counter value DI over a block, from the angle channel's block-mean volts.
+
+    The channel reads one ADC level per counter value (the AD561's line, then the ADC's 12 bits), so a block
+    mean between two adjacent levels is the same mix of the two counts: interpolating the level table
+    inverts it exactly while the beam stays within two counts in a block, and closely beyond. Unlike the
+    software's eq 6.2.10, this does not carry the ADC's rounding of each level (up to ±0.44 mrad)."""
+    levels = np.asarray(_level_table(params.angle_sensor, params.daq))
+    v = finite_values(angle_v, "angle_v")
+    out = np.interp(v, levels, np.arange(levels.size, dtype=np.float64))
+    return float(out) if np.ndim(angle_v) == 0 else out
 
 
 def angle_block_mean_bruteforce_v(times_s: np.ndarray, theta_rad: np.ndarray, params: Parameters) -> float:

@@ -168,6 +168,82 @@ def _cmd_view(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_calibrate(args: argparse.Namespace) -> int:
+    from calib.identify import FITTABLE, calibrate
+    from calib.logs import load_rig_log
+    from calib.report import check_out_dir, write_report
+
+    start = _load_params(args)
+    fit = [name.strip() for name in args.fit.split(",") if name.strip()]
+    unknown = [n for n in fit if n not in FITTABLE]
+    if not fit or unknown:
+        raise ParameterError(f"--fit {args.fit!r}: choose from {', '.join(FITTABLE)}")
+    if args.out:
+        check_out_dir(args.out, args.overwrite)
+    logs = [load_rig_log(path) for path in args.logs]
+
+    def progress(line: str) -> None:
+        if not args.json:
+            print(f"  {line}", file=sys.stderr, flush=True)
+
+    cal = calibrate(logs, fit, start, window_s=args.window, progress=progress)
+    if args.out:
+        write_report(cal, args.out, overwrite=args.overwrite)
+    if args.json:
+        print(json.dumps(cal.to_json()))
+    else:
+        for name, v in cal.values.items():
+            print(
+                f"{name:<36} {v.value:12.6g}  [{v.ci_low:.6g}, {v.ci_high:.6g}]  (start {v.initial:.6g}) {v.unit}"
+            )
+        print(f"converged: {cal.converged} ({cal.message}); {cal.wall_s:.1f} s")
+        for warning in cal.warnings:
+            print(f"warning: {warning}")
+        if args.out:
+            print(f"wrote {args.out}/params.toml, calibration.json, report.md")
+    return 0 if cal.converged else 1
+
+
+def _cmd_calibrate_static(args: argparse.Namespace) -> int:
+    from calib.static import calibrate, load_table, render_lines, render_toml
+
+    params = _load_params(args)
+    if args.out and Path(args.out).exists() and not args.overwrite:
+        raise ParameterError(f"{args.out}: exists; not overwritten (pass --overwrite)")
+    result = calibrate(load_table(args.table), params)
+    print(json.dumps(result.to_json(), indent=2) if args.json else "\n".join(render_lines(result)))
+    if args.out:
+        _write_atomic(Path(args.out), render_toml(result))
+    return 0
+
+
+def _cmd_experiment(args: argparse.Namespace) -> int:
+    from calib.experiments import EXPERIMENTS, run_experiment
+    from twin.log import save_csv, save_mat
+
+    params = _load_params(args)
+    if args.name not in EXPERIMENTS:
+        raise ParameterError(f"unknown experiment {args.name!r}; known: {', '.join(EXPERIMENTS)}")
+    if not (math.isfinite(args.duration) and 5.0 <= args.duration <= 3600.0):
+        raise ParameterError(f"--duration = {args.duration!r}: an experiment lasts 5…3600 s")
+    out = Path(args.out)
+    if out.exists() and not args.overwrite:
+        raise ParameterError(f"{out}: exists; not overwritten (pass --overwrite)")
+    result = run_experiment(args.name, params, duration_s=args.duration, seed=args.seed)
+    save = save_csv if out.suffix.lower() == ".csv" else save_mat
+    save(result.log, out, overwrite=args.overwrite)
+    print(
+        f"{args.name}: {args.duration:g} s, {result.log.k} ticks, ball lost: {result.verdict.ball_lost}; wrote {out}"
+    )
+    return 0 if not result.verdict.ball_lost else 1
+
+
+def _write_atomic(path: Path, text: str) -> None:
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_text(text)
+    tmp.replace(path)
+
+
 def _add_params_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--params", metavar="FILE", help="parameter file (TOML or JSON) overriding the defaults"
@@ -252,6 +328,42 @@ def build_parser() -> argparse.ArgumentParser:
     _add_params_options(view)
     view.set_defaults(func=_cmd_view)
 
+    cal = sub.add_parser(
+        "calibrate", help="fit the twin's parameters to logs recorded on a rig (exit 0 converged, 1 not)"
+    )
+    cal.add_argument("logs", nargs="+", metavar="LOG", help="data_file.mat or .csv logs of the same rig")
+    cal.add_argument(
+        "--fit",
+        required=True,
+        metavar="NAME,NAME,…",
+        help="parameters to fit, e.g. motor.resistance_ohm,beam.inertia_pivot_kgm2 (see README)",
+    )
+    cal.add_argument("--out", metavar="DIR", help="write params.toml, calibration.json and report.md here")
+    cal.add_argument("--overwrite", action="store_true", help="replace an existing --out directory")
+    cal.add_argument("--window", type=float, default=1.0, metavar="S", help="window length (default 1 s)")
+    cal.add_argument("--json", action="store_true", help="print calibration.json")
+    _add_params_options(cal)
+    cal.set_defaults(func=_cmd_calibrate)
+
+    stat = sub.add_parser("calibrate-static", help="fit a sensor's static curve from a measured table (CSV)")
+    stat.add_argument(
+        "table", metavar="TABLE.csv", help="columns position_m,volts_v (ball) or di,volts_v (angle)"
+    )
+    stat.add_argument("--out", metavar="FILE.toml", help="write the fitted parameters as a parameter file")
+    stat.add_argument("--overwrite", action="store_true", help="replace an existing --out file")
+    stat.add_argument("--json", action="store_true", help="print JSON")
+    _add_params_options(stat)
+    stat.set_defaults(func=_cmd_calibrate_static)
+
+    exp = sub.add_parser("experiment", help="run an identification experiment on the twin and save its log")
+    exp.add_argument("name", metavar="NAME", help="square (recommended), dither or sweep")
+    exp.add_argument("--out", required=True, metavar="LOG.mat", help="the log: .mat (thesis format) or .csv")
+    exp.add_argument("--duration", type=float, default=60.0, metavar="S", help="seconds (default 60)")
+    exp.add_argument("--seed", type=int, default=0, help="seed of the dither and the sensor noise")
+    exp.add_argument("--overwrite", action="store_true", help="replace an existing --out file")
+    _add_params_options(exp)
+    exp.set_defaults(func=_cmd_experiment)
+
     par = sub.add_parser("params", help="list every parameter with its unit and source")
     _add_params_options(par)
     par.add_argument("--json", action="store_true", help="print JSON")
@@ -264,7 +376,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         return int(args.func(args))
-    except (ValueError, FileExistsError) as exc:  # bad input (ParameterError is a ValueError): no traceback
+    except (ValueError, FileExistsError, FileNotFoundError) as exc:  # bad input: no traceback
         print(f"ballbeam: error: {exc}", file=sys.stderr)
         return 2
     except BrokenPipeError:  # output piped into e.g. head

@@ -1,0 +1,211 @@
+"""The calibration package's reader: a log recorded on the rig (or by the twin), reduced to what the rig records.
+
+``load_rig_log(path)`` reads ``data_file.mat`` (appendix A's Plot button) or a CSV through ``twin.log`` and keeps
+the four signals the I/O card recorded, for the ticks identification uses:
+
+    time_s     timem    time of the block's last sample (s)
+    ball_v     datam1   raw ball channel, last sample of the block (V)
+    angle_v    datam2   raw angle channel, block mean (V)
+    command_v  aout     DAC command written at that tick (V)
+
+Row 1 of the log (k = 1) is dropped: it is the sample taken before the motor was driven, whose command the rig
+never wrote (on the rig its four values stay 0; in the twin's logs it is the held start block). Element ``i``
+of a ``RigLog`` array is therefore tick ``k = i + 2`` of the file, and every refusal names that k. The twin's
+true state (``true_*``) is never read into a ``RigLog``: identification sees only what the rig sees.
+
+Every refusal is a ``twin.log.LogError`` naming the file, the variable (the file's name, with the RigLog
+field's) and the first bad index.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from twin.log import LogError, RunLog, load_csv, load_mat
+
+__all__ = [
+    "rig_log",
+    "ADC_STEP_V",
+    "DAC_MAX_V",
+    "DAC_MIN_V",
+    "DAC_STEP_V",
+    "FIRST_INDEX",
+    "MAX_GAP_PERIODS",
+    "MIN_BALL_SPAN_V",
+    "MIN_COMMAND_SPAN_V",
+    "MIN_DURATION_S",
+    "RigLog",
+    "load_rig_log",
+]
+
+# The PCI-1712 as the thesis set it up (Table 6.4, §6.5): 12-bit DAC over 0…5 V, 12-bit ADC over −5…5 V.
+DAC_MIN_V = 0.0
+DAC_MAX_V = 5.0
+DAC_STEP_V = (DAC_MAX_V - DAC_MIN_V) / 4096  # 1.221 mV
+ADC_STEP_V = 10.0 / 4096  # 2.441 mV
+
+# At least 5 s of data: several periods of the closed loop's slowest motion (the limit cycles seen on the twin
+# last 0.7 s, the settling 2.5–3 s), 250 ticks at 50 Hz.
+MIN_DURATION_S = 5.0
+# A command that never moves by more than 2 DAC steps is a constant plus the DAC's rounding: it says nothing
+# about the motor and beam.
+MIN_COMMAND_SPAN_V = 2 * DAC_STEP_V
+# A ball reading spanning fewer than 10 ADC steps (24 mV, about 1.7 mm through eq 6.3.1) is quantization and
+# contact noise (a few steps), not motion of the ball.
+MIN_BALL_SPAN_V = 10 * ADC_STEP_V
+# A tick spacing beyond 1.5 periods is a missed block (the next one is 2 periods away): the samples are no
+# longer one per period, as the zero-order-hold models assume.
+MAX_GAP_PERIODS = 1.5
+
+# Element 0 of a RigLog array is tick k = 2 of the file (row 1, the start sample, is dropped).
+FIRST_INDEX = 2
+
+# RigLog field -> the thesis software's variable (the name a refusal shows first: the one in the file).
+_SOURCE = {"time_s": "timem", "ball_v": "datam1", "angle_v": "datam2", "command_v": "aout"}
+
+
+def _name(rig_field: str) -> str:
+    return f"'{_SOURCE[rig_field]}' ({rig_field})"
+
+
+@dataclass(frozen=True, eq=False)
+class RigLog:
+    """The rig's recorded signals over the identification ticks (k = 2 … the log's k), validated.
+
+    The arrays are read-only float64 copies; ``period_s`` is the median tick spacing. Building one checks
+    it (a refusal is a ``LogError`` naming ``path``, the field and the first bad tick k)."""
+
+    path: Path
+    time_s: np.ndarray
+    ball_v: np.ndarray
+    angle_v: np.ndarray
+    command_v: np.ndarray
+    period_s: float = field(init=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "path", Path(self.path))
+        for name in _SOURCE:
+            arr = np.array(getattr(self, name), dtype=np.float64)  # a copy
+            if arr.ndim != 1:
+                raise LogError(f"{self.path}: {_name(name)} has shape {arr.shape}: it must be a 1-D array")
+            arr.setflags(write=False)
+            object.__setattr__(self, name, arr)
+        object.__setattr__(self, "period_s", self._validate())
+
+    @property
+    def ticks(self) -> int:
+        """The number of identification ticks (the log's k − 1)."""
+        return int(self.time_s.size)
+
+    @property
+    def duration_s(self) -> float:
+        """Time from the first to the last identification tick."""
+        return float(self.time_s[-1] - self.time_s[0]) if self.time_s.size else 0.0
+
+    def _fail(self, rig_field: str, i: int | None, what: str) -> LogError:
+        where = "" if i is None else f", index {i + FIRST_INDEX}"
+        return LogError(f"{self.path}: {_name(rig_field)}{where}: {what}")
+
+    def _validate(self) -> float:
+        """Check the log is usable for identification; return the median tick spacing."""
+        t, n = self.time_s, self.time_s.size
+        for name in ("ball_v", "angle_v", "command_v"):
+            m = getattr(self, name).size
+            if m != n:
+                raise self._fail(name, min(m, n), f"has {m} values but 'timem' (time_s) has {n}")
+        for name in _SOURCE:
+            arr = getattr(self, name)
+            bad = np.flatnonzero(~np.isfinite(arr))
+            if bad.size:
+                i = int(bad[0])
+                raise self._fail(name, i, f"{float(arr[i])!r} is not a finite number")
+        if n < 2:
+            raise self._fail(
+                "time_s",
+                None,
+                f"the log ends at index {n - 1 + FIRST_INDEX}, {n} tick(s) after the start sample (index 1): "
+                f"identification needs at least {MIN_DURATION_S} s of data",
+            )
+        steps = np.diff(t)
+        bad = np.flatnonzero(~(steps > 0))
+        if bad.size:
+            i = int(bad[0]) + 1
+            raise self._fail(
+                "time_s",
+                i,
+                f"{float(t[i])!r} s is not after {float(t[i - 1])!r} s: time must increase strictly",
+            )
+        period = float(np.median(steps))
+        bad = np.flatnonzero(steps > MAX_GAP_PERIODS * period)
+        if bad.size:
+            i = int(bad[0]) + 1
+            raise self._fail(
+                "time_s",
+                i,
+                f"{float(steps[i - 1]):.6g} s after the previous tick, more than {MAX_GAP_PERIODS} × the median "
+                f"period {period:.6g} s: a gap in the ticks (a missed block?)",
+            )
+        duration = float(t[-1] - t[0])
+        if duration < MIN_DURATION_S:
+            raise self._fail(
+                "time_s",
+                n - 1,
+                f"the log ends {duration:.6g} s after index {FIRST_INDEX}: identification needs at least "
+                f"{MIN_DURATION_S} s of data",
+            )
+        u = self.command_v
+        bad = np.flatnonzero((u < DAC_MIN_V) | (u > DAC_MAX_V))
+        if bad.size:
+            i = int(bad[0])
+            raise self._fail(
+                "command_v", i, f"{float(u[i])!r} V is outside the DAC's {DAC_MIN_V}…{DAC_MAX_V} V"
+            )
+        last = n - 1 + FIRST_INDEX
+        span = float(np.ptp(u))
+        if span <= MIN_COMMAND_SPAN_V:
+            raise self._fail(
+                "command_v",
+                None,
+                f"spans only {span:.6g} V over indices {FIRST_INDEX}…{last} (not more than 2 DAC steps of "
+                f"{DAC_STEP_V:.6g} V): no excitation",
+            )
+        span = float(np.ptp(self.ball_v))
+        if span < MIN_BALL_SPAN_V:
+            raise self._fail(
+                "ball_v",
+                None,
+                f"spans only {span:.6g} V over indices {FIRST_INDEX}…{last} (fewer than 10 ADC steps of "
+                f"{ADC_STEP_V:.6g} V): the ball hardly moved",
+            )
+        return period
+
+
+def load_rig_log(path: str | Path) -> RigLog:
+    """Read a ``.mat`` (``data_file.mat``) or ``.csv`` log and return its identification ticks, validated.
+
+    The file is only read. Refusals are ``LogError`` naming the file, the field and the first bad index."""
+    path = Path(path)
+    suffix = path.suffix.lower()
+    log: RunLog
+    if suffix == ".mat":
+        log = load_mat(path)
+    elif suffix == ".csv":
+        log = load_csv(path)
+    else:
+        shown = f"suffix '{path.suffix}'" if path.suffix else "no suffix"
+        raise LogError(f"{path}: {shown}: a rig log is a .mat (data_file.mat) or a .csv file")
+    return rig_log(log, path)
+
+
+def rig_log(log: RunLog, path: str | Path = "<memory>") -> RigLog:
+    """The identification ticks of a log already in memory (e.g. a twin run), validated as a file would be."""
+    return RigLog(
+        path=Path(path),
+        time_s=log.timem[1:],
+        ball_v=log.datam1[1:],
+        angle_v=log.datam2[1:],
+        command_v=log.aout[1:],
+    )
