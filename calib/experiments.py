@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from calib.logs import RigLog
 from controllers import registry
 from controllers.loop import LoopController
 from twin import converters
@@ -138,3 +139,26 @@ def run_experiment(
     return run_closed_loop(
         controller, x0_m=x0_m, theta0_rad=theta0_rad, duration_s=duration_s, seed=seed, params=p
     )
+
+
+def replay_rms(
+    log: RigLog, name: str, seed: int, params: Parameters, *, x0_m: float = 0.0, theta0_rad: float = 0.0
+) -> dict[str, float]:
+    """Closed-loop replay: the experiment that made ``log`` (same controller, setpoints and dither seed) run
+    on the twin with ``params`` and the sensor noise off; the RMS difference of the readings the software
+    makes of the two (ball m by eq 6.3.1, beam rad by eq 6.2.10), tick by tick."""
+    quiet = params.with_overrides({"ball_sensor.noise_enabled": False})
+    replay = run_experiment(
+        name, quiet, duration_s=log.duration_s, seed=seed, x0_m=x0_m, theta0_rad=theta0_rad
+    )
+    n = min(log.ticks, replay.log.k - 1)
+    sw = params.software
+    sim_b = converters.ball_position_m(replay.log.datam1[1 : n + 1], sw)
+    sim_a = converters.beam_angle_rad(replay.log.datam2[1 : n + 1], sw)
+    rec_b = converters.ball_position_m(log.ball_v[:n], sw)
+    rec_a = converters.beam_angle_rad(log.angle_v[:n], sw)
+    return {
+        "ball_m": float(np.sqrt(np.mean((sim_b - rec_b) ** 2))),
+        "angle_rad": float(np.sqrt(np.mean((sim_a - rec_a) ** 2))),
+        "ticks": float(n),
+    }

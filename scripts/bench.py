@@ -6,6 +6,7 @@
 - runs: computer time per 15 s closed-loop run (50 Hz controllers, a 1 kHz chapter 4 law on the true state,
   the reference rig), each as a ratio to the physical floor: raw ``mujoco.rollout`` of the same physics
   steps in one call, measured in the same run;
+- calibration: wall time of a 5-parameter fit to a 60 s log;
 - view: the live view's tick rate at speed 1.0 over the given wall time (target 50 Hz ± 1 %) and its CPU
   time per tick, headless (no browser attached).
 """
@@ -86,6 +87,28 @@ def bench_runs() -> dict[str, float]:
     return out
 
 
+def bench_calibration() -> dict[str, float]:
+    """Wall time of ``calibrate`` on a 60 s log of the recommended experiment, 5 parameters (the target:
+    under 30 s on 2 cores)."""
+    from calib.experiments import run_experiment
+    from calib.identify import calibrate
+    from calib.logs import rig_log
+
+    start_params = Parameters().with_overrides({"beam.pivot_damping_nm_s_per_rad": 1e-3})
+    truth = start_params.with_overrides({"motor.resistance_ohm": 10.5, "beam.inertia_pivot_kgm2": 3.7e-3})
+    log = rig_log(run_experiment("square", truth, duration_s=60.0, seed=1).log)
+    fit = [
+        "motor.resistance_ohm",
+        "beam.inertia_pivot_kgm2",
+        "beam.pivot_damping_nm_s_per_rad",
+        "beam.pivot_friction_nm",
+        "angle_sensor.zeroing_error_rad",
+    ]
+    start = time.perf_counter()
+    cal = calibrate([log], fit, start_params)
+    return {"calibrate_60s_5_params_s": time.perf_counter() - start, "converged": float(cal.converged)}
+
+
 def bench_view(seconds: float) -> dict[str, float]:
     from twin.viewer import serve
 
@@ -102,8 +125,11 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--view-seconds", type=float, default=60.0)
     parser.add_argument("--skip-view", action="store_true")
+    parser.add_argument("--skip-calibration", action="store_true")
     args = parser.parse_args()
     results = {"physics": bench_physics(), "runs": bench_runs()}
+    if not args.skip_calibration:
+        results["calibration"] = bench_calibration()
     if not args.skip_view:
         results["view"] = bench_view(args.view_seconds)
     print(json.dumps(results, indent=2))

@@ -36,6 +36,7 @@ __all__ = [
     "ReferenceModel",
     "ReferencePlant",
     "discretize_zoh",
+    "rk4_step",
 ]
 
 STATE_NAMES = ("x", "theta", "xdot", "thetadot")
@@ -208,6 +209,21 @@ class ReferenceModel:
         return np.array(times), np.array(states)
 
 
+def rk4_step(f: Any, x: Any, th: Any, xd: Any, thd: Any, u: Any, h: float) -> tuple[Any, Any, Any, Any]:
+    """One classical Runge-Kutta step of (x, θ, ẋ, θ̇) with the input ``u`` held; ``f(x, θ, ẋ, θ̇, u)`` returns
+    the four derivatives. Floats or numpy arrays alike (the reference plant; the identification's batch)."""
+    a1 = f(x, th, xd, thd, u)
+    a2 = f(x + 0.5 * h * a1[0], th + 0.5 * h * a1[1], xd + 0.5 * h * a1[2], thd + 0.5 * h * a1[3], u)
+    a3 = f(x + 0.5 * h * a2[0], th + 0.5 * h * a2[1], xd + 0.5 * h * a2[2], thd + 0.5 * h * a2[3], u)
+    a4 = f(x + h * a3[0], th + h * a3[1], xd + h * a3[2], thd + h * a3[3], u)
+    return (
+        x + h / 6.0 * (a1[0] + 2 * a2[0] + 2 * a3[0] + a4[0]),
+        th + h / 6.0 * (a1[1] + 2 * a2[1] + 2 * a3[1] + a4[1]),
+        xd + h / 6.0 * (a1[2] + 2 * a2[2] + 2 * a3[2] + a4[2]),
+        thd + h / 6.0 * (a1[3] + 2 * a2[3] + 2 * a3[3] + a4[3]),
+    )
+
+
 class ReferencePlant:
     """The reference model as a physics backend (``twin.physics.Physics``): fixed-step RK4 at
     ``physics.timestep_s`` with the motor volts held over each step (eq 3.3.1 through the amplifier's rails).
@@ -277,18 +293,7 @@ class ReferencePlant:
         for i in range(n):
             if self._lost_time_s is None:
                 v = min(max(float(volts[i]), -rail), rail)
-                a1 = f(x, th, xd, thd, v)
-                a2 = f(
-                    x + 0.5 * h * a1[0], th + 0.5 * h * a1[1], xd + 0.5 * h * a1[2], thd + 0.5 * h * a1[3], v
-                )
-                a3 = f(
-                    x + 0.5 * h * a2[0], th + 0.5 * h * a2[1], xd + 0.5 * h * a2[2], thd + 0.5 * h * a2[3], v
-                )
-                a4 = f(x + h * a3[0], th + h * a3[1], xd + h * a3[2], thd + h * a3[3], v)
-                x += h / 6.0 * (a1[0] + 2 * a2[0] + 2 * a3[0] + a4[0])
-                th += h / 6.0 * (a1[1] + 2 * a2[1] + 2 * a3[1] + a4[1])
-                xd += h / 6.0 * (a1[2] + 2 * a2[2] + 2 * a3[2] + a4[2])
-                thd += h / 6.0 * (a1[3] + 2 * a2[3] + 2 * a3[3] + a4[3])
+                x, th, xd, thd = rk4_step(f, x, th, xd, thd, v, h)
                 if abs(th) > stop:
                     th = math.copysign(stop, th)
                     if thd * th > 0:

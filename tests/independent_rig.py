@@ -1,0 +1,134 @@
+"""An independent simulator of the rig, for testing identification on logs the twin did not make.
+
+Written from the physics, sharing no code with twin/ beyond the parameter values it is given:
+
+* dynamics: Lagrange's equations in mass-matrix form (q = (x, θ); kinetic energy of the ball's translation
+  and rolling on two wires with rolling radius r*, the beam about its pivot, the motor's reflected rotor),
+  integrated by scipy's adaptive DOP853 between ticks (the twin uses MuJoCo or fixed-step RK4);
+* ball channel: Table 6.3 curve through the 147 Ω / 22 µF RC filter stepped at 40 samples per block
+  (exponential update of each sample's wiper volts), plus Gaussian noise (0.3 mm worth of volts) and, on
+  4 % of the ticks, the wiper open for the block's last 2 ms (the twin: Poisson dropouts, exact RC);
+* angle channel: the counter rounded to the nearest count, the AD561 line, a 12-bit ADC, averaged over 40
+  samples per block (the twin: 800 samples from the count-crossing times);
+* command: 12-bit DAC, amplifier 9.6·(u − 2.5) within ±12 V, no latency;
+* controller: state feedback with finite-difference velocities and a ±0.1 m square-wave setpoint, plus a
+  ±0.5 V dither from its own random generator.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.integrate import solve_ivp
+
+from twin.parameters import Parameters
+
+K_SF = (-36.34, 24.6, -15.96, 3.98)  # §5.2.1's printed gains (V per m, rad, m/s, rad/s)
+PERIOD_S = 0.02
+
+
+def _rhs(p: Parameters, volts: float):
+    m, r, g = p.ball.mass_kg, p.ball.radius_m, p.physics.gravity_m_s2
+    rs = math.sqrt(r * r - p.track.contact_spacing_m**2 / 4)
+    j_ball = 0.4 * m * r * r
+    c = p.track.contact_height_m + rs
+    n = p.motor.gear_ratio
+    j_beam = p.beam.inertia_pivot_kgm2 + p.motor.rotor_inertia_kgm2 * n * n
+    b_beam = p.motor.viscous_damping_nm_s_per_rad * n * n + p.beam.pivot_damping_nm_s_per_rad
+    k_t = n * p.motor.torque_constant_nm_per_a / p.motor.resistance_ohm
+    k_b = n * p.motor.backemf_constant_v_s_per_rad
+    mb, h = p.beam.mass_kg, p.beam.cog_height_m
+
+    def f(_t: float, s: np.ndarray) -> list[float]:
+        x, th, xd, thd = s
+        # Ball centre in the pivot frame: (x cos θ − c sin θ, x sin θ + c cos θ); its spin relative to the
+        # beam is −ẋ/r*, so its absolute spin is θ̇ − ẋ/r*.
+        m11 = m + j_ball / rs**2
+        m12 = -(m * c + j_ball / rs)
+        m22 = j_beam + j_ball + m * (c * c + x * x)
+        torque = k_t * (min(max(volts, -12.0), 12.0) - k_b * thd)
+        q1 = m * x * thd**2 - m * g * math.sin(th)
+        q2 = (
+            torque
+            - b_beam * thd
+            - 2 * m * x * xd * thd
+            - m * g * (x * math.cos(th) - c * math.sin(th))
+            + mb * g * h * math.sin(th)
+        )
+        det = m11 * m22 - m12 * m12
+        return [xd, thd, (m22 * q1 - m12 * q2) / det, (m11 * q2 - m12 * q1) / det]
+
+    return f
+
+
+def simulate(params: Parameters, *, duration_s: float = 60.0, seed: int = 0) -> dict[str, np.ndarray]:
+    """A closed-loop log: {"timem", "datam1", "datam2", "aout"}, one value per tick, row 0 the start sample."""
+    p = params
+    rng = np.random.default_rng(seed)
+    curve_x, curve_v = np.array(p.ball_sensor.curve_position_m), np.array(p.ball_sensor.curve_volts_v)
+    step = 2 * math.pi / (p.angle_sensor.encoder_pulses_per_rev * p.motor.gear_ratio)
+    lsb_adc, lsb_dac = 10.0 / 4096, 5.0 / 4096
+    sw = p.software
+
+    tau = p.ball_sensor.rc_resistance_ohm * p.ball_sensor.rc_capacitance_f
+    decay = math.exp(-PERIOD_S / 40 / tau)
+    filtered = [float(np.interp(0.05, curve_x, curve_v))]
+
+    def ball_reading(xs: np.ndarray) -> float:
+        wiper = np.interp(xs, curve_x, curve_v)
+        if rng.random() < 0.04:
+            wiper[-4:] = 0.0
+        for w in wiper:
+            filtered[0] = w + (filtered[0] - w) * decay
+        v = filtered[0] + rng.normal(0.0, 0.3e-3 / 0.0693)
+        return -5.0 + lsb_adc * round((v + 5.0) / lsb_adc)
+
+    def angle_level(theta: float) -> float:
+        di = 512 + round((theta - p.angle_sensor.zeroing_error_rad) / step)
+        v = 0.009818 * di - 5.042
+        return -5.0 + lsb_adc * round((v + 5.0) / lsb_adc)
+
+    def measured(ball_v: float, angle_v: float) -> tuple[float, float]:
+        x = sw.ball_gain_m_per_v * ball_v + sw.ball_offset_m
+        deg = (sw.angle_gain_deg_per_v * (angle_v - sw.angle_reference_v) + sw.angle_reference_motor_deg) / 7
+        return x, deg * math.pi / 180
+
+    state = np.array([0.05, 0.0, 0.0, 0.0])
+    volts = 0.0
+    ticks = int(round(duration_s / PERIOD_S))
+    out = {k: np.zeros(ticks + 1) for k in ("timem", "datam1", "datam2", "aout")}
+    out["datam1"][0], out["datam2"][0], out["aout"][0] = (
+        ball_reading(np.full(40, state[0])),
+        angle_level(state[1]),
+        2.5,
+    )
+    out["timem"][0] = 0.0
+    prev = measured(out["datam1"][0], out["datam2"][0])
+    dither = 0.0
+    for k in range(1, ticks + 1):
+        t0 = (k - 1) * PERIOD_S
+        samples = t0 + PERIOD_S * np.arange(1, 41) / 40
+        sol = solve_ivp(
+            _rhs(p, volts), (t0, t0 + PERIOD_S), state, method="DOP853", t_eval=samples, rtol=1e-9, atol=1e-11
+        )
+        state = sol.y[:, -1]
+        ball_v = ball_reading(sol.y[0])
+        angle_v = float(np.mean([angle_level(th) for th in sol.y[1]]))
+        x, th = measured(ball_v, angle_v)
+        setpoint = 0.1 if (t0 // 5.0) % 2 == 0 else -0.1
+        xd, thd = (x - prev[0]) / PERIOD_S, (th - prev[1]) / PERIOD_S
+        prev = (x, th)
+        u = -(K_SF[0] * (x - setpoint) + K_SF[1] * th + K_SF[2] * xd + K_SF[3] * thd)
+        if k % 2 == 1:
+            dither = 0.5 if rng.random() < 0.5 else -0.5
+        command = min(max(u / 9.6 + 2.5 + dither / 9.6, 1.25), 3.75)
+        command = lsb_dac * round(command / lsb_dac)
+        volts = 9.6 * (command - 2.5)
+        out["timem"][k], out["datam1"][k], out["datam2"][k], out["aout"][k] = (
+            t0 + PERIOD_S,
+            ball_v,
+            angle_v,
+            command,
+        )
+    return out
