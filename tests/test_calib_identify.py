@@ -13,7 +13,6 @@ from calib.identify import FITTABLE, CalibrationError, calibrate
 from calib.logs import RigLog, rig_log
 from twin.app.cli import main
 from twin.log import save_mat
-from twin.model import measure_rest_gap_m
 from twin.parameters import Parameters
 
 FIT = [
@@ -44,15 +43,6 @@ def _error(name: str, fitted: float, true: float) -> float:
     return abs(fitted - true) if name == FIT[3] else abs(fitted / true - 1)
 
 
-def _fine_twin(values: dict[str, float]) -> Parameters:
-    """The twin at a 0.5 ms step (its contact margin re-measured for that step). At the default 1 ms the
-    twin's own time stepping adds about 0.1 % to the beam's inertia as the fit sees it (docs/design.md):
-    the method is tested against a twin whose numbers are its parameters."""
-    fine = Parameters().with_overrides({"physics.timestep_s": 5e-4, "physics.contact_margin_m": 0.0})
-    margin = -measure_rest_gap_m(fine)
-    return NOMINAL.with_overrides({**values, "physics.timestep_s": 5e-4, "physics.contact_margin_m": margin})
-
-
 @pytest.mark.slow
 def test_recovery_from_twin_logs_five_seeds() -> None:
     """60 s of the recommended experiment on the twin (full sensor chain, noise on) for five perturbed rigs:
@@ -60,7 +50,7 @@ def test_recovery_from_twin_logs_five_seeds() -> None:
     inside = {name: 0 for name in FIT}
     for seed in range(1, 6):
         truth = _truth(seed)
-        run = run_experiment("square", _fine_twin(truth), duration_s=60.0, seed=seed)
+        run = run_experiment("square", NOMINAL.with_overrides(truth), duration_s=60.0, seed=seed)
         cal = calibrate([rig_log(run.log)], FIT, NOMINAL)
         assert cal.converged, (seed, cal.message)
         for name in FIT:
