@@ -120,6 +120,7 @@ class Plant:
         mujoco.mj_forward(m, d)
         self.ball_lost = False
         self.ball_lost_time_s = None
+        self.lost_state: np.ndarray | None = None
 
     def _beam_axes(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The beam frame's unit vectors in world coordinates: a rotation by θ about (0, −1, 0).
@@ -160,7 +161,10 @@ class Plant:
         return float(self.data.qvel[self._hinge_dof])
 
     def state(self) -> np.ndarray:
-        """(x_m, θ_rad, ẋ_m_s, θ̇_rad_s) in the thesis's coordinates (eq 3.1.28)."""
+        """(x_m, θ_rad, ẋ_m_s, θ̇_rad_s) in the thesis's coordinates (eq 3.1.28). Once the ball is lost, the
+        state at the step it left the track: what falls afterwards is no longer the rig's state."""
+        if self.lost_state is not None:
+            return self.lost_state.copy()
         kin = self.ball_kinematics()
         return np.array([kin.position_m[0], self._theta(), kin.velocity_m_s[0], self._theta_dot()])
 
@@ -251,9 +255,25 @@ class Plant:
             if off.size:  # latched from the first step off the track
                 self.ball_lost = True
                 self.ball_lost_time_s = float(rows[off[0], 0])
+                self.lost_state = self._row_state(rows[off[0]])
                 on[off[0] :] = False
         times = t0 + np.arange(n + 1) * m.opt.timestep
         return PhysicsBlock(time_s=times, x_m=along, theta_rad=theta, on_track=on)
+
+    def _row_state(self, row: np.ndarray) -> np.ndarray:
+        """(x, θ, ẋ, θ̇) from one row of (time, qpos, qvel): the ball relative to the beam, as ``state``."""
+        nq = self.model.nq
+        theta, thetadot = (
+            (float(self.held_angle_rad or 0.0), 0.0)
+            if self._hinge_qpos is None or self._hinge_dof is None
+            else (float(row[1 + self._hinge_qpos]), float(row[1 + nq + self._hinge_dof]))
+        )
+        q, v = 1 + self._ball_qpos, 1 + nq + self._ball_dof
+        ox, oz = row[q] - self._pivot[0], row[q + 2] - self._pivot[2]
+        # Velocity relative to the rotating beam: v − ω×offset with ω = θ̇ about (0, −1, 0).
+        vx, vz = row[v] + thetadot * oz, row[v + 2] - thetadot * ox
+        c, s = math.cos(theta), math.sin(theta)
+        return np.array([c * ox + s * oz, theta, c * vx + s * vz, thetadot])
 
     def _on_track(self, along: np.ndarray, lateral: np.ndarray, height: np.ndarray) -> np.ndarray:
         p = self.params

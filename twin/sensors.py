@@ -54,6 +54,8 @@ __all__ = [
     "wiper_static_v",
 ]
 
+# Finished dropouts kept in the history (a long live session would otherwise grow it without bound).
+DROPOUT_HISTORY = 1000
 # A knot time within this many sample periods (25 ps at 40 kHz) of a sample instant is that instant: knot
 # times like k·1 ms accumulate rounding, and θ is continuous there, so the choice only removes float noise.
 SNAP_TOLERANCE_SAMPLES = 1e-6
@@ -346,6 +348,7 @@ class BallPositionChain:
         self.reading_v = float(adc_quantize_v(self.filtered_v, self.params.daq))
         self._dropouts: list[tuple[float, float]] = []
         self._first_open = 0
+        self._forgotten = 0  # dropouts over and dropped from the history (it stays bounded in long sessions)
         self._next_start_s = (
             t + self._rng.exponential(1.0 / self.params.ball_sensor.dropout_rate_hz)
             if self._noise_on
@@ -366,11 +369,12 @@ class BallPositionChain:
     @property
     def dropout_count(self) -> int:
         """Dropouts started since the last reset."""
-        return len(self._dropouts)
+        return self._forgotten + len(self._dropouts)
 
     @property
     def dropout_intervals(self) -> list[tuple[float, float]]:
-        """(start, end) times of every dropout since the last reset (may extend past ``time_s``)."""
+        """(start, end) times of the dropouts kept: every one since the last reset, up to the last
+        ``DROPOUT_HISTORY`` that are over (may extend past ``time_s``)."""
         return list(self._dropouts)
 
     def _schedule_until(self, t_end: float) -> None:
@@ -405,6 +409,11 @@ class BallPositionChain:
         self._schedule_until(t_end)
         while self._first_open < len(self._dropouts) and self._dropouts[self._first_open][1] <= t0:
             self._first_open += 1
+        if self._first_open > 2 * DROPOUT_HISTORY:  # forget the oldest finished ones
+            forget = self._first_open - DROPOUT_HISTORY
+            del self._dropouts[:forget]
+            self._first_open -= forget
+            self._forgotten += forget
         drops = [d for d in self._dropouts[self._first_open :] if d[1] > t0]
 
         # Extra breakpoints: where x crosses a table point or a track end (the wiper's slope or contact
