@@ -12,6 +12,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import re
 import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
@@ -39,6 +40,22 @@ class ParameterError(ValueError):
     """An impossible or unknown parameter; the message names the parameter, the value and the source."""
 
 
+# A parameter file with every value and its comments is about 10 kB; anything past 1 MiB is not one, and is
+# refused before it is parsed rather than read whole.
+MAX_FILE_BYTES = 1 << 20
+# A parameter file nests containers at most three deep: the file's table, a group's table, a curve's list
+# (group → field → number or list of numbers). Deeper nesting is refused before it reaches the fields.
+MAX_FILE_DEPTH = 3
+# A block is reduced to its last sample and its mean (appendix A): it needs at least this many samples.
+MIN_BLOCK_SAMPLES = 2
+# Longest rendering of a value or a name in a message: a refused 1 MiB string or list is not echoed whole.
+_SHOW_CHARS = 80
+# Card-side voltages (ADC and DAC ranges, sensor and command volts): I/O cards read and write within ±10 V;
+# ±100 V leaves room for a divider in front of the card and refuses a value typed in millivolts.
+_CARD_V = 100.0
+_CARD_V_WHY = "a card-side voltage: I/O cards read and write within ±10 V, ±100 V allows a divider in front"
+
+
 def param(
     default: float,
     unit: str,
@@ -48,17 +65,33 @@ def param(
     ge: float | None = None,
     lt: float | None = None,
     le: float | None = None,
+    why: str = "",
+    integer: bool = False,
 ) -> Any:
-    """A dataclass field with its unit, provenance and admissible range."""
+    """A dataclass field with its unit, provenance and admissible range; ``why`` gives the reason for the range
+    (it is quoted when a value is refused); ``integer`` makes it a whole number (stored as ``int``)."""
     return field(
         default=default,
-        metadata={"unit": unit, "source": source, "gt": gt, "ge": ge, "lt": lt, "le": le},
+        metadata={
+            "unit": unit,
+            "source": source,
+            "gt": gt,
+            "ge": ge,
+            "lt": lt,
+            "le": le,
+            "why": why,
+            "integer": integer,
+        },
     )
 
 
-def curve(default: tuple[float, ...], unit: str, source: str) -> Any:
-    """A dataclass field holding a measured table column (a tuple of floats) with its unit and provenance."""
-    return field(default=default, metadata={"unit": unit, "source": source, "curve": True})
+def curve(default: tuple[float, ...], unit: str, source: str, *, magnitude: float, why: str) -> Any:
+    """A dataclass field holding a measured table column (a tuple of floats) with its unit and provenance;
+    every value's magnitude is at most ``magnitude`` (reason: ``why``)."""
+    return field(
+        default=default,
+        metadata={"unit": unit, "source": source, "curve": True, "magnitude": magnitude, "why": why},
+    )
 
 
 def flag(default: bool, source: str) -> Any:
@@ -66,55 +99,163 @@ def flag(default: bool, source: str) -> Any:
     return field(default=default, metadata={"unit": "on/off", "source": source, "flag": True})
 
 
+def _show(value: Any) -> str:
+    """``repr(value)``, shortened for a message (a refused value may be a 1 MiB string or list)."""
+    try:
+        text = repr(value)
+    except ValueError:  # an int too long to print (sys.get_int_max_str_digits)
+        return f"<an integer of {value.bit_length()} bits>"
+    return _clip(text)
+
+
+def _clip(text: str, limit: int = _SHOW_CHARS) -> str:
+    """A name or a parser's message for a message, shortened like ``_show``."""
+    return text if len(text) <= limit else f"{text[: limit - 5]}…({len(text)} characters)"
+
+
+_BOUNDS = (
+    ("gt", lambda v, b: v > b, ">"),
+    ("ge", lambda v, b: v >= b, ">="),
+    ("lt", lambda v, b: v < b, "<"),
+    ("le", lambda v, b: v <= b, "<="),
+)
+
+
+def _refuse(name: str, value: Any, unit: str, rule: str, why: str = "") -> ParameterError:
+    """The one message format: ``group.field = value unit is impossible: it must be … (reason)``."""
+    reason = f" ({why})" if why else ""
+    return ParameterError(f"{name} = {_show(value)} {unit} is impossible: it must be {rule}{reason}")
+
+
 def _check_fields(obj: Any, group: str) -> None:
     for f in fields(obj):
         value = getattr(obj, f.name)
         name = f"{group}.{f.name}"
-        if f.metadata.get("flag"):
+        md = f.metadata
+        if md.get("flag"):
             if not isinstance(value, bool):
-                raise ParameterError(f"{name} = {value!r} is not true/false")
+                raise ParameterError(f"{name} = {_show(value)} is not true/false")
             continue
-        if f.metadata.get("curve"):
-            object.__setattr__(obj, f.name, _check_curve(name, value))
+        if md.get("curve"):
+            object.__setattr__(obj, f.name, _check_curve(name, value, md))
             continue
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ParameterError(f"{name} = {value!r} is not a number")
-        value = float(value)
-        if not math.isfinite(value):
-            raise ParameterError(f"{name} = {value!r} is impossible: it must be finite")
-        md = f.metadata
+            raise ParameterError(f"{name} = {_show(value)} is not a number")
         unit = md.get("unit", "")
-        for key, ok, word in (
-            ("gt", lambda v, b: v > b, ">"),
-            ("ge", lambda v, b: v >= b, ">="),
-            ("lt", lambda v, b: v < b, "<"),
-            ("le", lambda v, b: v <= b, "<="),
-        ):
+        number = _whole(name, value, unit) if md.get("integer") else _finite(name, value, unit)
+        for key, ok, word in _BOUNDS:
             bound = md.get(key)
-            if bound is not None and not ok(value, bound):
-                raise ParameterError(f"{name} = {value!r} {unit} is impossible: it must be {word} {bound}")
-        object.__setattr__(obj, f.name, value)
+            if bound is not None and not ok(number, bound):
+                # A sign (> 0, >= 0) needs no reason; every other bound quotes the field's.
+                why = "" if key in ("gt", "ge") and bound == 0 else md.get("why", "")
+                shown = value if md.get("integer") else number
+                raise _refuse(name, shown, unit, f"{word} {bound!r}", why)
+        object.__setattr__(obj, f.name, number)
 
 
-def _check_curve(name: str, value: Any) -> tuple[float, ...]:
+def _finite(name: str, value: int | float, unit: str) -> float:
+    """``value`` as a finite float (an integer too large for a float is refused, not an OverflowError)."""
+    try:
+        number = float(value)
+    except OverflowError:
+        number = math.inf
+    if not math.isfinite(number):
+        raise _refuse(name, value, unit, "finite")
+    return number
+
+
+def _whole(name: str, value: int | float, unit: str) -> int:
+    """``value`` as an int: a whole float (12.0, as TOML/JSON may write it) is accepted, 12.5 is refused."""
+    if isinstance(value, int):
+        return int(value)
+    if not math.isfinite(value):
+        raise _refuse(name, value, unit, "finite")
+    if not value.is_integer():
+        raise _refuse(name, value, unit, "a whole number")
+    return int(value)
+
+
+def _check_curve(name: str, value: Any, md: Mapping[str, Any]) -> tuple[float, ...]:
     if isinstance(value, (str, bytes, Mapping)) or not isinstance(value, (list, tuple)):
-        raise ParameterError(f"{name} = {value!r} is not a list of numbers")
+        raise ParameterError(f"{name} = {_show(value)} is not a list of numbers")
     out = []
+    unit, magnitude = md.get("unit", ""), md["magnitude"]
     for i, item in enumerate(value):
-        if isinstance(item, bool) or not isinstance(item, (int, float)) or not math.isfinite(item):
-            raise ParameterError(f"{name}[{i}] = {item!r} is not a finite number")
-        out.append(float(item))
+        if isinstance(item, bool) or not isinstance(item, (int, float)):
+            raise ParameterError(f"{name}[{i}] = {_show(item)} is not a finite number")
+        try:
+            number = float(item)
+        except OverflowError:
+            number = math.inf
+        if not math.isfinite(number):
+            raise ParameterError(f"{name}[{i}] = {_show(item)} is not a finite number")
+        if abs(number) > magnitude:
+            raise _refuse(f"{name}[{i}]", item, unit, f"within ±{magnitude!r}", md["why"])
+        out.append(number)
     if len(out) < 2:
         raise ParameterError(f"{name} has {len(out)} values: a curve needs at least 2 points")
     return tuple(out)
+
+
+# TOML text with its strings and comments blanked, then a dotted key of more than MAX_FILE_DEPTH parts (outside
+# strings and comments a run of dots joined by bare words can only be a key: a number has at most one dot).
+# tomllib's cost grows with the square of a dotted key's length (40 kB of "a.x.x…" take seconds), so such a key
+# is refused before parsing. Possessive quantifiers keep the scan linear.
+_TOML_STRINGS_AND_COMMENTS = re.compile(
+    r'"""[\s\S]*?"""|\'\'\'[\s\S]*?\'\'\'|"(?:[^"\\\n]|\\.)*+"|\'[^\'\n]*+\'|#[^\n]*+'
+)
+_TOML_DEEP_KEY = re.compile(rf"(?<![\w-])[\w-]++(?:[ \t]*+\.[ \t]*+[\w-]++){{{MAX_FILE_DEPTH},}}")
+
+
+def _toml_deep_key(text: str) -> int | None:
+    """The line of a dotted key nested deeper than a parameter file, or None (see ``_TOML_DEEP_KEY``)."""
+    # Each string or comment becomes a word of its own length, so offsets (and line numbers) are kept.
+    blanked = _TOML_STRINGS_AND_COMMENTS.sub(lambda m: "s" * len(m.group(0)), text)
+    match = _TOML_DEEP_KEY.search(blanked)
+    return None if match is None else text.count("\n", 0, match.start()) + 1
+
+
+def _file_depth_error(data: Any) -> str | None:
+    """Where ``data`` (a parsed file) nests containers deeper than ``MAX_FILE_DEPTH``, or None.
+
+    Iterative: a deeply nested value that the parser accepted must not raise RecursionError here."""
+    stack: list[tuple[Any, str, int]] = [(data, "", 1)]
+    while stack:
+        obj, where, depth = stack.pop()
+        if isinstance(obj, Mapping):
+            items: Any = ((f"{where}.{k}" if where else str(k), v) for k, v in obj.items())
+        elif isinstance(obj, list):
+            items = ((f"{where}[{i}]", v) for i, v in enumerate(obj))
+        else:
+            continue
+        if depth > MAX_FILE_DEPTH:
+            return _clip(where)
+        stack.extend((v, w, depth + 1) for w, v in items)
+    return None
 
 
 @dataclass(frozen=True)
 class Ball:
     """The steel ball."""
 
-    mass_kg: float = param(18.848e-3, "kg", "Table 3.1 (m)", gt=0.0)
-    radius_m: float = param(8.329e-3, "m", "Table 3.1 (r)", gt=0.0)
+    mass_kg: float = param(
+        18.848e-3,
+        "kg",
+        "Table 3.1 (m)",
+        gt=0.0,
+        le=1.0,
+        why="a bench-top rig's ball: 1 kg is a steel ball of 31 mm radius, 50x the thesis's; grams typed as kg "
+        "are refused",
+    )
+    radius_m: float = param(
+        8.329e-3,
+        "m",
+        "Table 3.1 (r)",
+        gt=0.0,
+        le=0.1,
+        why="a ball rolling on two wires of a bench-top beam: 0.1 m is 12x the thesis's; millimetres typed as "
+        "metres are refused",
+    )
 
     def __post_init__(self) -> None:
         _check_fields(self, "ball")
@@ -130,25 +271,54 @@ class Ball:
 class Beam:
     """The beam on its pivot P (without the ball)."""
 
-    mass_kg: float = param(136.78e-3, "kg", "Table 3.1 (M_B)", gt=0.0)
-    inertia_pivot_kgm2: float = param(4e-3, "kg·m²", "Table 3.1 (J_BP), about the pivot axis", gt=0.0)
+    mass_kg: float = param(
+        136.78e-3,
+        "kg",
+        "Table 3.1 (M_B)",
+        gt=0.0,
+        le=20.0,
+        why="a bench-top beam: 20 kg is 150x the thesis's and more than a small motor can tilt",
+    )
+    inertia_pivot_kgm2: float = param(
+        4e-3,
+        "kg·m²",
+        "Table 3.1 (J_BP), about the pivot axis",
+        gt=0.0,
+        le=10.0,
+        why="a bench-top beam: 10 kg·m² is 20 kg at 0.7 m from the pivot, 2500x the thesis's",
+    )
     cog_height_m: float = param(
-        10.2e-3, "m", "Table 3.1 (h): centre of gravity above the pivot (destabilising, eq 3.1.27)"
+        10.2e-3,
+        "m",
+        "Table 3.1 (h): centre of gravity above the pivot (destabilising, eq 3.1.27)",
+        ge=-1.0,
+        le=1.0,
+        why="a bench-top beam's centre of gravity lies within 1 m of its pivot (negative: below it)",
     )
     stop_angle_rad: float = param(
-        math.radians(43.4), "rad", "§3 (|θ| ≤ 43.4°): mechanical stops", gt=0.0, lt=math.pi / 2
+        math.radians(43.4),
+        "rad",
+        "§3 (|θ| ≤ 43.4°): mechanical stops",
+        gt=0.0,
+        lt=math.pi / 2,
+        why="a beam that tilts at all and stays short of vertical, where the ball falls off",
     )
     pivot_damping_nm_s_per_rad: float = param(
         0.0,
         "N·m·s/rad",
         "viscous friction of the pivot bearing; the thesis neglects it (§3.1), to be fitted from a rig log",
         ge=0.0,
+        le=10.0,
+        why="10 N·m·s/rad brakes the beam at 0.02 rad/s with the whole "
+        "0.2 N·m the thesis's motor gives at 12 V: a seized bearing",
     )
     pivot_friction_nm: float = param(
         0.0,
         "N·m",
         "Coulomb (dry) friction of the pivot bearing; the thesis neglects it (§3.1), to be fitted from a rig log",
         ge=0.0,
+        le=10.0,
+        why="10 N·m is 50x the 0.2 N·m the thesis's motor gives at 12 V: a seized bearing",
     )
 
     def __post_init__(self) -> None:
@@ -165,23 +335,45 @@ class Track:
     """The two wires the ball rolls on."""
 
     contact_height_m: float = param(
-        17.281e-3, "m", "Table 3.1 (h*): the wires' contact line above the pivot", gt=0.0
+        17.281e-3,
+        "m",
+        "Table 3.1 (h*): the wires' contact line above the pivot",
+        gt=0.0,
+        le=1.0,
+        why="the wires are above the pivot, within 1 m of it on a bench-top beam",
     )
     contact_spacing_m: float = param(
-        13.785e-3, "m", "Table 3.1 (d): distance between the two contacts", gt=0.0
+        13.785e-3,
+        "m",
+        "Table 3.1 (d): distance between the two contacts",
+        gt=0.0,
+        le=0.2,
+        why="two separate contacts, closer than the largest ball's diameter (2 × 0.1 m); the ball's own "
+        "diameter is checked with the ball",
     )
-    half_length_m: float = param(0.323, "m", "§3: |x| ≤ 0.323 m, the ball leaves the track beyond", gt=0.0)
+    half_length_m: float = param(
+        0.323,
+        "m",
+        "§3: |x| ≤ 0.323 m, the ball leaves the track beyond",
+        gt=0.0,
+        le=5.0,
+        why="a bench-top beam is at most 10 m long",
+    )
     wire_radius_m: float = param(
         1.0e-3,
         "m",
         "not given in the thesis; only the contact geometry (h*, d) enters the dynamics",
         gt=0.0,
+        le=0.1,
+        why="a wire: no thicker than the largest ball (0.1 m)",
     )
     friction: float = param(
         1.0,
         "-",
         "not given; rolling without slipping (thesis §1) needs μ > ≈0.3 up to the 43.4° stop",
         gt=0.0,
+        le=10.0,
+        why="a friction coefficient: dry contacts rarely exceed 1.5; 10 is already no-slip for any tilt",
     )
 
     def __post_init__(self) -> None:
@@ -192,20 +384,72 @@ class Track:
 class Motor:
     """Escap 26L18-216 DC motor and its 1:7 gearbox (Table 3.2, §3.3)."""
 
-    resistance_ohm: float = param(9.4, "Ω", "Table 3.2 (R)", gt=0.0)
-    torque_constant_nm_per_a: float = param(0.022, "N·m/A", "Table 3.2 (K_t)", gt=0.0)
-    backemf_constant_v_s_per_rad: float = param(0.022, "V·s/rad", "Table 3.2 (K_b)", gt=0.0)
-    gear_ratio: float = param(7.0, "-", "§3.3: gearbox 1:7 (N2/N1 in eq 3.3.1)", gt=0.0)
+    resistance_ohm: float = param(
+        9.4,
+        "Ω",
+        "Table 3.2 (R)",
+        gt=0.0,
+        le=1000.0,
+        why="a small DC motor's armature: 1 kΩ is 100x the Escap's and passes 12 mA at 12 V",
+    )
+    torque_constant_nm_per_a: float = param(
+        0.022,
+        "N·m/A",
+        "Table 3.2 (K_t)",
+        gt=0.0,
+        le=10.0,
+        why="10 N·m/A is a large industrial servo's, 450x the Escap's",
+    )
+    backemf_constant_v_s_per_rad: float = param(
+        0.022,
+        "V·s/rad",
+        "Table 3.2 (K_b)",
+        gt=0.0,
+        le=10.0,
+        why="equal to K_t in SI units: 10 V·s/rad is a large industrial servo's, 450x the Escap's",
+    )
+    gear_ratio: float = param(
+        7.0,
+        "-",
+        "§3.3: gearbox 1:7 (N2/N1 in eq 3.3.1)",
+        gt=0.0,
+        le=1000.0,
+        why="a gearbox: at 1:1000 the Escap's full speed (≈ 5 200 rpm at 12 V) turns the beam at 0.55 rad/s, too "
+        "slow to catch the ball",
+    )
     rotor_inertia_kgm2: float = param(
-        8.5e-7, "kg·m²", "Table 3.2 (J_m), reflected ×N² to the beam; the thesis neglects it", ge=0.0
+        8.5e-7,
+        "kg·m²",
+        "Table 3.2 (J_m), reflected ×N² to the beam; the thesis neglects it",
+        ge=0.0,
+        le=0.01,
+        why="a small motor's rotor: 0.01 kg·m² is a 2 kg disc 10 cm in radius, 10⁴x the Escap's; g·cm² "
+        "typed as kg·m² are refused",
     )
     viscous_damping_nm_s_per_rad: float = param(
-        0.4e-6, "N·m·s/rad", "Table 3.2 (B_m), reflected ×N² to the beam; the thesis neglects it", ge=0.0
+        0.4e-6,
+        "N·m·s/rad",
+        "Table 3.2 (B_m), reflected ×N² to the beam; the thesis neglects it",
+        ge=0.0,
+        le=0.01,
+        why="0.01 N·m·s/rad is 25000x the Escap's and 10 N·m of drag at 10 000 rpm",
     )
     inductance_h: float = param(
-        0.8e-3, "H", "Table 3.2 (L); L/R = 85 µs ≪ 1 ms step, neglected as in §3.3", ge=0.0
+        0.8e-3,
+        "H",
+        "Table 3.2 (L); L/R = 85 µs ≪ 1 ms step, neglected as in §3.3",
+        ge=0.0,
+        le=1.0,
+        why="a small motor's winding: 1 H is 1250x the Escap's",
     )
-    continuous_current_a: float = param(0.76, "A", "Table 3.2 (I_a), a rating, not a limit", gt=0.0)
+    continuous_current_a: float = param(
+        0.76,
+        "A",
+        "Table 3.2 (I_a), a rating, not a limit",
+        gt=0.0,
+        le=100.0,
+        why="a bench-top motor's rating: 100 A is 130x the Escap's",
+    )
 
     def __post_init__(self) -> None:
         _check_fields(self, "motor")
@@ -225,9 +469,26 @@ class Motor:
 class Amplifier:
     """Power amplifier between the I/O card's DAC and the motor (§6.4)."""
 
-    gain_v_per_v: float = param(9.6, "V/V", "§6.4: gain 9.6", gt=0.0)
-    zero_command_v: float = param(2.5, "V", "§6.4: 2.5 V command gives 0 V at the motor")
-    rail_v: float = param(12.0, "V", "§6.4: ±12 V full scale across the motor", gt=0.0)
+    gain_v_per_v: float = param(
+        9.6,
+        "V/V",
+        "§6.4: gain 9.6",
+        gt=0.0,
+        le=1000.0,
+        why="a power amplifier: 1000 V/V takes a 1 mV command step to 1 V at the motor",
+    )
+    zero_command_v: float = param(
+        2.5, "V", "§6.4: 2.5 V command gives 0 V at the motor", ge=-_CARD_V, le=_CARD_V, why=_CARD_V_WHY
+    )
+    rail_v: float = param(
+        12.0,
+        "V",
+        "§6.4: ±12 V full scale across the motor",
+        gt=0.0,
+        le=1e6,
+        why="1e6 V is the reproduction's stand-in for chapter 4's unlimited voltage "
+        "(controllers/reproduction); a real amplifier's rails are at most a few hundred volts",
+    )
 
     def __post_init__(self) -> None:
         _check_fields(self, "amplifier")
@@ -238,19 +499,30 @@ class Physics:
     """Numerical settings of the MuJoCo model: the values that make rolling on two wires exact (measured;
     docs/design.md)."""
 
-    gravity_m_s2: float = param(9.81, "m/s²", "standard gravity, as used by the thesis", gt=0.0)
+    gravity_m_s2: float = param(
+        9.81,
+        "m/s²",
+        "standard gravity, as used by the thesis",
+        gt=0.0,
+        le=100.0,
+        why="100 m/s² is 10 g, beyond any place a bench-top rig stands",
+    )
     timestep_s: float = param(
         1e-3,
         "s",
         "measured: 1 ms with implicitfast keeps rolling on two wires exact (docs/design.md)",
-        gt=0.0,
+        ge=1e-5,
         le=0.02,
+        why="at most one 20 ms control period; at 10 µs a 15 s run is already 1.5 million MuJoCo steps",
     )
     contact_timeconst_s: float = param(
         2e-3,
         "s",
         "measured: solref time constant = 2·timestep, stiff enough that the ball does not sink (docs/design.md)",
         gt=0.0,
+        le=0.1,
+        why="the contact's stiffness falls as 1/τ²: the ball rests 0.35 µm deep at 2 ms and about 1 mm deep "
+        "at 0.1 s, sinking into the wires beyond",
     )
     contact_impedance: float = param(
         0.99,
@@ -259,6 +531,7 @@ class Physics:
         "harder; with 0.9 the soft friction lets the ball creep (linearization off by 2 % in ∂ẍ/∂θ̇)",
         gt=0.0,
         lt=1.0,
+        why="MuJoCo's solimp impedance lies strictly between 0 and 1",
     )
     contact_margin_m: float = param(
         3.495e-7,
@@ -266,6 +539,9 @@ class Physics:
         "measured: rest penetration of the ball on the wires with no margin at the default timestep, "
         "time constant and impedance (twin.model.measure_rest_gap_m; tests/test_model.py keeps it current)",
         ge=0.0,
+        le=1e-3,
+        why="a margin is a contact's rest penetration (0.35 µm here); 1 mm would float the ball visibly "
+        "above the wires",
     )
 
     def __post_init__(self) -> None:
@@ -281,21 +557,65 @@ class Physics:
 class AngleSensor:
     """Beam-angle chain (§6.2): motor encoder → 10-bit up/down counter → AD561 DAC → I/O card ADC."""
 
-    encoder_pulses_per_rev: float = param(256.0, "pulses/rev", "§6.2: HEDS 5540, 256 pulses per turn", gt=0.0)
-    counter_bits: float = param(
-        10.0, "bit", "§6.2: 10-bit counter (three 74LS193, top 2 bits unused)", ge=1.0
+    encoder_pulses_per_rev: int = param(
+        256,
+        "pulses/rev",
+        "§6.2: HEDS 5540, 256 pulses per turn",
+        ge=1,
+        le=100_000,
+        why="whole pulses; optical encoders have up to ≈ 10 000 lines (40 000 edges in quadrature)",
+        integer=True,
     )
-    counter_zero_count: float = param(
-        512.0, "count", "§6.6: counters set to 512 at 0° by the zero switch", ge=0.0
+    counter_bits: int = param(
+        10,
+        "bit",
+        "§6.2: 10-bit counter (three 74LS193, top 2 bits unused)",
+        ge=1,
+        le=16,
+        why="a counter of whole bits; the twin tabulates the DAC's level for each of its 2**bits counts, and "
+        "16 bits (four 74LS193) is already 65 536 levels",
+        integer=True,
     )
-    dac_volts_per_count: float = param(0.009818, "V/count", "eq 6.2.6 (fit of the measured eq 6.2.4)", gt=0.0)
-    dac_offset_v: float = param(-5.042, "V", "eq 6.2.6: Va at DI = 0 (measured, eq 6.2.4)")
+    counter_zero_count: int = param(
+        512,
+        "count",
+        "§6.6: counters set to 512 at 0° by the zero switch",
+        ge=0,
+        le=2**16 - 1,
+        why="a value the counter can hold: 0 … 2**angle_sensor.counter_bits − 1",
+        integer=True,
+    )
+    dac_volts_per_count: float = param(
+        0.009818,
+        "V/count",
+        "eq 6.2.6 (fit of the measured eq 6.2.4)",
+        gt=0.0,
+        le=_CARD_V,
+        why="one count's step within the card-side ±100 V (the AD561's is 9.8 mV)",
+    )
+    dac_offset_v: float = param(
+        -5.042, "V", "eq 6.2.6: Va at DI = 0 (measured, eq 6.2.4)", ge=-_CARD_V, le=_CARD_V, why=_CARD_V_WHY
+    )
     zeroing_error_rad: float = param(
-        0.0, "rad", "Fig 7.20: beam angle at which the counter was zeroed (0 = beam level)"
+        0.0,
+        "rad",
+        "Fig 7.20: beam angle at which the counter was zeroed (0 = beam level)",
+        ge=-math.pi / 2,
+        le=math.pi / 2,
+        why="the beam is zeroed short of vertical (it has stops at ±43.4°)",
     )
 
     def __post_init__(self) -> None:
         _check_fields(self, "angle_sensor")
+        top = 2**self.counter_bits - 1
+        if self.counter_zero_count > top:
+            raise _refuse(
+                "angle_sensor.counter_zero_count",
+                self.counter_zero_count,
+                "count",
+                f"<= {top}",
+                f"2**angle_sensor.counter_bits − 1: the largest value a {self.counter_bits}-bit counter holds",
+            )
 
 
 @dataclass(frozen=True)
@@ -311,24 +631,61 @@ class BallSensor:
          0.03, 0.06, 0.09, 0.12, 0.15, 0.18, 0.21, 0.24, 0.27, 0.30, 0.323),
         "m",
         "Table 6.3: ball positions of the static calibration (measured on the rig), strictly increasing",
+        magnitude=5.0,
+        why="a position on a beam at most 10 m long",
     )  # fmt: skip
     curve_volts_v: tuple[float, ...] = curve(
         (-4.620, -4.410, -3.925, -3.460, -3.045, -2.620, -2.170, -1.747, -1.325, -0.895, -0.487, 0.0012,
          0.428, 0.840, 1.280, 1.716, 2.113, 2.470, 3.000, 3.460, 3.890, 4.340, 4.600),
         "V",
         "Table 6.3: volts measured at the I/O card for each position (not a straight line; eq 6.3.1 fits it)",
+        magnitude=_CARD_V,
+        why=_CARD_V_WHY,
     )  # fmt: skip
 
-    rc_resistance_ohm: float = param(147.0, "Ω", "§6.3: low-pass filter resistor", gt=0.0)
-    rc_capacitance_f: float = param(22e-6, "F", "§6.3: low-pass filter capacitor", gt=0.0)
+    rc_resistance_ohm: float = param(
+        147.0,
+        "Ω",
+        "§6.3: low-pass filter resistor",
+        gt=0.0,
+        le=1e6,
+        why="a filter resistor: 1 MΩ with the 22 µF capacitor is a 22 s time constant, a filter that passes "
+        "nothing a 50 Hz loop could use",
+    )
+    rc_capacitance_f: float = param(
+        22e-6,
+        "F",
+        "§6.3: low-pass filter capacitor",
+        gt=0.0,
+        le=1.0,
+        why="a filter capacitor: 1 F with the 147 Ω resistor is a 147 s time constant; µF typed as F are "
+        "refused",
+    )
     dropout_rate_hz: float = param(
-        5.0, "1/s", "assumed: rate of contact losses between ball and spring (§6.3), fit from a log", ge=0.0
+        5.0,
+        "1/s",
+        "assumed: rate of contact losses between ball and spring (§6.3), fit from a log",
+        ge=0.0,
+        le=1000.0,
+        why="beyond one loss per millisecond (a physics step, 40 samples) the "
+        "wiper is not a contact that sometimes opens but a wire that is never in contact, and the noise "
+        "process's work and memory grow with the rate",
     )
     dropout_mean_duration_s: float = param(
-        0.5e-3, "s", "assumed: mean duration of a contact loss, fit from a log", gt=0.0
+        0.5e-3,
+        "s",
+        "assumed: mean duration of a contact loss, fit from a log",
+        gt=0.0,
+        le=1.0,
+        why="a contact loss lasting longer than 1 s on average is a broken wire, not contact noise",
     )
     dropout_voltage_v: float = param(
-        0.0, "V", "assumed: the open wiper floats to ground through the measurement circuit (Fig 6.9)"
+        0.0,
+        "V",
+        "assumed: the open wiper floats to ground through the measurement circuit (Fig 6.9)",
+        ge=-_CARD_V,
+        le=_CARD_V,
+        why=_CARD_V_WHY,
     )
     noise_enabled: bool = flag(True, "switch: False turns the contact noise off")
 
@@ -352,20 +709,76 @@ class BallSensor:
 class Daq:
     """Advantech PCI-1712 as the thesis software used it (Table 6.4, appendix A)."""
 
-    sample_rate_hz: float = param(40000.0, "Hz", "Table 6.4: data acquisition rate", gt=0.0)
-    period_s: float = param(0.02, "s", "Table 6.4: timer period (control at 50 Hz)", gt=0.0)
-    adc_bits: float = param(12.0, "bit", "§6.5: 12-bit A/D", ge=1.0)
-    adc_min_v: float = param(-5.0, "V", "Table 6.4: analog input interval −5 V…5 V")
-    adc_max_v: float = param(5.0, "V", "Table 6.4: analog input interval −5 V…5 V")
-    dac_bits: float = param(12.0, "bit", "§6.5: 12-bit analog outputs", ge=1.0)
-    dac_min_v: float = param(0.0, "V", "Table 6.4: analog output interval 0…5 V")
-    dac_max_v: float = param(5.0, "V", "Table 6.4: analog output interval 0…5 V")
+    sample_rate_hz: float = param(
+        40000.0,
+        "Hz",
+        "Table 6.4: data acquisition rate",
+        gt=0.0,
+        le=1e6,
+        why="the PCI-1712 samples at up to 1 MS/s; a block holds sample_rate × period samples and is "
+        "allocated whole, so 1 MS/s × 1 s caps it at a million samples (8 MB a channel) instead of exhausting "
+        "memory; at least 2 samples per block is checked with daq.period_s",
+    )
+    period_s: float = param(
+        0.02,
+        "s",
+        "Table 6.4: timer period (control at 50 Hz)",
+        ge=1e-3,
+        le=1.0,
+        why="a software timer's period: 1 ms is the finest a desktop timer fires (the thesis's ran at 20 ms); a "
+        "loop slower than 1 s cannot hold this open-loop unstable rig",
+    )
+    adc_bits: int = param(
+        12,
+        "bit",
+        "§6.5: 12-bit A/D",
+        ge=1,
+        le=24,
+        why="a converter of whole bits; DAQ cards stop at 24 bits (the PCI-1712 has 12)",
+        integer=True,
+    )
+    adc_min_v: float = param(
+        -5.0, "V", "Table 6.4: analog input interval −5 V…5 V", ge=-_CARD_V, le=_CARD_V, why=_CARD_V_WHY
+    )
+    adc_max_v: float = param(
+        5.0, "V", "Table 6.4: analog input interval −5 V…5 V", ge=-_CARD_V, le=_CARD_V, why=_CARD_V_WHY
+    )
+    dac_bits: int = param(
+        12,
+        "bit",
+        "§6.5: 12-bit analog outputs",
+        ge=1,
+        le=24,
+        why="a converter of whole bits; DAQ cards stop at 24 bits (the PCI-1712 has 12)",
+        integer=True,
+    )
+    dac_min_v: float = param(
+        0.0, "V", "Table 6.4: analog output interval 0…5 V", ge=-_CARD_V, le=_CARD_V, why=_CARD_V_WHY
+    )
+    dac_max_v: float = param(
+        5.0, "V", "Table 6.4: analog output interval 0…5 V", ge=-_CARD_V, le=_CARD_V, why=_CARD_V_WHY
+    )
     output_latency_s: float = param(
-        0.0, "s", "assumed: delay from reading a block to the DAC update (computation time), 0…period", ge=0.0
+        0.0,
+        "s",
+        "assumed: delay from reading a block to the DAC update (computation time), 0…period",
+        ge=0.0,
+        le=1.0,
+        why="shorter than daq.period_s (checked with it), itself at most 1 s",
     )
 
     def __post_init__(self) -> None:
         _check_fields(self, "daq")
+        # (1e-9: a rate of exactly 2/period must not be refused for the rounding of the product)
+        if self.sample_rate_hz * self.period_s < MIN_BLOCK_SAMPLES - 1e-9:
+            raise _refuse(
+                "daq.sample_rate_hz",
+                self.sample_rate_hz,
+                "Hz",
+                f">= {MIN_BLOCK_SAMPLES / self.period_s!r}",
+                f"at least {MIN_BLOCK_SAMPLES} samples in a daq.period_s = {self.period_s!r} s block: the "
+                "software reads a block's last sample and its mean, and an empty block divides by zero",
+            )
         if self.adc_max_v <= self.adc_min_v:
             raise ParameterError(
                 f"daq.adc_max_v = {self.adc_max_v!r} V must exceed daq.adc_min_v = {self.adc_min_v!r} V"
@@ -395,26 +808,95 @@ class SoftwareCalibration:
     (twin.converters); the ideal sensors (twin.sensors.IdealSensors) invert them. A recalibrated rig
     changes them here instead of editing controller code."""
 
-    ball_gain_m_per_v: float = param(0.0693, "m/V", "eq 6.3.1 / appendix A: x1 = 0.0693·V + 0.0018", gt=0.0)
-    ball_offset_m: float = param(0.0018, "m", "eq 6.3.1 / appendix A: x1 = 0.0693·V + 0.0018")
+    ball_gain_m_per_v: float = param(
+        0.0693,
+        "m/V",
+        "eq 6.3.1 / appendix A: x1 = 0.0693·V + 0.0018",
+        gt=0.0,
+        le=10.0,
+        why="metres per card volt: 10 m/V sweeps a 10 m beam with 1 V, 140x the thesis's",
+    )
+    ball_offset_m: float = param(
+        0.0018,
+        "m",
+        "eq 6.3.1 / appendix A: x1 = 0.0693·V + 0.0018",
+        ge=-5.0,
+        le=5.0,
+        why="a position on a beam at most 10 m long",
+    )
     angle_gain_deg_per_v: float = param(
         143.22657649,
         "deg/V",
         "eq 6.2.9–6.2.10 / appendix A: (360/256)/(5 kΩ·2.0108 mA/1024), motor degrees per volt",
         gt=0.0,
+        le=1e5,
+        why="700x the thesis's 143 °/V; the bound refuses unit mistakes (counts, arc minutes) more than it "
+        "states a physical limit",
     )
-    angle_reference_v: float = param(5.002, "V", "eq 6.2.4 / appendix A: measured DAC output at DI = 1023")
+    angle_reference_v: float = param(
+        5.002,
+        "V",
+        "eq 6.2.4 / appendix A: measured DAC output at DI = 1023",
+        ge=-_CARD_V,
+        le=_CARD_V,
+        why=_CARD_V_WHY,
+    )
     angle_reference_motor_deg: float = param(
-        718.59375, "deg", "§6.2 / appendix A: motor angle at DI = 1023, (1023 − 512)·360/256"
+        718.59375,
+        "deg",
+        "§6.2 / appendix A: motor angle at DI = 1023, (1023 − 512)·360/256",
+        ge=-(2**16 - 1) * 360.0,
+        le=(2**16 - 1) * 360.0,
+        why="a counter of at most 16 bits at 1 pulse per turn spans at most 65 535 motor turns",
     )
-    angle_gear_ratio: float = param(7.0, "-", "appendix A: the literal '/ 7' (gearbox 1:7, §6.2)", gt=0.0)
+    angle_gear_ratio: float = param(
+        7.0,
+        "-",
+        "appendix A: the literal '/ 7' (gearbox 1:7, §6.2)",
+        gt=0.0,
+        le=1000.0,
+        why="as motor.gear_ratio: a gearbox of at most 1:1000",
+    )
     software_pi: float = param(
-        3.141592654, "-", "appendix A: x2 = x2_temp_2·(3.141592654/180), π as typed", gt=3.14, lt=3.15
+        3.141592654,
+        "-",
+        "appendix A: x2 = x2_temp_2·(3.141592654/180), π as typed",
+        gt=3.14,
+        lt=3.15,
+        why="π as typed, to two decimals at least",
     )
-    command_gain_v_per_v: float = param(9.6, "V/V", "§6.4 / appendix A: adat = u/9.6 + 2.5", gt=0.0)
-    command_zero_v: float = param(2.5, "V", "§6.4 / appendix A: 2.5 V is zero volts at the motor")
-    command_low_v: float = param(1.25, "V", "appendix A: adat clipped to 1.25…3.75 V (−12 V…+12 V)")
-    command_high_v: float = param(3.75, "V", "appendix A: adat clipped to 1.25…3.75 V (−12 V…+12 V)")
+    command_gain_v_per_v: float = param(
+        9.6,
+        "V/V",
+        "§6.4 / appendix A: adat = u/9.6 + 2.5",
+        gt=0.0,
+        le=1000.0,
+        why="as amplifier.gain_v_per_v: a power amplifier's gain of at most 1000 V/V",
+    )
+    command_zero_v: float = param(
+        2.5,
+        "V",
+        "§6.4 / appendix A: 2.5 V is zero volts at the motor",
+        ge=-_CARD_V,
+        le=_CARD_V,
+        why=_CARD_V_WHY,
+    )
+    command_low_v: float = param(
+        1.25,
+        "V",
+        "appendix A: adat clipped to 1.25…3.75 V (−12 V…+12 V)",
+        ge=-_CARD_V,
+        le=_CARD_V,
+        why=_CARD_V_WHY,
+    )
+    command_high_v: float = param(
+        3.75,
+        "V",
+        "appendix A: adat clipped to 1.25…3.75 V (−12 V…+12 V)",
+        ge=-_CARD_V,
+        le=_CARD_V,
+        why=_CARD_V_WHY,
+    )
 
     def __post_init__(self) -> None:
         _check_fields(self, "software")
@@ -439,6 +921,7 @@ class Start:
         "exactly when the first command arrives (as the thesis's simulations start)",
         ge=0.0,
         le=1.0,
+        why="after 1 s the released rig has long fallen",
     )
 
     def __post_init__(self) -> None:
@@ -511,6 +994,8 @@ class Parameters:
         Unknown groups or names raise ``ParameterError`` naming them and ``origin``."""
         nested: dict[str, dict[str, Any]] = {}
         for key, value in overrides.items():
+            if not isinstance(key, str):
+                raise ParameterError(f"{origin}: {_show(key)} is not a parameter name")
             if "." in key:
                 group, name = key.split(".", 1)
                 nested.setdefault(group, {})[name] = value
@@ -518,19 +1003,19 @@ class Parameters:
                 nested.setdefault(key, {}).update(value)
             else:
                 raise ParameterError(
-                    f"{origin}: '{key}' is not a parameter group (expected one of {sorted(_GROUPS)})"
+                    f"{origin}: '{_clip(key)}' is not a parameter group (expected one of {sorted(_GROUPS)})"
                 )
         changes: dict[str, Any] = {}
         for group, values in nested.items():
             if group not in _GROUPS:
                 raise ParameterError(
-                    f"{origin}: unknown parameter group '{group}' (expected one of {sorted(_GROUPS)})"
+                    f"{origin}: unknown parameter group '{_clip(group)}' (expected one of {sorted(_GROUPS)})"
                 )
             known = {f.name for f in fields(_GROUPS[group])}
             for name in values:
                 if name not in known:
                     raise ParameterError(
-                        f"{origin}: unknown parameter '{group}.{name}' (known: {sorted(known)})"
+                        f"{origin}: unknown parameter '{group}.{_clip(str(name))}' (known: {sorted(known)})"
                     )
             try:
                 changes[group] = dataclasses.replace(getattr(self, group), **values)
@@ -543,23 +1028,48 @@ class Parameters:
 
     @classmethod
     def from_file(cls, path: str | Path) -> Parameters:
-        """Defaults overridden by a TOML or JSON file (groups as tables/objects, e.g. ``[ball] mass_kg = …``)."""
+        """Defaults overridden by a TOML or JSON file (groups as tables/objects, e.g. ``[ball] mass_kg = …``).
+
+        Anything that is not a parameter file raises ``ParameterError`` naming the file: a file larger than
+        ``MAX_FILE_BYTES`` (only that much is read), one that does not parse, or one nested deeper than a
+        parameter file (group → field → number or list of numbers)."""
         path = Path(path)
+        kind = "JSON" if path.suffix.lower() == ".json" else "TOML"
         try:
-            text = path.read_bytes()
+            with path.open("rb") as fh:
+                text = fh.read(MAX_FILE_BYTES + 1)
         except OSError as exc:
-            raise ParameterError(f"{path}: cannot read parameter file ({exc.strerror})") from None
+            raise ParameterError(f"{path}: cannot read parameter file ({exc.strerror or exc})") from None
+        if len(text) > MAX_FILE_BYTES:
+            raise ParameterError(
+                f"{path}: larger than {MAX_FILE_BYTES} bytes (1 MiB), not read further: a parameter file with "
+                f"every value and its comments is about 10 kB"
+            )
+        nested = (
+            f"{path}: nested deeper than a parameter file's two levels (group → field → number or list of "
+            f"numbers)"
+        )
+        deep_line: int | None = None
         try:
-            if path.suffix.lower() == ".json":
+            if kind == "JSON":
                 data = json.loads(text)
             else:
-                data = tomllib.loads(text.decode("utf-8"))
-        except (json.JSONDecodeError, tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+                toml_text = text.decode("utf-8")
+                deep_line = _toml_deep_key(toml_text)
+                data = {} if deep_line is not None else tomllib.loads(toml_text)
+        except RecursionError:
+            raise ParameterError(nested) from None
+        except ValueError as exc:  # JSONDecodeError, TOMLDecodeError, UnicodeDecodeError, over-long integers
+            raise ParameterError(f"{path}: not a valid {kind} file: {_clip(str(exc), 200)}") from None
+        if deep_line is not None:
             raise ParameterError(
-                f"{path}: not a valid {path.suffix.lstrip('.').upper() or 'TOML'} file: {exc}"
-            ) from None
+                f"{nested}: line {deep_line} has a dotted key of more than {MAX_FILE_DEPTH} parts"
+            )
         if not isinstance(data, dict):
             raise ParameterError(f"{path}: expected a table of parameter groups at the top level")
+        where = _file_depth_error(data)
+        if where is not None:
+            raise ParameterError(f"{nested}: at {where}")
         return cls().with_overrides(data, origin=str(path))
 
     def to_dict(self) -> dict[str, dict[str, Any]]:
