@@ -32,8 +32,14 @@ from __future__ import annotations
 
 import csv
 import io
+import os
+import stat
+import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field, fields
 from pathlib import Path
+from typing import BinaryIO
 
 import numpy as np
 import scipy.io
@@ -45,6 +51,7 @@ __all__ = [
     "TRUTH_FIELDS",
     "LogError",
     "RunLog",
+    "atomic_output",
     "load_csv",
     "load_mat",
     "save_csv",
@@ -128,11 +135,63 @@ class RunLog:
         return int(self.timem.size)
 
 
-def _open_new(path: Path, overwrite: bool) -> io.BufferedWriter:
+def _exists_error(path: Path) -> FileExistsError:
+    return FileExistsError(f"{path}: exists; not overwritten (pass overwrite=True)")
+
+
+def _file_mode(path: Path) -> int:
+    """The mode of the file being replaced, or a new file's (0o666 less the umask)."""
     try:
-        return open(path, "wb" if overwrite else "xb")
-    except FileExistsError:
-        raise FileExistsError(f"{path}: exists; not overwritten (pass overwrite=True)") from None
+        return stat.S_IMODE(os.stat(path).st_mode)
+    except OSError:
+        umask = os.umask(0)
+        os.umask(umask)
+        return 0o666 & ~umask
+
+
+@contextmanager
+def atomic_output(path: str | Path, *, overwrite: bool = False) -> Iterator[BinaryIO]:
+    """A binary file to write ``path`` through, atomically: the data goes to a temporary file in the same
+    directory, which replaces ``path`` in one step (``os.replace``) when the block ends without error. On
+    an error the temporary file is removed and whatever was at ``path`` is left as it was. Without
+    ``overwrite`` an existing ``path`` is refused (``FileExistsError``), also one that appears meanwhile
+    (the file is linked into place, which fails on an existing name)."""
+    path = Path(path)
+    if not overwrite and os.path.lexists(path):
+        raise _exists_error(path)
+    try:
+        fd, tmp_name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    except OSError as exc:  # name the file asked for, not the temporary one
+        raise type(exc)(exc.errno, exc.strerror, str(path)) from None
+    tmp = Path(tmp_name)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            yield fh
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.chmod(tmp, _file_mode(path))
+        if overwrite:
+            os.replace(tmp, path)
+            return
+        try:
+            os.link(tmp, path)  # fails if path exists: a file created since the check is not replaced
+        except FileExistsError:
+            raise _exists_error(path) from None
+        except OSError:  # no hard links on this file system
+            if os.path.lexists(path):
+                raise _exists_error(path) from None
+            os.replace(tmp, path)
+            return
+    except BaseException:
+        try:
+            tmp.unlink()
+        except OSError:
+            pass
+        raise
+    try:  # linked into place: the temporary name goes
+        tmp.unlink()
+    except OSError:
+        pass
 
 
 def save_mat(log: RunLog, path: str | Path, *, overwrite: bool = False) -> None:
@@ -144,7 +203,7 @@ def save_mat(log: RunLog, path: str | Path, *, overwrite: bool = False) -> None:
     for name in TRUTH_FIELDS:
         value = getattr(log, name)
         data[name] = value.astype(np.uint8) if name in _BOOL_FIELDS else value  # MATLAB: logical(ball_lost)
-    with _open_new(path, overwrite) as fh:
+    with atomic_output(path, overwrite=overwrite) as fh:  # a failed write leaves an existing file as it was
         scipy.io.savemat(fh, data, format="5", oned_as="row", do_compression=False)
 
 
@@ -267,11 +326,14 @@ def save_csv(log: RunLog, path: str | Path, *, overwrite: bool = False) -> None:
         else:
             columns.append([repr(v) for v in value.tolist()])  # shortest repr that reads back exactly
     rows = max(len(c) for c in columns)
-    with _open_new(path, overwrite) as fh, io.TextIOWrapper(fh, encoding="utf-8", newline="") as text:
+    with atomic_output(path, overwrite=overwrite) as fh:  # a failed write leaves an existing file as it was
+        text = io.TextIOWrapper(fh, encoding="utf-8", newline="")
         writer = csv.writer(text, lineterminator="\n")
         writer.writerow(names)
         for i in range(rows):
             writer.writerow([c[i] if i < len(c) else "" for c in columns])
+        text.flush()
+        text.detach()  # atomic_output closes the file
 
 
 def load_csv(path: str | Path) -> RunLog:

@@ -10,12 +10,18 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 from twin.engine import RunResult  # noqa: E402
+from twin.log import atomic_output  # noqa: E402
 
 __all__ = ["plot_run"]
 
 
-def plot_run(result: RunResult, path: str | Path, title: str | None = None) -> None:
-    """Ball position (true, measured, estimated), beam angle, motor volts against time, as one PNG."""
+def plot_run(
+    result: RunResult, path: str | Path, title: str | None = None, *, overwrite: bool = True
+) -> None:
+    """Ball position (true, measured, estimated), beam angle, motor volts against time, as one PNG.
+
+    The file is written atomically (``twin.log.atomic_output``): a failed write leaves an existing file as
+    it was; without ``overwrite`` an existing file is refused (``FileExistsError``)."""
     log = result.log
     fig, axes = plt.subplots(3, 1, figsize=(8, 7.5), sharex=True)
     ax = axes[0]
@@ -34,5 +40,8 @@ def plot_run(result: RunResult, path: str | Path, title: str | None = None) -> N
     ax.set_xlabel("time (s)")
     fig.suptitle(title or f"{result.controller}: {'held' if result.verdict.held else result.verdict.reason}")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    try:
+        with atomic_output(path, overwrite=overwrite) as fh:
+            fig.savefig(fh, dpi=110, format=Path(path).suffix[1:].lower() or "png")
+    finally:
+        plt.close(fig)

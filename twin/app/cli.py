@@ -3,24 +3,93 @@
 Exit codes: 0 success (for ``run``: the ball was held), 1 a run whose ball was lost or not held, or whose
 controller failed, 2 bad input (arguments, parameter files, output paths), each with a one-line message
 and no traceback.
+
+Outputs (``--log``, ``--plot``, ``--out``) are checked before any work (twin.app.paths): a known extension,
+not an existing file unless ``--overwrite``, two options never naming the same file, a directory that exists
+and can be written. They are written atomically: a failed write leaves an existing file as it was.
+
+``--help`` imports nothing heavy: the controller registry (python-control), MuJoCo's runs and the plots are
+imported by the commands that use them.
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib
+import inspect
 import json
 import math
+import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING, Any, NoReturn
 
-import numpy as np
+from twin.app.paths import check_output_dir, check_outputs, writing
 
-from twin.parameters import ParameterError, Parameters
-from twin.reference import STATE_NAMES, ReferenceModel
+if TYPE_CHECKING:
+    from twin.engine import Catalogue, StateLaw
+    from twin.interface import Controller
+    from twin.parameters import Parameters
+
+# controllers.registry.NAMES, kept here as text so that --help need not import the registry (and python-control);
+# tests/test_cli.py checks that the two agree. A name is validated against the registry itself.
+CONTROLLER_NAMES = (
+    "thesis-sf-continuous",
+    "thesis-clp-continuous",
+    "thesis-smc-continuous",
+    "thesis-sf",
+    "thesis-clp",
+    "appendix-sf",
+    "appendix-clp",
+    "sf",
+    "clp",
+    "smc",
+    "lqr",
+)
+CONTROLLER_HELP = (
+    "a named controller ({names}) or MODULE:CLASS, your own twin.interface.Controller subclass imported from "
+    "MODULE (the current directory is searched first); it is built as CLASS(software=params.software), with "
+    "the rig software's calibration, if its constructor has a parameter named 'software', else as CLASS()"
+)
+# A run keeps every tick of its log in memory (and the log on disk holds them all): one simulated hour is
+# 180 000 ticks at 50 Hz.
+MAX_RUN_S = 3600.0
+# The live view's speed slider (twin.viewer) runs from 0.1 to 4.
+SPEED_MIN, SPEED_MAX = 0.1, 4.0
+LOG_SUFFIXES = (".mat", ".csv")
+PLOT_SUFFIXES = (".png",)
+PARAMS_OUT_SUFFIXES = (".toml",)
+# Lower bounds of an output's size, to refuse a disk without room before the run: 17 columns a tick, 8 bytes
+# each in a .mat, at least 4 characters each in a CSV; a plot takes at least 20 kB.
+_LOG_BYTES_PER_TICK = {".mat": 17 * 8, ".csv": 17 * 4}
+_PLOT_BYTES = 20_000
+
+
+def _one_line(exc: BaseException) -> str:
+    return " ".join(str(exc).split()) or type(exc).__name__
+
+
+def package_version() -> str:
+    """The installed package's version, or pyproject.toml's when the package is not installed."""
+    from importlib import metadata
+
+    try:
+        return metadata.version("ballbeam-twin")
+    except metadata.PackageNotFoundError:
+        pass
+    import tomllib
+
+    try:
+        with open(Path(__file__).resolve().parents[2] / "pyproject.toml", "rb") as fh:
+            return str(tomllib.load(fh)["project"]["version"])
+    except (OSError, KeyError, tomllib.TOMLDecodeError):
+        return "unknown"
 
 
 def _load_params(args: argparse.Namespace) -> Parameters:
+    from twin.parameters import ParameterError, Parameters
+
     params = Parameters.from_file(args.params) if args.params else Parameters()
     overrides: dict[str, object] = {}
     for item in getattr(args, "set", None) or ():
@@ -33,18 +102,33 @@ def _load_params(args: argparse.Namespace) -> Parameters:
 
 def _parse_value(text: str, item: str) -> object:
     """A --set value: true/false, a number, or a JSON list of numbers."""
+    from twin.parameters import ParameterError
+
     if text in ("true", "false"):
         return text == "true"
+    shown = text if len(text) <= 40 else text[:37] + "..."
     try:
         value = json.loads(text)
-    except json.JSONDecodeError:
+    except (json.JSONDecodeError, RecursionError, ValueError):  # ValueError: an integer of > 4300 digits
         raise ParameterError(
-            f"--set {item!r}: {text!r} is not a number, true/false or a list of numbers"
+            f"--set {item[:60]!r}: {shown!r} is not a number, true/false or a list of numbers"
         ) from None
+    ok = isinstance(value, (int, float)) or (
+        isinstance(value, list)
+        and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)
+    )
+    if not ok:
+        raise ParameterError(
+            f"--set {item[:60]!r}: {shown!r} is not a number, true/false or a list of numbers"
+        )
     return value
 
 
 def _cmd_linearize(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from twin.reference import STATE_NAMES, ReferenceModel
+
     params = _load_params(args)
     if args.source == "reference":
         a, b = ReferenceModel(params).linearize(args.input)
@@ -73,6 +157,8 @@ def _cmd_linearize(args: argparse.Namespace) -> int:
 
 
 def _cmd_params(args: argparse.Namespace) -> int:
+    from twin.parameters import Parameters
+
     params = _load_params(args)
     if args.json:
         print(json.dumps(params.to_dict(), indent=2))
@@ -84,21 +170,136 @@ def _cmd_params(args: argparse.Namespace) -> int:
     return 0
 
 
+def _check_finite(**values: float) -> None:
+    from twin.parameters import ParameterError
+
+    for name, value in values.items():
+        if not math.isfinite(value):
+            raise ParameterError(f"--{name} = {value!r} is not a finite number")
+
+
+def _check_run_duration(duration_s: float, params: Parameters) -> None:
+    from twin.parameters import ParameterError
+
+    if not 0 < duration_s <= MAX_RUN_S:
+        raise ParameterError(
+            f"--duration = {duration_s!r}: a run lasts more than 0 and at most {MAX_RUN_S:g} s of simulated "
+            f"time (its log keeps every {params.daq.period_s * 1e3:g} ms tick in memory)"
+        )
+
+
+def _log_bytes(text: str | None, duration_s: float, params: Parameters) -> int:
+    """A lower bound of a log's size on disk (0 for a path the checks will refuse anyway)."""
+    if not text:
+        return 0
+    ticks = int(duration_s / params.daq.period_s) + 2
+    return ticks * _LOG_BYTES_PER_TICK.get(Path(text).suffix.lower(), 0)
+
+
+def _user_controller(spec: str) -> type[Controller] | None:
+    """The class named by ``MODULE:CLASS``, or None for a registry name (checked against the registry)."""
+    from twin.parameters import ParameterError
+
+    if ":" not in spec:
+        from controllers import registry
+
+        if spec not in registry.NAMES:
+            raise ParameterError(
+                f"--controller {spec!r}: unknown controller; known: {', '.join(registry.NAMES)}, "
+                "or MODULE:CLASS for your own"
+            )
+        return None
+    from twin.interface import Controller
+
+    module_name, _, qualname = spec.partition(":")
+    if not module_name or not qualname:
+        raise ParameterError(f"--controller {spec!r}: expected MODULE:CLASS, e.g. mypkg.mod:MyController")
+    cwd = os.getcwd()
+    if "" not in sys.path and cwd not in sys.path:  # as `python -m`: the user's modules where they are
+        sys.path.insert(0, cwd)
+    try:
+        module = importlib.import_module(module_name)
+    except ModuleNotFoundError as exc:
+        if exc.name and (module_name == exc.name or module_name.startswith(exc.name + ".")):
+            raise ParameterError(f"--controller {spec}: no module named {exc.name!r}") from None
+        raise ParameterError(
+            f"--controller {spec}: importing {module_name} failed: {_one_line(exc)}"
+        ) from None
+    except Exception as exc:  # noqa: BLE001 - the user's module may raise anything while it is imported
+        raise ParameterError(
+            f"--controller {spec}: importing {module_name} failed: {type(exc).__name__}: {_one_line(exc)}"
+        ) from None
+    obj: Any = module
+    for part in qualname.split("."):
+        try:
+            obj = getattr(obj, part)
+        except AttributeError:
+            raise ParameterError(f"--controller {spec}: module {module_name} has no {qualname!r}") from None
+    if not (isinstance(obj, type) and issubclass(obj, Controller)):
+        raise ParameterError(
+            f"--controller {spec}: {qualname} is not a subclass of twin.interface.Controller "
+            "(a hardware controller: raw blocks in, a DAC command out)"
+        )
+    return obj
+
+
+def _construct(cls: type[Controller], spec: str, params: Parameters) -> Controller:
+    """``cls(software)`` if the constructor has a parameter ``software``, else ``cls()``."""
+    from twin.parameters import ParameterError
+
+    try:
+        software = inspect.signature(cls).parameters.get("software")
+    except (TypeError, ValueError):  # no signature to read: call it without arguments
+        software = None
+    call = f"{cls.__name__}({'' if software is None else 'software'})"
+    try:
+        if software is None:
+            controller = cls()
+        elif software.kind is inspect.Parameter.POSITIONAL_ONLY:
+            controller = cls(params.software)  # type: ignore[call-arg]
+        else:
+            controller = cls(software=params.software)  # type: ignore[call-arg]
+    except Exception as exc:  # noqa: BLE001 - the user's constructor may raise anything
+        raise ParameterError(
+            f"--controller {spec}: {call} failed: {type(exc).__name__}: {_one_line(exc)}"
+        ) from None
+    return controller
+
+
+class _WithUserController:
+    """The registry plus the user's ``MODULE:CLASS`` controller, as a catalogue for the live view."""
+
+    def __init__(self, base: Catalogue, spec: str, cls: type[Controller]) -> None:
+        self.base, self.spec, self.cls = base, spec, cls
+        self.NAMES: tuple[str, ...] = (*base.NAMES, spec)
+
+    def make(self, name: str, params: Parameters | None = None) -> Controller | StateLaw:
+        from twin.parameters import Parameters
+
+        if name == self.spec:
+            return _construct(self.cls, name, params or Parameters())
+        return self.base.make(name, params)
+
+
 def _cmd_run(args: argparse.Namespace) -> int:
     from controllers import registry
     from twin.engine import ControllerError, run_closed_loop
     from twin.log import save_csv, save_mat
 
     params = _load_params(args)
-    for name, value in (("--x0", args.x0), ("--theta0", args.theta0), ("--duration", args.duration)):
-        if not math.isfinite(value):
-            raise ParameterError(f"{name} = {value!r} is not a finite number")
-    if args.duration <= 0:
-        raise ParameterError(f"--duration = {args.duration!r} must be positive")
-    for path in (args.log, args.plot):
-        if path and Path(path).exists() and not args.overwrite:
-            raise ParameterError(f"{path}: exists; not overwritten (pass --overwrite)")
-    controller = registry.make(args.controller, params)
+    _check_finite(x0=args.x0, theta0=args.theta0, duration=args.duration)
+    _check_run_duration(args.duration, params)
+    user = _user_controller(args.controller)
+    paths = check_outputs(
+        [
+            ("--log", args.log, LOG_SUFFIXES, _log_bytes(args.log, args.duration, params)),
+            ("--plot", args.plot, PLOT_SUFFIXES, _PLOT_BYTES),
+        ],
+        overwrite=args.overwrite,
+    )
+    controller = (
+        registry.make(args.controller, params) if user is None else _construct(user, args.controller, params)
+    )
     try:
         result = run_closed_loop(
             controller,
@@ -114,13 +315,16 @@ def _cmd_run(args: argparse.Namespace) -> int:
     except ControllerError as exc:
         print(f"ballbeam run: the controller failed: {exc}", file=sys.stderr)
         return 1
-    if args.log:
-        save = save_csv if Path(args.log).suffix.lower() == ".csv" else save_mat
-        save(result.log, args.log, overwrite=args.overwrite)
-    if args.plot:
+    if "--log" in paths:
+        log_path = paths["--log"]
+        save = save_csv if log_path.suffix.lower() == ".csv" else save_mat
+        with writing("--log", args.log):
+            save(result.log, log_path, overwrite=args.overwrite)
+    if "--plot" in paths:
         from twin.plots import plot_run
 
-        plot_run(result, args.plot)
+        with writing("--plot", args.plot):
+            plot_run(result, paths["--plot"], overwrite=args.overwrite)
     summary = {
         "controller": args.controller,
         "x0_m": args.x0,
@@ -142,14 +346,25 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 def _cmd_view(args: argparse.Namespace) -> int:
     from controllers import registry
+    from twin.parameters import ParameterError
     from twin.viewer import ViewerError, serve
 
     params = _load_params(args)
     if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
         raise ParameterError(f"--duration = {args.duration!r} must be a positive number of seconds")
+    if not (math.isfinite(args.speed) and SPEED_MIN <= args.speed <= SPEED_MAX):
+        raise ParameterError(
+            f"--speed = {args.speed!r}: the view runs at {SPEED_MIN:g}…{SPEED_MAX:g} simulated seconds per "
+            "wall second (the range of its speed slider)"
+        )
+    user = _user_controller(args.controller)
+    catalogue: Catalogue = registry
+    if user is not None:
+        _construct(user, args.controller, params)  # a failing constructor is refused here, not in the view
+        catalogue = _WithUserController(registry, args.controller, user)
     try:
         stats = serve(
-            registry,
+            catalogue,
             host=args.host,
             port=args.port,
             controller=args.controller,
@@ -172,13 +387,15 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
     from calib.identify import FITTABLE, calibrate
     from calib.logs import load_rig_log
     from calib.report import check_out_dir, write_report
+    from twin.parameters import ParameterError
 
     start = _load_params(args)
     fit = [name.strip() for name in args.fit.split(",") if name.strip()]
     unknown = [n for n in fit if n not in FITTABLE]
     if not fit or unknown:
         raise ParameterError(f"--fit {args.fit!r}: choose from {', '.join(FITTABLE)}")
-    if args.out:
+    if args.out is not None:
+        check_output_dir("--out", args.out)
         check_out_dir(args.out, args.overwrite)
     logs = [load_rig_log(path) for path in args.logs]
 
@@ -187,8 +404,9 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
             print(f"  {line}", file=sys.stderr, flush=True)
 
     cal = calibrate(logs, fit, start, window_s=args.window, progress=progress)
-    if args.out:
-        write_report(cal, args.out, overwrite=args.overwrite)
+    if args.out is not None:
+        with writing("--out", args.out):
+            write_report(cal, args.out, overwrite=args.overwrite)
     if args.json:
         print(json.dumps(cal.to_json()))
     else:
@@ -199,49 +417,82 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
         print(f"converged: {cal.converged} ({cal.message}); {cal.wall_s:.1f} s")
         for warning in cal.warnings:
             print(f"warning: {warning}")
-        if args.out:
+        if args.out is not None:
             print(f"wrote {args.out}/params.toml, calibration.json, report.md")
     return 0 if cal.converged else 1
 
 
 def _cmd_calibrate_static(args: argparse.Namespace) -> int:
     from calib.static import calibrate, load_table, render_lines, render_toml
+    from twin.log import atomic_output
 
     params = _load_params(args)
-    if args.out and Path(args.out).exists() and not args.overwrite:
-        raise ParameterError(f"{args.out}: exists; not overwritten (pass --overwrite)")
+    paths = check_outputs([("--out", args.out, PARAMS_OUT_SUFFIXES, 0)], overwrite=args.overwrite)
     result = calibrate(load_table(args.table), params)
     print(json.dumps(result.to_json(), indent=2) if args.json else "\n".join(render_lines(result)))
-    if args.out:
-        _write_atomic(Path(args.out), render_toml(result))
+    if "--out" in paths:
+        with writing("--out", args.out), atomic_output(paths["--out"], overwrite=args.overwrite) as fh:
+            fh.write(render_toml(result).encode("utf-8"))
     return 0
 
 
 def _cmd_experiment(args: argparse.Namespace) -> int:
     from calib.experiments import EXPERIMENTS, run_experiment
     from twin.log import save_csv, save_mat
+    from twin.parameters import ParameterError
 
     params = _load_params(args)
     if args.name not in EXPERIMENTS:
         raise ParameterError(f"unknown experiment {args.name!r}; known: {', '.join(EXPERIMENTS)}")
-    if not (math.isfinite(args.duration) and 5.0 <= args.duration <= 3600.0):
-        raise ParameterError(f"--duration = {args.duration!r}: an experiment lasts 5…3600 s")
-    out = Path(args.out)
-    if out.exists() and not args.overwrite:
-        raise ParameterError(f"{out}: exists; not overwritten (pass --overwrite)")
+    if not (math.isfinite(args.duration) and 5.0 <= args.duration <= MAX_RUN_S):
+        raise ParameterError(
+            f"--duration = {args.duration!r}: an experiment lasts 5…{MAX_RUN_S:g} s "
+            "(its log keeps every tick in memory)"
+        )
+    out = check_outputs(
+        [("--out", args.out, LOG_SUFFIXES, _log_bytes(args.out, args.duration, params))],
+        overwrite=args.overwrite,
+    )["--out"]
     result = run_experiment(args.name, params, duration_s=args.duration, seed=args.seed)
     save = save_csv if out.suffix.lower() == ".csv" else save_mat
-    save(result.log, out, overwrite=args.overwrite)
+    with writing("--out", args.out):
+        save(result.log, out, overwrite=args.overwrite)
     print(
-        f"{args.name}: {args.duration:g} s, {result.log.k} ticks, ball lost: {result.verdict.ball_lost}; wrote {out}"
+        f"{args.name}: {args.duration:g} s, {result.log.k} ticks, ball lost: {result.verdict.ball_lost}; "
+        f"wrote {args.out}"
     )
     return 0 if not result.verdict.ball_lost else 1
 
 
-def _write_atomic(path: Path, text: str) -> None:
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(text)
-    tmp.replace(path)
+class _HelpFormatter(argparse.HelpFormatter):
+    """Help text wrapped at spaces only: a controller name such as thesis-clp-continuous stays whole."""
+
+    def _split_lines(self, text: str, width: int) -> list[str]:
+        import textwrap
+
+        return textwrap.wrap(" ".join(text.split()), width, break_on_hyphens=False)
+
+
+class _Parser(argparse.ArgumentParser):
+    """An argparse parser whose usage errors are one line (exit 2), naming the bad argument."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        kwargs.setdefault("formatter_class", _HelpFormatter)  # subcommands' parsers too
+        super().__init__(*args, **kwargs)
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+class _VersionAction(argparse.Action):
+    """``--version``: read the version only when asked (importlib.metadata is not free)."""
+
+    def __init__(self, option_strings: Sequence[str], dest: str = argparse.SUPPRESS, **kwargs: Any) -> None:
+        super().__init__(option_strings, dest, nargs=0, default=argparse.SUPPRESS, **kwargs)
+
+    def __call__(self, parser: argparse.ArgumentParser, *_: object) -> None:
+        print(f"ballbeam {package_version()}")
+        parser.exit()
 
 
 def _add_params_options(parser: argparse.ArgumentParser) -> None:
@@ -272,11 +523,9 @@ def _add_plant_options(parser: argparse.ArgumentParser) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from controllers.registry import NAMES
-
-    parser = argparse.ArgumentParser(
-        prog="ballbeam", description="Digital twin of the two-wire ball-and-beam rig."
-    )
+    controller_help = CONTROLLER_HELP.format(names=", ".join(CONTROLLER_NAMES))
+    parser = _Parser(prog="ballbeam", description="Digital twin of the two-wire ball-and-beam rig.")
+    parser.add_argument("--version", action=_VersionAction, help="print the version and exit")
     sub = parser.add_subparsers(dest="command", required=True)
 
     lin = sub.add_parser("linearize", help="continuous-time A, B at the origin")
@@ -295,17 +544,25 @@ def build_parser() -> argparse.ArgumentParser:
         "run",
         help="run a controller in closed loop and report the verdict (exit 0 held, 1 lost or not held)",
     )
-    run.add_argument("--controller", required=True, choices=NAMES)
+    run.add_argument("--controller", required=True, metavar="NAME|MODULE:CLASS", help=controller_help)
     run.add_argument("--x0", type=float, required=True, metavar="M", help="initial ball position (m)")
     run.add_argument("--theta0", type=float, required=True, metavar="RAD", help="initial beam angle (rad)")
     run.add_argument(
-        "--duration", type=float, default=15.0, metavar="S", help="simulated seconds (default 15)"
+        "--duration",
+        type=float,
+        default=15.0,
+        metavar="S",
+        help=f"simulated seconds (default 15, at most {MAX_RUN_S:g}: the log keeps every tick in memory)",
     )
     run.add_argument("--seed", type=int, default=0, help="seed of the sensor noise (default 0)")
     run.add_argument("--no-noise", action="store_true", help="switch the ball sensor's contact noise off")
     _add_plant_options(run)
-    run.add_argument("--log", metavar="FILE", help="save the run: .mat (thesis data_file format) or .csv")
-    run.add_argument("--plot", metavar="FILE", help="save a PNG of the run")
+    run.add_argument(
+        "--log",
+        metavar="FILE",
+        help="save the run: .mat (thesis data_file format) or .csv (written atomically)",
+    )
+    run.add_argument("--plot", metavar="FILE.png", help="save a PNG of the run")
     run.add_argument("--overwrite", action="store_true", help="replace existing --log/--plot files")
     _add_params_options(run)
     run.add_argument("--json", action="store_true", help="print the verdict as JSON")
@@ -316,9 +573,17 @@ def build_parser() -> argparse.ArgumentParser:
         "--host", default="127.0.0.1", help="interface to serve on (default 127.0.0.1: this machine only)"
     )
     view.add_argument("--port", type=int, default=8080, help="port (default 8080); a taken port is an error")
-    view.add_argument("--controller", default="appendix-clp", choices=NAMES)
     view.add_argument(
-        "--speed", type=float, default=1.0, help="simulated seconds per wall second (default 1.0)"
+        "--controller",
+        default="appendix-clp",
+        metavar="NAME|MODULE:CLASS",
+        help=f"the controller to start with (default appendix-clp): {controller_help}",
+    )
+    view.add_argument(
+        "--speed",
+        type=float,
+        default=1.0,
+        help=f"simulated seconds per wall second, {SPEED_MIN:g}…{SPEED_MAX:g} (default 1.0)",
     )
     view.add_argument("--seed", type=int, default=0, help="seed of the sensor noise (default 0)")
     view.add_argument(
@@ -358,7 +623,9 @@ def build_parser() -> argparse.ArgumentParser:
     exp = sub.add_parser("experiment", help="run an identification experiment on the twin and save its log")
     exp.add_argument("name", metavar="NAME", help="square (recommended), dither or sweep")
     exp.add_argument("--out", required=True, metavar="LOG.mat", help="the log: .mat (thesis format) or .csv")
-    exp.add_argument("--duration", type=float, default=60.0, metavar="S", help="seconds (default 60)")
+    exp.add_argument(
+        "--duration", type=float, default=60.0, metavar="S", help=f"seconds, 5…{MAX_RUN_S:g} (default 60)"
+    )
     exp.add_argument("--seed", type=int, default=0, help="seed of the dither and the sensor noise")
     exp.add_argument("--overwrite", action="store_true", help="replace an existing --out file")
     _add_params_options(exp)
@@ -371,16 +638,73 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _option_strings(parser: argparse.ArgumentParser) -> tuple[set[str], set[str]]:
+    """The options (of the parser and its subcommands) that take a number, and all options."""
+    numeric: set[str] = set()
+    every: set[str] = set()
+    parsers = [parser]
+    while parsers:
+        for action in parsers.pop()._actions:
+            every.update(action.option_strings)
+            if action.option_strings and action.type in (int, float):
+                numeric.update(action.option_strings)
+            if isinstance(action, argparse._SubParsersAction):
+                parsers.extend(action.choices.values())
+    return numeric, every
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def join_negative_numbers(argv: Sequence[str], parser: argparse.ArgumentParser) -> list[str]:
+    """``--x0 -1e-2`` → ``--x0=-1e-2`` for the options that take a number.
+
+    argparse reads a token that starts with '-' as an option unless it looks like ``-1`` or ``-.5``, so
+    ``-1e-2`` or ``-inf`` after a numeric option would be refused; joined with '=' it is the option's value.
+    An unambiguous prefix (``--th -0.3``) counts; nothing after ``--`` is touched."""
+    numeric, every = _option_strings(parser)
+    args = list(argv)
+    out: list[str] = []
+    i = 0
+    while i < len(args):
+        token = args[i]
+        if token == "--":
+            out.extend(args[i:])
+            break
+        if (
+            token.startswith("--")
+            and "=" not in token
+            and i + 1 < len(args)
+            and args[i + 1].startswith("-")
+            and _is_number(args[i + 1])
+            and (token in numeric or (token not in every and any(n.startswith(token) for n in numeric)))
+        ):
+            out.append(f"{token}={args[i + 1]}")
+            i += 2
+            continue
+        out.append(token)
+        i += 1
+    return out
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(join_negative_numbers(sys.argv[1:] if argv is None else argv, parser))
+    except SystemExit as exc:  # --help, --version, or a usage error already reported on one line
+        return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 2)
     try:
         return int(args.func(args))
-    except (ValueError, FileExistsError, FileNotFoundError) as exc:  # bad input: no traceback
-        print(f"ballbeam: error: {exc}", file=sys.stderr)
-        return 2
     except BrokenPipeError:  # output piped into e.g. head
         return 0
+    except (ValueError, OSError) as exc:  # bad input, or an output that cannot be written: no traceback
+        print(f"ballbeam: error: {_one_line(exc)}", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":
