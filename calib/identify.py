@@ -137,8 +137,13 @@ FITTABLE: dict[str, FitSpec] = {
         FitSpec(
             "ball_reading.offset_m", "m", -0.05, 0.05, 0.005, "ball reading's offset relative to the curve"
         ),
+        FitSpec("ball_sensor.dropout_rate_hz", "1/s", 0.0, 1000.0, 5.0, "contact losses of the ball's wiper"),
     )
 }
+# Estimated after the dynamic fit from the ball channel's outliers (it does not enter the smooth model).
+DROPOUT = "ball_sensor.dropout_rate_hz"
+# A ball reading this far from the fitted model is a contact-noise outlier (6 σ of the channel's noise).
+OUTLIER_M = 3e-3
 # Measurement-model parameters that are not twin parameters: they are folded into the sensor curve.
 _READING = ("ball_reading.gain", "ball_reading.offset_m")
 
@@ -533,6 +538,49 @@ def _solve(
     )
 
 
+def dropout_rate(
+    problem: WindowProblem, z: np.ndarray, params: Parameters
+) -> tuple[float, float, float, int]:
+    """The wiper's contact-loss rate from the ball channel's outliers, by maximum likelihood.
+
+    A contact loss that starts a time a before a block's end and lasts d (exponential, mean
+    ``ball_sensor.dropout_mean_duration_s``, which must be known: rate and duration trade off) pulls the RC
+    filter towards the open-wiper volts; the reading is an outlier (more than ``OUTLIER_M`` off the fitted
+    model) when that pull exceeds the threshold. For a tick whose wiper sits Δv from the open-wiper volts, w(Δv)
+    is the length of start times that make it an outlier, so P(outlier) = 1 − e^(−λ·w). Returns (λ, 95 % low,
+    high, number of outlier ticks)."""
+    s = params.ball_sensor
+    tau, mu = s.rc_resistance_ohm * s.rc_capacitance_f, s.dropout_mean_duration_s
+    pred_b, _ = problem.predict(z)
+    y = problem.windows.y_ball_m
+    outlier = (np.abs(y - pred_b) > OUTLIER_M).ravel()
+    gain = params.software.ball_gain_m_per_v
+    wiper = (pred_b.ravel() - params.software.ball_offset_m) / gain  # the volts eq 6.3.1 reads as the model
+    delta_v = np.abs(wiper - s.dropout_voltage_v)
+    threshold_v = OUTLIER_M / gain
+    # w(Δv) on a grid: ages a up to 20 τ, durations at 200 quantiles of the exponential distribution.
+    ages = np.linspace(0.0, 20 * tau, 801)
+    durations = -mu * np.log1p(-(np.arange(200) + 0.5) / 200)
+    a, d = ages[:, None], durations[None, :]
+    pull = np.where(d >= a, 1.0 - np.exp(-a / tau), np.exp(-(a - d) / tau) * (1.0 - np.exp(-d / tau)))
+    levels = np.geomspace(max(threshold_v, 1e-6), max(float(delta_v.max()), threshold_v) * 1.01, 60)
+    w_table = np.array([np.trapezoid(np.mean(lv * pull > threshold_v, axis=1), ages) for lv in levels])
+    w = np.interp(delta_v, levels, w_table, left=0.0)
+    usable = w > 0
+
+    def nll(rate: float) -> float:
+        p = -np.expm1(-rate * w[usable])
+        return float(-np.sum(np.where(outlier[usable], np.log(np.maximum(p, 1e-300)), -rate * w[usable])))
+
+    spec = FITTABLE[DROPOUT]
+    best = scipy.optimize.minimize_scalar(nll, bounds=(spec.lower, spec.upper), method="bounded")
+    rate = float(best.x)
+    ew = np.exp(-rate * w[usable])
+    info = float(np.sum(w[usable] ** 2 * ew / np.maximum(1.0 - ew, 1e-300)))
+    half = 1.96 / math.sqrt(info) if info > 0 else spec.upper
+    return rate, max(0.0, rate - half), rate + half, int(outlier.sum())
+
+
 def _color_columns(pattern: scipy.sparse.csc_matrix) -> np.ndarray:
     """Greedy grouping of columns that share no row (a proper coloring of the column-intersection graph)."""
     n = pattern.shape[1]
@@ -574,7 +622,10 @@ def calibrate(
     """Fit ``fit`` (names from ``FITTABLE``) to ``logs`` from ``start`` (default: the thesis's values)."""
     started = time.perf_counter()
     base = start or Parameters()
-    problem = WindowProblem(logs, base, fit, window_s=window_s, substeps=substeps)
+    dynamic = [name for name in fit if name != DROPOUT]
+    if DROPOUT in fit and DROPOUT not in FITTABLE:
+        raise CalibrationError(f"cannot fit {DROPOUT}")
+    problem = WindowProblem(logs, base, dynamic, window_s=window_s, substeps=substeps)
     z0 = problem.initial_vector()
     n_g = problem.n_global
     states = np.arange(n_g, z0.size)
@@ -662,10 +713,19 @@ def calibrate(
                     f"{problem.fit[i]} and {problem.fit[j]} are correlated ({corr[i, j]:+.2f}): the logs barely "
                     "separate them; excite the rig differently (README: how to record a log)"
                 )
+    params_fitted = problem.parameters(z)
+    if DROPOUT in fit:
+        rate, rate_lo, rate_hi, outliers = dropout_rate(problem, z, params_fitted)
+        values[DROPOUT] = FittedValue(rate, rate_lo, rate_hi, base.ball_sensor.dropout_rate_hz, "1/s")
+        params_fitted = params_fitted.with_overrides({DROPOUT: rate}, origin="calibration")
+        if outliers < 10:
+            warnings.append(
+                f"{DROPOUT}: only {outliers} outlier ticks in the logs: the rate is barely determined"
+            )
     pred_b0, pred_a0 = problem.predict(z_before)
     pred_b1, pred_a1 = problem.predict(z)
     return Calibration(
-        params=problem.parameters(z),
+        params=params_fitted,
         values=values,
         correlation=corr,
         rms_before=_rms(problem, z_before),

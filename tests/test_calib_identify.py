@@ -153,3 +153,15 @@ def test_cli_calibrate_writes_a_parameter_file_the_twin_loads(tmp_path: Path, ca
     assert (out / "calibration.json").read_bytes() == before
     assert main(["calibrate", str(log), "--fit", "motor.colour"]) == 2
     assert "choose from" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_the_contact_dropout_rate_is_estimated_from_the_outliers() -> None:
+    """20 contact losses per second (4× the default) in a 60 s twin log: the estimate's interval holds it."""
+    truth = NOMINAL.with_overrides({"ball_sensor.dropout_rate_hz": 20.0})
+    run = run_experiment("square", truth, duration_s=60.0, seed=3)
+    cal = calibrate([rig_log(run.log)], ["ball_sensor.dropout_rate_hz"], NOMINAL)
+    v = cal.values["ball_sensor.dropout_rate_hz"]
+    assert v.value == pytest.approx(20.0, rel=0.2)
+    assert v.ci_low <= 20.0 <= v.ci_high
+    assert cal.params.ball_sensor.dropout_rate_hz == v.value
