@@ -804,3 +804,19 @@ def test_thesis_sf_overflowing_fails_its_run_and_the_view_goes_on() -> None:
     assert live.error is not None and "thesis-sf" in live.error and "tick k = " in live.error
     for key in ("x_est", "err_xdot"):
         assert not np.isinf(live.history.array(key)).any()  # the plots get gaps, not infinities
+
+
+def test_a_lost_ball_pauses_the_run_until_reset() -> None:
+    """The printed chapter 5 state feedback loses the ball within seconds: the run pauses itself with the
+    ball where it left, the status says so, and Reset starts again with the ball on the beam."""
+    live = LiveTwin(Parameters(), CATALOGUE, "thesis-sf", 0, 1.0, plant="reference", ideal_sensors=True)
+    for _ in range(500):
+        if live.running:
+            live.tick()
+    assert live.rig.ball_lost and live.lost_paused and not live.running
+    left = live.rig.true_state()
+    assert "Reset starts again" in live.status_markdown()
+    live.enqueue("reset")
+    live.apply_actions()
+    assert not live.rig.ball_lost and not live.lost_paused
+    assert abs(left[0]) > 0.3

@@ -254,6 +254,7 @@ class LiveTwin:
         self.reference_x_m = 0.0
         self.running = True
         self.error: str | None = None
+        self.lost_paused = False  # the run paused itself when the ball left the track
         self.history = History()
         self.actions: queue.Queue[tuple[str, Any]] = queue.Queue(maxsize=MAX_PENDING_ACTIONS)
         self.runs = 0  # runs started (each reset or controller change starts one)
@@ -288,6 +289,7 @@ class LiveTwin:
             raise _Refused(f"cannot start {_show(name)}: {type(exc).__name__}: {exc}") from exc
         self.runs += 1
         self.error = None
+        self.lost_paused = False
         self.controller_name = name
         self.rig, self.loop = rig, loop
         self.history.clear()
@@ -439,6 +441,14 @@ class LiveTwin:
             self._record()
         except Exception as exc:  # noqa: BLE001 - a failing controller or rig fails the run, not the server
             self._fail(exc)
+            return
+        if self.rig.ball_lost and not self.lost_paused:  # an event: pause on the state it left with
+            self.lost_paused = True
+            self.running = False
+            _log(
+                f"ball lost at t = {self.rig.ball_lost_time_s:.2f} s: paused (Reset starts again)",
+                stream=sys.stdout,
+            )
 
     def _record(self) -> None:
         x, theta, xdot, thetadot = self.rig.true_state()
@@ -462,7 +472,7 @@ class LiveTwin:
     def status_markdown(self) -> str:
         state = "running" if self.running else "paused"
         ball = (
-            f"**ball lost** at {self.rig.ball_lost_time_s:.2f} s"
+            f"**ball lost** at {self.rig.ball_lost_time_s:.2f} s — paused; Reset starts again"
             if self.rig.ball_lost
             else "ball on the beam"
         )

@@ -374,6 +374,7 @@ def _cmd_view(args: argparse.Namespace) -> int:
             params=params,
             plant=args.plant,
             ideal_sensors=args.ideal_sensors or args.plant == "reference",
+            allowed_origins=tuple(args.allow_origin or ()),
         )
     except ViewerError as exc:
         print(f"ballbeam view: error: {exc}", file=sys.stderr)
@@ -569,6 +570,13 @@ def build_parser() -> argparse.ArgumentParser:
     run.set_defaults(func=_cmd_run)
 
     view = sub.add_parser("view", help="live 3D view of the twin in the browser (viser)")
+    view.add_argument(
+        "--allow-origin",
+        action="append",
+        metavar="ORIGIN",
+        help="also accept browser connections from this origin, e.g. http://lab-pc:8080 (repeatable; "
+        "by default only the page's own origin may drive the twin)",
+    )
     view.add_argument(
         "--host", default="127.0.0.1", help="interface to serve on (default 127.0.0.1: this machine only)"
     )
