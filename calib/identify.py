@@ -599,8 +599,7 @@ def _color_columns(pattern: scipy.sparse.csc_matrix) -> np.ndarray:
     return groups
 
 
-def _rms(problem: WindowProblem, z: np.ndarray) -> dict[str, float]:
-    pred_b, pred_a = problem.predict(z)
+def _rms(problem: WindowProblem, pred_b: np.ndarray, pred_a: np.ndarray) -> dict[str, float]:
     eb, ea = pred_b - problem.windows.y_ball_m, pred_a - problem.windows.y_angle_rad
     return {
         "ball_m": float(np.sqrt(np.mean(eb**2))),
@@ -728,8 +727,8 @@ def calibrate(
         params=params_fitted,
         values=values,
         correlation=corr,
-        rms_before=_rms(problem, z_before),
-        rms_after=_rms(problem, z),
+        rms_before=_rms(problem, pred_b0, pred_a0),
+        rms_after=_rms(problem, pred_b1, pred_a1),
         converged=bool(result.success),
         message=str(result.message),
         warnings=warnings,

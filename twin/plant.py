@@ -168,28 +168,6 @@ class Plant:
         kin = self.ball_kinematics()
         return np.array([kin.position_m[0], self._theta(), kin.velocity_m_s[0], self._theta_dot()])
 
-    def ball_in_beam_frame(self) -> tuple[float, float, float]:
-        """Ball centre (along, lateral, height) in the beam frame from qpos alone: cheap enough to call
-        every physics step (the beam frame is a rotation by θ about the hinge axis (0, −1, 0))."""
-        theta = self._theta()
-        q = self._ball_qpos
-        pivot = self._pivot
-        dx = float(self.data.qpos[q]) - pivot[0]
-        dy = float(self.data.qpos[q + 1]) - pivot[1]
-        dz = float(self.data.qpos[q + 2]) - pivot[2]
-        c, s = math.cos(theta), math.sin(theta)
-        return c * dx + s * dz, dy, -s * dx + c * dz
-
-    def ball_on_track(self) -> bool:
-        """Whether the ball still sits on both wires within the track's length."""
-        p = self.params
-        along, lateral, height = self.ball_in_beam_frame()
-        return bool(
-            abs(along) <= p.track.half_length_m + p.ball.radius_m
-            and abs(lateral) < p.track.contact_spacing_m / 2
-            and abs(height - p.ball_centre_height_m) < LOST_HEIGHT_TOLERANCE_M
-        )
-
     # --- stepping ---------------------------------------------------------------------------------
     @property
     def timestep_s(self) -> float:
@@ -206,7 +184,7 @@ class Plant:
         """One physics step per entry of ``motor_volts`` in one C call; the ball and beam at every step.
 
         The ``ball_lost`` flag latches at the first step after which the ball no longer sits on both wires
-        within the track (see ``ball_on_track``)."""
+        within the track (see ``_on_track``)."""
         m, d = self.model, self.data
         volts = np.asarray(motor_volts, dtype=np.float64)
         n = volts.size
