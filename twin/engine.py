@@ -119,7 +119,16 @@ class _Recorder:
 class ClosedLoop:
     """One closed-loop run on a simulated rig, tick by tick (the rig must already be ``reset``)."""
 
-    def __init__(self, rig: SimRig, controller: Controller | StateLaw, *, record: bool = True) -> None:
+    def __init__(
+        self,
+        rig: SimRig,
+        controller: Controller | StateLaw,
+        *,
+        record: bool = True,
+        record_limit: int | None = None,
+    ) -> None:
+        """``record_limit``: the most ticks recorded (a long live session keeps its first ones and its
+        memory bounded); ``None`` records every tick."""
         self.rig = rig
         self.controller = controller
         self.is_state_law = isinstance(controller, StateLaw) and not isinstance(controller, Controller)
@@ -140,6 +149,7 @@ class ClosedLoop:
                 f"file) or change the controller"
             )
         self.recorder = _Recorder(256) if record else None
+        self.record_limit = record_limit
         self.last_sample: DaqSample | None = None
         self.command_v = rig.command_v
         self.started = False
@@ -147,6 +157,12 @@ class ClosedLoop:
     @property
     def name(self) -> str:
         return self.controller.name
+
+    @property
+    def recording(self) -> bool:
+        """Whether the next tick is recorded (recording on and the limit not reached)."""
+        r = self.recorder
+        return r is not None and (self.record_limit is None or r.n < self.record_limit)
 
     def start(self) -> None:
         """The software's Start/Clear Buffer phase: the held rig's block starts the controller."""
@@ -160,7 +176,7 @@ class ClosedLoop:
             raise ControllerError(f"{self.name}.start raised {type(exc).__name__}: {exc}") from exc
         self.last_sample = sample
         self.started = True
-        if self.recorder is not None:
+        if self.recorder is not None and self.recording:
             self.recorder.add(sample, self.rig.command_v, self.controller.telemetry, self.rig)
 
     def tick(self) -> None:
@@ -197,7 +213,7 @@ class ClosedLoop:
             rig.write(float(command))
         self.last_sample = sample
         self.command_v = float(command)
-        if self.recorder is not None:
+        if self.recorder is not None and self.recording:
             self.recorder.add(sample, self.command_v, self.controller.telemetry, rig)
 
     def _law_volts(self, state: np.ndarray) -> float:
