@@ -15,6 +15,7 @@ All functions take a float or a numpy array and return the same kind. NaN or inf
 
 from __future__ import annotations
 
+import math
 from typing import overload
 
 import numpy as np
@@ -29,6 +30,7 @@ __all__ = [
     "beam_angle_rad",
     "clip_command_v",
     "dac_command_v",
+    "finite_input",
     "finite_values",
     "motor_volts_from_command",
 ]
@@ -46,8 +48,20 @@ def finite_values(value: float | np.ndarray, name: str) -> np.ndarray:
     return arr
 
 
-def _same_kind(result: np.ndarray, value: float | np.ndarray) -> float | np.ndarray:
+def finite_input(value: float | np.ndarray, name: str) -> float | np.ndarray:
+    """A finite Python float as it is, anything else through ``finite_values``.
+
+    The conversions run once per tick on single readings: on a Python float they are the same IEEE
+    operations as on a 0-d array (same bits) without numpy's cost per call, which dominates there."""
+    if type(value) is float and math.isfinite(value):
+        return value
+    return finite_values(value, name)
+
+
+def _same_kind(result: float | np.ndarray, value: float | np.ndarray) -> float | np.ndarray:
     """A Python float for scalar input, an array otherwise."""
+    if type(result) is float:
+        return result
     return float(result) if np.ndim(value) == 0 else result
 
 
@@ -57,7 +71,7 @@ def ball_position_m(volts: float, sw: SoftwareCalibration) -> float: ...
 def ball_position_m(volts: np.ndarray, sw: SoftwareCalibration) -> np.ndarray: ...
 def ball_position_m(volts: float | np.ndarray, sw: SoftwareCalibration) -> float | np.ndarray:
     """Ball position (m) from the ball channel's volts: 0.0693·V + 0.0018 (eq 6.3.1, appendix A)."""
-    v = finite_values(volts, "volts")
+    v = finite_input(volts, "volts")
     return _same_kind((sw.ball_gain_m_per_v * v) + sw.ball_offset_m, volts)
 
 
@@ -67,11 +81,11 @@ def ball_volts_v(x_m: float, sw: SoftwareCalibration) -> float: ...
 def ball_volts_v(x_m: np.ndarray, sw: SoftwareCalibration) -> np.ndarray: ...
 def ball_volts_v(x_m: float | np.ndarray, sw: SoftwareCalibration) -> float | np.ndarray:
     """The ball channel's volts that eq 6.3.1 reads as ``x_m`` (its inverse)."""
-    x = finite_values(x_m, "x_m")
+    x = finite_input(x_m, "x_m")
     return _same_kind((x - sw.ball_offset_m) / sw.ball_gain_m_per_v, x_m)
 
 
-def _angle_deg(v: np.ndarray, sw: SoftwareCalibration) -> np.ndarray:
+def _angle_deg(v: float | np.ndarray, sw: SoftwareCalibration) -> float | np.ndarray:
     # x2_temp_2 = ((143.22657649*(x2_temp - 5.002) + 718.59375) / 7)
     return (
         sw.angle_gain_deg_per_v * (v - sw.angle_reference_v) + sw.angle_reference_motor_deg
@@ -84,7 +98,7 @@ def beam_angle_deg(volts: float, sw: SoftwareCalibration) -> float: ...
 def beam_angle_deg(volts: np.ndarray, sw: SoftwareCalibration) -> np.ndarray: ...
 def beam_angle_deg(volts: float | np.ndarray, sw: SoftwareCalibration) -> float | np.ndarray:
     """Beam angle in degrees from the angle channel's volts (eq 6.2.10; appendix A's ``x2_temp_2``)."""
-    return _same_kind(_angle_deg(finite_values(volts, "volts"), sw), volts)
+    return _same_kind(_angle_deg(finite_input(volts, "volts"), sw), volts)
 
 
 @overload
@@ -93,7 +107,7 @@ def beam_angle_rad(volts: float, sw: SoftwareCalibration) -> float: ...
 def beam_angle_rad(volts: np.ndarray, sw: SoftwareCalibration) -> np.ndarray: ...
 def beam_angle_rad(volts: float | np.ndarray, sw: SoftwareCalibration) -> float | np.ndarray:
     """Beam angle (rad) exactly as appendix A computes it: eq 6.2.10 in degrees, times 3.141592654/180."""
-    deg = _angle_deg(finite_values(volts, "volts"), sw)
+    deg = _angle_deg(finite_input(volts, "volts"), sw)
     return _same_kind(deg * (sw.software_pi / 180), volts)
 
 
@@ -103,7 +117,7 @@ def angle_volts_v(theta_rad: float, sw: SoftwareCalibration) -> float: ...
 def angle_volts_v(theta_rad: np.ndarray, sw: SoftwareCalibration) -> np.ndarray: ...
 def angle_volts_v(theta_rad: float | np.ndarray, sw: SoftwareCalibration) -> float | np.ndarray:
     """The angle channel's volts that eq 6.2.10 reads as ``theta_rad`` (its inverse)."""
-    th = finite_values(theta_rad, "theta_rad")
+    th = finite_input(theta_rad, "theta_rad")
     motor_deg = th / (sw.software_pi / 180) * sw.angle_gear_ratio
     return _same_kind(
         (motor_deg - sw.angle_reference_motor_deg) / sw.angle_gain_deg_per_v + sw.angle_reference_v, theta_rad
@@ -116,7 +130,7 @@ def dac_command_v(motor_volts: float, sw: SoftwareCalibration) -> float: ...
 def dac_command_v(motor_volts: np.ndarray, sw: SoftwareCalibration) -> np.ndarray: ...
 def dac_command_v(motor_volts: float | np.ndarray, sw: SoftwareCalibration) -> float | np.ndarray:
     """DAC command from desired motor volts: V/9.6 + 2.5 (§6.4; appendix A ``adat``), not clipped."""
-    v = finite_values(motor_volts, "motor_volts")
+    v = finite_input(motor_volts, "motor_volts")
     return _same_kind((v / sw.command_gain_v_per_v) + sw.command_zero_v, motor_volts)
 
 
@@ -126,7 +140,7 @@ def motor_volts_from_command(command_v: float, sw: SoftwareCalibration) -> float
 def motor_volts_from_command(command_v: np.ndarray, sw: SoftwareCalibration) -> np.ndarray: ...
 def motor_volts_from_command(command_v: float | np.ndarray, sw: SoftwareCalibration) -> float | np.ndarray:
     """Motor volts the software assumes for a DAC command: (cmd − 2.5)·9.6 (appendix A ``u(k)``)."""
-    c = finite_values(command_v, "command_v")
+    c = finite_input(command_v, "command_v")
     return _same_kind((c - sw.command_zero_v) * sw.command_gain_v_per_v, command_v)
 
 
@@ -147,9 +161,11 @@ def clip_command_v(
     """The software's command limits (appendix A: 1.25…3.75 V; appendix B's first-run limits are 2…3 V).
 
     ``low``/``high`` default to the software calibration's ``command_low_v``/``command_high_v``."""
-    c = finite_values(command_v, "command_v")
-    lo = float(finite_values(sw.command_low_v if low is None else low, "low"))
-    hi = float(finite_values(sw.command_high_v if high is None else high, "high"))
+    c = finite_input(command_v, "command_v")
+    lo = float(finite_input(sw.command_low_v if low is None else low, "low"))
+    hi = float(finite_input(sw.command_high_v if high is None else high, "high"))
     if not lo < hi:
         raise ValueError(f"low = {lo!r} V must be below high = {hi!r} V")
+    if type(c) is float:  # min/max is np.clip on a finite number
+        return min(max(c, lo), hi)
     return _same_kind(np.clip(c, lo, hi), command_v)

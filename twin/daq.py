@@ -25,7 +25,7 @@ import math
 
 import numpy as np
 
-from twin.converters import finite_values
+from twin.converters import finite_input, finite_values
 from twin.parameters import Daq
 
 __all__ = [
@@ -104,7 +104,7 @@ def block_sample_times_s(block_start_s: float, daq: Daq) -> np.ndarray:
 
 def block_time_s(block_start_s: float, daq: Daq) -> float:
     """Time stamp of the block (appendix A ``time(blocksize)``): its last sample, t0 + 800/f_s."""
-    t0 = float(finite_values(block_start_s, "block_start_s"))
+    t0 = float(finite_input(block_start_s, "block_start_s"))
     return t0 + daq.block_size / daq.sample_rate_hz
 
 

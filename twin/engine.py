@@ -105,8 +105,12 @@ class _Recorder:
         c["motor_volts_v"][k] = rig.motor_volts_v
         self.lost[k] = rig.ball_lost
         block = rig.last_block
-        if block is not None and block.on_track.any():
-            self.peak_theta[k] = float(np.max(np.abs(block.theta_rad[block.on_track])))
+        if block is not None:
+            on = block.on_track
+            if on.all():  # the common case: no mask to apply
+                self.peak_theta[k] = float(np.max(np.abs(block.theta_rad)))
+            elif on.any():
+                self.peak_theta[k] = float(np.max(np.abs(block.theta_rad[on])))
         self.n += 1
 
     def log(self) -> RunLog:

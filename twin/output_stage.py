@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from twin.converters import finite_values
+from twin.converters import finite_input
 from twin.daq import dac_quantize_v
 from twin.parameters import Amplifier, Parameters
 
@@ -21,10 +21,11 @@ __all__ = ["amplifier_volts", "motor_volts"]
 
 def amplifier_volts(dac_output_v: float | np.ndarray, amplifier: Amplifier) -> float | np.ndarray:
     """Motor volts for the DAC's actual output: 9.6·(V − 2.5) clipped to ±12 V (§6.4)."""
-    v = finite_values(dac_output_v, "dac_output_v")
-    out = np.clip(
-        amplifier.gain_v_per_v * (v - amplifier.zero_command_v), -amplifier.rail_v, amplifier.rail_v
-    )
+    v = finite_input(dac_output_v, "dac_output_v")
+    volts = amplifier.gain_v_per_v * (v - amplifier.zero_command_v)
+    if type(volts) is float:  # one command per tick: min/max is np.clip on a finite number, same bits
+        return float(min(max(volts, -amplifier.rail_v), amplifier.rail_v))
+    out = np.clip(volts, -amplifier.rail_v, amplifier.rail_v)
     return float(out) if np.ndim(dac_output_v) == 0 else out
 
 
@@ -32,6 +33,8 @@ def motor_volts(command_v: float | np.ndarray, params: Parameters) -> float | np
     """Motor volts for a command written to the DAC: DAC quantization and range, then the amplifier.
 
     NaN or infinite commands raise ValueError naming the value (the card cannot output them)."""
-    c = finite_values(command_v, "command_v")
+    c = finite_input(command_v, "command_v")
     out = amplifier_volts(dac_quantize_v(c, params.daq), params.amplifier)
+    if type(out) is float:
+        return out
     return float(out) if np.ndim(command_v) == 0 else out

@@ -41,6 +41,20 @@ class BallKinematics:
     spin_rad_s: float  # ball angular velocity relative to the beam, about the hinge axis
 
 
+class _StepBuffers:
+    """Arrays reused by every ``advance`` of ``n`` steps (the per-tick cost is allocation, not arithmetic).
+
+    ``rows`` holds the state before the first step and after each step; ``initial_state`` and ``states``
+    are views of it in the shapes ``mujoco.rollout`` takes, so the rollout writes straight into it."""
+
+    def __init__(self, n: int, nu: int, nstate: int, timestep_s: float) -> None:
+        self.control = np.zeros((1, n, nu))
+        self.rows = np.empty((n + 1, nstate))
+        self.initial_state = self.rows[None, 0]  # (1, nstate)
+        self.states = self.rows[None, 1:]  # (1, n, nstate), C-contiguous
+        self.step_offsets_s = np.arange(n + 1) * timestep_s  # time of each row after the first
+
+
 class Plant:
     """MuJoCo model + data of the rig, with the thesis's state coordinates.
 
@@ -67,10 +81,11 @@ class Plant:
         self.ball_lost_time_s: float | None = None
         mujoco.mj_kinematics(self.model, self.data)
         self._pivot = tuple(float(v) for v in self.data.xpos[self._beam])  # the beam body's origin is P
+        self._pivot_m = np.array(self._pivot)
         self._nstate = mujoco.mj_stateSize(m, _FULL)
-        self._state0 = np.empty((1, self._nstate))
+        self._warmstart = np.empty((1, m.nv))
         self._rollout = rollout.Rollout(nthread=0)
-        self._buffers: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        self._buffers: dict[int, _StepBuffers] = {}
         self.reset()
 
     # --- state ------------------------------------------------------------------------------------
@@ -165,8 +180,19 @@ class Plant:
         state at the step it left the track: what falls afterwards is no longer the rig's state."""
         if self.lost_state is not None:
             return self.lost_state.copy()
-        kin = self.ball_kinematics()
-        return np.array([kin.position_m[0], self._theta(), kin.velocity_m_s[0], self._theta_dot()])
+        d = self.data
+        theta, thetadot = self._theta(), self._theta_dot()
+        q, v = self._ball_qpos, self._ball_dof
+        offset = d.qpos[q : q + 3] - self._pivot_m
+        ox, oz = float(offset[0]), float(offset[2])
+        # Velocity relative to the rotating beam: v − ω×offset with ω = θ̇ about (0, −1, 0) (what
+        # ``ball_kinematics`` computes with np.cross, component for component).
+        v_rel = np.array([d.qvel[v] + thetadot * oz, d.qvel[v + 1], d.qvel[v + 2] - thetadot * ox])
+        # Along the beam: the projections on the beam's x axis are kept as numpy dot products, as
+        # ``ball_kinematics`` takes them: BLAS fuses the multiply-add, so c·x + s·z written out would differ
+        # in the last bit from the logs recorded so far.
+        ex = np.array([math.cos(theta), 0.0, math.sin(theta)])
+        return np.array([offset @ ex, theta, v_rel @ ex, thetadot])
 
     # --- stepping ---------------------------------------------------------------------------------
     @property
@@ -190,28 +216,29 @@ class Plant:
         n = volts.size
         if not np.isfinite(volts).all():
             raise ValueError(f"motor_volts contains {volts[~np.isfinite(volts)][0]!r}: it must be finite")
-        if n not in self._buffers:
-            self._buffers[n] = (np.zeros((1, n, m.nu)), np.empty((1, n, self._nstate)))
-        control, states = self._buffers[n]
+        buf = self._buffers.get(n)
+        if buf is None:
+            buf = self._buffers[n] = _StepBuffers(n, m.nu, self._nstate, m.opt.timestep)
+        rows = buf.rows  # (n + 1, nstate): time, qpos, qvel; row 0 the state before the first step
         t0 = float(d.time)
-        mujoco.mj_getState(m, d, self._state0[0], _FULL)
+        mujoco.mj_getState(m, d, rows[0], _FULL)
         if n:
             if m.nu:
-                control[0, :, 0] = volts
+                buf.control[0, :, 0] = volts
+            self._warmstart[0] = d.qacc_warmstart
             self._rollout.rollout(
                 [m],
                 [d],
-                self._state0,
-                control,
+                buf.initial_state,
+                buf.control,
                 control_spec=_CTRL.value,
                 skip_checks=True,
                 nstep=n,
-                initial_warmstart=d.qacc_warmstart[None].copy(),
-                state=states,
+                initial_warmstart=self._warmstart,
+                state=buf.states,
                 sensordata=None,
                 chunk_size=None,
             )
-        rows = np.concatenate([self._state0, states[0]])  # (n + 1, nstate): time, qpos, qvel
         if not np.isfinite(rows[-1]).all():
             raise FloatingPointError(f"MuJoCo state is not finite at t = {float(rows[-1, 0]):.3f} s")
         q = 1 + self._ball_qpos
@@ -229,13 +256,13 @@ class Plant:
             on[:] = False
         else:
             on[0] = True
-            off = np.flatnonzero(~on)
-            if off.size:  # latched from the first step off the track
+            if not on.all():  # latched from the first step off the track
+                first_off = int(np.flatnonzero(~on)[0])
                 self.ball_lost = True
-                self.ball_lost_time_s = float(rows[off[0], 0])
-                self.lost_state = self._row_state(rows[off[0]])
-                on[off[0] :] = False
-        times = t0 + np.arange(n + 1) * m.opt.timestep
+                self.ball_lost_time_s = float(rows[first_off, 0])
+                self.lost_state = self._row_state(rows[first_off])
+                on[first_off:] = False
+        times = t0 + buf.step_offsets_s
         return PhysicsBlock(time_s=times, x_m=along, theta_rad=theta, on_track=on)
 
     def _row_state(self, row: np.ndarray) -> np.ndarray:

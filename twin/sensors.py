@@ -429,29 +429,37 @@ class BallPositionChain:
             xk = np.interp(knots, t, x)
         else:
             knots, xk = t, x
-        mid = 0.5 * (knots[:-1] + knots[1:])
         connected = np.abs(0.5 * (xk[:-1] + xk[1:])) <= self.params.track.half_length_m
         if contact.ndim == 0:
             connected &= bool(contact)
         elif not contact.all():
+            mid = 0.5 * (knots[:-1] + knots[1:])
             connected &= contact[np.searchsorted(t, mid, side="left")]
         if drops:
+            mid = 0.5 * (knots[:-1] + knots[1:])
             d = np.array(drops)
             connected &= ~((d[None, :, 0] < mid[:, None]) & (mid[:, None] < d[None, :, 1])).any(axis=1)
         vk = np.interp(xk, self._curve_x, self._curve_v)
-        v_drop = self.params.ball_sensor.dropout_voltage_v
-        v_start = np.where(connected, vk[:-1], v_drop)
-        v_end = np.where(connected, vk[1:], v_drop)
+        if connected.all():  # the common case: the wiper on the curve throughout
+            v_start, v_end = vk[:-1], vk[1:]
+        else:
+            v_drop = self.params.ball_sensor.dropout_voltage_v
+            v_start = np.where(connected, vk[:-1], v_drop)
+            v_end = np.where(connected, vk[1:], v_drop)
 
         # τ·y' = v − y with v linear on a piece of length h from v_k to v_k+1 gives exactly
         #   y_k+1 = E·y_k + (1 − E)·v_k + (v_k+1 − v_k)·(1 − (1 − E)/(h/τ)),  E = e^(−h/τ)
         # (the last factor by its series for tiny h/τ, to avoid cancellation). Chained over all pieces:
         #   y_end = e^(−T/τ)·y_0 + Σ_k e^(−(t_end − t_k+1)/τ)·[(1 − E_k)·v_k + (v_k+1 − v_k)·ramp_k].
-        a = np.diff(knots) / self.tau_s
+        a = (knots[1:] - knots[:-1]) / self.tau_s
         one_minus = -np.expm1(-a)
-        ramp = np.where(
-            a < 1e-4, a / 2.0 - a * a / 6.0 + a**3 / 24.0, 1.0 - one_minus / np.maximum(a, 1e-300)
-        )
+        tiny = a < 1e-4  # only pieces cut short by an extra knot; whole physics steps are a ≈ 0.3
+        if tiny.any():
+            ramp = np.where(
+                tiny, a / 2.0 - a * a / 6.0 + a**3 / 24.0, 1.0 - one_minus / np.maximum(a, 1e-300)
+            )
+        else:
+            ramp = 1.0 - one_minus / a
         drive = one_minus * v_start + (v_end - v_start) * ramp
         weight = np.exp((knots[1:] - t_end) / self.tau_s)
         y = math.exp((t0 - t_end) / self.tau_s) * self.filtered_v + float(np.dot(weight, drive))
