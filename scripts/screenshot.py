@@ -6,7 +6,6 @@ python scripts/screenshot.py [--out docs/view.png] [--wait 8]
 from __future__ import annotations
 
 import argparse
-import shutil
 import socket
 import subprocess
 import sys
@@ -15,24 +14,19 @@ from pathlib import Path
 
 from playwright.sync_api import sync_playwright
 
-ARGS = [
-    "--no-sandbox",
-    "--use-angle=swiftshader",
-    "--enable-unsafe-swiftshader",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-    "--no-first-run",
-]
+from twin.app.browser import CHROMIUM_ARGS, find_chromium
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=Path("docs/view.png"))
     parser.add_argument("--wait", type=float, default=8.0, help="seconds of running before the shot")
-    parser.add_argument("--controller", default="appendix-clp")
+    parser.add_argument("--controller", default="lqr")
+    parser.add_argument(
+        "--setpoint-steps", type=int, default=8, help="setpoint slider steps (0.01 m each) to the right"
+    )
     args = parser.parse_args()
-    chromium = shutil.which("chromium")
+    chromium = find_chromium()
     if chromium is None:
         sys.exit("screenshot: Debian's chromium is not installed (apt-get install chromium)")
     with socket.socket() as s:
@@ -60,10 +54,15 @@ def main() -> None:
             if line.startswith("ballbeam view:"):
                 break
         with sync_playwright() as pw:
-            browser = pw.chromium.launch(executable_path=chromium, args=ARGS)
-            page = browser.new_page(viewport={"width": 1400, "height": 860})
+            browser = pw.chromium.launch(executable_path=chromium, args=list(CHROMIUM_ARGS))
+            page = browser.new_page(viewport={"width": 1400, "height": 900})
             page.goto(f"http://127.0.0.1:{port}")
             page.get_by_text("Connected").wait_for(timeout=30000)
+            time.sleep(2.0)
+            if args.setpoint_steps:  # move the setpoint with the keyboard, as a person would
+                page.get_by_role("slider").nth(4).focus()
+                for _ in range(args.setpoint_steps):
+                    page.keyboard.press("ArrowRight")
             time.sleep(args.wait)
             # The software-WebGL notice is about this headless browser, not about the twin.
             page.evaluate(

@@ -236,19 +236,20 @@ class ClosedLoop:
             raise RuntimeError("this closed loop was built with record=False")
         return self.recorder.log()
 
-    def verdict(self, x0_m: float, criteria: Criteria | None = None) -> Verdict:
-        """The verdict of the run so far (from the recorded true state)."""
+    def verdict(self, x0_m: float, criteria: Criteria | None = None, *, x_ref_m: float = 0.0) -> Verdict:
+        """The verdict of the run so far (from the recorded true state), judged about the ball position
+        ``x_ref_m`` (a setpoint; the offsets and the settling band are measured from it)."""
         if self.recorder is None:
             raise RuntimeError("this closed loop was built with record=False")
         r, p = self.recorder, self.rig.params
         n = r.n
         return evaluate(
             r.cols["true_time_s"][:n],
-            r.cols["true_x_m"][:n],
+            r.cols["true_x_m"][:n] - x_ref_m,
             r.cols["true_theta_rad"][:n],
             r.cols["motor_volts_v"][:n],
             r.peak_theta[:n],
-            x0_m=x0_m,
+            x0_m=x0_m - x_ref_m,
             ball_lost_time_s=self.rig.ball_lost_time_s,
             rail_v=p.amplifier.rail_v,
             stop_angle_rad=p.beam.stop_angle_rad,

@@ -56,6 +56,8 @@ __all__ = [
     "load_mat",
     "save_csv",
     "save_mat",
+    "write_csv",
+    "write_mat",
 ]
 
 THESIS_FIELDS = ("timem", "datam1", "datam2", "aout", "x1", "x2", "x3", "x4", "u", "uhesap")
@@ -194,17 +196,22 @@ def atomic_output(path: str | Path, *, overwrite: bool = False) -> Iterator[Bina
         pass
 
 
-def save_mat(log: RunLog, path: str | Path, *, overwrite: bool = False) -> None:
-    """Write a MATLAB 5 .mat file with the thesis's variable names (1×N rows, ``k`` a scalar double)."""
-    path = Path(path)
+def write_mat(log: RunLog, fh: BinaryIO) -> None:
+    """Write ``log`` to an open binary file as MATLAB 5 with the thesis's variable names (1×N rows, ``k`` a
+    scalar double)."""
     data: dict[str, np.ndarray | float] = {name: getattr(log, name) for name in THESIS_FIELDS}
     data["sampnumber"] = np.zeros((0, 0))  # as on the rig: declared global, never assigned
     data["k"] = float(log.k)
     for name in TRUTH_FIELDS:
         value = getattr(log, name)
         data[name] = value.astype(np.uint8) if name in _BOOL_FIELDS else value  # MATLAB: logical(ball_lost)
+    scipy.io.savemat(fh, data, format="5", oned_as="row", do_compression=False)
+
+
+def save_mat(log: RunLog, path: str | Path, *, overwrite: bool = False) -> None:
+    """Write a MATLAB 5 .mat file (``write_mat``) atomically."""
     with atomic_output(path, overwrite=overwrite) as fh:  # a failed write leaves an existing file as it was
-        scipy.io.savemat(fh, data, format="5", oned_as="row", do_compression=False)
+        write_mat(log, fh)
 
 
 def _vector(path: Path, name: str, value: object) -> np.ndarray:
@@ -312,11 +319,10 @@ def load_mat(path: str | Path) -> RunLog:
         raise LogError(f"{path}: {exc}") from None
 
 
-def save_csv(log: RunLog, path: str | Path, *, overwrite: bool = False) -> None:
-    """Write one column per array with a header row; floats at repr precision (they read back bit-identical).
-
-    Columns shorter than the longest (the true state may have its own length) end in empty cells."""
-    path = Path(path)
+def write_csv(log: RunLog, fh: BinaryIO) -> None:
+    """Write ``log`` to an open binary file as UTF-8 CSV: one column per array with a header row; floats at
+    repr precision (they read back bit-identical). Columns shorter than the longest (the true state may have
+    its own length) end in empty cells."""
     names = THESIS_FIELDS + TRUTH_FIELDS
     columns = []
     for name in names:
@@ -326,14 +332,19 @@ def save_csv(log: RunLog, path: str | Path, *, overwrite: bool = False) -> None:
         else:
             columns.append([repr(v) for v in value.tolist()])  # shortest repr that reads back exactly
     rows = max(len(c) for c in columns)
+    text = io.TextIOWrapper(fh, encoding="utf-8", newline="")
+    writer = csv.writer(text, lineterminator="\n")
+    writer.writerow(names)
+    for i in range(rows):
+        writer.writerow([c[i] if i < len(c) else "" for c in columns])
+    text.flush()
+    text.detach()  # the caller closes the file
+
+
+def save_csv(log: RunLog, path: str | Path, *, overwrite: bool = False) -> None:
+    """Write a CSV file (``write_csv``) atomically."""
     with atomic_output(path, overwrite=overwrite) as fh:  # a failed write leaves an existing file as it was
-        text = io.TextIOWrapper(fh, encoding="utf-8", newline="")
-        writer = csv.writer(text, lineterminator="\n")
-        writer.writerow(names)
-        for i in range(rows):
-            writer.writerow([c[i] if i < len(c) else "" for c in columns])
-        text.flush()
-        text.detach()  # atomic_output closes the file
+        write_csv(log, fh)
 
 
 def load_csv(path: str | Path) -> RunLog:

@@ -14,8 +14,10 @@ rig that fails marks the run failed; nothing a client sends stops the server.
 from __future__ import annotations
 
 import contextlib
+import functools
 import html
 import http
+import io
 import ipaddress
 import logging
 import math
@@ -38,12 +40,14 @@ import viser.uplot
 from viser import _messages as viser_messages
 
 from twin import converters
+from twin import log as log_io
 from twin.engine import Catalogue, ClosedLoop, ControllerError
 from twin.interface import DaqSample
 from twin.parameters import Parameters
 from twin.physics import check_initial_state
 from twin.plant import Plant
 from twin.rig import PlantKind, make_rig
+from twin.verdict import Verdict
 
 __all__ = ["LiveTwin", "OriginPolicy", "ViewerError", "serve"]
 
@@ -70,23 +74,55 @@ MAX_MESSAGE_BYTES = 1 << 20  # a GUI message is a few hundred bytes; viser's own
 NOTICE_S = 10.0  # a refusal stays in the status line this long
 NOTIFY_EVERY_S = 0.5  # at most two refusal notifications a second (a flood shows as a count)
 
-# Live plots: title, then (legend label, history key, colour) per trace.
+# The run is recorded from its start (Reset) for this long of simulated time (17 columns: about 4 MB).
+RECORD_LIMIT_S = 600.0
+VERDICT_EVERY_S = 1.0  # the live verdict is recomputed at most once a second of wall time
+
+# Live plots: title, then (legend label, history key, colour) per trace. Estimated = the controller's own
+# estimate (its observer or differentiator); measured = the raw readings through the software's converters.
 PLOTS = (
     (
-        "Ball position (m)",
+        "x (m)",
         (
             ("x true", "x_true", "#1f77b4"),
-            ("x measured", "x_meas", "#ff7f0e"),
-            ("x estimated", "x_est", "#2ca02c"),
+            ("measured", "x_meas", "#ff7f0e"),
+            ("estimated", "x_est", "#2ca02c"),
+            ("setpoint", "x_ref", "#000000"),
         ),
     ),
-    ("Beam angle (rad)", (("θ true", "th_true", "#1f77b4"), ("θ measured", "th_meas", "#ff7f0e"))),
-    ("Motor voltage (V)", (("motor V", "volts", "#d62728"),)),
     (
-        "Observer error (estimate − true)",
-        (("ẋ error (m/s)", "err_xdot", "#9467bd"), ("θ̇ error (rad/s)", "err_thdot", "#8c564b")),
+        "θ (rad)",
+        (
+            ("θ true", "th_true", "#1f77b4"),
+            ("measured", "th_meas", "#ff7f0e"),
+            ("estimated", "th_est", "#2ca02c"),
+        ),
     ),
+    ("θ̇ (rad/s)", (("θ̇ true", "thdot_true", "#1f77b4"), ("estimated", "thdot_est", "#2ca02c"))),
+    (
+        "I/O card (V)",
+        (
+            ("ball ADC", "ball_v", "#ff7f0e"),
+            ("angle ADC", "angle_v", "#8c564b"),
+            ("DAC out", "dac_v", "#9467bd"),
+        ),
+    ),
+    ("motor (V)", (("motor volts", "volts", "#d62728"),)),
 )
+PLOT_AXIS_PX = 58  # room for a y value such as "−0.005" with its minus sign (uPlot's default clips it)
+PLOT_ASPECT = 3.4  # wide and low: all the plots fit the height of a 900 px window
+PLOT_PANEL_PX = 460
+
+# Camera presets: position, look-at point (m, world frame; the pivot is 0.25 m above the floor), up.
+CAMERAS: dict[
+    str, tuple[tuple[float, float, float], tuple[float, float, float], tuple[float, float, float]]
+] = {
+    "Three-quarter": ((0.2, -0.72, 0.52), (0.0, 0.0, 0.24), (0.0, 0.0, 1.0)),
+    "Side": ((0.0, -0.7, 0.27), (0.0, 0.0, 0.25), (0.0, 0.0, 1.0)),
+    "Top": ((0.0, -0.02, 0.95), (0.0, 0.0, 0.25), (0.0, 1.0, 0.0)),
+}
+DEFAULT_CAMERA = "Three-quarter"
+SETPOINT_FLAG_M = (0.010, 0.028)  # the setpoint flag's extent above the ball centre (clear of the ball)
 
 
 class ViewerError(RuntimeError):
@@ -228,7 +264,8 @@ class LiveTwin:
     beam.stop_angle_rad), ``initial`` ((x0, θ0)), ``flick`` (m/s, |v| ≤ 1), ``noise`` (bool), ``speed``
     (0.1 … 4), ``reference`` (the setpoint, m, within the track). A controller or rig that fails (raises,
     a non-finite command, a diverged state) marks the run failed: ``error`` names the reason and the tick,
-    the run pauses, and a reset or another controller starts a new one."""
+    the run pauses, and a reset or another controller starts a new one. A lost ball pauses the run where
+    it left the track; the next run (Reset, another controller) then runs."""
 
     def __init__(
         self,
@@ -240,6 +277,7 @@ class LiveTwin:
         *,
         plant: PlantKind = "twin",
         ideal_sensors: bool = False,
+        wait_for_client: bool = False,
     ) -> None:
         self.params = params
         self.catalogue = catalogue
@@ -252,7 +290,9 @@ class LiveTwin:
         self.theta0_rad = min(0.1, 0.5 * params.beam.stop_angle_rad)
         self.noise = params.ball_sensor.noise_enabled
         self.reference_x_m = 0.0
-        self.running = True
+        # A first visitor sees the run from its start: the twin waits (paused) until a browser connects.
+        self.awaiting_client = wait_for_client
+        self.running = not wait_for_client
         self.error: str | None = None
         self.lost_paused = False  # the run paused itself when the ball left the track
         self.history = History()
@@ -284,14 +324,20 @@ class LiveTwin:
             params = self.params.with_overrides({"ball_sensor.noise_enabled": self.noise})
             rig = make_rig(params, plant=self.plant, ideal_sensors=self.ideal_sensors, seed=self.seed)
             rig.reset(self.x0_m, self.theta0_rad)
-            loop = ClosedLoop(rig, controller, record=False)
+            limit = int(RECORD_LIMIT_S / rig.period_s) + 1
+            loop = ClosedLoop(rig, controller, record=True, record_limit=limit)
         except Exception as exc:  # noqa: BLE001 - a controller or rig that cannot start is refused
             raise _Refused(f"cannot start {_show(name)}: {type(exc).__name__}: {exc}") from exc
         self.runs += 1
         self.error = None
+        if self.lost_paused:  # the pause was the lost ball's, not the user's: the new run goes
+            self.running = True
         self.lost_paused = False
         self.controller_name = name
         self.rig, self.loop = rig, loop
+        self.run_x0_m, self.run_theta0_rad = self.x0_m, self.theta0_rad  # this run's start
+        # (tick, wall time, verdict, setpoint) of the last verdict
+        self._verdict: tuple[int, float, Verdict, float] | None = None
         self.history.clear()
         try:
             self._apply_reference()
@@ -311,6 +357,52 @@ class LiveTwin:
     @property
     def supports_reference(self) -> bool:
         return hasattr(getattr(self.controller, "law", None), "ref_x_m")
+
+    @property
+    def setpoint_reason(self) -> str:
+        """Why the setpoint control does (or does not) act on this controller."""
+        if self.supports_reference:
+            return "The ball position the controller regulates to."
+        return (
+            f"{self.controller_name} regulates the ball to the centre: its law has no setpoint input "
+            "(the appendix programs and the sliding-mode law are written for x = 0)."
+        )
+
+    @property
+    def setpoint_m(self) -> float:
+        """The position the running controller regulates the ball to."""
+        return self.reference_x_m if self.supports_reference else 0.0
+
+    @property
+    def initial_pending(self) -> bool:
+        """x0/θ0 were changed since this run started: they apply on Reset."""
+        return (self.x0_m, self.theta0_rad) != (self.run_x0_m, self.run_theta0_rad)
+
+    def verdict(self) -> Verdict | None:
+        """The verdict of the run so far (recomputed at most once a second while it runs), None before the
+        first tick."""
+        ticks = self.rig.ticks
+        cached = self._verdict
+        if cached is not None and (
+            (cached[0] == ticks and cached[3] == self.setpoint_m)
+            or (self.running and time.monotonic() - cached[1] < VERDICT_EVERY_S)
+        ):
+            return cached[2]
+        recorder = self.loop.recorder
+        if recorder is None or recorder.n < 2:
+            return None
+        verdict = self.loop.verdict(self.run_x0_m, x_ref_m=self.setpoint_m)
+        self._verdict = (ticks, time.monotonic(), verdict, self.setpoint_m)
+        return verdict
+
+    def recording(self, kind: str) -> tuple[str, bytes]:
+        """This run's record so far as a file: (file name, contents); ``kind`` is "mat" or "csv"."""
+        writers = {"mat": log_io.write_mat, "csv": log_io.write_csv}
+        if kind not in writers:
+            raise _Refused(f"download = {_show(kind)}: the formats are mat and csv")
+        buffer = io.BytesIO()
+        writers[kind](self.loop.log(), buffer)
+        return f"ballbeam_run{self.runs}_{self.controller_name}.{kind}", buffer.getvalue()
 
     def _apply_reference(self) -> None:
         if self.supports_reference:
@@ -361,6 +453,20 @@ class LiveTwin:
         else:
             shown = "" if value is None else f" {_show(value)}"
             _log(f"t = {self.rig.time_s:.2f} s: {action}{shown}", key=f"action {action}", stream=sys.stdout)
+
+    def _do_connected(self, value: Any) -> None:
+        if self.awaiting_client:  # the first browser: a fresh run from t = 0, running
+            self.awaiting_client = False
+            self.runs = 0  # nobody saw the run built while waiting: the first one watched is run 1
+            self._start_run(self.controller_name)
+            self.running = self.error is None
+
+    def _do_download(self, value: Any) -> None:
+        if not isinstance(value, tuple) or len(value) != 2 or not callable(value[1]):
+            raise _Refused(f"download = {_show(value)} is not (format, receiver)")
+        kind, send = value
+        name, data = self.recording(kind)
+        send(name, data)
 
     def _do_controller(self, value: Any) -> None:
         if not isinstance(value, str) or value not in self.catalogue.NAMES:
@@ -427,6 +533,8 @@ class LiveTwin:
         "noise": _do_noise,
         "speed": _do_speed,
         "reference": _do_reference,
+        "connected": _do_connected,
+        "download": _do_download,
     }
 
     def tick(self) -> None:
@@ -455,27 +563,46 @@ class LiveTwin:
         est = self.controller.telemetry.estimate
         s = self.last_sample
         sw = self.rig.params.software
-        x_meas = converters.ball_position_m(s.ball_v, sw) if s is not None else float("nan")
-        th_meas = converters.beam_angle_rad(s.angle_v, sw) if s is not None else float("nan")
+        nan = float("nan")
         self.history.append(
             t=self.rig.time_s,
             x_true=x,
-            x_meas=x_meas,
+            x_meas=converters.ball_position_m(s.ball_v, sw) if s is not None else nan,
             x_est=est[0],
+            x_ref=self.setpoint_m,
             th_true=theta,
-            th_meas=th_meas,
+            th_meas=converters.beam_angle_rad(s.angle_v, sw) if s is not None else nan,
+            th_est=est[1],
+            xdot_true=xdot,
+            xdot_est=est[2],
+            thdot_true=thetadot,
+            thdot_est=est[3],
+            ball_v=s.ball_v if s is not None else nan,
+            angle_v=s.angle_v if s is not None else nan,
+            dac_v=self.loop.command_v,
             volts=self.rig.motor_volts_v,
-            err_xdot=est[2] - xdot,
-            err_thdot=est[3] - thetadot,
         )
 
     def status_markdown(self) -> str:
-        state = "running" if self.running else "paused"
+        if self.awaiting_client:
+            state = "waiting for a browser"
+        else:
+            state = "running" if self.running else "paused"
         ball = (
             f"**ball lost** at {self.rig.ball_lost_time_s:.2f} s — paused; Reset starts again"
             if self.rig.ball_lost
             else "ball on the beam"
         )
+        verdict = self.verdict()
+        judged = (
+            f"  \n{_markdown_text(verdict_text(verdict, self.setpoint_m))}" if verdict is not None else ""
+        )
+        pending = ""
+        if self.initial_pending:
+            pending = (
+                f"  \n*x0 = {self.x0_m:+.2f} m, θ0 = {self.theta0_rad:+.2f} rad apply on Reset* "
+                f"(this run started at {self.run_x0_m:+.2f} m, {self.run_theta0_rad:+.2f} rad)"
+            )
         error = f"  \n**run failed**: {_markdown_text(self.error)}" if self.error else ""
         notice = ""
         if self.notice is not None and time.monotonic() - self.notice[0] < NOTICE_S:
@@ -484,8 +611,43 @@ class LiveTwin:
             f"run {self.runs} · **t = {self.rig.time_s:.2f} s** · {state} · controller: "
             f"**{_markdown_text(self.controller_name)}** · {ball}  \n"
             f"noise {'on' if self.noise else 'off'} · speed ×{self.speed:g} · "
-            f"motor {self.rig.motor_volts_v:+.2f} V{error}{notice}"
+            f"motor {self.rig.motor_volts_v:+.2f} V{judged}{pending}{error}{notice}"
         )
+
+    def lost_banner_html(self) -> str:
+        """The banner shown while the ball is off the track (empty otherwise)."""
+        if not self.rig.ball_lost:
+            return ""
+        verdict = self.verdict()
+        x = float(self.rig.true_state()[0])
+        where = f" at x = {x:+.3f} m" if math.isfinite(x) else ""
+        text = (
+            f"Ball lost at t = {self.rig.ball_lost_time_s:.2f} s: it left the track{where}. The run is paused "
+            f"({verdict_text(verdict, self.setpoint_m) if verdict is not None else 'no verdict'}). "
+            "Press Reset to start again."
+        )
+        return (
+            '<div role="alert" style="background:#c92a2a;color:#fff;padding:8px 10px;border-radius:6px;'
+            f'font-weight:600;font-size:0.9em">{html.escape(text)}</div>'
+        )
+
+
+def verdict_text(v: Verdict, setpoint_m: float = 0.0) -> str:
+    """One line for a person watching: the verdict of the run so far."""
+    if v.ball_lost:
+        return f"verdict: lost (ball off the track at {v.ball_lost_time_s:.2f} s)"
+    if v.steady_x_m is None:
+        return f"verdict so far: too early to tell ({v.reason})"
+    parts = ["held" if v.held else f"not held: {v.reason}"]
+    if v.settling_time_s is not None:
+        parts.append(f"settled in {v.settling_time_s:.2f} s")
+    parts.append(f"steady x {v.steady_x_m * 1e3:+.1f} mm" + (" from the setpoint" if setpoint_m else ""))
+    if v.limit_cycle_x_pp_m is not None:
+        parts.append(f"cycle {v.limit_cycle_x_pp_m * 1e3:.1f} mm p-p")
+    parts.append(f"peak {v.peak_motor_voltage_v:.1f} V ({100 * v.saturated_fraction:.0f} % at the rails)")
+    judged = " · ".join(parts)
+    about = f" (about the setpoint x = {setpoint_m:+.2f} m)" if setpoint_m else ""
+    return f"verdict so far{about}: {judged}"
 
 
 def owe(owed_s: float, speed: float) -> float:
@@ -745,6 +907,32 @@ def build_scene(server: viser.ViserServer, model: mujoco.MjModel) -> dict[int, A
     return frames
 
 
+def _on_camera(name: str, event: Any) -> None:
+    _set_camera(event.client, name)
+
+
+def _set_camera(client: Any, name: str) -> None:
+    """One browser's camera to a preset (per client: other viewers keep their own view)."""
+    if client is None or name not in CAMERAS:
+        return
+    position, look_at, up = CAMERAS[name]
+    with client.atomic():
+        client.camera.up_direction = up
+        client.camera.position = position
+        client.camera.look_at = look_at
+
+
+def parameter_changes(params: Parameters) -> list[str]:
+    """``group.name = value`` for every parameter that differs from the defaults."""
+    ours, defaults = params.to_dict(), Parameters().to_dict()
+    changes = []
+    for group, values in ours.items():
+        for name, value in values.items():
+            if defaults.get(group, {}).get(name) != value:
+                changes.append(f"{group}.{name} = {_show(value, 80)}")
+    return changes
+
+
 def _free_port_or_raise(host: str, port: int) -> None:
     """viser moves silently to the next free port; a taken port is an error here instead."""
     if not 1 <= port <= 65535:
@@ -768,9 +956,17 @@ def _free_port_or_raise(host: str, port: int) -> None:
 class Viewer:
     """viser server + GUI around a ``LiveTwin``, paced by the wall clock."""
 
-    def __init__(self, live: LiveTwin, host: str, port: int, allowed_origins: Sequence[str] = ()) -> None:
+    def __init__(
+        self,
+        live: LiveTwin,
+        host: str,
+        port: int,
+        allowed_origins: Sequence[str] = (),
+        params_source: str = "",
+    ) -> None:
         _free_port_or_raise(host, port)
         self.live = live
+        self.params_source = params_source
         self.policy = OriginPolicy.for_bind(host, port, allowed_origins)
         self.refused_connections = 0  # handshakes refused by the origin policy
         self.dropped_messages = 0  # GUI messages dropped before viser applied them
@@ -789,13 +985,26 @@ class Viewer:
             raise ViewerError(f"port {port} on {host} is taken; choose another with --port")
         self.host, self.port = host, port
         self._harden_messages()
-        self.server.gui.configure_theme(show_share_button=False, control_width="large")
-        self.server.initial_camera.position = (0.16, -0.58, 0.36)
-        self.server.initial_camera.look_at = (0.16, 0.0, 0.25)
+        self.server.gui.configure_theme(show_share_button=False, control_width="medium")
+        position, look_at, up = CAMERAS[DEFAULT_CAMERA]
+        self.server.initial_camera.position = position
+        self.server.initial_camera.look_at = look_at
+        self.server.initial_camera.up = up
         # The reference model has no geometry: a MuJoCo model of the same rig shows its state.
         self._display = Plant(live.params)
         self.frames = build_scene(self.server, self._display.model)
+        # The setpoint on the beam: a thin flag across both wires above the ball's path, in the beam's frame.
+        p = live.params
+        self._setpoint_flag_z_m = p.ball_centre_height_m + 0.5 * sum(SETPOINT_FLAG_M)
+        self.setpoint_marker = self.server.scene.add_box(
+            "/beam/setpoint",
+            color=(20, 20, 20),
+            dimensions=(0.002, 0.04, SETPOINT_FLAG_M[1] - SETPOINT_FLAG_M[0]),
+            position=(live.setpoint_m, 0.0, self._setpoint_flag_z_m),
+        )
+        self._shown_setpoint = live.setpoint_m
         self._build_gui()
+        self.server.on_client_connect(lambda _client: live.enqueue("connected"))
         self._frame_count = 0
         self._pending: list[Refusal] = []  # refusals not yet notified
         self._last_notify = -math.inf
@@ -864,6 +1073,7 @@ class Viewer:
         x_max = min(X0_SLIDER_M, p.track.half_length_m)
         th_max = min(THETA0_SLIDER_RAD, p.beam.stop_angle_rad)
         ref_max = min(SETPOINT_SLIDER_M, p.track.half_length_m)
+        self.banner = gui.add_html("", visible=False)
         self.status = gui.add_markdown(live.status_markdown())
         with gui.add_folder("Run"):
             controller = gui.add_dropdown(
@@ -871,13 +1081,25 @@ class Viewer:
             )
             run = gui.add_button("Pause")
             step = gui.add_button("Step 20 ms")
-            reset = gui.add_button("Reset")
+            reset = gui.add_button("Reset", hint="Start a new run from x0, θ0 (and re-place a lost ball)")
             speed = gui.add_slider("Speed", min=SPEED_MIN, max=SPEED_MAX, step=0.1, initial_value=live.speed)
             noise = gui.add_checkbox("Sensor noise", initial_value=live.noise)
-        with gui.add_folder("Initial state"):
-            x0 = gui.add_slider("x0 (m)", min=-x_max, max=x_max, step=0.01, initial_value=live.x0_m)
+        with gui.add_folder("Initial state (applies on Reset)"):
+            x0 = gui.add_slider(
+                "x0 (m)",
+                min=-x_max,
+                max=x_max,
+                step=0.01,
+                initial_value=live.x0_m,
+                hint="Where the ball is held before release; press Reset to apply",
+            )
             th0 = gui.add_slider(
-                "θ0 (rad)", min=-th_max, max=th_max, step=0.01, initial_value=live.theta0_rad
+                "θ0 (rad)",
+                min=-th_max,
+                max=th_max,
+                step=0.01,
+                initial_value=live.theta0_rad,
+                hint="Where the beam is held before release; press Reset to apply",
             )
         with gui.add_folder("Disturb"):
             kick = gui.add_slider(
@@ -892,7 +1114,22 @@ class Viewer:
                 step=0.01,
                 initial_value=0.0,
                 disabled=not live.supports_reference,
+                hint=live.setpoint_reason,
             )
+            self.setpoint_note = gui.add_markdown(
+                "" if live.supports_reference else f"*{_markdown_text(live.setpoint_reason)}*"
+            )
+        with gui.add_folder("Record"):
+            gui.add_markdown(
+                f"Each run is recorded from its start (Reset) for up to {RECORD_LIMIT_S / 60:g} min of "
+                "simulated time: the thesis software's `data_file.mat` variables and the twin's true state."
+            )
+            download_mat = gui.add_button("Download .mat")
+            download_csv = gui.add_button("Download CSV")
+        with gui.add_folder("Camera"):
+            cameras = {name: gui.add_button(name) for name in CAMERAS}
+        with gui.add_folder("Parameters", expand_by_default=False):
+            gui.add_markdown(self._parameters_markdown())
         self.reference_slider = reference
         self.run_button = run
         self.controls: dict[str, Any] = {
@@ -908,6 +1145,9 @@ class Viewer:
             "flick_left": flick_left,
             "flick_right": flick_right,
             "setpoint": reference,
+            "download_mat": download_mat,
+            "download_csv": download_csv,
+            **{f"camera_{name}": button for name, button in cameras.items()},
         }
 
         controller.on_update(lambda _: live.enqueue("controller", controller.value))
@@ -921,17 +1161,58 @@ class Viewer:
         flick_left.on_click(lambda _: live.enqueue("flick", -kick.value))
         flick_right.on_click(lambda _: live.enqueue("flick", kick.value))
         reference.on_update(lambda _: live.enqueue("reference", reference.value))
+        download_mat.on_click(lambda event: self._download(event.client, "mat"))
+        download_csv.on_click(lambda event: self._download(event.client, "csv"))
+        for name, button in cameras.items():
+            button.on_click(functools.partial(_on_camera, name))
 
+        # The plots in their own panel, docked left of the view: all of them visible at 1400 × 900.
+        # Compact: the quantity as the y-axis label (no title), a static legend, a low time axis.
         scales: dict[str, viser.uplot.Scale] = {"x": {"time": False, "auto": True}}
+        legend: viser.uplot.Legend = {"live": False}
         self.plots = []
-        with gui.add_folder("Plots (last 10 s)"):
-            for title, traces in PLOTS:
+        self.plot_panel = gui.add_panel()
+        with self.plot_panel.add_tab("Plots (last 10 s, time in s)"):
+            for label, traces in PLOTS:
                 series = [viser.uplot.Series(label="t (s)")] + [
-                    viser.uplot.Series(label=label, stroke=colour) for label, _, colour in traces
+                    viser.uplot.Series(label=name, stroke=colour, width=1.5) for name, _, colour in traces
                 ]
+                axes: tuple[viser.uplot.Axis, ...] = (
+                    {"size": 26},
+                    {"size": PLOT_AXIS_PX, "label": label, "labelSize": 18},
+                )
                 data = tuple(np.zeros(2) for _ in series)
-                handle = gui.add_uplot(data, tuple(series), title=title, aspect=2.0, scales=scales)
+                handle = gui.add_uplot(
+                    data, tuple(series), aspect=PLOT_ASPECT, scales=scales, axes=axes, legend=legend
+                )
                 self.plots.append((handle, [key for _, key, _ in traces]))
+        self.plot_panel.dock_left()
+        gui.main_panel.dock_right()  # the view between the two: nothing covers the rig
+        self.plot_panel.set_width(PLOT_PANEL_PX)
+
+    def _download(self, client: Any, kind: str) -> None:
+        """The loop builds the file (it owns the record); the clicking browser receives it."""
+        if client is None:
+            return
+
+        def send(name: str, data: bytes) -> None:
+            client.send_file_download(name, data, save_immediately=True)
+
+        self.live.enqueue("download", (kind, send))
+
+    def _parameters_markdown(self) -> str:
+        """Where the parameters come from, and every value that differs from the thesis's defaults."""
+        source = self.params_source or "the thesis's values (no --params, no --set)"
+        changed = parameter_changes(self.live.params)
+        lines = [f"parameters: **{_markdown_text(source)}**"]
+        if changed:
+            lines.append("changed from the defaults:")
+            lines += [f"- `{_markdown_text(item)}`" for item in changed[:40]]
+            if len(changed) > 40:
+                lines.append(f"- … and {len(changed) - 40} more")
+        else:
+            lines.append("every value is the default (see `ballbeam params`)")
+        return "  \n".join(lines[:2]) + ("\n\n" + "\n".join(lines[2:]) if len(lines) > 2 else "")
 
     def _resync(self, action: str) -> None:
         """Put a control whose value was refused back to the state the twin runs with."""
@@ -1008,6 +1289,16 @@ class Viewer:
                     self.run_button.label = label
                 if self.reference_slider.disabled == live.supports_reference:
                     self.reference_slider.disabled = not live.supports_reference
+                    self.reference_slider.hint = live.setpoint_reason
+                    note = "" if live.supports_reference else f"*{_markdown_text(live.setpoint_reason)}*"
+                    self.setpoint_note.content = note
+                banner = live.lost_banner_html()
+                if self.banner.content != banner:
+                    self.banner.content = banner
+                    self.banner.visible = bool(banner)
+            if self._shown_setpoint != live.setpoint_m:
+                self._shown_setpoint = live.setpoint_m
+                self.setpoint_marker.position = (live.setpoint_m, 0.0, self._setpoint_flag_z_m)
 
     def _safely(self, step: Callable[[], None]) -> None:
         """The loop's last line of defence: whatever fails in a frame is one log line, never the server."""
@@ -1071,6 +1362,8 @@ def serve(
     ideal_sensors: bool = False,
     announce: bool = True,
     allowed_origins: tuple[str, ...] = (),
+    params_source: str = "",
+    wait_for_client: bool = True,
     stop: threading.Event | None = None,
     on_ready: Callable[[Viewer], None] | None = None,
 ) -> dict[str, float]:
@@ -1079,7 +1372,8 @@ def serve(
     Browsers connect from the page's own origin only; ``allowed_origins`` adds others (e.g.
     ``("https://twin.lab.example",)`` behind a reverse proxy). A host other than loopback is served with a
     warning on stderr: anyone who can reach it can drive the twin. ``on_ready(viewer)`` is called once the
-    server listens (tests)."""
+    server listens (tests). The twin waits, paused, until the first browser connects (``wait_for_client``),
+    so that a visitor sees the run from its start; ``params_source`` is shown in the panel."""
     if not (isinstance(speed, (int, float)) and math.isfinite(speed) and SPEED_MIN <= speed <= SPEED_MAX):
         raise ViewerError(
             f"--speed = {speed!r} must be within {SPEED_MIN:g} … {SPEED_MAX:g} (the speed slider)"
@@ -1087,9 +1381,16 @@ def serve(
     if controller not in catalogue.NAMES:
         raise ViewerError(f"unknown controller {controller!r}; known: {', '.join(catalogue.NAMES)}")
     live = LiveTwin(
-        params or Parameters(), catalogue, controller, seed, speed, plant=plant, ideal_sensors=ideal_sensors
+        params or Parameters(),
+        catalogue,
+        controller,
+        seed,
+        speed,
+        plant=plant,
+        ideal_sensors=ideal_sensors,
+        wait_for_client=wait_for_client,
     )
-    viewer = Viewer(live, host, port, allowed_origins)
+    viewer = Viewer(live, host, port, allowed_origins, params_source)
     if not is_loopback(host):
         where = "every interface" if _is_wildcard(host) else host
         _log(

@@ -100,6 +100,13 @@ def _load_params(args: argparse.Namespace) -> Parameters:
     return params.with_overrides(overrides, origin="--set") if overrides else params
 
 
+def _params_source(args: argparse.Namespace) -> str:
+    """Where the parameters came from, as typed: ``--params FILE`` and the ``--set`` items."""
+    parts = [f"--params {args.params}"] if args.params else []
+    parts += [f"--set {item}" for item in getattr(args, "set", None) or ()]
+    return " ".join(parts)
+
+
 def _parse_value(text: str, item: str) -> object:
     """A --set value: true/false, a number, or a JSON list of numbers."""
     from twin.parameters import ParameterError
@@ -375,6 +382,7 @@ def _cmd_view(args: argparse.Namespace) -> int:
             plant=args.plant,
             ideal_sensors=args.ideal_sensors or args.plant == "reference",
             allowed_origins=tuple(args.allow_origin or ()),
+            params_source=_params_source(args),
         )
     except ViewerError as exc:
         print(f"ballbeam view: error: {exc}", file=sys.stderr)
