@@ -15,21 +15,18 @@ imported by the commands that use them.
 from __future__ import annotations
 
 import argparse
-import importlib
-import inspect
 import json
 import math
-import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, NoReturn
 
+from twin.app.catalogue import WithUserController, construct, one_line, user_controller
 from twin.app.paths import check_output_dir, check_outputs, writing
 
 if TYPE_CHECKING:
-    from twin.engine import Catalogue, StateLaw
-    from twin.interface import Controller
+    from twin.engine import Catalogue
     from twin.parameters import Parameters
 
 # controllers.registry.NAMES, kept here as text so that --help need not import the registry (and python-control);
@@ -64,10 +61,6 @@ PARAMS_OUT_SUFFIXES = (".toml",)
 # each in a .mat, at least 4 characters each in a CSV; a plot takes at least 20 kB.
 _LOG_BYTES_PER_TICK = {".mat": 17 * 8, ".csv": 17 * 4}
 _PLOT_BYTES = 20_000
-
-
-def _one_line(exc: BaseException) -> str:
-    return " ".join(str(exc).split()) or type(exc).__name__
 
 
 def package_version() -> str:
@@ -203,91 +196,6 @@ def _log_bytes(text: str | None, duration_s: float, params: Parameters) -> int:
     return ticks * _LOG_BYTES_PER_TICK.get(Path(text).suffix.lower(), 0)
 
 
-def _user_controller(spec: str) -> type[Controller] | None:
-    """The class named by ``MODULE:CLASS``, or None for a registry name (checked against the registry)."""
-    from twin.parameters import ParameterError
-
-    if ":" not in spec:
-        from controllers import registry
-
-        if spec not in registry.NAMES:
-            raise ParameterError(
-                f"--controller {spec!r}: unknown controller; known: {', '.join(registry.NAMES)}, "
-                "or MODULE:CLASS for your own"
-            )
-        return None
-    from twin.interface import Controller
-
-    module_name, _, qualname = spec.partition(":")
-    if not module_name or not qualname:
-        raise ParameterError(f"--controller {spec!r}: expected MODULE:CLASS, e.g. mypkg.mod:MyController")
-    cwd = os.getcwd()
-    if "" not in sys.path and cwd not in sys.path:  # as `python -m`: the user's modules where they are
-        sys.path.insert(0, cwd)
-    try:
-        module = importlib.import_module(module_name)
-    except ModuleNotFoundError as exc:
-        if exc.name and (module_name == exc.name or module_name.startswith(exc.name + ".")):
-            raise ParameterError(f"--controller {spec}: no module named {exc.name!r}") from None
-        raise ParameterError(
-            f"--controller {spec}: importing {module_name} failed: {_one_line(exc)}"
-        ) from None
-    except Exception as exc:  # noqa: BLE001 - the user's module may raise anything while it is imported
-        raise ParameterError(
-            f"--controller {spec}: importing {module_name} failed: {type(exc).__name__}: {_one_line(exc)}"
-        ) from None
-    obj: Any = module
-    for part in qualname.split("."):
-        try:
-            obj = getattr(obj, part)
-        except AttributeError:
-            raise ParameterError(f"--controller {spec}: module {module_name} has no {qualname!r}") from None
-    if not (isinstance(obj, type) and issubclass(obj, Controller)):
-        raise ParameterError(
-            f"--controller {spec}: {qualname} is not a subclass of twin.interface.Controller "
-            "(a hardware controller: raw blocks in, a DAC command out)"
-        )
-    return obj
-
-
-def _construct(cls: type[Controller], spec: str, params: Parameters) -> Controller:
-    """``cls(software)`` if the constructor has a parameter ``software``, else ``cls()``."""
-    from twin.parameters import ParameterError
-
-    try:
-        software = inspect.signature(cls).parameters.get("software")
-    except (TypeError, ValueError):  # no signature to read: call it without arguments
-        software = None
-    call = f"{cls.__name__}({'' if software is None else 'software'})"
-    try:
-        if software is None:
-            controller = cls()
-        elif software.kind is inspect.Parameter.POSITIONAL_ONLY:
-            controller = cls(params.software)  # type: ignore[call-arg]
-        else:
-            controller = cls(software=params.software)  # type: ignore[call-arg]
-    except Exception as exc:  # noqa: BLE001 - the user's constructor may raise anything
-        raise ParameterError(
-            f"--controller {spec}: {call} failed: {type(exc).__name__}: {_one_line(exc)}"
-        ) from None
-    return controller
-
-
-class _WithUserController:
-    """The registry plus the user's ``MODULE:CLASS`` controller, as a catalogue for the live view."""
-
-    def __init__(self, base: Catalogue, spec: str, cls: type[Controller]) -> None:
-        self.base, self.spec, self.cls = base, spec, cls
-        self.NAMES: tuple[str, ...] = (*base.NAMES, spec)
-
-    def make(self, name: str, params: Parameters | None = None) -> Controller | StateLaw:
-        from twin.parameters import Parameters
-
-        if name == self.spec:
-            return _construct(self.cls, name, params or Parameters())
-        return self.base.make(name, params)
-
-
 def _cmd_run(args: argparse.Namespace) -> int:
     from controllers import registry
     from twin.engine import ControllerError, run_closed_loop
@@ -296,7 +204,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     params = _load_params(args)
     _check_finite(x0=args.x0, theta0=args.theta0, duration=args.duration)
     _check_run_duration(args.duration, params)
-    user = _user_controller(args.controller)
+    user = user_controller(args.controller)
     paths = check_outputs(
         [
             ("--log", args.log, LOG_SUFFIXES, _log_bytes(args.log, args.duration, params)),
@@ -305,7 +213,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         overwrite=args.overwrite,
     )
     controller = (
-        registry.make(args.controller, params) if user is None else _construct(user, args.controller, params)
+        registry.make(args.controller, params) if user is None else construct(user, args.controller, params)
     )
     try:
         result = run_closed_loop(
@@ -364,11 +272,11 @@ def _cmd_view(args: argparse.Namespace) -> int:
             f"--speed = {args.speed!r}: the view runs at {SPEED_MIN:g}…{SPEED_MAX:g} simulated seconds per "
             "wall second (the range of its speed slider)"
         )
-    user = _user_controller(args.controller)
+    user = user_controller(args.controller)
     catalogue: Catalogue = registry
     if user is not None:
-        _construct(user, args.controller, params)  # a failing constructor is refused here, not in the view
-        catalogue = _WithUserController(registry, args.controller, user)
+        construct(user, args.controller, params)  # a failing constructor is refused here, not in the view
+        catalogue = WithUserController(registry, args.controller, user)
     try:
         stats = serve(
             catalogue,
@@ -719,7 +627,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except BrokenPipeError:  # output piped into e.g. head
         return 0
     except (ValueError, OSError) as exc:  # bad input, or an output that cannot be written: no traceback
-        print(f"ballbeam: error: {_one_line(exc)}", file=sys.stderr)
+        print(f"ballbeam: error: {one_line(exc)}", file=sys.stderr)
         return 2
 
 

@@ -1,0 +1,123 @@
+"""The controller a command runs: a name from the registry or the user's own ``MODULE:CLASS``.
+
+``catalogue_for(spec, params)`` is the catalogue (``twin.engine.Catalogue``) in which ``spec`` names a
+controller; worker processes rebuild it from the same text, so a user's controller runs there too. Failures
+are ``ParameterError``s naming the ``--controller`` value (one line, no traceback). Imports stay lazy:
+``ballbeam --help`` must not load python-control.
+"""
+
+from __future__ import annotations
+
+import importlib
+import inspect
+import os
+import sys
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from twin.engine import Catalogue, StateLaw
+    from twin.interface import Controller
+    from twin.parameters import Parameters
+
+__all__ = ["WithUserController", "catalogue_for", "construct", "one_line", "user_controller"]
+
+
+def one_line(exc: BaseException) -> str:
+    return " ".join(str(exc).split()) or type(exc).__name__
+
+
+def user_controller(spec: str) -> type[Controller] | None:
+    """The class named by ``MODULE:CLASS``, or None for a registry name (checked against the registry)."""
+    from twin.parameters import ParameterError
+
+    if ":" not in spec:
+        from controllers import registry
+
+        if spec not in registry.NAMES:
+            raise ParameterError(
+                f"--controller {spec!r}: unknown controller; known: {', '.join(registry.NAMES)}, "
+                "or MODULE:CLASS for your own"
+            )
+        return None
+    from twin.interface import Controller
+
+    module_name, _, qualname = spec.partition(":")
+    if not module_name or not qualname:
+        raise ParameterError(f"--controller {spec!r}: expected MODULE:CLASS, e.g. mypkg.mod:MyController")
+    cwd = os.getcwd()
+    if "" not in sys.path and cwd not in sys.path:  # as `python -m`: the user's modules where they are
+        sys.path.insert(0, cwd)
+    try:
+        module = importlib.import_module(module_name)
+    except ModuleNotFoundError as exc:
+        if exc.name and (module_name == exc.name or module_name.startswith(exc.name + ".")):
+            raise ParameterError(f"--controller {spec}: no module named {exc.name!r}") from None
+        raise ParameterError(
+            f"--controller {spec}: importing {module_name} failed: {one_line(exc)}"
+        ) from None
+    except Exception as exc:  # noqa: BLE001 - the user's module may raise anything while it is imported
+        raise ParameterError(
+            f"--controller {spec}: importing {module_name} failed: {type(exc).__name__}: {one_line(exc)}"
+        ) from None
+    obj: Any = module
+    for part in qualname.split("."):
+        try:
+            obj = getattr(obj, part)
+        except AttributeError:
+            raise ParameterError(f"--controller {spec}: module {module_name} has no {qualname!r}") from None
+    if not (isinstance(obj, type) and issubclass(obj, Controller)):
+        raise ParameterError(
+            f"--controller {spec}: {qualname} is not a subclass of twin.interface.Controller "
+            "(a hardware controller: raw blocks in, a DAC command out)"
+        )
+    return obj
+
+
+def construct(cls: type[Controller], spec: str, params: Parameters) -> Controller:
+    """``cls(software)`` if the constructor has a parameter ``software``, else ``cls()``."""
+    from twin.parameters import ParameterError
+
+    try:
+        software = inspect.signature(cls).parameters.get("software")
+    except (TypeError, ValueError):  # no signature to read: call it without arguments
+        software = None
+    call = f"{cls.__name__}({'' if software is None else 'software'})"
+    try:
+        if software is None:
+            controller = cls()
+        elif software.kind is inspect.Parameter.POSITIONAL_ONLY:
+            controller = cls(params.software)  # type: ignore[call-arg]
+        else:
+            controller = cls(software=params.software)  # type: ignore[call-arg]
+    except Exception as exc:  # noqa: BLE001 - the user's constructor may raise anything
+        raise ParameterError(
+            f"--controller {spec}: {call} failed: {type(exc).__name__}: {one_line(exc)}"
+        ) from None
+    return controller
+
+
+class WithUserController:
+    """The registry plus the user's ``MODULE:CLASS`` controller, as a catalogue for the live view."""
+
+    def __init__(self, base: Catalogue, spec: str, cls: type[Controller]) -> None:
+        self.base, self.spec, self.cls = base, spec, cls
+        self.NAMES: tuple[str, ...] = (*base.NAMES, spec)
+
+    def make(self, name: str, params: Parameters | None = None) -> Controller | StateLaw:
+        from twin.parameters import Parameters
+
+        if name == self.spec:
+            return construct(self.cls, name, params or Parameters())
+        return self.base.make(name, params)
+
+
+def catalogue_for(spec: str, params: Parameters) -> Catalogue:
+    """The registry, or the registry plus the user's ``MODULE:CLASS`` (its constructor tried once here, so
+    that a failing one is refused before any work)."""
+    from controllers import registry
+
+    user = user_controller(spec)
+    if user is None:
+        return registry
+    construct(user, spec, params)
+    return WithUserController(registry, spec, user)
