@@ -14,11 +14,11 @@ complete).
 from __future__ import annotations
 
 import json
-import shutil
-import tempfile
 from pathlib import Path
 
 import matplotlib
+
+from twin.log import atomic_directory, check_output_directory
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
@@ -30,39 +30,17 @@ __all__ = ["write_report", "check_out_dir"]
 
 
 def check_out_dir(out_dir: str | Path, overwrite: bool) -> Path:
-    """Refuse an existing ``out_dir`` unless ``overwrite``; refuse a parent that does not exist. Call it
-    before a long fit so that nothing is computed for an output that cannot be written."""
-    out = Path(out_dir)
-    if out.exists() and not overwrite:
-        raise FileExistsError(f"{out}: exists; not overwritten (pass --overwrite)")
-    if out.exists() and not out.is_dir():
-        raise FileExistsError(f"{out}: exists and is not a directory")
-    parent = out.resolve().parent
-    if not parent.is_dir():
-        raise FileNotFoundError(f"{out}: its folder {parent} does not exist")
-    return out
+    """Refuse an existing ``out_dir`` unless ``overwrite``, and a parent that does not exist (before a fit)."""
+    return check_output_directory(out_dir, overwrite=overwrite)
 
 
 def write_report(cal: Calibration, out_dir: str | Path, *, overwrite: bool = False) -> Path:
-    out = check_out_dir(out_dir, overwrite)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.resolve().parent))
-    try:
+    with atomic_directory(out_dir, overwrite=overwrite) as tmp:
         cal.params.save(tmp / "params.toml")
         (tmp / "calibration.json").write_text(json.dumps(cal.to_json(), indent=2) + "\n")
         _figures(cal, tmp)
         (tmp / "report.md").write_text(_markdown(cal))
-        if out.exists():
-            old = Path(tempfile.mkdtemp(prefix=f".{out.name}.old.", dir=out.resolve().parent))
-            old.rmdir()
-            out.rename(old)
-            tmp.rename(out)
-            shutil.rmtree(old)
-        else:
-            tmp.rename(out)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
-    return out
+    return Path(out_dir)
 
 
 def _figures(cal: Calibration, out: Path) -> None:

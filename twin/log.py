@@ -33,6 +33,7 @@ from __future__ import annotations
 import csv
 import io
 import os
+import shutil
 import stat
 import tempfile
 from collections.abc import Iterator
@@ -51,7 +52,9 @@ __all__ = [
     "TRUTH_FIELDS",
     "LogError",
     "RunLog",
+    "atomic_directory",
     "atomic_output",
+    "check_output_directory",
     "load_csv",
     "load_mat",
     "save_csv",
@@ -194,6 +197,42 @@ def atomic_output(path: str | Path, *, overwrite: bool = False) -> Iterator[Bina
         tmp.unlink()
     except OSError:
         pass
+
+
+def check_output_directory(path: str | Path, *, overwrite: bool = False) -> Path:
+    """Refuse an existing ``path`` unless ``overwrite`` (and then only a directory), and a parent folder
+    that does not exist. Call it before a long job: nothing is computed for an output that cannot be
+    written."""
+    out = Path(path)
+    if os.path.lexists(out) and not overwrite:
+        raise FileExistsError(f"{out}: exists; not overwritten (pass --overwrite)")
+    if os.path.lexists(out) and not out.is_dir():
+        raise FileExistsError(f"{out}: exists and is not a directory")
+    parent = out.resolve().parent
+    if not parent.is_dir():
+        raise FileNotFoundError(f"{out}: its folder {parent} does not exist")
+    return out
+
+
+@contextmanager
+def atomic_directory(path: str | Path, *, overwrite: bool = False) -> Iterator[Path]:
+    """A new directory to write ``path``'s files into, which replaces ``path`` when the block ends without
+    error (renames in the same folder). On an error it is removed and ``path`` is left as it was."""
+    out = check_output_directory(path, overwrite=overwrite)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.resolve().parent))
+    try:
+        yield tmp
+        if out.exists():
+            old = Path(tempfile.mkdtemp(prefix=f".{out.name}.old.", dir=out.resolve().parent))
+            old.rmdir()
+            out.rename(old)
+            tmp.rename(out)
+            shutil.rmtree(old, ignore_errors=True)
+        else:
+            tmp.rename(out)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
 
 
 def write_mat(log: RunLog, fh: BinaryIO) -> None:
