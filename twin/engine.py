@@ -18,7 +18,6 @@ episode and computes the verdict (twin.verdict) once.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
 import numpy as np
@@ -68,11 +67,28 @@ class ControllerError(RuntimeError):
     """A controller raised or returned something the I/O card cannot output; the message names the tick."""
 
 
-@dataclass
 class RunResult:
-    controller: str
-    log: RunLog
-    verdict: Verdict
+    """One run's verdict and, when it was recorded, its log (``twin.batch.run_batch`` may keep verdicts only)."""
+
+    def __init__(self, controller: str, log: RunLog | None, verdict: Verdict) -> None:
+        self.controller = controller
+        self._log = log
+        self.verdict = verdict
+
+    @property
+    def recorded(self) -> bool:
+        return self._log is not None
+
+    @property
+    def log(self) -> RunLog:
+        if self._log is None:
+            raise RuntimeError(f"{self.controller}: this run kept its verdict only (run_batch record=False)")
+        return self._log
+
+    def __repr__(self) -> str:
+        return (
+            f"RunResult(controller={self.controller!r}, recorded={self.recorded}, verdict={self.verdict!r})"
+        )
 
 
 class _Recorder:

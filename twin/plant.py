@@ -194,6 +194,24 @@ class Plant:
         ex = np.array([math.cos(theta), 0.0, math.sin(theta)])
         return np.array([offset @ ex, theta, v_rel @ ex, thetadot])
 
+    def row_states(self, rows: np.ndarray) -> np.ndarray:
+        """(x, θ, ẋ, θ̇) for each full-physics state row (time, qpos, qvel), shape (n, 4): what ``state``
+        computes from MjData, with the same operations (its BLAS dot products are numpy's matmul of one row
+        by one column per run), so a run in a batch (``twin.batch``) logs the same bits as alone."""
+        if self._hinge_qpos is None or self._hinge_dof is None:
+            raise ValueError("row_states needs the beam's hinge (a rig built with hold_beam_rad has none)")
+        nq = self.model.nq
+        theta, thetadot = rows[:, 1 + self._hinge_qpos], rows[:, 1 + nq + self._hinge_dof]
+        q, v = 1 + self._ball_qpos, 1 + nq + self._ball_dof
+        offset = rows[:, q : q + 3] - self._pivot_m
+        ox, oz = offset[:, 0], offset[:, 2]
+        v_rel = np.stack([rows[:, v] + thetadot * oz, rows[:, v + 1], rows[:, v + 2] - thetadot * ox], axis=1)
+        zero = np.zeros_like(theta)
+        ex = np.stack([np.cos(theta), zero, np.sin(theta)], axis=1)[:, :, None]
+        along = np.matmul(offset[:, None, :], ex)[:, 0, 0]
+        speed = np.matmul(v_rel[:, None, :], ex)[:, 0, 0]
+        return np.stack([along, theta, speed, thetadot], axis=1)
+
     # --- stepping ---------------------------------------------------------------------------------
     @property
     def timestep_s(self) -> float:
@@ -241,17 +259,11 @@ class Plant:
             )
         if not np.isfinite(rows[-1]).all():
             raise FloatingPointError(f"MuJoCo state is not finite at t = {float(rows[-1, 0]):.3f} s")
-        q = 1 + self._ball_qpos
         if self._hinge_qpos is None:
             theta = np.full(n + 1, self._theta())
         else:
             theta = rows[:, 1 + self._hinge_qpos].copy()
-        c, s = np.cos(theta), np.sin(theta)
-        dx = rows[:, q] - self._pivot[0]
-        dy = rows[:, q + 1] - self._pivot[1]
-        dz = rows[:, q + 2] - self._pivot[2]
-        along = c * dx + s * dz
-        on = self._on_track(along, dy, -s * dx + c * dz)
+        along, on = self.track_coordinates(theta, rows[:, 1 + self._ball_qpos : 4 + self._ball_qpos])
         if self.ball_lost:
             on[:] = False
         else:
@@ -280,13 +292,23 @@ class Plant:
         c, s = math.cos(theta), math.sin(theta)
         return np.array([c * ox + s * oz, theta, c * vx + s * vz, thetadot])
 
-    def _on_track(self, along: np.ndarray, lateral: np.ndarray, height: np.ndarray) -> np.ndarray:
+    def track_coordinates(self, theta_rad: np.ndarray, ball_xyz: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The ball's position along the beam and whether it sits on the track, from the beam angle and the
+        ball centre's world position (``ball_xyz[..., 0:3]``) at each step: elementwise, so the rows of a
+        batch of runs (``twin.batch``) give the same bits as a run alone."""
         p = self.params
-        return (
+        c, s = np.cos(theta_rad), np.sin(theta_rad)
+        dx = ball_xyz[..., 0] - self._pivot[0]
+        dy = ball_xyz[..., 1] - self._pivot[1]
+        dz = ball_xyz[..., 2] - self._pivot[2]
+        along = c * dx + s * dz
+        height = -s * dx + c * dz
+        on = (
             (np.abs(along) <= p.track.half_length_m + p.ball.radius_m)
-            & (np.abs(lateral) < p.track.contact_spacing_m / 2)
+            & (np.abs(dy) < p.track.contact_spacing_m / 2)
             & (np.abs(height - p.ball_centre_height_m) < LOST_HEIGHT_TOLERANCE_M)
         )
+        return along, on
 
     def kick_ball(self, dv_m_s: float) -> None:
         """Give the ball a velocity kick along the beam (a flick with a finger), keeping it rolling."""

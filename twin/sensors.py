@@ -42,10 +42,12 @@ __all__ = [
     "CONTINUITY_TOLERANCE_SAMPLES",
     "SNAP_TOLERANCE_SAMPLES",
     "AngleChain",
+    "BallChainBatch",
     "BallPositionChain",
     "IdealSensors",
     "angle_block_mean_bruteforce_v",
     "angle_block_mean_v",
+    "angle_block_means_v",
     "angle_counter_mean",
     "angle_count_step_rad",
     "angle_sensor_v",
@@ -197,6 +199,30 @@ def angle_block_mean_v(times_s: np.ndarray, theta_rad: np.ndarray, params: Param
     sensor = params.angle_sensor
     u = ((theta - sensor.zeroing_error_rad) / angle_count_step_rad(params) + 0.5).tolist()
     return _block_mean(_sample_positions(t, params.daq), u, _level_table(sensor, params.daq), params)
+
+
+def angle_block_means_v(times_s: np.ndarray, theta_rad: np.ndarray, params: Parameters) -> np.ndarray:
+    """``angle_block_mean_v`` for a batch of runs in step: the times shared (K,), θ one row per run (B, K).
+
+    A row whose count is the same at every knot reads that level (numpy over the batch); the others go
+    through ``_block_mean`` one by one, exactly as a run alone does."""
+    t = finite_values(times_s, "times_s")
+    theta = finite_values(theta_rad, "theta_rad")
+    _check_trajectory(t, theta[0] if len(theta) else t, "theta_rad")
+    sensor = params.angle_sensor
+    levels = _level_table(sensor, params.daq)
+    u = (theta - sensor.zeroing_error_rad) / angle_count_step_rad(params) + 0.5
+    c = np.floor(u)
+    still = c.min(axis=1) == c.max(axis=1)
+    out = np.empty(len(theta))
+    zero = int(sensor.counter_zero_count)
+    out[still] = np.asarray(levels)[(zero + c[still, 0].astype(np.int64)) % len(levels)]
+    moving = np.flatnonzero(~still)
+    if moving.size:
+        s = _sample_positions(t, params.daq)
+        for i in moving.tolist():
+            out[i] = _block_mean(s, u[i].tolist(), levels, params)
+    return out
 
 
 def _block_mean(s: list[float], u: list[float], levels: tuple[float, ...], params: Parameters) -> float:
@@ -447,27 +473,101 @@ class BallPositionChain:
             v_start = np.where(connected, vk[:-1], v_drop)
             v_end = np.where(connected, vk[1:], v_drop)
 
-        # τ·y' = v − y with v linear on a piece of length h from v_k to v_k+1 gives exactly
-        #   y_k+1 = E·y_k + (1 − E)·v_k + (v_k+1 − v_k)·(1 − (1 − E)/(h/τ)),  E = e^(−h/τ)
-        # (the last factor by its series for tiny h/τ, to avoid cancellation). Chained over all pieces:
-        #   y_end = e^(−T/τ)·y_0 + Σ_k e^(−(t_end − t_k+1)/τ)·[(1 − E_k)·v_k + (v_k+1 − v_k)·ramp_k].
-        a = (knots[1:] - knots[:-1]) / self.tau_s
-        one_minus = -np.expm1(-a)
-        tiny = a < 1e-4  # only pieces cut short by an extra knot; whole physics steps are a ≈ 0.3
-        if tiny.any():
-            ramp = np.where(
-                tiny, a / 2.0 - a * a / 6.0 + a**3 / 24.0, 1.0 - one_minus / np.maximum(a, 1e-300)
-            )
-        else:
-            ramp = 1.0 - one_minus / a
-        drive = one_minus * v_start + (v_end - v_start) * ramp
-        weight = np.exp((knots[1:] - t_end) / self.tau_s)
-        y = math.exp((t0 - t_end) / self.tau_s) * self.filtered_v + float(np.dot(weight, drive))
+        end = rc_filter_end_v(
+            knots, v_start[None, :], v_end[None, :], np.array([self.filtered_v]), self.tau_s
+        )
+        y = float(end[0])
         self.filtered_v = y
         self.wiper_v = float(v_end[-1])
         self.time_s = t_end
         self.reading_v = float(adc_quantize_v(y, self.params.daq))
         return self.reading_v
+
+
+class BallChainBatch:
+    """The ball chains of a batch of runs in step (one seed each), advanced block by block together.
+
+    A run's block that crosses no table point or track end, has no dropout in it and stays in contact (the
+    common block) is filtered in numpy over the batch with ``rc_filter_end_v``, the function a run alone
+    uses; any other block goes through the run's own ``BallPositionChain``, which also owns its noise
+    process (the next dropout is drawn there, so each run draws the same numbers in the same order as
+    alone). Same bits as ``BallPositionChain`` run by run."""
+
+    def __init__(self, params: Parameters, seeds: np.ndarray, x_m: np.ndarray, t_s: float) -> None:
+        self.params = params
+        self.chains = []
+        for seed, x in zip(seeds.tolist(), x_m.tolist(), strict=True):
+            chain = BallPositionChain(params, int(seed), x_m=x)
+            chain.reset(x, t_s, seed=int(seed))  # as SimRig.reset: the noise process from the seed
+            self.chains.append(chain)
+        self.time_s = float(t_s)
+        self.filtered_v = np.array([c.filtered_v for c in self.chains])
+        self._next_start_s = np.array([c._next_start_s for c in self.chains])
+        self._busy_until_s = np.full(len(self.chains), -math.inf)  # the latest end of a dropout so far
+
+    def advance(
+        self, runs: np.ndarray, times_s: np.ndarray, x_m: np.ndarray, on_track: np.ndarray
+    ) -> np.ndarray:
+        """``BallPositionChain.advance`` for the runs ``runs`` (indices), their x and contact one row each
+        (len(runs), K) over the shared ``times_s`` (K,): the ADC readings at the block's end."""
+        t0, t_end = float(times_s[0]), float(times_s[-1])
+        chain0 = self.chains[0]
+        half = self.params.track.half_length_m
+        segment = np.searchsorted(chain0._breakpoints_m, x_m)
+        common = (
+            (self._next_start_s[runs] > t_end)
+            & (self._busy_until_s[runs] <= t0)
+            & (segment == segment[:, :1]).all(axis=1)
+            & (np.abs(0.5 * (x_m[:, :-1] + x_m[:, 1:])) <= half).all(axis=1)
+            & on_track.all(axis=1)
+        )
+        y = np.empty(len(runs))
+        if common.any():
+            vk = np.interp(x_m[common], chain0._curve_x, chain0._curve_v)
+            y[common] = rc_filter_end_v(
+                times_s, vk[:, :-1], vk[:, 1:], self.filtered_v[runs[common]], chain0.tau_s
+            )
+        readings = np.empty(len(runs))
+        if common.any():
+            readings[common] = adc_quantize_v(y[common], self.params.daq)
+        for j in np.flatnonzero(~common).tolist():
+            i = int(runs[j])
+            chain = self.chains[i]
+            chain.filtered_v, chain.time_s = float(self.filtered_v[i]), self.time_s
+            readings[j] = chain.advance(times_s, x_m[j], on_track[j])
+            y[j] = chain.filtered_v
+            self._next_start_s[i] = chain._next_start_s
+            if chain._dropouts:
+                self._busy_until_s[i] = max(end for _, end in chain._dropouts)
+        self.filtered_v[runs] = y
+        self.time_s = t_end
+        return readings
+
+
+def rc_filter_end_v(
+    knots_s: np.ndarray, v_start: np.ndarray, v_end: np.ndarray, y0_v: np.ndarray, tau_s: float
+) -> np.ndarray:
+    """The RC filter's output at ``knots_s[-1]`` for each row: wiper volts linear on each piece from
+    ``v_start[:, k]`` at ``knots_s[k]`` to ``v_end[:, k]`` at ``knots_s[k + 1]``, the capacitor at ``y0_v`` at
+    ``knots_s[0]``. Rows share the knots (a batch of runs in step); one run is a batch of one, so a run gives
+    the same bits alone or in a batch (the sum over pieces is one BLAS dot per row either way)."""
+    knots = knots_s
+    t0, t_end = float(knots[0]), float(knots[-1])
+    # τ·y' = v − y with v linear on a piece of length h from v_k to v_k+1 gives exactly
+    #   y_k+1 = E·y_k + (1 − E)·v_k + (v_k+1 − v_k)·(1 − (1 − E)/(h/τ)),  E = e^(−h/τ)
+    # (the last factor by its series for tiny h/τ, to avoid cancellation). Chained over all pieces:
+    #   y_end = e^(−T/τ)·y_0 + Σ_k e^(−(t_end − t_k+1)/τ)·[(1 − E_k)·v_k + (v_k+1 − v_k)·ramp_k].
+    a = (knots[1:] - knots[:-1]) / tau_s
+    one_minus = -np.expm1(-a)
+    tiny = a < 1e-4  # only pieces cut short by an extra knot; whole physics steps are a ≈ 0.3
+    if tiny.any():
+        ramp = np.where(tiny, a / 2.0 - a * a / 6.0 + a**3 / 24.0, 1.0 - one_minus / np.maximum(a, 1e-300))
+    else:
+        ramp = 1.0 - one_minus / a
+    drive = one_minus * v_start + (v_end - v_start) * ramp
+    weight = np.exp((knots[1:] - t_end) / tau_s)
+    # (1, K) @ (K, 1) per row: numpy's matmul takes the same BLAS dot as np.dot of two vectors.
+    return math.exp((t0 - t_end) / tau_s) * y0_v + np.matmul(drive[:, None, :], weight[:, None])[:, 0, 0]
 
 
 class IdealSensors:

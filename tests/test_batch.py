@@ -1,0 +1,191 @@
+"""The batch engine (twin.batch.run_batch): every run of a batch equals the same run alone, bit for bit —
+every log array and the verdict — with the controllers vectorized or one scalar instance per run."""
+
+import json
+from dataclasses import fields
+
+import numpy as np
+import pytest
+
+from controllers import registry
+from twin import converters
+from twin.batch import run_batch
+from twin.engine import RunResult, run_closed_loop
+from twin.interface import Controller, DaqSample
+from twin.log import RunLog
+from twin.parameters import Parameters, SoftwareCalibration
+
+# Hardware starts, a start that loses the ball quickly, and the origin.
+X0 = np.array([0.14, -0.13, 0.25, 0.0])
+THETA0 = np.array([-0.2, 0.29, -0.7, 0.0])
+SEEDS = np.array([0, 1, 2])
+
+
+class FiniteDifferenceFeedback(Controller):
+    """A user's own scalar controller (the README's example): state feedback with finite-difference rates."""
+
+    name = "mine"
+
+    def __init__(self, software: SoftwareCalibration) -> None:
+        super().__init__()
+        self.sw = software
+
+    def _measure(self, sample: DaqSample) -> tuple[float, float]:
+        return converters.ball_position_m(sample.ball_v, self.sw), converters.beam_angle_rad(
+            sample.angle_v, self.sw
+        )
+
+    def start(self, sample: DaqSample) -> None:
+        self.previous = self._measure(sample)
+
+    def update(self, sample: DaqSample) -> float:
+        x, theta = self._measure(sample)
+        xdot = (x - self.previous[0]) / self.period_s
+        thetadot = (theta - self.previous[1]) / self.period_s
+        self.previous = (x, theta)
+        volts = -(-36.34 * x + 24.6 * theta - 15.96 * xdot + 3.98 * thetadot)
+        return converters.clip_command_v(converters.dac_command_v(volts, self.sw), self.sw)
+
+
+class UserCatalogue:
+    """A catalogue with the user's controller only (no batched version: the scalar loop runs it)."""
+
+    NAMES = ("mine",)
+
+    def make(self, name: str, params: Parameters | None = None) -> Controller:
+        return FiniteDifferenceFeedback((params or Parameters()).software)
+
+
+def _assert_same_run(single: RunResult, batched: RunResult, what: str) -> None:
+    assert json.dumps(single.verdict.to_json()) == json.dumps(batched.verdict.to_json()), what
+    for f in fields(RunLog):
+        a, b = getattr(single.log, f.name), getattr(batched.log, f.name)
+        assert a.shape == b.shape and np.array_equal(a, b, equal_nan=True), f"{what}: {f.name}"
+
+
+def _check(catalogue, name: str, x0, theta0, seeds, *, duration_s: float, params=None, vectorized=True, **kw):
+    runs = run_batch(
+        catalogue,
+        name,
+        x0_m=x0,
+        theta0_rad=theta0,
+        seeds=seeds,
+        duration_s=duration_s,
+        params=params,
+        nthread=2,
+        record=True,
+        vectorized=vectorized,
+        **kw,
+    )
+    assert len(runs) == len(x0)
+    for i, batched in enumerate(runs):
+        p = params[i] if isinstance(params, list) else params
+        single = run_closed_loop(
+            catalogue.make(name, p),
+            x0_m=float(x0[i]),
+            theta0_rad=float(theta0[i]),
+            duration_s=duration_s,
+            seed=int(seeds[i]),
+            params=p,
+            **kw,
+        )
+        _assert_same_run(single, batched, f"{name} run {i} (x0 = {x0[i]}, θ0 = {theta0[i]}, seed {seeds[i]})")
+    return runs
+
+
+def _grid(seeds: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Every start with every seed."""
+    x0, seed = np.meshgrid(X0, seeds)
+    theta0, _ = np.meshgrid(THETA0, seeds)
+    return x0.ravel(), theta0.ravel(), seed.ravel()
+
+
+@pytest.mark.parametrize("vectorized", [True, False], ids=["vectorized", "scalar-loop"])
+@pytest.mark.parametrize("name", ["appendix-sf", "appendix-clp", "lqr"])
+def test_batch_equals_single_runs_bit_for_bit(name: str, vectorized: bool) -> None:
+    """3 seeds × 4 starts (held and lost balls), noise on: every log array and the verdict."""
+    x0, theta0, seeds = _grid(SEEDS)
+    runs = _check(registry, name, x0, theta0, seeds, duration_s=2.0, vectorized=vectorized)
+    assert any(r.verdict.ball_lost for r in runs) and not all(r.verdict.ball_lost for r in runs)
+
+
+def test_a_users_scalar_controller_runs_in_the_batch_bit_for_bit() -> None:
+    x0, theta0, seeds = _grid(SEEDS)
+    _check(UserCatalogue(), "mine", x0, theta0, seeds, duration_s=2.0)
+
+
+def test_per_run_parameters_each_run_its_own_physics() -> None:
+    """Monte Carlo: each run its own motor resistance and beam inertia (one MuJoCo model each), two runs
+    sharing one parameter set, and runs whose sensor parameters differ (batched apart)."""
+    base = Parameters()
+    params = [
+        base.with_overrides(
+            {"motor.resistance_ohm": 9.5 + 0.5 * i, "beam.inertia_pivot_kgm2": 3.4e-3 + 1e-4 * i}
+        )
+        for i in range(4)
+    ]
+    params[2] = params[1]
+    params[3] = params[3].with_overrides({"angle_sensor.zeroing_error_rad": 0.002})
+    for name in ("lqr", "appendix-sf"):
+        _check(registry, name, X0, THETA0, np.array([5, 6, 7, 8]), duration_s=1.5, params=params)
+
+
+def test_without_record_only_the_verdicts_are_kept() -> None:
+    runs = run_batch(registry, "appendix-sf", x0_m=X0, theta0_rad=THETA0, seeds=np.arange(4), duration_s=1.0)
+    single = run_closed_loop(registry.make("appendix-sf"), x0_m=0.14, theta0_rad=-0.2, duration_s=1.0, seed=0)
+    assert runs[0].verdict.to_json() == single.verdict.to_json()
+    assert not runs[0].recorded
+    with pytest.raises(RuntimeError, match="verdict only"):
+        runs[0].log  # noqa: B018
+
+
+def test_bad_inputs_are_refused() -> None:
+    with pytest.raises(ValueError, match="one value per run"):
+        run_batch(registry, "lqr", x0_m=X0, theta0_rad=THETA0[:2], seeds=np.arange(4))
+    with pytest.raises(ValueError, match="params has 2 entries"):
+        run_batch(registry, "lqr", x0_m=X0, theta0_rad=THETA0, seeds=np.arange(4), params=[Parameters()] * 2)
+    with pytest.raises(ValueError, match="off the track"):
+        run_batch(registry, "lqr", x0_m=np.array([0.5]), theta0_rad=np.array([0.0]), seeds=np.array([0]))
+    assert run_batch(registry, "lqr", x0_m=np.array([]), theta0_rad=np.array([]), seeds=np.array([])) == []
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    "overrides",
+    [
+        {"start.free_run_s": 0.0},
+        {"start.free_run_s": 0.04},
+        {"start.free_run_s": 0.05},  # the rig runs free before the start block
+        {"daq.output_latency_s": 0.003},
+    ],
+)
+def test_start_timing_and_latency_as_single_runs(overrides: dict) -> None:
+    params = Parameters().with_overrides(overrides)
+    _check(registry, "appendix-clp", X0, THETA0, np.array([1, 2, 3, 4]), duration_s=2.0, params=params)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("name", "kw"),
+    [
+        ("sf", {}),
+        ("thesis-sf", {}),
+        ("clp", {}),
+        ("smc", {}),
+        ("appendix-clp", {"stop_when_lost": False}),
+        ("lqr", {"noise": False}),
+        ("lqr", {"ideal_sensors": True}),
+        ("thesis-sf-continuous", {}),
+        ("appendix-sf", {"plant": "reference", "ideal_sensors": True}),
+    ],
+)
+def test_other_controllers_and_rigs_as_single_runs(name: str, kw: dict) -> None:
+    _check(registry, name, X0, THETA0, np.array([3, 4, 5, 6]), duration_s=3.0, **kw)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["appendix-sf", "appendix-clp", "lqr"])
+def test_long_runs_as_single_runs(name: str) -> None:
+    """10 s runs: limit cycles, dropouts and table points crossed many times."""
+    x0, theta0, seeds = _grid(SEEDS)
+    _check(registry, name, x0, theta0, seeds, duration_s=10.0)

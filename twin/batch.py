@@ -1,0 +1,590 @@
+"""The batch engine: N closed-loop runs at once, each bit-identical to ``run_closed_loop`` alone.
+
+    physics           one ``mujoco.batch.Batch`` call per tick for every run still going, on C threads
+                      (one state row per run, solver warm start included, so a run's trajectory is the one
+                      ``twin.plant.Plant`` steps alone)
+    sensors, DAQ,     numpy over a leading batch axis with the functions a run alone uses
+    output stage      (``twin.plant.Plant.track_coordinates``, ``twin.sensors.angle_block_means_v``,
+                      ``BallChainBatch``, ``twin.output_stage.motor_volts``)
+    controllers       a ``BatchController`` from the catalogue's optional ``make_batch`` (numpy over the
+                      batch), otherwise one scalar ``Controller`` per run called in a loop
+
+The tick sequence (start timing, held rig, free run, output latency, lost ball, recording, verdict) is
+``twin.rig.SimRig._read``/``write`` and ``twin.engine.ClosedLoop`` step for step; a test checks every log
+array and the verdict against single runs. Runs whose lost ball ends them (``stop_when_lost``) leave the
+batch. Laws on the true state (``StateLaw``) and the reference plant run one by one through
+``run_closed_loop``.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
+
+import mujoco
+import numpy as np
+from mujoco import batch as mjbatch
+
+from twin.converters import angle_volts_v, ball_volts_v
+from twin.daq import block_time_s
+from twin.engine import Catalogue, ControllerError, RunResult, StateLaw, run_closed_loop, update_ticks
+from twin.interface import Controller, DaqSample
+from twin.log import THESIS_FIELDS, TRUTH_FIELDS, RunLog
+from twin.output_stage import amplifier_volts, motor_volts
+from twin.parameters import Parameters
+from twin.plant import Plant
+from twin.rig import PlantKind, RigError, whole_steps
+from twin.sensors import BallChainBatch, angle_block_means_v
+from twin.verdict import Criteria, evaluate
+
+__all__ = [
+    "BatchCatalogue",
+    "BatchController",
+    "BatchSamples",
+    "BatchTelemetry",
+    "ScalarControllers",
+    "run_batch",
+]
+
+_FULL = mujoco.mjtState.mjSTATE_FULLPHYSICS
+_INTEGRATION = mujoco.mjtState.mjSTATE_INTEGRATION
+# Two periods agree when they differ by less than this (as twin.engine).
+_PERIOD_TOLERANCE_S = 1e-12
+
+
+@dataclass(frozen=True)
+class BatchSamples:
+    """One block for each run of a batch (``twin.interface.DaqSample`` over a leading batch axis)."""
+
+    time_s: float  # the same for every run: the runs are in step
+    ball_v: np.ndarray  # (n,)
+    angle_v: np.ndarray  # (n,)
+
+
+@dataclass
+class BatchTelemetry:
+    """``twin.interface.Telemetry`` over the batch: x1…x4 (n, 4), u (n,), uhesap (n,)."""
+
+    estimate: np.ndarray
+    u: np.ndarray
+    u_computed: np.ndarray
+
+
+@runtime_checkable
+class BatchController(Protocol):
+    """N controllers of one kind in numpy: the DAC commands of every run of a batch at once.
+
+    Each run's commands and telemetry must be those of its own scalar ``Controller`` bit for bit."""
+
+    name: str
+    period_s: float
+    telemetry: BatchTelemetry
+
+    def start(self, samples: BatchSamples) -> None: ...
+
+    def update(self, samples: BatchSamples) -> np.ndarray:
+        """The DAC commands (n,) for the blocks just read."""
+        ...
+
+    def keep(self, runs: np.ndarray) -> None:
+        """Go on with these runs only (indices into the current batch, in order): the others ended."""
+        ...
+
+
+class BatchCatalogue(Catalogue, Protocol):
+    """A catalogue that may also build batched controllers (``controllers.registry`` is one)."""
+
+    def make_batch(self, name: str, params: Sequence[Parameters]) -> BatchController | None: ...
+
+
+class ScalarControllers:
+    """One scalar ``Controller`` per run, called in a loop: any controller runs in a batch this way."""
+
+    def __init__(self, controllers: Sequence[Controller]) -> None:
+        self.controllers = list(controllers)
+        self.name = self.controllers[0].name
+        self.period_s = self.controllers[0].period_s
+        self.telemetry = BatchTelemetry(np.empty((0, 4)), np.empty(0), np.empty(0))
+
+    def _collect(self) -> None:
+        tel = [c.telemetry for c in self.controllers]
+        self.telemetry = BatchTelemetry(
+            np.array([t.estimate for t in tel]).reshape(len(tel), 4),
+            np.array([t.u for t in tel], dtype=float),
+            np.array([t.u_computed for t in tel], dtype=float),
+        )
+
+    def start(self, samples: BatchSamples) -> None:
+        for i, c in enumerate(self.controllers):
+            try:
+                c.start(DaqSample(samples.time_s, float(samples.ball_v[i]), float(samples.angle_v[i])))
+            except Exception as exc:  # noqa: BLE001 - a user's controller may raise anything: report it
+                raise ControllerError(f"{c.name}.start raised {type(exc).__name__} (run {i}): {exc}") from exc
+        self._collect()
+
+    def update(self, samples: BatchSamples) -> np.ndarray:
+        out = np.empty(len(self.controllers))
+        for i, c in enumerate(self.controllers):
+            try:
+                command = c.update(
+                    DaqSample(samples.time_s, float(samples.ball_v[i]), float(samples.angle_v[i]))
+                )
+            except Exception as exc:  # noqa: BLE001
+                raise ControllerError(
+                    f"{c.name}.update raised {type(exc).__name__} (run {i}, t = {samples.time_s:.3f} s): {exc}"
+                ) from exc
+            if isinstance(command, bool) or not isinstance(command, (int, float, np.floating, np.integer)):
+                raise ControllerError(
+                    f"{c.name}.update returned {command!r} (run {i}, t = {samples.time_s:.3f} s): expected the "
+                    f"DAC command in volts"
+                )
+            out[i] = float(command)
+        self._collect()
+        return out
+
+    def keep(self, runs: np.ndarray) -> None:
+        self.controllers = [self.controllers[i] for i in runs.tolist()]
+
+
+def run_batch(
+    catalogue: Catalogue,
+    name: str,
+    *,
+    x0_m: np.ndarray,
+    theta0_rad: np.ndarray,
+    seeds: np.ndarray,
+    duration_s: float = 10.0,
+    noise: bool = True,
+    params: Parameters | Sequence[Parameters] | None = None,
+    plant: PlantKind = "twin",
+    ideal_sensors: bool = False,
+    stop_when_lost: bool = True,
+    criteria: Criteria | None = None,
+    nthread: int | None = None,
+    record: bool = False,
+    vectorized: bool = True,
+) -> list[RunResult]:
+    """Run controller ``name`` from each (x0_m[i], theta0_rad[i]) with noise seed seeds[i]: element i is
+    ``run_closed_loop(catalogue.make(name, params_i), x0_m=x0_m[i], …, seed=seeds[i], …)`` bit for bit.
+
+    ``params``: one for every run or one per run (runs whose sensor, DAQ, amplifier, software and timing
+    parameters agree share one batch; each run's physics has its own MuJoCo model). ``nthread``: physics
+    threads (default: every CPU). ``record``: keep each run's log (17 arrays per run); without it a result's
+    ``log`` is not kept (``RunResult.recorded`` is false) and only the verdict is. ``vectorized=False``
+    calls one scalar controller per run even when the catalogue has a batched one (for tests)."""
+    x0 = np.asarray(x0_m, dtype=float).reshape(-1)
+    th0 = np.asarray(theta0_rad, dtype=float).reshape(-1)
+    seed_arr = np.asarray(seeds).reshape(-1)
+    n = len(x0)
+    if len(th0) != n or len(seed_arr) != n:
+        raise ValueError(
+            f"x0_m, theta0_rad and seeds must have one value per run: {n}, {len(th0)}, {len(seed_arr)}"
+        )
+    if not (isinstance(duration_s, (int, float)) and math.isfinite(duration_s) and duration_s > 0):
+        raise ValueError(f"duration_s = {duration_s!r} must be a positive number of seconds")
+    if params is None or isinstance(params, Parameters):
+        run_params = [params or Parameters()] * n
+    else:
+        run_params = list(params)
+        if len(run_params) != n:
+            raise ValueError(f"params has {len(run_params)} entries for {n} runs: give one, or one per run")
+    if n == 0:
+        return []
+    probe = catalogue.make(name, run_params[0])
+    if plant != "twin" or (isinstance(probe, StateLaw) and not isinstance(probe, Controller)):
+        # The reference plant and the 1 kHz laws on the true state stay on the single-run path.
+        return [
+            run_closed_loop(
+                catalogue.make(name, run_params[i]),
+                x0_m=float(x0[i]),
+                theta0_rad=float(th0[i]),
+                duration_s=duration_s,
+                seed=int(seed_arr[i]),
+                noise=noise,
+                params=run_params[i],
+                plant=plant,
+                ideal_sensors=ideal_sensors,
+                stop_when_lost=stop_when_lost,
+                criteria=criteria,
+            )
+            for i in range(n)
+        ]
+    results: list[RunResult | None] = [None] * n
+    noisy: dict[int, Parameters] = {}  # the rig's parameters (noise switched as asked), per distinct object
+    groups: dict[tuple, list[int]] = {}
+    for i, p in enumerate(run_params):
+        if id(p) not in noisy:
+            noisy[id(p)] = p.with_overrides({"ball_sensor.noise_enabled": bool(noise)})
+        groups.setdefault(_io_key(noisy[id(p)]), []).append(i)
+    threads = (os.cpu_count() or 1) if nthread is None else int(nthread)
+    for idx in groups.values():
+        rows = np.array(idx)
+        make_batch = getattr(catalogue, "make_batch", None) if vectorized else None
+        group_params = [run_params[i] for i in idx]
+        controller = make_batch(name, group_params) if make_batch is not None else None
+        if controller is None:
+            made = [catalogue.make(name, p) for p in group_params]
+            scalar = [c for c in made if isinstance(c, Controller)]
+            if len(scalar) != len(made):
+                raise TypeError(f"{name}: the catalogue made something that is not a Controller")
+            controller = ScalarControllers(scalar)
+        group = _Group(
+            [noisy[id(run_params[i])] for i in idx],
+            x0[rows],
+            th0[rows],
+            seed_arr[rows],
+            ideal_sensors=ideal_sensors,
+            nthread=threads,
+            record=record,
+        )
+        for j, result in enumerate(group.run(controller, duration_s, stop_when_lost, criteria)):
+            results[idx[j]] = result
+    return [r for r in results if r is not None]
+
+
+def _io_key(p: Parameters) -> tuple:
+    """What the numpy stages of a batch share: runs that differ only in their physics batch together."""
+    return (
+        p.daq,
+        p.start,
+        p.amplifier,
+        p.software,
+        p.angle_sensor,
+        p.ball_sensor,
+        p.track,
+        p.physics.timestep_s,
+        p.motor.gear_ratio,
+        p.beam.stop_angle_rad,
+    )
+
+
+class _Columns:
+    """The log's columns of every run of a group, one row per tick (row k: the k-th block read)."""
+
+    def __init__(self, ticks: int, n: int, record: bool) -> None:
+        names = (
+            [f for f in THESIS_FIELDS + TRUTH_FIELDS if f != "ball_lost"]
+            if record
+            else ["true_time_s", "true_x_m", "true_theta_rad", "motor_volts_v"]
+        )
+        self.cols = {f: np.zeros((ticks, n)) for f in names}
+        self.lost = np.zeros((ticks, n), dtype=bool)
+        self.peak_theta = np.zeros((ticks, n))
+
+
+class _Group:
+    """Runs that share their sensor/DAQ/timing parameters, stepped together (the single rig's state as arrays
+    over the runs; the comments name the ``SimRig`` lines each step mirrors)."""
+
+    def __init__(
+        self,
+        params: list[Parameters],
+        x0: np.ndarray,
+        theta0: np.ndarray,
+        seeds: np.ndarray,
+        *,
+        ideal_sensors: bool,
+        nthread: int,
+        record: bool,
+    ) -> None:
+        p = self.p = params[0]
+        self.n = n = len(params)
+        self.ideal = ideal_sensors
+        self.record = record
+        self.x0 = x0
+        dt = p.physics.timestep_s
+        self.dt = dt
+        self.steps_per_tick = whole_steps(p.daq.period_s, dt, "daq.period_s")
+        if self.steps_per_tick < 1:
+            raise RigError(f"daq.period_s = {p.daq.period_s!r} s is shorter than one physics step")
+        self.latency_steps = whole_steps(p.daq.output_latency_s, dt, "daq.output_latency_s")
+        free_run_steps = whole_steps(p.start.free_run_s, dt, "start.free_run_s")
+        # One Plant per distinct physics: its model for the batch, its geometry for the numpy stages.
+        plants: dict[Parameters, Plant] = {}
+        for q in params:
+            if q not in plants:
+                plants[q] = Plant(q)
+        self.plants = [plants[q] for q in params]
+        self.distinct = list(plants.values())
+        index = {q: k for k, q in enumerate(plants)}
+        self.plant_of = np.array([index[q] for q in params])
+        states = np.empty((n, mujoco.mj_stateSize(self.distinct[0].model, _INTEGRATION)))
+        nfull = mujoco.mj_stateSize(self.distinct[0].model, _FULL)
+        self.last_row = np.empty((n, nfull))  # each run's state after its last step (MjData's, alone)
+        for i, plant in enumerate(self.plants):
+            plant.reset(float(x0[i]), float(theta0[i]))  # the single run's reset (and its checks)
+            mujoco.mj_getState(plant.model, plant.data, states[i], _INTEGRATION)
+            mujoco.mj_getState(plant.model, plant.data, self.last_row[i], _FULL)
+        self.batch = mjbatch.Batch(self.distinct[0].model, n, nthread=nthread)
+        if len(self.distinct) > 1:
+            self.batch.set_models([plant.model for plant in self.plants])
+        self.batch.state[:] = states
+        plant0 = self.distinct[0]
+        assert plant0._hinge_qpos is not None
+        self.theta_col = 1 + plant0._hinge_qpos
+        self.ball_col = 1 + plant0._ball_qpos
+        # SimRig.reset
+        self.held = np.stack([x0, theta0, np.zeros(n), np.zeros(n)], axis=1)
+        self.next_end_step = free_run_steps - self.steps_per_tick
+        self.steps_done = 0
+        self.physics_time_s = float(self.last_row[0, 0])
+        chain_start = min(self.next_end_step - self.steps_per_tick, 0)
+        self.ball = None if ideal_sensors else BallChainBatch(p, seeds, x0, chain_start * dt)
+        self.command_v = np.full(n, p.amplifier.zero_command_v)
+        self.applied_v = np.full(n, self._motor_volts_for(self.command_v))
+        self.pending_v = self.applied_v.copy()
+        self.switch_in_steps: int | None = None
+        self.lost = np.zeros(n, dtype=bool)
+        self.lost_time_s: list[float | None] = [None] * n
+        self.lost_state = np.full((n, 4), math.nan)
+        self.live = np.arange(n)  # the runs still going
+        self.block_theta = np.zeros((n, 2))
+        self.block_on = np.ones((n, 2), dtype=bool)
+
+    # --- the rig, over the live runs --------------------------------------------------------------------
+    def _motor_volts_for(self, command_v: np.ndarray) -> np.ndarray:
+        if self.ideal:  # an exact DAC: the card's range, then the amplifier
+            daq = self.p.daq
+            return np.asarray(
+                amplifier_volts(np.clip(command_v, daq.dac_min_v, daq.dac_max_v), self.p.amplifier)
+            )
+        return np.asarray(motor_volts(command_v, self.p))
+
+    def write(self, command_v: np.ndarray) -> None:
+        live = self.live
+        self.command_v[live] = command_v
+        volts = self._motor_volts_for(command_v)
+        self.pending_v[live] = volts
+        if self.latency_steps == 0:
+            self.applied_v[live] = volts
+            self.switch_in_steps = None
+        else:
+            self.switch_in_steps = self.latency_steps
+
+    def _step_volts(self, n: int) -> np.ndarray:
+        live = self.live
+        volts = np.repeat(self.applied_v[live][:, None], n, axis=1)
+        if self.switch_in_steps is not None:
+            k = self.switch_in_steps
+            if k < n:
+                volts[:, k:] = self.pending_v[live][:, None]
+                self.applied_v[live] = self.pending_v[live]
+                self.switch_in_steps = None
+            else:
+                self.switch_in_steps = k - n
+        return volts
+
+    def _advance(self, volts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Plant.advance for every live run: (times (m+1,), x, θ, on-track (live, m+1))."""
+        live, m = self.live, volts.shape[1]
+        t0 = self.physics_time_s
+        out = self.batch.rollout(m, control=volts[:, :, None], record=(_FULL,), ids=live)[_FULL]
+        last = out[:, -1]
+        if not np.isfinite(last).all():
+            i = int(live[np.flatnonzero(~np.isfinite(last).all(axis=1))[0]])
+            raise FloatingPointError(f"run {i}: MuJoCo state is not finite at t = {float(last[0, 0]):.3f} s")
+        if not (last[:, 0] == last[0, 0]).all():
+            raise RuntimeError("the runs of a batch fell out of step")
+        theta = np.concatenate(
+            [self.last_row[live, self.theta_col][:, None], out[:, :, self.theta_col]], axis=1
+        )
+        c = self.ball_col
+        xyz = np.concatenate([self.last_row[live, None, c : c + 3], out[:, :, c : c + 3]], axis=1)
+        along = np.empty_like(theta)
+        on = np.empty(theta.shape, dtype=bool)
+        which = self.plant_of[live]
+        for k, plant in enumerate(self.distinct):
+            rows = which == k
+            if rows.all():
+                along, on = plant.track_coordinates(theta, xyz)
+            elif rows.any():
+                along[rows], on[rows] = plant.track_coordinates(theta[rows], xyz[rows])
+        lost = self.lost[live]
+        on[lost] = False
+        on[~lost, 0] = True
+        for j in np.flatnonzero(
+            ~lost & ~on.all(axis=1)
+        ).tolist():  # latched from the first step off the track
+            i = int(live[j])
+            first_off = int(np.flatnonzero(~on[j])[0])
+            row = out[j, first_off - 1]
+            self.lost[i] = True
+            self.lost_time_s[i] = float(row[0])
+            self.lost_state[i] = self.plants[i]._row_state(row)
+            on[j, first_off:] = False
+        self.last_row[live] = last
+        self.physics_time_s = float(last[0, 0])
+        times = t0 + np.arange(m + 1) * self.dt  # as Plant.advance: its clock plus the step offsets
+        return times, along, theta, on
+
+    def read(self) -> BatchSamples:
+        """SimRig._read for every live run."""
+        p, live = self.p, self.live
+        end = self.next_end_step
+        start = end - self.steps_per_tick
+        t_start = start * self.dt if start < 0 else self.physics_time_s
+        n_free = end - max(start, 0) if end > 0 else 0
+        if start > self.steps_done:  # released before this block begins: run free up to it, unobserved
+            pre_t, pre_x, _, pre_on = self._advance(self._step_volts(start - self.steps_done))
+            self.steps_done = start
+            t_start = self.physics_time_s
+            if self.ball is not None:
+                self.ball.advance(live, pre_t, pre_x, pre_on)
+        times: list[np.ndarray] = []
+        xs: list[np.ndarray] = []
+        thetas: list[np.ndarray] = []
+        ons: list[np.ndarray] = []
+        if start < 0:  # the held rig, until release at t = 0 (or the block's end)
+            if self.switch_in_steps is not None:
+                self.switch_in_steps = max(0, self.switch_in_steps - (min(end, 0) - start))
+            times.append(np.array([t_start, min(end, 0) * self.dt]))
+            xs.append(np.repeat(self.held[live, 0:1], 2, axis=1))
+            thetas.append(np.repeat(self.held[live, 1:2], 2, axis=1))
+            ons.append(np.ones((len(live), 2), dtype=bool))
+        if n_free:
+            t, x, th, on = self._advance(self._step_volts(n_free))
+            skip = 1 if times else 0  # consecutive pieces share their joining entry (rig._join)
+            times.append(t[skip:])
+            xs.append(x[:, skip:])
+            thetas.append(th[:, skip:])
+            ons.append(on[:, skip:])
+            self.steps_done += n_free
+        block_t = np.concatenate(times)
+        block_x = np.concatenate(xs, axis=1)
+        block_theta = np.concatenate(thetas, axis=1)
+        block_on = np.concatenate(ons, axis=1)
+        self.block_theta, self.block_on = block_theta, block_on
+        if self.ball is None:
+            sw = p.software
+            ball_v = np.asarray(ball_volts_v(block_x[:, -1], sw))
+            angle_v = np.asarray(angle_volts_v(block_theta[:, -1] - p.angle_sensor.zeroing_error_rad, sw))
+        else:
+            angle_v = angle_block_means_v(block_t, block_theta, p)
+            ball_v = self.ball.advance(live, block_t, block_x, block_on)
+        self.next_end_step = end + self.steps_per_tick
+        return BatchSamples(time_s=block_time_s(t_start, p.daq), ball_v=ball_v, angle_v=angle_v)
+
+    @property
+    def held_now(self) -> bool:
+        return self.next_end_step - self.steps_per_tick < 0
+
+    def true_state(self) -> np.ndarray:
+        """SimRig.true_state for every live run (n_live, 4)."""
+        live = self.live
+        if self.held_now:
+            return self.held[live].copy()
+        states = np.empty((len(live), 4))
+        which = self.plant_of[live]
+        for k, plant in enumerate(self.distinct):
+            rows = which == k
+            if rows.any():
+                states[rows] = plant.row_states(self.last_row[live[rows]])
+        lost = self.lost[live]
+        states[lost] = self.lost_state[live[lost]]  # Plant.state: the state at the step it left the track
+        return states
+
+    @property
+    def time_s(self) -> float:
+        if self.held_now:
+            return (self.next_end_step - self.steps_per_tick) * self.dt
+        return self.physics_time_s
+
+    # --- the closed loop ----------------------------------------------------------------------------------
+    def _add(self, k: int, cols: _Columns, samples: BatchSamples, controller: BatchController) -> None:
+        """ClosedLoop's recorder, one row for every live run."""
+        live, c = self.live, cols.cols
+        state = self.true_state()
+        c["true_time_s"][k, live] = self.time_s
+        c["true_x_m"][k, live] = state[:, 0]
+        c["true_theta_rad"][k, live] = state[:, 1]
+        c["motor_volts_v"][k, live] = self.applied_v[live]
+        if self.record:
+            tel = controller.telemetry
+            c["timem"][k, live] = samples.time_s
+            c["datam1"][k, live] = samples.ball_v
+            c["datam2"][k, live] = samples.angle_v
+            c["aout"][k, live] = self.command_v[live]
+            for j, f in enumerate(("x1", "x2", "x3", "x4")):
+                c[f][k, live] = tel.estimate[:, j]
+            c["u"][k, live] = tel.u
+            c["uhesap"][k, live] = tel.u_computed
+            c["true_xdot_m_s"][k, live] = state[:, 2]
+            c["true_thetadot_rad_s"][k, live] = state[:, 3]
+        cols.lost[k, live] = self.lost[live]
+        # The largest |θ| of the block over the steps with the ball on the track (0 when none): |θ| ≥ 0, so
+        # the steps off the track can count as 0.
+        cols.peak_theta[k, live] = np.max(np.abs(np.where(self.block_on, self.block_theta, 0.0)), axis=1)
+
+    def run(
+        self, controller: BatchController, duration_s: float, stop_when_lost: bool, criteria: Criteria | None
+    ) -> list[RunResult]:
+        p = self.p
+        if abs(controller.period_s - p.daq.period_s) > _PERIOD_TOLERANCE_S:
+            raise RigError(
+                f"{controller.name}: period_s = {controller.period_s!r} s does not match the DAQ's "
+                f"daq.period_s = {p.daq.period_s!r} s"
+            )
+        ticks = update_ticks(duration_s, p)
+        cols = _Columns(ticks + 1, self.n, self.record)
+        rows_done = np.zeros(self.n, dtype=np.int64)
+        samples = self.read()
+        try:
+            controller.start(samples)
+        except ControllerError:
+            raise
+        except Exception as exc:  # noqa: BLE001 - report which controller, do not crash
+            raise ControllerError(f"{controller.name}.start raised {type(exc).__name__}: {exc}") from exc
+        self._add(0, cols, samples, controller)
+        rows_done[self.live] = 1
+        for k in range(1, ticks + 1):
+            samples = self.read()
+            try:
+                command = np.asarray(controller.update(samples), dtype=float)
+            except ControllerError:
+                raise
+            except Exception as exc:  # noqa: BLE001
+                raise ControllerError(
+                    f"{controller.name}.update raised {type(exc).__name__} at tick k = {k} "
+                    f"(t = {samples.time_s:.3f} s): {exc}"
+                ) from exc
+            bad = ~np.isfinite(command)
+            if bad.any():
+                j = int(np.flatnonzero(bad)[0])
+                raise ControllerError(
+                    f"{controller.name}.update returned {command[j]!r} at tick k = {k} (t = {samples.time_s:.3f} s, "
+                    f"run {int(self.live[j])}): the DAC command must be a finite number of volts"
+                )
+            self.write(command)
+            self._add(k, cols, samples, controller)
+            rows_done[self.live] = k + 1
+            if stop_when_lost:
+                going = ~self.lost[self.live]
+                if not going.all():
+                    kept = np.flatnonzero(going)
+                    self.live = self.live[kept]
+                    if not len(self.live):
+                        break
+                    controller.keep(kept)
+        return [self._result(i, int(rows_done[i]), cols, controller.name, criteria) for i in range(self.n)]
+
+    def _result(self, i: int, n: int, cols: _Columns, name: str, criteria: Criteria | None) -> RunResult:
+        c, p = cols.cols, self.p
+        verdict = evaluate(
+            c["true_time_s"][:n, i],
+            c["true_x_m"][:n, i] - 0.0,  # as ClosedLoop.verdict with no setpoint
+            c["true_theta_rad"][:n, i],
+            c["motor_volts_v"][:n, i],
+            cols.peak_theta[:n, i],
+            x0_m=float(self.x0[i]) - 0.0,
+            ball_lost_time_s=self.lost_time_s[i],
+            rail_v=p.amplifier.rail_v,
+            stop_angle_rad=p.beam.stop_angle_rad,
+            criteria=criteria,
+        )
+        log = None
+        if self.record:
+            log = RunLog(**{f: col[:n, i] for f, col in c.items()}, ball_lost=cols.lost[:n, i])
+        return RunResult(controller=name, log=log, verdict=verdict)
