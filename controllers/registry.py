@@ -16,13 +16,14 @@ This module is the controller catalogue the application layer hands to the CLI a
 from __future__ import annotations
 
 import functools
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 import control
 import numpy as np
 
 from controllers import thesis_numbers as T
 from controllers.appendix import AppendixControlLaw, AppendixStateFeedback
+from controllers.batch import batched
 from controllers.design import (
     ReducedObserver,
     clp_gains,
@@ -32,12 +33,13 @@ from controllers.design import (
 )
 from controllers.laws import ClpLaw, ClpTerms, KalmanState, SlidingModeLaw, StateFeedbackLaw
 from controllers.loop import LoopController, MotorInverse, ObserverState, TrueStateLaw
+from twin.batch import BatchController
 from twin.interface import Controller
 from twin.parameters import Parameters
 from twin.reference import ReferenceModel
 from twin.sensors import angle_count_step_rad
 
-__all__ = ["NAMES", "UnknownControllerError", "describe", "make", "simulation_only"]
+__all__ = ["NAMES", "UnknownControllerError", "describe", "make", "make_batch", "simulation_only"]
 
 AnyController = Controller | TrueStateLaw
 
@@ -238,6 +240,28 @@ def make(name: str, params: Parameters | None = None) -> AnyController:
     except KeyError:
         raise UnknownControllerError(name) from None
     return factory(params or Parameters())
+
+
+def make_batch(
+    name: str, params: Parameters | Sequence[Parameters] | None = None, n: int | None = None
+) -> BatchController | None:
+    """The controller ``name`` for a batch of runs in numpy (``twin.batch.BatchController``), each run's
+    commands those of ``make(name, params_i)`` bit for bit; None when ``name`` has no batched version (the
+    batch engine then runs one scalar instance per run). ``params``: one set for all ``n`` runs or one per
+    run (each distinct set designs its own controller)."""
+    if params is None or isinstance(params, Parameters):
+        if n is None:
+            raise ValueError("make_batch: give n with a single parameter set")
+        run_params = [params or Parameters()] * n
+    else:
+        run_params = list(params)
+    if not run_params:
+        return None
+    designed: dict[Parameters, AnyController] = {}
+    for p in run_params:
+        if p not in designed:
+            designed[p] = make(name, p)
+    return batched([designed[p] for p in run_params])
 
 
 @functools.cache

@@ -220,9 +220,52 @@ def angle_block_means_v(times_s: np.ndarray, theta_rad: np.ndarray, params: Para
     moving = np.flatnonzero(~still)
     if moving.size:
         s = _sample_positions(t, params.daq)
-        for i in moving.tolist():
+        crossings = np.abs(np.diff(c[moving], axis=1)).sum(axis=1)
+        fast = crossings <= _MAX_CROSSINGS_FAST
+        if fast.any():
+            rows = moving[fast]
+            out[rows] = _block_means_crossing(
+                s, u[rows], c[rows], np.asarray(levels), zero, params.daq.block_size
+            )
+        for i in moving[~fast].tolist():
             out[i] = _block_mean(s, u[i].tolist(), levels, params)
     return out
+
+
+def _block_means_crossing(
+    s: list[float], u: np.ndarray, c: np.ndarray, levels: np.ndarray, zero: int, n: int
+) -> np.ndarray:
+    """``_block_mean``'s count-crossing sum for each row of ``u`` (c = floor(u)), over the batch: the same
+    terms added in the same order (interval by interval, each interval's level and then its crossings one
+    by one), so each row's sum has the bits of ``_block_mean`` on that row alone."""
+    modulus = len(levels)
+    total = np.zeros(len(u))
+    for j in range(len(s) - 1):
+        first = math.floor(s[j]) + 1
+        last = min(math.floor(s[j + 1]), n)
+        if last < first:
+            continue
+        c0, c1 = c[:, j], c[:, j + 1]
+        total = total + (last - first + 1) * levels[(zero + c0.astype(np.int64)) % modulus]
+        rows = np.flatnonzero(c1 != c0)
+        if not rows.size:
+            continue
+        # u is linear on the interval; it reaches boundary m at s* = s_j + (m − u_j)/(u_j+1 − u_j)·(s_j+1 − s_j).
+        uj, c0r, c1r = u[rows, j], c0[rows], c1[rows]
+        ds_du = (s[j + 1] - s[j]) / (u[rows, j + 1] - uj)
+        rising = c1r > c0r
+        for i in range(int(np.abs(c1r - c0r).max())):
+            live = np.abs(c1r - c0r) > i
+            # rising: the count is ≥ m at samples s ≥ s*; falling: the count is < m at samples s > s*
+            m = np.where(rising, c0r + 1 + i, c0r - i)
+            at = s[j] + (m - uj) * ds_du
+            start = np.maximum(first, np.where(rising, np.ceil(at), np.floor(at) + 1))
+            upper = levels[(zero + m.astype(np.int64)) % modulus]
+            lower = levels[(zero + m.astype(np.int64) - 1) % modulus]
+            step = np.where(rising, upper - lower, lower - upper)
+            add = live & (start <= last)
+            total[rows] = np.where(add, total[rows] + (last - start + 1) * step, total[rows])
+    return total / n
 
 
 def _block_mean(s: list[float], u: list[float], levels: tuple[float, ...], params: Parameters) -> float:

@@ -1,0 +1,255 @@
+"""The named controllers over a batch of runs (``twin.batch.BatchController``): numpy over a leading batch
+axis, each line the scalar controller's line with the same operations in the same order, so each run gets
+the bits its scalar controller computes alone (tests/test_batch.py checks every log array).
+
+What keeps the bits:
+
+* elementwise +, −, ×, /, np.sin, np.cos and np.clip give what Python's float operations and ``math`` give;
+* Python's ``x**2`` is libm's pow, which differs from x·x in the last bit for about 1 value in 1000:
+  ``np.float_power(x, 2)`` calls the same pow (numpy's ``x**2`` squares);
+* a matrix times a vector (numpy's ``M @ v``: BLAS gemv, or dot for one row) over the batch is
+  ``np.matmul(M, V[:, :, None])``: numpy runs the same BLAS call for each run's (r, c) @ (c, 1).
+
+``appendix-sf``, ``appendix-clp`` and the ``LoopController``s with a state-feedback law in volts on a
+reduced-order observer or a Kalman filter (``lqr``, ``sf``, ``thesis-sf``) are batched; ``make_batch``
+returns None for the others, which the batch engine runs one scalar instance per run.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from controllers.appendix import AppendixControlLaw, AppendixStateFeedback
+from controllers.laws import KalmanState, StateFeedbackLaw
+from controllers.loop import LoopController, ObserverState
+from twin.batch import BatchSamples, BatchTelemetry
+from twin.converters import (
+    ball_position_m,
+    beam_angle_rad,
+    clip_command_v,
+    dac_command_v,
+    motor_volts_from_command,
+)
+from twin.interface import Controller
+from twin.parameters import SoftwareCalibration
+
+__all__ = ["BatchAppendixControlLaw", "BatchAppendixStateFeedback", "BatchLoopController", "batched"]
+
+
+def _mv(matrix: np.ndarray, vectors: np.ndarray) -> np.ndarray:
+    """``matrix @ v`` for each row v of ``vectors`` (n, c); ``matrix`` (r, c) for all or (n, r, c) per run."""
+    return np.matmul(matrix, vectors[:, :, None])[:, :, 0]
+
+
+def _measure(samples: BatchSamples, sw: SoftwareCalibration) -> tuple[np.ndarray, np.ndarray]:
+    return ball_position_m(samples.ball_v, sw), beam_angle_rad(samples.angle_v, sw)
+
+
+class _AppendixBatch:
+    """``controllers.appendix._AppendixCallback`` over the batch: the MATLAB values at k − 1 as arrays."""
+
+    period_s = Controller.period_s
+
+    def __init__(self, name: str, software: SoftwareCalibration) -> None:
+        self.name = name
+        self.software = software
+        self.telemetry = BatchTelemetry(np.empty((0, 4)), np.empty(0), np.empty(0))
+        self.prev: tuple[np.ndarray, ...] = ()
+
+    def start(self, samples: BatchSamples) -> None:
+        x1, x2 = _measure(samples, self.software)
+        zero = np.zeros_like(x1)
+        self.prev = (x1, x2, zero, zero, zero)
+        self.telemetry = BatchTelemetry(np.stack([x1, x2, zero, zero], axis=1), zero, zero)
+
+    def keep(self, runs: np.ndarray) -> None:
+        self.prev = tuple(a[runs] for a in self.prev)
+
+    def _command(self, value_v: np.ndarray) -> np.ndarray:
+        return clip_command_v(dac_command_v(value_v, self.software), self.software)
+
+
+class BatchAppendixStateFeedback(_AppendixBatch):
+    """``AppendixStateFeedback.update``, line for line."""
+
+    def __init__(self, software: SoftwareCalibration) -> None:
+        super().__init__(AppendixStateFeedback.name, software)
+
+    def update(self, samples: BatchSamples) -> np.ndarray:
+        x1_k, x2_k = _measure(samples, self.software)
+        x1, x2, x3, x4, u = self.prev
+        x3_k = 0.9207 * x3 - 0.1601 * x4 - 3.9409 * x1 - 8.0826 * x2 - 0.0055 * u + 4 * x1_k + 8 * x2_k
+        x4_k = 0.2927 * x3 + 0.7494 * x4 + 14.257 * x1 - 11.945 * x2 + 0.0717 * u - 15 * x1_k + 12 * x2_k
+        u_temp = -1 * (-36.3437 * x1_k + 24.5992 * x2_k - 15.9593 * x3_k + 3.9815 * x4_k)
+        adat = self._command(u_temp)
+        u_k = motor_volts_from_command(adat, self.software)
+        self.prev = (x1_k, x2_k, x3_k, x4_k, u_k)
+        self.telemetry = BatchTelemetry(np.stack([x1_k, x2_k, x3_k, x4_k], axis=1), u_k, u_temp)
+        return adat
+
+
+class BatchAppendixControlLaw(_AppendixBatch):
+    """``AppendixControlLaw.update``, line for line."""
+
+    def __init__(self, software: SoftwareCalibration) -> None:
+        super().__init__(AppendixControlLaw.name, software)
+
+    def update(self, samples: BatchSamples) -> np.ndarray:
+        x1_k, x2_k = _measure(samples, self.software)
+        x1, x2, x3, x4, u = self.prev
+        x3_k = (
+            (u * 0.066)
+            + ((x1 * -40.011) + (x2 * 0.1797))
+            + ((x3 * 0.2) + (x4 * 0.0036))
+            + ((x1_k * 39.9998) + (x2_k * -0.227))
+        )
+        x4_k = (
+            (u * 3.0244)
+            + ((x1 * -0.462) + (x2 * -39.563))
+            + ((x3 * -0.0036) + (x4 * 0.2))
+            + ((x1_k * -0.0452) + (x2_k * 39.608))
+        )
+        beta = (
+            (-0.0137 * np.sin(x2_k))
+            + (0.17 * x1_k * np.cos(x2_k))
+            + (0.0346 * x1_k * x3_k * x4_k)
+            + (-0.000373 * x1_k * np.float_power(x4_k, 2))
+        )
+        d = (40.0 * x1_k, -38.0 * x2_k)
+        e = (23.5604 * x3_k, -5.1736 * x4_k)
+        b = (d[0] + e[0], d[1] + e[1])
+        c = (np.float_power(x1_k, 2) * 0.01732) + 0.004
+        f_prime = 0.003833 * b[0] + c * b[1]
+        t = beta + f_prime
+        v_temp = ((t * 9.4) / (0.022 * 7)) + (x4_k * 0.022 * 7)
+        adat = self._command(v_temp)
+        self.prev = (x1_k, x2_k, x3_k, x4_k, t)
+        self.telemetry = BatchTelemetry(np.stack([x1_k, x2_k, x3_k, x4_k], axis=1), t, v_temp)
+        return adat
+
+
+class BatchLoopController:
+    """``LoopController`` with a ``StateFeedbackLaw`` in volts on an ``ObserverState`` or a ``KalmanState``,
+    over the batch (each run may have its own design: the matrices are then stacked per run)."""
+
+    # The design's arrays: shared (as the scalar controller holds them) or stacked per run.
+    gain: np.ndarray
+    phi: np.ndarray
+    gamma0: np.ndarray
+    k_gain: np.ndarray
+    h: np.ndarray
+    f: np.ndarray
+    ga: np.ndarray
+    o_gain: np.ndarray
+    h0: np.ndarray
+
+    def __init__(self, controllers: Sequence[LoopController]) -> None:
+        c0 = controllers[0]
+        self.name = c0.name
+        self.period_s = c0.period_s
+        self.software = c0.software
+        self.command_limits = c0.command_limits
+        self.feed_applied = c0.observer_input == "applied_volts"
+        laws = [c.law for c in controllers if isinstance(c.law, StateFeedbackLaw)]
+        if len(laws) != len(controllers):
+            raise TypeError(f"{self.name}: BatchLoopController takes state-feedback laws only")
+        self._per_run = ["ref"]  # the arrays with one entry per run (``keep`` selects from them)
+        self.ref = np.array([[law.ref_x_m, 0.0, 0.0, 0.0] for law in laws])
+        self._matrix("gain", [law.gain for law in laws])
+        states = [c.state for c in controllers]
+        self.kalman = isinstance(states[0], KalmanState)
+        if self.kalman:
+            ks = [s for s in states if isinstance(s, KalmanState)]
+            self._matrix("phi", [s.phi for s in ks])
+            self._matrix("gamma0", [s.gamma[:, 0] for s in ks])
+            self._matrix("k_gain", [s.gain for s in ks])
+            self._matrix("h", [s.h for s in ks])
+        else:
+            obs = [s.observer for s in states if isinstance(s, ObserverState)]
+            self._matrix("f", [o.f for o in obs])
+            self._matrix("ga", [o.ga for o in obs])
+            self._matrix("o_gain", [o.gain for o in obs])
+            self._matrix("h0", [o.h[:, 0] for o in obs])
+        self.telemetry = BatchTelemetry(np.empty((0, 4)), np.empty(0), np.empty(0))
+
+    def _matrix(self, name: str, arrays: Sequence[np.ndarray]) -> None:
+        """One array for all runs when they share it, else one per run stacked on a leading axis."""
+        first = arrays[0]
+        if all(a is first or np.array_equal(a, first) for a in arrays):
+            setattr(self, name, first)
+        else:
+            setattr(self, name, np.stack(arrays))
+            self._per_run.append(name)
+
+    @staticmethod
+    def supports(controller: object) -> bool:
+        return (
+            isinstance(controller, LoopController)
+            and isinstance(controller.law, StateFeedbackLaw)
+            and controller.u_kind == "volts"
+            and isinstance(controller.state, KalmanState | ObserverState)
+        )
+
+    def _xa(self, samples: BatchSamples) -> np.ndarray:
+        x, theta = _measure(samples, self.software)
+        return np.stack([x, theta], axis=1)
+
+    def start(self, samples: BatchSamples) -> None:
+        xa = self._xa(samples)
+        zeros = np.zeros_like(xa)
+        self._x = np.concatenate([xa, zeros], axis=1)  # Kalman: the estimate; observer: (xa, xb)
+        self._u_prev = np.zeros(len(xa))
+        self.telemetry = BatchTelemetry(self._x.copy(), self._u_prev.copy(), self._u_prev.copy())
+
+    def keep(self, runs: np.ndarray) -> None:
+        self._x, self._u_prev = self._x[runs], self._u_prev[runs]
+        for name in self._per_run:
+            setattr(self, name, getattr(self, name)[runs])
+
+    def update(self, samples: BatchSamples) -> np.ndarray:
+        sw = self.software
+        xa = self._xa(samples)
+        u_prev = self._u_prev[:, None]
+        if self.kalman:  # KalmanState.update
+            predicted = _mv(self.phi, self._x) + self.gamma0 * u_prev
+            x = predicted + _mv(self.k_gain, xa - _mv(self.h, predicted))
+        else:  # ObserverState.update
+            xa_prev, xb = self._x[:, :2], self._x[:, 2:]
+            xb = _mv(self.f, xb) + _mv(self.ga, xa_prev) + _mv(self.o_gain, xa) + self.h0 * u_prev
+            x = np.concatenate([xa, xb], axis=1)
+        self._x = x
+        u = -(_mv(self.gain, x - self.ref)[:, 0])  # StateFeedbackLaw
+        if not np.isfinite(u).all():
+            j = int(np.flatnonzero(~np.isfinite(u))[0])
+            raise FloatingPointError(f"{self.name}: control law returned {u[j]!r} for state {x[j].tolist()}")
+        command = dac_command_v(u, sw)
+        if self.command_limits:
+            command = clip_command_v(command, sw)
+        applied = motor_volts_from_command(command, sw)
+        self._u_prev = applied if self.feed_applied else u
+        self.telemetry = BatchTelemetry(x.copy(), applied, u)
+        return command
+
+
+def batched(
+    controllers: Sequence[object],
+) -> BatchAppendixStateFeedback | BatchAppendixControlLaw | BatchLoopController | None:
+    """The batched version of these controllers (one per run, all of one kind and software calibration),
+    or None when there is none."""
+    c0 = controllers[0]
+    if not all(type(c) is type(c0) for c in controllers):
+        return None
+    if isinstance(c0, AppendixStateFeedback | AppendixControlLaw):
+        software = c0.software
+        if not all(c.software == software for c in controllers):  # type: ignore[attr-defined]
+            return None
+        if isinstance(c0, AppendixStateFeedback):
+            return BatchAppendixStateFeedback(software)
+        return BatchAppendixControlLaw(software)
+    if all(BatchLoopController.supports(c) for c in controllers):
+        loops = [c for c in controllers if isinstance(c, LoopController)]
+        if all(c.software == loops[0].software for c in loops):
+            return BatchLoopController(loops)
+    return None
