@@ -155,6 +155,9 @@ class FittedValue:
     ci_high: float
     initial: float
     unit: str
+    # The standard uncertainty behind the interval (statistical and model resolution combined): what a Monte
+    # Carlo study samples, with the correlations.
+    sd: float = math.nan
 
 
 @dataclass
@@ -183,12 +186,13 @@ class Calibration:
                     "ci_low": v.ci_low,
                     "ci_high": v.ci_high,
                     "initial": v.initial,
+                    "sd": v.sd,
                     "unit": v.unit,
                 }
                 for name, v in self.values.items()
             },
             "correlation": {
-                "names": list(self.values),
+                "names": [name for name in self.values if name != DROPOUT],  # the fitted (smooth) ones
                 "matrix": np.round(self.correlation, 4).tolist(),
             },
             "rms_residual": {
@@ -694,7 +698,7 @@ def calibrate(
         rel, absolute = MODEL_RESOLUTION.get(name, (0.0, 0.0))
         half = math.hypot(z_crit * std[i], max(rel * abs(float(z[i])), absolute))
         lo, hi = float(z[i] - half), float(z[i] + half)
-        values[name] = FittedValue(float(z[i]), lo, hi, float(z0[i]), spec.unit)
+        values[name] = FittedValue(float(z[i]), lo, hi, float(z0[i]), spec.unit, sd=half / z_crit)
         if not np.isfinite(std[i]) or std[i] == 0.0:
             warnings.append(f"{name}: the data do not determine it (flat direction)")
         elif hi - lo > spec.upper - spec.lower:
@@ -715,7 +719,11 @@ def calibrate(
     params_fitted = problem.parameters(z)
     if DROPOUT in fit:
         rate, rate_lo, rate_hi, outliers = dropout_rate(problem, z, params_fitted)
-        values[DROPOUT] = FittedValue(rate, rate_lo, rate_hi, base.ball_sensor.dropout_rate_hz, "1/s")
+        # Its interval is a likelihood interval (asymmetric); its width over 2·1.96 is the standard uncertainty.
+        sd_rate = (rate_hi - rate_lo) / (2 * float(scipy.stats.norm.ppf(0.5 + CONFIDENCE / 2)))
+        values[DROPOUT] = FittedValue(
+            rate, rate_lo, rate_hi, base.ball_sensor.dropout_rate_hz, "1/s", sd=sd_rate
+        )
         params_fitted = params_fitted.with_overrides({DROPOUT: rate}, origin="calibration")
         if outliers < 10:
             warnings.append(

@@ -147,6 +147,7 @@ SF_CONT_SETTLING_S = (2.5, 3.0)  # §4.2 and chapter 7: "2 < t_s < 3"
 CLP_CONT_SETTLING_S = (6.0, 7.0)  # chapter 7
 SF_DISC_RANGE = ((-0.25, 0.2), (0.33, 0.68))  # chapter 7: initial states brought back, [x m, θ rad]
 CLP_DISC_RANGE = ((-0.25, 0.3), (0.33, 0.7))
+CHAPTER4_STARTS = ((0.2, 0.3), (-0.2, 0.3))  # §4.2–4.4 and chapter 5 simulations: [±0.2 m, 0.3 rad]
 HARDWARE_STARTS = {  # chapter 6 experiment figures: (x0 m, θ0 rad)
     "Fig 6.16 (state feedback)": (0.14, -0.2),
     "Fig 6.17 (state feedback)": (-0.13, 0.29),

@@ -17,8 +17,6 @@ from controllers import registry
 from controllers import thesis_numbers as T
 from twin.engine import run_closed_loop
 
-CHAPTER4_STARTS = [(0.2, 0.3), (-0.2, 0.3)]
-
 
 def _fmt(value: object, digits: int = 3) -> str:
     if value is None:
@@ -36,7 +34,7 @@ def main() -> None:
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
 
-    starts = CHAPTER4_STARTS + list(T.HARDWARE_STARTS.values())
+    starts = [*T.CHAPTER4_STARTS, *T.HARDWARE_STARTS.values()]
     rows = []
     for name in registry.NAMES:
         for x0, theta0 in starts:

@@ -63,6 +63,14 @@ class Catalogue(Protocol):
     def make(self, name: str, params: Parameters | None = None) -> Controller | StateLaw: ...
 
 
+class Pacer(Protocol):
+    """Paces a run's ticks (wall clock, hardware): ``wait(k)`` before tick k, ``done()`` after it."""
+
+    def wait(self, k: int) -> None: ...
+
+    def done(self) -> None: ...
+
+
 class ControllerError(RuntimeError):
     """A controller raised or returned something the I/O card cannot output; the message names the tick."""
 
@@ -292,6 +300,7 @@ def run_closed_loop(
     ideal_sensors: bool = False,
     stop_when_lost: bool = True,
     criteria: Criteria | None = None,
+    pacer: Pacer | None = None,
 ) -> RunResult:
     """Run ``controller`` on a fresh simulated rig from (x0, θ0) at rest for ``duration_s`` after release.
 
@@ -305,8 +314,12 @@ def run_closed_loop(
     rig.reset(x0_m, theta0_rad)
     loop = ClosedLoop(rig, controller)
     loop.start()
-    for _ in range(update_ticks(duration_s, rig.params)):
+    for k in range(update_ticks(duration_s, rig.params)):
+        if pacer is not None:
+            pacer.wait(k)
         loop.tick()
+        if pacer is not None:
+            pacer.done()
         if stop_when_lost and rig.ball_lost:
             break
     return RunResult(controller=controller.name, log=loop.log(), verdict=loop.verdict(x0_m, criteria))

@@ -18,7 +18,7 @@ import argparse
 import json
 import math
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, NoReturn
 
@@ -52,6 +52,7 @@ CONTROLLER_HELP = (
 # A run keeps every tick of its log in memory (and the log on disk holds them all): one simulated hour is
 # 180 000 ticks at 50 Hz.
 MAX_RUN_S = 3600.0
+MAX_SWEEP_RUN_S = 600.0  # one run of a sweep: its verdict, not its log, is kept
 # The live view's speed slider (twin.viewer) runs from 0.1 to 4.
 SPEED_MIN, SPEED_MAX = 0.1, 4.0
 LOG_SUFFIXES = (".mat", ".csv")
@@ -215,6 +216,11 @@ def _cmd_run(args: argparse.Namespace) -> int:
     controller = (
         registry.make(args.controller, params) if user is None else construct(user, args.controller, params)
     )
+    pacer = None
+    if args.realtime:
+        from twin.realtime import WallClockPacer
+
+        pacer = WallClockPacer(params.daq.period_s)
     try:
         result = run_closed_loop(
             controller,
@@ -226,6 +232,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
             params=params,
             plant=args.plant,
             ideal_sensors=args.ideal_sensors or args.plant == "reference",
+            pacer=pacer,
         )
     except ControllerError as exc:
         print(f"ballbeam run: the controller failed: {exc}", file=sys.stderr)
@@ -251,6 +258,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
         "free_run_s": params.start.free_run_s,
         **result.verdict.to_json(),
     }
+    if pacer is not None:
+        summary["realtime"] = pacer.timing().to_json()
     if args.json:
         print(json.dumps(summary))
     else:
@@ -298,6 +307,218 @@ def _cmd_view(args: argparse.Namespace) -> int:
     if args.duration is not None and stats:
         print(json.dumps(stats))
     return 0
+
+
+def _cmd_sweep(args: argparse.Namespace) -> int:
+    from twin.app.catalogue import catalogue_for
+    from twin.app.sweep import DEFAULT_THETA0, DEFAULT_X0, SweepSettings, parse_range, run_sweep, write_sweep
+    from twin.log import check_output_directory
+    from twin.parameters import ParameterError
+
+    params = _load_params(args)
+    _check_finite(duration=args.duration)
+    if not 0 < args.duration <= MAX_SWEEP_RUN_S:
+        raise ParameterError(
+            f"--duration = {args.duration!r}: each run lasts more than 0 and at most {MAX_SWEEP_RUN_S:g} s"
+        )
+    if not 1 <= args.workers <= 256:
+        raise ParameterError(f"--workers = {args.workers!r}: 1 … 256 local processes")
+    settings = SweepSettings(
+        controller=args.controller,
+        x0=parse_range("--x0", args.x0) if args.x0 else DEFAULT_X0,
+        theta0=parse_range("--theta0", args.theta0) if args.theta0 else DEFAULT_THETA0,
+        duration_s=args.duration,
+        noise=not args.no_noise,
+        plant=args.plant,
+        ideal_sensors=bool(args.ideal_sensors or args.plant == "reference"),
+        seed=args.seed,
+    )
+    catalogue_for(args.controller, params)  # an unknown or failing controller is refused before the work
+    if args.out is not None:
+        check_output_dir("--out", args.out)
+        check_output_directory(args.out, overwrite=args.overwrite)
+    result = run_sweep(
+        settings, params, workers=args.workers, scheduler=args.scheduler, progress=_progress_bar("sweep")
+    )
+    if args.out is not None:
+        with writing("--out", args.out):
+            write_sweep(result, args.out, overwrite=args.overwrite)
+    report = result.to_json()
+    if args.json:
+        print(json.dumps(report))
+    else:
+        summary = report["summary"]
+        print(
+            f"{settings.controller}: {summary['done']} of {summary['points']} starts: held {summary['held']}, "
+            f"not held {summary['not_held']}, lost {summary['lost']} ({result.wall_s:.1f} s)"
+        )
+        for claim in result.claims:
+            print(
+                f"claim ({claim['source']}): {claim['statement']}: {claim['verdict']} "
+                f"({claim['kept']} of {claim['grid_points_inside']} grid starts keep the ball)"
+            )
+        if args.out is not None:
+            print(f"wrote {Path(args.out) / 'sweep.json'} and {Path(args.out) / 'map.png'}")
+    if not result.complete:
+        print("ballbeam sweep: interrupted: the starts done so far are kept", file=sys.stderr)
+        return 130
+    return 0
+
+
+def _cmd_montecarlo(args: argparse.Namespace) -> int:
+    from twin.app.catalogue import catalogue_for
+    from twin.app.montecarlo import (
+        MonteCarloSettings,
+        load_calibration_spread,
+        load_spread,
+        run_montecarlo,
+        write_montecarlo,
+    )
+    from twin.log import check_output_directory
+    from twin.parameters import ParameterError
+    from twin.physics import check_initial_state
+
+    if (args.spread is None) == (args.calibration is None):
+        raise ParameterError(
+            "give one of --spread FILE or --calibration DIR (what to perturb, and by how much)"
+        )
+    _check_finite(x0=args.x0, theta0=args.theta0, duration=args.duration)
+    if not 0 < args.duration <= MAX_SWEEP_RUN_S:
+        raise ParameterError(
+            f"--duration = {args.duration!r}: each run lasts more than 0 and at most {MAX_SWEEP_RUN_S:g} s"
+        )
+    if not 1 <= args.workers <= 256:
+        raise ParameterError(f"--workers = {args.workers!r}: 1 … 256 local processes")
+    if args.calibration is not None:
+        if args.params or args.set:
+            raise ParameterError("--calibration brings its own parameters: drop --params/--set")
+        base, spread = load_calibration_spread(args.calibration)
+    else:
+        base = _load_params(args)
+        spread = load_spread(args.spread, base)
+    try:
+        check_initial_state(base, args.x0, args.theta0, 0.0, 0.0)
+    except ValueError as exc:
+        raise ParameterError(f"--x0/--theta0: {exc}") from None
+    catalogue_for(args.controller, base)
+    if args.out is not None:
+        check_output_dir("--out", args.out)
+        check_output_directory(args.out, overwrite=args.overwrite)
+    settings = MonteCarloSettings(
+        controller=args.controller,
+        n=args.n,
+        x0_m=args.x0,
+        theta0_rad=args.theta0,
+        duration_s=args.duration,
+        noise=not args.no_noise,
+        plant=args.plant,
+        ideal_sensors=bool(args.ideal_sensors or args.plant == "reference"),
+        seed=args.seed,
+    )
+    result = run_montecarlo(
+        settings,
+        base,
+        spread,
+        workers=args.workers,
+        scheduler=args.scheduler,
+        progress=_progress_bar("montecarlo"),
+    )
+    if args.out is not None:
+        with writing("--out", args.out):
+            write_montecarlo(result, args.out, overwrite=args.overwrite)
+    if args.json:
+        print(json.dumps(result.to_json()))
+    else:
+        s = result.summary
+        ci = s["success_ci"]
+        print(
+            f"{args.controller} from ({args.x0:g} m, {args.theta0:g} rad): held {s['held']} of {s['runs']}"
+            + (
+                f" ({100 * s['success_rate']:.1f} %, 95 % CI {100 * ci[0]:.1f}–{100 * ci[1]:.1f} %)"
+                if ci
+                else ""
+            )
+            + f", lost {s['lost']} ({result.wall_s:.1f} s)"
+        )
+        for name, dist in (("settling time (s)", s["settling_time_s"]), ("steady x (m)", s["steady_x_m"])):
+            if dist:
+                print(
+                    f"  {name}: p5 {dist['p5']:g}, median {dist['p50']:g}, p95 {dist['p95']:g}, max {dist['max']:g}"
+                )
+        for run in s["worst"][:3]:
+            if run["held"]:
+                break
+            changed = ", ".join(f"{k} = {v:.6g}" for k, v in run["parameters"].items())
+            print(f"  worst: {run['reason']} (seed {run['seed']}): {changed}")
+        if args.out is not None:
+            print(f"wrote {Path(args.out) / 'montecarlo.json'} and {Path(args.out) / 'distributions.png'}")
+    if not result.complete:
+        print("ballbeam montecarlo: interrupted: the runs done so far are kept", file=sys.stderr)
+        return 130
+    return 0
+
+
+def _cmd_validate(args: argparse.Namespace) -> int:
+    from twin.app.catalogue import catalogue_for
+    from twin.app.montecarlo import load_calibration_spread, load_spread
+    from twin.app.validate import ValidationCriteria, load_criteria, validate, write_validation
+    from twin.log import check_output_directory
+    from twin.parameters import ParameterError
+
+    if not 1 <= args.workers <= 256:
+        raise ParameterError(f"--workers = {args.workers!r}: 1 … 256 local processes")
+    spread = None
+    if args.calibration is not None:
+        if args.params or args.set:
+            raise ParameterError("--calibration brings its own parameters: drop --params/--set")
+        params, spread = load_calibration_spread(args.calibration)
+    else:
+        params = _load_params(args)
+        if args.spread is not None:
+            spread = load_spread(args.spread, params)
+    criteria = load_criteria(args.criteria) if args.criteria else ValidationCriteria()
+    catalogue_for(args.controller, params)
+    if args.out is not None:
+        check_output_dir("--out", args.out)
+        check_output_directory(args.out, overwrite=args.overwrite)
+    report = validate(
+        args.controller,
+        params,
+        criteria,
+        spread=spread,
+        seed=args.seed,
+        workers=args.workers,
+        progress=_progress_bar("validate"),
+    )
+    if args.out is not None:
+        with writing("--out", args.out):
+            write_validation(report, args.out, overwrite=args.overwrite)
+    if args.json:
+        print(json.dumps(report.to_json()))
+    else:
+        mark = {True: "pass", False: "FAIL", None: "not run"}
+        for check in report.checks:
+            print(f"{mark[check.passed]:<8} {check.name}: {check.measured}  [{check.criterion}]")
+        print(f"{args.controller}: {'PASS' if report.passed else 'FAIL'} ({report.wall_s:.0f} s)")
+        if args.out is not None:
+            print(f"wrote {Path(args.out) / 'report.md'}")
+    return 0 if report.passed else 1
+
+
+def _progress_bar(what: str) -> Callable[[int, int], None]:
+    """A progress bar with ETA on stderr (tqdm), advanced by ``(done, total)`` calls."""
+    from tqdm import tqdm
+
+    bar: list[Any] = []
+
+    def update(done: int, total: int) -> None:
+        if not bar:
+            bar.append(tqdm(total=total, desc=what, unit="run", file=sys.stderr, dynamic_ncols=True))
+        bar[0].update(done - bar[0].n)
+        if done >= total:
+            bar[0].close()
+
+    return update
 
 
 def _cmd_calibrate(args: argparse.Namespace) -> int:
@@ -473,6 +694,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     run.add_argument("--seed", type=int, default=0, help="seed of the sensor noise (default 0)")
     run.add_argument("--no-noise", action="store_true", help="switch the ball sensor's contact noise off")
+    run.add_argument(
+        "--realtime",
+        action="store_true",
+        help="pace the ticks to the wall clock (one every daq.period_s, as on the rig) and report the tick "
+        "jitter (p50/p99/max) and overruns",
+    )
     _add_plant_options(run)
     run.add_argument(
         "--log",
@@ -484,6 +711,99 @@ def build_parser() -> argparse.ArgumentParser:
     _add_params_options(run)
     run.add_argument("--json", action="store_true", help="print the verdict as JSON")
     run.set_defaults(func=_cmd_run)
+
+    sweep = sub.add_parser(
+        "sweep",
+        help="region of attraction: a grid of initial states, a map (PNG) and the verdict of every start (JSON)",
+    )
+    sweep.add_argument("--controller", required=True, metavar="NAME|MODULE:CLASS", help=controller_help)
+    sweep.add_argument(
+        "--x0",
+        type=range_text,
+        metavar="LO:HI:N",
+        help="initial ball positions (default -0.32:0.32:41, the chapter 7 range)",
+    )
+    sweep.add_argument(
+        "--theta0",
+        type=range_text,
+        metavar="LO:HI:N",
+        help="initial beam angles (default -0.7:0.7:41, the chapter 7 range)",
+    )
+    sweep.add_argument(
+        "--duration", type=float, default=10.0, metavar="S", help="seconds per run (default 10)"
+    )
+    sweep.add_argument(
+        "--seed", type=int, default=0, help="base seed; each start's seed follows from it and its index"
+    )
+    sweep.add_argument("--no-noise", action="store_true", help="switch the ball sensor's contact noise off")
+    _add_plant_options(sweep)
+    _add_params_options(sweep)
+    sweep.add_argument("--workers", type=int, default=1, help="local processes (default 1: this process)")
+    sweep.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="a Dask distributed scheduler, e.g. tcp://10.0.0.5:8786, to fan the grid out to "
+        "(pip install 'ballbeam-twin[distributed]'); results equal the local run's",
+    )
+    sweep.add_argument("--out", metavar="DIR", help="write DIR/sweep.json and DIR/map.png")
+    sweep.add_argument("--overwrite", action="store_true", help="replace an existing --out directory")
+    sweep.add_argument("--json", action="store_true", help="print the whole result as JSON")
+    sweep.set_defaults(func=_cmd_sweep)
+
+    mc = sub.add_parser(
+        "montecarlo",
+        help="robustness: one start over many perturbed rigs and noise seeds; success rate with its interval",
+    )
+    mc.add_argument("--controller", required=True, metavar="NAME|MODULE:CLASS", help=controller_help)
+    mc.add_argument("--n", type=int, default=200, help="runs (default 200)")
+    what = mc.add_mutually_exclusive_group()
+    what.add_argument(
+        "--spread", metavar="FILE", help="each parameter's uncertainty (TOML/JSON; see the README)"
+    )
+    what.add_argument(
+        "--calibration",
+        metavar="DIR",
+        help="a calibration's values, uncertainties and correlations (calibrate --out)",
+    )
+    mc.add_argument(
+        "--x0", type=float, default=-0.2, metavar="M", help="initial ball position (default -0.2)"
+    )
+    mc.add_argument(
+        "--theta0", type=float, default=0.3, metavar="RAD", help="initial beam angle (default 0.3)"
+    )
+    mc.add_argument("--duration", type=float, default=15.0, metavar="S", help="seconds per run (default 15)")
+    mc.add_argument("--seed", type=int, default=0, help="seed of the samples and of every run's noise")
+    mc.add_argument("--no-noise", action="store_true", help="switch the ball sensor's contact noise off")
+    _add_plant_options(mc)
+    _add_params_options(mc)
+    mc.add_argument("--workers", type=int, default=1, help="local processes (default 1: this process)")
+    mc.add_argument(
+        "--scheduler", metavar="ADDRESS", help="a Dask distributed scheduler to fan the runs out to"
+    )
+    mc.add_argument("--out", metavar="DIR", help="write DIR/montecarlo.json and DIR/distributions.png")
+    mc.add_argument("--overwrite", action="store_true", help="replace an existing --out directory")
+    mc.add_argument("--json", action="store_true", help="print the whole result as JSON")
+    mc.set_defaults(func=_cmd_montecarlo)
+
+    val = sub.add_parser(
+        "validate",
+        help="the standard battery before hardware: nominal starts, region, sensitivities, saturation, "
+        "Monte Carlo; one report, exit 0 pass / 1 fail",
+    )
+    val.add_argument("--controller", required=True, metavar="NAME|MODULE:CLASS", help=controller_help)
+    spread = val.add_mutually_exclusive_group()
+    spread.add_argument("--spread", metavar="FILE", help="parameter uncertainties for the Monte Carlo check")
+    spread.add_argument(
+        "--calibration", metavar="DIR", help="a calibration's uncertainties for the Monte Carlo check"
+    )
+    val.add_argument("--criteria", metavar="FILE", help="TOML overriding the pass criteria (see the report)")
+    val.add_argument("--seed", type=int, default=0, help="base seed of every run's noise")
+    _add_params_options(val)
+    val.add_argument("--workers", type=int, default=1, help="local processes (default 1: this process)")
+    val.add_argument("--out", metavar="DIR", help="write DIR/report.md, DIR/validation.json, DIR/region.png")
+    val.add_argument("--overwrite", action="store_true", help="replace an existing --out directory")
+    val.add_argument("--json", action="store_true", help="print the report as JSON")
+    val.set_defaults(func=_cmd_validate)
 
     view = sub.add_parser("view", help="live 3D view of the twin in the browser (viser)")
     view.add_argument(
@@ -570,7 +890,7 @@ def _option_strings(parser: argparse.ArgumentParser) -> tuple[set[str], set[str]
     while parsers:
         for action in parsers.pop()._actions:
             every.update(action.option_strings)
-            if action.option_strings and action.type in (int, float):
+            if action.option_strings and action.type in (int, float, range_text):
                 numeric.update(action.option_strings)
             if isinstance(action, argparse._SubParsersAction):
                 parsers.extend(action.choices.values())
@@ -578,11 +898,18 @@ def _option_strings(parser: argparse.ArgumentParser) -> tuple[set[str], set[str]
 
 
 def _is_number(text: str) -> bool:
+    """A number, or a range of numbers ``LO:HI:N``."""
     try:
-        float(text)
+        for part in text.split(":"):
+            float(part)
     except ValueError:
         return False
     return True
+
+
+def range_text(text: str) -> str:
+    """The type of a ``LO:HI:N`` option (parsed by the command; marked so that ``-0.3:0.3:7`` is a value)."""
+    return text
 
 
 def join_negative_numbers(argv: Sequence[str], parser: argparse.ArgumentParser) -> list[str]:

@@ -1,0 +1,184 @@
+"""Region-of-attraction sweeps: every point is the single run it stands for (same seed, same verdict),
+chunking and workers (local processes, a Dask cluster) change nothing, an interrupted sweep keeps what it
+did, and the chapter 7 claims are judged from the map."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import twin.app.fanout as fanout
+import twin.app.sweep as sweep_module
+from controllers import registry
+from twin.app.cli import main
+from twin.app.sweep import (
+    CLAIMS,
+    Grid,
+    SweepSettings,
+    parse_range,
+    point_seeds,
+    render_map,
+    run_sweep,
+    write_sweep,
+)
+from twin.engine import run_closed_loop
+from twin.parameters import ParameterError
+
+SMALL = SweepSettings(
+    controller="appendix-sf", x0=Grid(-0.3, 0.3, 3), theta0=Grid(0.0, 0.6, 3), duration_s=2.0, noise=True
+)
+
+
+@pytest.mark.parametrize(
+    ("text", "grid"),
+    [("-0.3:0.3:7", Grid(-0.3, 0.3, 7)), ("0.1", Grid(0.1, 0.1, 1)), ("0:0:1", Grid(0.0, 0.0, 1))],
+)
+def test_ranges_parse(text: str, grid: Grid) -> None:
+    assert parse_range("--x0", text) == grid
+
+
+@pytest.mark.parametrize("text", ["", "a:b:c", "0.3:-0.3:5", "0:1:0", "0:1", "nan:1:3", "0:1:2.5", "0:inf:3"])
+def test_bad_ranges_are_refused_naming_the_option(text: str) -> None:
+    with pytest.raises(ParameterError, match="--x0"):
+        parse_range("--x0", text)
+
+
+def test_point_seeds_depend_on_the_seed_and_the_index_only() -> None:
+    assert np.array_equal(point_seeds(7, 10)[:5], point_seeds(7, 5))
+    assert len(set(point_seeds(7, 1000).tolist())) == 1000
+    assert not np.array_equal(point_seeds(7, 5), point_seeds(8, 5))
+
+
+def test_every_point_is_its_single_run() -> None:
+    """Grid order (x0 outer, θ0 inner), seeds and verdicts: each point equals run_closed_loop from the
+    same start with the same seed (the claims' corner states are extra runs, not grid points)."""
+    result = run_sweep(SMALL)
+    assert result.complete and len(result.points) == 9
+    seeds = point_seeds(SMALL.seed, 9 + len(result.corners))
+    for k, point in enumerate(result.points):
+        x, th = SMALL.x0.values()[k // 3], SMALL.theta0.values()[k % 3]
+        assert (point["x0_m"], point["theta0_rad"], point["seed"]) == (x, th, seeds[k])
+        single = run_closed_loop(
+            registry.make("appendix-sf"), x0_m=x, theta0_rad=th, duration_s=2.0, seed=int(seeds[k])
+        )
+        assert {key: point[key] for key in single.verdict.to_json()} == single.verdict.to_json()
+
+
+def test_chunks_and_workers_change_nothing(monkeypatch: pytest.MonkeyPatch) -> None:
+    whole = run_sweep(SMALL).to_json()
+    monkeypatch.setattr(fanout, "CHUNK_RUNS", 2)
+    assert run_sweep(SMALL).to_json() == whole
+    assert run_sweep(SMALL, workers=2).to_json() == whole
+
+
+def test_a_dask_cluster_gives_the_local_result() -> None:
+    distributed = pytest.importorskip("distributed")
+    local = run_sweep(SMALL).to_json()
+    with distributed.LocalCluster(
+        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None
+    ) as cluster:
+        remote = run_sweep(SMALL, scheduler=cluster.scheduler_address).to_json()
+    assert remote == local
+
+
+def test_an_interrupted_sweep_keeps_the_points_done(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(fanout, "CHUNK_RUNS", 4)
+    real = fanout.run_chunk
+    calls = []
+
+    def interrupted(chunk):
+        calls.append(chunk)
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return real(chunk)
+
+    monkeypatch.setattr(fanout, "run_chunk", interrupted)
+    result = run_sweep(SMALL)
+    assert not result.complete
+    assert [bool(p) for p in result.points] == [True] * 4 + [False] * 5
+    assert result.to_json()["summary"]["done"] == 4
+
+
+def test_the_claims_are_judged_from_the_points() -> None:
+    """A grid on the state-feedback claim's rectangle: the verdict is 'holds' exactly when no start inside
+    loses the ball; the corner at 0.33 m lies beyond the beam's end (0.323 m) and is noted, not run."""
+    settings = SweepSettings(
+        controller="appendix-sf",
+        x0=Grid(-0.25, 0.3, 3),
+        theta0=Grid(0.2, 0.68, 3),
+        duration_s=3.0,
+        noise=False,
+    )
+    result = run_sweep(settings)
+    (claim,) = result.claims
+    assert claim["grid_points_inside"] == 9
+    lost = sum(p["ball_lost"] for p in result.points)
+    assert claim["kept"] == 9 - lost
+    assert claim["verdict"] == ("holds" if lost == 0 else "fails")
+    far = next(c for c in claim["corners"] if c["x0_m"] == 0.33)
+    assert far["kept"] is None and "not on this rig" in far["note"]
+    near = next(c for c in claim["corners"] if c["x0_m"] == -0.25)
+    single = run_closed_loop(
+        registry.make("appendix-sf"),
+        x0_m=-0.25,
+        theta0_rad=0.2,
+        duration_s=3.0,
+        noise=False,
+        seed=int(point_seeds(0, 10)[9]),
+    )
+    assert near["kept"] == (not single.verdict.ball_lost)
+    assert {c.applies_to for c in CLAIMS if "appendix-clp" in c.applies_to}
+
+
+def test_the_map_and_json_are_written_atomically(tmp_path: Path) -> None:
+    result = run_sweep(SMALL)
+    out = write_sweep(result, tmp_path / "roa")
+    data = json.loads((out / "sweep.json").read_text())
+    assert data["summary"]["points"] == 9 and len(data["points"]) == 9
+    assert (out / "map.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    with pytest.raises(FileExistsError, match="not overwritten"):
+        write_sweep(result, out)
+    (out / "mine.txt").write_text("kept")
+
+    def broken(result, path):
+        raise RuntimeError("disk full")
+
+    sweep_module_render = sweep_module.render_map
+    try:
+        sweep_module.render_map = broken  # type: ignore[assignment]
+        with pytest.raises(RuntimeError):
+            write_sweep(result, out, overwrite=True)
+    finally:
+        sweep_module.render_map = sweep_module_render
+    assert (out / "mine.txt").read_text() == "kept"  # a failed write leaves the old directory
+    assert render_map is sweep_module_render
+
+
+def test_the_command(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "roa"
+    args = [
+        "sweep",
+        "--controller",
+        "appendix-clp",
+        "--x0",
+        "-0.1:0.1:2",
+        "--theta0",
+        "0:0.2:2",
+        "--duration",
+        "1",
+    ]
+    assert main([*args, "--out", str(out), "--json"]) == 0
+    printed = json.loads(capsys.readouterr().out)
+    assert printed["summary"]["points"] == 4
+    assert json.loads((out / "sweep.json").read_text()) == printed
+    assert main([*args, "--out", str(out)]) == 2
+    assert "exists; not overwritten" in capsys.readouterr().err
+    assert main(["sweep", "--controller", "appendix-clp", "--x0", "0.5:-0.5:3"]) == 2
+    assert "--x0 '0.5:-0.5:3'" in capsys.readouterr().err
+    assert main(["sweep", "--controller", "appendix-clp", "--x0", "-0.4:0.4:3", "--duration", "1"]) == 2
+    assert "the grid leaves the rig" in capsys.readouterr().err
+    assert main(["sweep", "--controller", "nope"]) == 2
+    assert "unknown controller" in capsys.readouterr().err

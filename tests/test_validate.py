@@ -1,0 +1,89 @@
+"""``ballbeam validate``: every check is computed from runs that equal their single runs, the criteria are
+data that a file can change, and the exit code is the verdict."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from controllers import registry
+from controllers import thesis_numbers as T
+from twin.app.cli import main
+from twin.app.sweep import point_seeds
+from twin.app.validate import ValidationCriteria, load_criteria, validate
+from twin.engine import run_closed_loop
+from twin.parameters import ParameterError, Parameters
+
+QUICK = ValidationCriteria(
+    nominal_seeds=1,
+    duration_s=4.0,
+    region_x0=(-0.2, 0.2, 3),
+    region_theta0=(-0.3, 0.3, 3),
+    region_duration_s=4.0,
+    zeroing_counts=1,
+    latencies_s=(0.0,),
+    free_runs_s=(0.04,),
+)
+QUICK_TOML = """
+nominal_seeds = 1
+duration_s = 4.0
+region_x0 = [-0.2, 0.2, 3]
+region_theta0 = [-0.3, 0.3, 3]
+region_duration_s = 4.0
+zeroing_counts = 1
+latencies_s = [0.0]
+free_runs_s = [0.04]
+"""
+
+
+def test_the_checks_come_from_the_runs() -> None:
+    report = validate("appendix-clp", Parameters(), QUICK)
+    names = [c.name for c in report.checks]
+    assert names[:3] == ["nominal", "saturation", "region"] and "monte carlo" in names
+    nominal = report.checks[0]
+    starts = [*T.CHAPTER4_STARTS, *T.HARDWARE_STARTS.values()]
+    assert len(nominal.rows) == len(starts)
+    seeds = point_seeds(0, len(starts))
+    for row, (x, th), seed in zip(nominal.rows, starts, seeds, strict=True):
+        single = run_closed_loop(
+            registry.make("appendix-clp"), x0_m=x, theta0_rad=th, duration_s=4.0, seed=int(seed)
+        )
+        assert row["held"] == single.verdict.held and row["seed"] == seed
+    held = sum(r["held"] for r in nominal.rows)
+    assert nominal.passed == (held == len(starts)) and nominal.measured == f"held {held} of {len(starts)}"
+    worst = max(r["saturated_fraction"] for r in nominal.rows)
+    assert report.checks[1].passed == (worst <= 0.2)
+    assert report.checks[-1].passed is None  # no spread: Monte Carlo not run, and it does not fail the report
+    assert report.passed == all(c.passed is not False for c in report.checks)
+
+
+def test_criteria_files(tmp_path: Path) -> None:
+    path = tmp_path / "criteria.toml"
+    path.write_text(QUICK_TOML)
+    assert load_criteria(path) == QUICK
+    for text, message in [
+        ("nominal_seed = 1\n", "unknown criterion 'nominal_seed'"),
+        ("nominal_seeds = 1.5\n", "must be a int"),
+        ("latencies_s = 3\n", "must be a list of numbers"),
+        ("duration_s = 'long'\n", "must be a float"),
+    ]:
+        path.write_text(text)
+        with pytest.raises(ParameterError, match=message):
+            load_criteria(path)
+
+
+def test_the_exit_code_is_the_verdict(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    criteria = tmp_path / "criteria.toml"
+    criteria.write_text(QUICK_TOML + "max_saturated_fraction = 0.0\n")  # no tick at the rails allowed
+    out = tmp_path / "report"
+    code = main(
+        ["validate", "--controller", "appendix-sf", "--criteria", str(criteria), "--out", str(out), "--json"]
+    )
+    data = json.loads(capsys.readouterr().out)
+    saturation = next(c for c in data["checks"] if c["name"] == "saturation")
+    assert code == (0 if data["passed"] else 1)
+    assert saturation["passed"] == (saturation["measured"] == "at most 0.0 %")
+    assert (out / "report.md").read_text().startswith("# Validation of `appendix-sf`")
+    assert json.loads((out / "validation.json").read_text()) == data

@@ -1,0 +1,172 @@
+"""Many closed-loop runs fanned out: in this process, in local worker processes, or on a Dask cluster.
+
+A job is a list of starts, each with its own seed (and, for Monte Carlo, its own parameters). It is cut
+into chunks of ``CHUNK_RUNS``; each chunk runs through the batch engine (``twin.batch.run_batch``) where it
+lands. Because every run's numbers depend only on its own start, seed and parameters, the result is the
+same however the job is chunked and wherever the chunks run. Ctrl-C stops handing out chunks and returns
+what came back (``complete`` false).
+
+Why Dask for more than one machine: it is pip-installable, pure Python, starts a local cluster in a test,
+and its futures map one-to-one onto chunks; Ray would bring a much larger runtime for the same use here.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+from collections.abc import Callable, Generator, Sequence
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from twin.parameters import ParameterError, Parameters
+
+__all__ = ["CHUNK_RUNS", "Progress", "Runs", "run_chunk", "run_starts"]
+
+CHUNK_RUNS = 64  # runs per batch: enough to keep rollout's threads busy, small enough for progress
+
+Progress = Callable[[int, int], None]
+
+
+@dataclass(frozen=True)
+class Runs:
+    """What every run of a job shares."""
+
+    controller: str  # a registry name or MODULE:CLASS
+    params: Parameters
+    duration_s: float
+    noise: bool
+    plant: str
+    ideal_sensors: bool
+
+
+@dataclass(frozen=True)
+class _Chunk:
+    """One piece of work as plain data (picklable, for processes and Dask)."""
+
+    runs: Runs
+    x0_m: tuple[float, ...]
+    theta0_rad: tuple[float, ...]
+    seeds: tuple[int, ...]
+    params: tuple[Parameters, ...] | None  # one per run, or None: ``runs.params`` for all
+    nthread: int
+
+
+def run_chunk(chunk: _Chunk) -> list[dict[str, Any]]:
+    """Run one chunk through the batch engine: per run its start, seed and verdict as JSON values."""
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # an idle OpenBLAS thread spins after dlqr
+    from twin.app.catalogue import catalogue_for
+    from twin.batch import run_batch
+
+    r = chunk.runs
+    results = run_batch(
+        catalogue_for(r.controller, r.params),
+        r.controller,
+        x0_m=np.array(chunk.x0_m),
+        theta0_rad=np.array(chunk.theta0_rad),
+        seeds=np.array(chunk.seeds, dtype=np.int64),
+        duration_s=r.duration_s,
+        noise=r.noise,
+        params=list(chunk.params) if chunk.params is not None else r.params,
+        plant=r.plant,  # type: ignore[arg-type]
+        ideal_sensors=r.ideal_sensors,
+        nthread=chunk.nthread,
+    )
+    return [
+        {"x0_m": x, "theta0_rad": th, "seed": seed, **result.verdict.to_json()}
+        for x, th, seed, result in zip(chunk.x0_m, chunk.theta0_rad, chunk.seeds, results, strict=True)
+    ]
+
+
+def _local(
+    chunks: list[tuple[int, _Chunk]], workers: int
+) -> Generator[tuple[int, list[dict[str, Any]]], None, None]:
+    if workers <= 1:
+        for lo, chunk in chunks:
+            yield lo, run_chunk(chunk)
+        return
+    # Workers ignore Ctrl-C: the parent stops handing out work and keeps what came back.
+    with ProcessPoolExecutor(
+        workers, initializer=signal.signal, initargs=(signal.SIGINT, signal.SIG_IGN)
+    ) as pool:
+        pending: dict[Future, int] = {pool.submit(run_chunk, chunk): lo for lo, chunk in chunks}
+        try:
+            while pending:
+                done, _ = wait(pending, return_when=FIRST_COMPLETED)
+                for future in done:
+                    yield pending.pop(future), future.result()
+        finally:
+            for future in pending:
+                future.cancel()
+
+
+def _dask(
+    chunks: list[tuple[int, _Chunk]], scheduler: str
+) -> Generator[tuple[int, list[dict[str, Any]]], None, None]:
+    try:
+        from distributed import Client, as_completed
+    except ImportError:
+        raise ParameterError(
+            "--scheduler needs Dask distributed: pip install 'ballbeam-twin[distributed]'"
+        ) from None
+    try:
+        client = Client(scheduler, timeout="20s")
+    except (OSError, TimeoutError, ValueError) as exc:
+        raise ParameterError(f"--scheduler {scheduler!r}: cannot connect: {exc}") from None
+    try:
+        futures = {client.submit(run_chunk, chunk, pure=False): lo for lo, chunk in chunks}
+        try:
+            for future in as_completed(futures):
+                yield futures[future], future.result()
+        finally:
+            client.cancel(list(futures))
+    finally:
+        client.close()
+
+
+def run_starts(
+    runs: Runs,
+    starts: np.ndarray,
+    seeds: np.ndarray,
+    *,
+    params: Sequence[Parameters] | None = None,
+    workers: int = 1,
+    scheduler: str | None = None,
+    nthread: int | None = None,
+    progress: Progress | None = None,
+) -> tuple[list[dict[str, Any] | None], bool]:
+    """Every start ((N, 2): x0, θ0) with its seed (and its parameters, when given): the records in the
+    starts' order (None where not run) and whether all ran. ``workers`` local processes (1: here), or a Dask
+    ``scheduler`` address; ``nthread``: rollout threads per batch (default: the cores shared by the
+    workers)."""
+    n = len(starts)
+    threads = nthread or max(1, (os.cpu_count() or 1) // max(workers, 1))
+    chunks = [
+        (
+            lo,
+            _Chunk(
+                runs=runs,
+                x0_m=tuple(float(v) for v in starts[lo : lo + CHUNK_RUNS, 0]),
+                theta0_rad=tuple(float(v) for v in starts[lo : lo + CHUNK_RUNS, 1]),
+                seeds=tuple(int(v) for v in seeds[lo : lo + CHUNK_RUNS]),
+                params=tuple(params[lo : lo + CHUNK_RUNS]) if params is not None else None,
+                nthread=threads,
+            ),
+        )
+        for lo in range(0, n, CHUNK_RUNS)
+    ]
+    results: list[dict[str, Any] | None] = [None] * n
+    source = _dask(chunks, scheduler) if scheduler else _local(chunks, workers)
+    done = 0
+    try:
+        for lo, records in source:
+            results[lo : lo + len(records)] = records
+            done += len(records)
+            if progress is not None:
+                progress(done, n)
+    except KeyboardInterrupt:
+        source.close()  # stop the workers' queue (a running chunk finishes)
+        return results, False
+    return results, all(r is not None for r in results)

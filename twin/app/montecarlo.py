@@ -1,0 +1,362 @@
+"""Monte Carlo robustness: one controller from one start over many perturbed rigs and noise seeds.
+
+The perturbations come from a spread file (each parameter's uncertainty: a normal with ``sd`` or
+``rel_sd``, or a uniform ``low``…``high``) or from a calibration directory (``ballbeam calibrate --out``:
+the fitted values, their standard uncertainties and correlations, sampled as one multivariate normal).
+A sample outside a parameter's physical bounds is drawn again. Every run has its own noise seed; the
+samples and seeds follow from ``--seed`` alone, so a study is bit-identical locally, with workers and on a
+cluster.
+
+The result: the success rate (held) with its exact (Clopper-Pearson) 95 % interval, the lost count, the
+worst runs with the parameters that caused them, and the distributions of settling time and steady offset.
+
+Spread file (TOML or JSON), one entry per parameter::
+
+    [motor]
+    resistance_ohm = { rel_sd = 0.05 }     # normal about the nominal value, 5 % standard deviation
+    [beam]
+    pivot_friction_nm = { low = 0.0, high = 0.004 }   # uniform
+    [angle_sensor]
+    zero_error_rad = { sd = 0.0035 }        # normal, absolute standard deviation
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+import tomllib
+from dataclasses import asdict, dataclass, field, fields, is_dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from twin.app.fanout import Progress, Runs, run_starts
+from twin.app.sweep import point_seeds
+from twin.parameters import ParameterError, Parameters
+
+__all__ = [
+    "Distribution",
+    "MonteCarloResult",
+    "MonteCarloSettings",
+    "load_calibration_spread",
+    "load_spread",
+    "run_montecarlo",
+    "sample_parameters",
+    "write_montecarlo",
+]
+
+MAX_RUNS = 100_000
+MAX_REDRAWS = 100  # a spread that puts a parameter outside its bounds this often is refused
+WORST_SHOWN = 10
+_READING = ("ball_reading.gain", "ball_reading.offset_m")  # calibration's reading model (not twin fields)
+
+
+@dataclass(frozen=True)
+class Distribution:
+    """Independent parameters: normal (``sd`` about ``mean``) or uniform (``low``…``high``); or, for a
+    calibration, one multivariate normal (``names``, ``mean``, ``cov``)."""
+
+    names: tuple[str, ...]
+    kind: str  # "independent" or "multivariate"
+    mean: tuple[float, ...]
+    sd: tuple[float, ...] = ()  # independent normals (NaN where uniform)
+    low: tuple[float, ...] = ()  # independent uniforms (NaN where normal)
+    high: tuple[float, ...] = ()
+    cov: tuple[tuple[float, ...], ...] = ()
+    source: str = ""
+
+    def draw(self, rng: np.random.Generator) -> np.ndarray:
+        if self.kind == "multivariate":
+            return rng.multivariate_normal(np.array(self.mean), np.array(self.cov), method="eigh")
+        normal = rng.standard_normal(len(self.names))
+        uniform = rng.random(len(self.names))
+        mean, sd, low, high = (np.array(v) for v in (self.mean, self.sd, self.low, self.high))
+        return np.where(np.isnan(sd), low + (high - low) * uniform, mean + sd * normal)
+
+
+def _nominal(params: Parameters, name: str) -> float:
+    """The value of parameter ``group.name`` (a field, not a derived property)."""
+    group, _, field_name = name.partition(".")
+    section = getattr(params, group, None)
+    if section is None or not is_dataclass(section) or field_name not in {f.name for f in fields(section)}:
+        raise ParameterError(f"unknown parameter {name!r} (see ballbeam params)")
+    value = getattr(section, field_name)
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ParameterError(f"{name}: only numeric parameters can be perturbed")
+    return float(value)
+
+
+def load_spread(path: str | Path, params: Parameters) -> Distribution:
+    """A spread file (TOML or JSON) about the nominal ``params``; refused naming the file and entry."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+        data = json.loads(text) if path.suffix.lower() == ".json" else tomllib.loads(text)
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ParameterError(f"{path}: cannot read: {exc}") from None
+    except (tomllib.TOMLDecodeError, json.JSONDecodeError, RecursionError) as exc:
+        raise ParameterError(
+            f"{path}: not valid {path.suffix.lstrip('.').upper() or 'TOML'}: {exc}"
+        ) from None
+    if not isinstance(data, dict) or not data:
+        raise ParameterError(
+            f"{path}: expected tables of parameters, e.g. [motor] resistance_ohm = {{ rel_sd = 0.05 }}"
+        )
+    rows: list[tuple[str, float, float, float, float]] = []  # name, nominal, sd, low, high
+    for group, entries in data.items():
+        if not isinstance(entries, dict):
+            raise ParameterError(f"{path}: [{group}] is not a table of parameters")
+        for name, spec in entries.items():
+            full = f"{group}.{name}"
+            try:
+                nominal = _nominal(params, full)
+            except ParameterError as exc:
+                raise ParameterError(f"{path}: {exc}") from None
+            keys = set(spec) if isinstance(spec, dict) else set()
+            values = {k: spec[k] for k in keys} if isinstance(spec, dict) else {}
+            if not all(
+                isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+                for v in values.values()
+            ):
+                raise ParameterError(f"{path}: {full} = {spec!r}: the numbers must be finite")
+            if keys == {"sd"} or keys == {"rel_sd"}:
+                s = float(values["sd"]) if "sd" in keys else float(values["rel_sd"]) * abs(nominal)
+                if s < 0:
+                    raise ParameterError(f"{path}: {full}: a standard deviation is ≥ 0")
+                rows.append((full, nominal, s, math.nan, math.nan))
+            elif keys == {"low", "high"}:
+                lo, hi = float(values["low"]), float(values["high"])
+                if lo > hi:
+                    raise ParameterError(f"{path}: {full}: low = {lo:g} is above high = {hi:g}")
+                rows.append((full, nominal, math.nan, lo, hi))
+            else:
+                raise ParameterError(
+                    f"{path}: {full} = {spec!r}: give {{ sd = … }}, {{ rel_sd = … }} or {{ low = …, high = … }}"
+                )
+    names, mean, sd, low, high = zip(*rows, strict=True)
+    return Distribution(names, "independent", mean, sd, low, high, source=str(path))
+
+
+def load_calibration_spread(directory: str | Path) -> tuple[Parameters, Distribution]:
+    """A calibration's fitted parameters (``params.toml``) and the multivariate normal of its values
+    (``calibration.json``: values, standard uncertainties, correlations)."""
+    directory = Path(directory)
+    params = Parameters.from_file(directory / "params.toml")
+    path = directory / "calibration.json"
+    try:
+        data = json.loads(path.read_text())
+        fitted = data["params"]
+        names = list(data["correlation"]["names"])
+        corr = np.array(data["correlation"]["matrix"], dtype=float)
+        sd = {name: float(fitted[name]["sd"]) for name in fitted}
+        value = {name: float(fitted[name]["value"]) for name in fitted}
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise ParameterError(f"{path}: not a calibration result ({type(exc).__name__}: {exc})") from None
+    if corr.shape != (len(names), len(names)) or not all(n in fitted for n in names):
+        raise ParameterError(f"{path}: the correlation matrix does not match its names")
+    ordered = names + [n for n in fitted if n not in names]  # e.g. the dropout rate, fitted separately
+    full = np.eye(len(ordered))
+    full[: len(names), : len(names)] = corr
+    s = np.array([sd[n] for n in ordered])
+    if not np.all(np.isfinite(s)):
+        raise ParameterError(f"{path}: a fitted value has no standard uncertainty (an older calibration?)")
+    cov = full * np.outer(s, s)
+    return params, Distribution(
+        tuple(ordered),
+        "multivariate",
+        tuple(value[n] for n in ordered),
+        cov=tuple(tuple(float(v) for v in row) for row in cov),
+        source=str(directory),
+    )
+
+
+def _apply(
+    base: Parameters, names: tuple[str, ...], values: np.ndarray, fitted: dict[str, float]
+) -> Parameters:
+    plain = {n: float(v) for n, v in zip(names, values, strict=True) if n not in _READING}
+    out = base.with_overrides(plain, origin="Monte Carlo sample") if plain else base
+    reading = {n: float(v) for n, v in zip(names, values, strict=True) if n in _READING}
+    if reading:
+        from calib.identify import apply_values
+
+        # The base already reads g₀·r + b₀ (the calibration folded its fit into the curve): apply the
+        # sample relative to it, g·r + b = (g/g₀)·(g₀·r + b₀) + (b − b₀·g/g₀).
+        g0, b0 = fitted.get("ball_reading.gain", 1.0), fitted.get("ball_reading.offset_m", 0.0)
+        g = reading.get("ball_reading.gain", g0) / g0
+        b = reading.get("ball_reading.offset_m", b0) - b0 * g
+        out = apply_values(out, {"ball_reading.gain": g, "ball_reading.offset_m": b})
+    return out
+
+
+def sample_parameters(
+    base: Parameters, spread: Distribution, n: int, seed: int
+) -> tuple[list[Parameters], np.ndarray]:
+    """``n`` parameter sets and their sampled values ((n, k)); a draw outside a parameter's bounds is
+    drawn again (the same seed always gives the same sets)."""
+    rng = np.random.default_rng(np.random.SeedSequence([seed, 0x4D43]))  # "MC": apart from the noise seeds
+    fitted = dict(zip(spread.names, spread.mean, strict=True)) if spread.kind == "multivariate" else {}
+    sets, values = [], []
+    for i in range(n):
+        for attempt in range(MAX_REDRAWS):
+            draw = spread.draw(rng)
+            try:
+                sets.append(_apply(base, spread.names, draw, fitted))
+            except ParameterError as exc:
+                if attempt == MAX_REDRAWS - 1:
+                    raise ParameterError(
+                        f"{spread.source}: sample {i}: {MAX_REDRAWS} draws in a row fall outside the parameters' "
+                        f"bounds (last: {exc}); narrow the spread"
+                    ) from None
+                continue
+            values.append(draw)
+            break
+    return sets, np.array(values).reshape(n, len(spread.names))
+
+
+@dataclass(frozen=True)
+class MonteCarloSettings:
+    controller: str
+    n: int
+    x0_m: float = -0.2  # a thesis start (Figures 5.5 and 5.10: [−0.2 m, 0.3 rad])
+    theta0_rad: float = 0.3
+    duration_s: float = 15.0
+    noise: bool = True
+    plant: str = "twin"
+    ideal_sensors: bool = False
+    seed: int = 0
+
+
+@dataclass
+class MonteCarloResult:
+    settings: MonteCarloSettings
+    spread: Distribution
+    runs: list[dict[str, Any]]  # per run: seed, verdict and the sampled values ({} where not run)
+    complete: bool
+    wall_s: float = 0.0
+    summary: dict[str, Any] = field(default_factory=dict)
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "settings": asdict(self.settings),
+            "spread": {
+                "source": self.spread.source,
+                "kind": self.spread.kind,
+                "names": list(self.spread.names),
+            },
+            "complete": self.complete,
+            "summary": self.summary,
+            "runs": self.runs,
+        }
+
+
+def _percentiles(values: list[float]) -> dict[str, float] | None:
+    if not values:
+        return None
+    a = np.array(values)
+    return {f"p{q}": round(float(np.percentile(a, q)), 6) for q in (5, 50, 95)} | {
+        "min": round(float(a.min()), 6),
+        "max": round(float(a.max()), 6),
+    }
+
+
+def summarize(runs: list[dict[str, Any]], confidence: float = 0.95) -> dict[str, Any]:
+    """Success rate (held) with its exact interval, the worst runs, the distributions."""
+    import scipy.stats
+
+    done = [r for r in runs if r]
+    held = sum(bool(r["held"]) for r in done)
+    n = len(done)
+    ci = scipy.stats.binomtest(held, n).proportion_ci(confidence, method="exact") if n else None
+
+    def badness(r: dict[str, Any]) -> tuple[int, float]:
+        offset = abs(r["steady_x_m"]) if r["steady_x_m"] is not None else math.inf
+        return (0 if r["ball_lost"] else (1 if not r["held"] else 2), -offset)
+
+    worst = sorted(done, key=badness)[:WORST_SHOWN]
+    return {
+        "runs": n,
+        "held": held,
+        "lost": sum(bool(r["ball_lost"]) for r in done),
+        "success_rate": round(held / n, 6) if n else None,
+        "success_ci": [round(ci.low, 6), round(ci.high, 6)] if ci else None,
+        "ci_level": confidence,
+        "settling_time_s": _percentiles(
+            [r["settling_time_s"] for r in done if r["held"] and r["settling_time_s"] is not None]
+        ),
+        "steady_x_m": _percentiles([r["steady_x_m"] for r in done if r["steady_x_m"] is not None]),
+        "worst": worst,
+    }
+
+
+def run_montecarlo(
+    settings: MonteCarloSettings,
+    base: Parameters,
+    spread: Distribution,
+    *,
+    workers: int = 1,
+    scheduler: str | None = None,
+    progress: Progress | None = None,
+) -> MonteCarloResult:
+    if not 1 <= settings.n <= MAX_RUNS:
+        raise ParameterError(f"--n = {settings.n}: 1 … {MAX_RUNS} runs")
+    sets, values = sample_parameters(base, spread, settings.n, settings.seed)
+    seeds = point_seeds(settings.seed, settings.n)
+    starts = np.tile([settings.x0_m, settings.theta0_rad], (settings.n, 1))
+    runs = Runs(
+        settings.controller, base, settings.duration_s, settings.noise, settings.plant, settings.ideal_sensors
+    )
+    start = time.perf_counter()
+    records, complete = run_starts(
+        runs, starts, seeds, params=sets, workers=workers, scheduler=scheduler, progress=progress
+    )
+    out: list[dict[str, Any]] = []
+    for record, sample in zip(records, values, strict=True):
+        if record is None:
+            out.append({})
+            continue
+        out.append({**record, "parameters": {n: float(v) for n, v in zip(spread.names, sample, strict=True)}})
+    result = MonteCarloResult(settings, spread, out, complete, wall_s=time.perf_counter() - start)
+    result.summary = summarize(out)
+    return result
+
+
+def write_montecarlo(result: MonteCarloResult, out_dir: str | Path, *, overwrite: bool = False) -> Path:
+    """``montecarlo.json`` and ``distributions.png`` into ``out_dir``, atomically."""
+    from twin.log import atomic_directory
+
+    with atomic_directory(out_dir, overwrite=overwrite) as tmp:
+        (tmp / "montecarlo.json").write_text(json.dumps(result.to_json(), indent=1) + "\n")
+        _render(result, tmp / "distributions.png")
+    return Path(out_dir)
+
+
+def _render(result: MonteCarloResult, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    done = [r for r in result.runs if r]
+    s = result.summary
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.8), dpi=110)
+    settle = [r["settling_time_s"] for r in done if r["held"] and r["settling_time_s"] is not None]
+    offset = [1e3 * r["steady_x_m"] for r in done if r["steady_x_m"] is not None]
+    axes[0].hist(settle, bins=30, color="#1f77b4")
+    axes[0].set_xlabel("settling time (s), held runs")
+    axes[1].hist(offset, bins=30, color="#2ca02c")
+    axes[1].set_xlabel("steady ball offset (mm)")
+    for ax in axes:
+        ax.set_ylabel("runs")
+    rate = "–" if s.get("success_rate") is None else f"{100 * s['success_rate']:.1f} %"
+    ci = s.get("success_ci")
+    fig.suptitle(
+        f"{result.settings.controller}: held {s.get('held')} of {s.get('runs')} ({rate}"
+        + (f", 95 % CI {100 * ci[0]:.1f}–{100 * ci[1]:.1f} %" if ci else "")
+        + f"), lost {s.get('lost')}",
+        fontsize=10,
+    )
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)

@@ -1,0 +1,359 @@
+"""Region of attraction: one controller over a grid of initial states, each point judged by the engine's
+verdict, and the thesis's chapter 7 region claims checked against the map.
+
+``run_sweep`` runs the grid through the batch engine in chunks (``twin.app.fanout``: this process, local
+processes or a Dask cluster). Every point has its own noise seed derived from (seed, point index), so the
+result does not depend on how the grid is chunked or where a chunk runs: a sweep is bit-identical locally,
+with workers and on a cluster. Ctrl-C stops the sweep and keeps the points already done (the result says
+it is incomplete).
+
+``write_sweep`` writes ``sweep.json`` (one record per point: ``x0_m``, ``theta0_rad``, ``seed`` and every
+field of the verdict; the claims; the settings) and ``map.png`` into a directory, atomically.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from controllers import thesis_numbers as T
+from twin.app.fanout import Progress, Runs, run_starts
+from twin.parameters import ParameterError, Parameters
+from twin.physics import check_initial_state
+
+__all__ = [
+    "CLAIMS",
+    "Grid",
+    "RegionClaim",
+    "SweepResult",
+    "SweepSettings",
+    "parse_range",
+    "point_seeds",
+    "run_sweep",
+    "write_sweep",
+]
+
+
+@dataclass(frozen=True)
+class Grid:
+    """A closed range ``lo … hi`` in ``n`` points (``n`` = 1: just ``lo``)."""
+
+    lo: float
+    hi: float
+    n: int
+
+    def values(self) -> np.ndarray:
+        return np.linspace(self.lo, self.hi, self.n) if self.n > 1 else np.array([self.lo])
+
+
+# The thesis's chapter 7 grid: the whole track (|x| ≤ 0.323 m) and nearly the whole stroke (|θ| ≤ 43.4°).
+DEFAULT_X0 = Grid(-0.32, 0.32, 41)
+DEFAULT_THETA0 = Grid(-0.7, 0.7, 41)
+MAX_POINTS = 250_000  # a grid beyond this is a typing error, not a study (about 3 h per 10 s runs here)
+
+
+def parse_range(option: str, text: str) -> Grid:
+    """``LO:HI:N`` (N ≥ 1 points, LO ≤ HI) or a single value."""
+    parts = text.split(":")
+    try:
+        if len(parts) == 1:
+            value = float(parts[0])
+            grid = Grid(value, value, 1)
+        elif len(parts) == 3:
+            grid = Grid(float(parts[0]), float(parts[1]), int(parts[2]))
+        else:
+            raise ValueError
+    except ValueError:
+        raise ParameterError(f"{option} {text!r}: expected LO:HI:N (e.g. -0.3:0.3:31) or one value") from None
+    if not (math.isfinite(grid.lo) and math.isfinite(grid.hi)) or grid.lo > grid.hi or grid.n < 1:
+        raise ParameterError(f"{option} {text!r}: LO and HI finite with LO ≤ HI, and N ≥ 1")
+    return grid
+
+
+def point_seeds(seed: int, n: int) -> np.ndarray:
+    """The noise seed of each point: a function of (seed, point index) only, so that any chunking of the
+    grid, on any machine, gives every point the same seed."""
+    return np.array(
+        [int(np.random.SeedSequence([seed, i]).generate_state(1, dtype=np.uint32)[0]) for i in range(n)],
+        dtype=np.int64,
+    )
+
+
+@dataclass(frozen=True)
+class RegionClaim:
+    """A chapter 7 statement that the ball stays on the beam for every start in a rectangle of initial
+    states, with the two corner states the thesis simulated (its figures)."""
+
+    family: str  # the controllers it is about
+    source: str
+    x0_m: tuple[float, float]
+    theta0_rad: tuple[float, float]
+    corners: tuple[tuple[float, float], ...]
+    applies_to: tuple[str, ...]
+
+
+def _claim(
+    family: str, source: str, corners: tuple[tuple[float, float], ...], names: tuple[str, ...]
+) -> RegionClaim:
+    (x_lo, th_lo), (x_hi, th_hi) = corners
+    return RegionClaim(family, source, (x_lo, x_hi), (th_lo, th_hi), corners, names)
+
+
+CLAIMS = (
+    _claim(
+        "state feedback with observer (discrete)",
+        "chapter 7, Discrete Time Controllers; Figures 7.8–7.13",
+        T.SF_DISC_RANGE,
+        ("thesis-sf", "appendix-sf", "sf"),
+    ),
+    _claim(
+        "control law partitioning with observer (discrete)",
+        "chapter 7, Discrete Time Controllers; Figures 7.14–7.19 (the figures start at −0.26 m)",
+        T.CLP_DISC_RANGE,
+        ("thesis-clp", "appendix-clp", "clp"),
+    ),
+)
+
+
+@dataclass(frozen=True)
+class SweepSettings:
+    """Everything a sweep's result depends on (written into its JSON)."""
+
+    controller: str
+    x0: Grid = DEFAULT_X0
+    theta0: Grid = DEFAULT_THETA0
+    duration_s: float = 10.0
+    noise: bool = True
+    plant: str = "twin"
+    ideal_sensors: bool = False
+    seed: int = 0
+
+
+@dataclass
+class SweepResult:
+    settings: SweepSettings
+    points: list[dict[str, Any]]  # in grid order (x0 outer, θ0 inner); None-free only when complete
+    complete: bool
+    corners: list[dict[str, Any]] = field(default_factory=list)  # the claims' named starts
+    claims: list[dict[str, Any]] = field(default_factory=list)
+    wall_s: float = 0.0
+
+    def to_json(self) -> dict[str, Any]:
+        s = self.settings
+        return {
+            "settings": {**asdict(s), "x0": asdict(s.x0), "theta0": asdict(s.theta0)},
+            "complete": self.complete,
+            "summary": summarize(self.points),
+            "claims": self.claims,
+            "corners": self.corners,
+            "points": self.points,
+        }
+
+
+def summarize(points: Sequence[dict[str, Any]]) -> dict[str, int]:
+    done = [p for p in points if p]
+    return {
+        "points": len(points),
+        "done": len(done),
+        "held": sum(bool(p["held"]) for p in done),
+        "lost": sum(bool(p["ball_lost"]) for p in done),
+        "not_held": sum(not p["held"] and not p["ball_lost"] for p in done),
+    }
+
+
+def run_sweep(
+    settings: SweepSettings,
+    params: Parameters | None = None,
+    *,
+    workers: int = 1,
+    scheduler: str | None = None,
+    nthread: int | None = None,
+    progress: Progress | None = None,
+) -> SweepResult:
+    """Run the grid (and the claims' corner states) and judge the claims. ``workers`` local processes
+    (1: this process), or a Dask ``scheduler`` address; ``nthread``: rollout threads per batch (default:
+    the cores, divided among the local workers)."""
+    p = params or Parameters()
+    xs, ths = settings.x0.values(), settings.theta0.values()
+    grid = np.array([(x, th) for x in xs for th in ths], dtype=float)
+    if len(grid) > MAX_POINTS:
+        raise ParameterError(f"the grid has {len(grid)} points; at most {MAX_POINTS}")
+    for x, th in (
+        (grid[:, 0].min(), 0.0),
+        (grid[:, 0].max(), 0.0),
+        (0.0, grid[:, 1].min()),
+        (0.0, grid[:, 1].max()),
+    ):
+        try:
+            check_initial_state(p, float(x), float(th), 0.0, 0.0)
+        except ValueError as exc:
+            raise ParameterError(f"the grid leaves the rig: {exc}") from None
+    corners = _corner_starts(settings.controller, p)
+    starts = np.vstack([grid, np.array([c[:2] for c in corners], dtype=float).reshape(-1, 2)])
+    seeds = point_seeds(settings.seed, len(starts))
+    start = time.perf_counter()
+    runs = Runs(
+        controller=settings.controller,
+        params=p,
+        duration_s=settings.duration_s,
+        noise=settings.noise,
+        plant=settings.plant,
+        ideal_sensors=settings.ideal_sensors,
+    )
+    results, complete = run_starts(
+        runs, starts, seeds, workers=workers, scheduler=scheduler, nthread=nthread, progress=progress
+    )
+    points = [r or {} for r in results[: len(grid)]]
+    corner_records = [
+        {**(results[len(grid) + i] or {}), "claim": claim, "note": note}
+        for i, (_, _, claim, note) in enumerate(corners)
+    ]
+    result = SweepResult(settings, points, complete, corner_records, wall_s=time.perf_counter() - start)
+    result.claims = [_judge(claim, result, p) for claim in CLAIMS if settings.controller in claim.applies_to]
+    return result
+
+
+def _corner_starts(controller: str, params: Parameters) -> list[tuple[float, float, str, str]]:
+    """The claims' corner states that lie on this rig (a corner off the track is noted, not run)."""
+    out = []
+    for claim in CLAIMS:
+        if controller not in claim.applies_to:
+            continue
+        for x, th in claim.corners:
+            try:
+                check_initial_state(params, x, th, 0.0, 0.0)
+            except ValueError:
+                continue
+            out.append((x, th, claim.source, ""))
+    return out
+
+
+def _judge(claim: RegionClaim, result: SweepResult, params: Parameters) -> dict[str, Any]:
+    """The claim against the map: the grid points inside its rectangle that keep the ball (and that hold),
+    and each corner state, run or noted off the track."""
+    (xlo, xhi), (tlo, thi) = claim.x0_m, claim.theta0_rad
+    inside = [p for p in result.points if p and xlo <= p["x0_m"] <= xhi and tlo <= p["theta0_rad"] <= thi]
+    kept = [p for p in inside if not p["ball_lost"]]
+    held = [p for p in inside if p["held"]]
+    corners = []
+    for x, th in claim.corners:
+        try:
+            check_initial_state(params, x, th, 0.0, 0.0)
+        except ValueError as exc:
+            corners.append({"x0_m": x, "theta0_rad": th, "kept": None, "note": f"not on this rig: {exc}"})
+            continue
+        run = next(
+            (c for c in result.corners if c and c.get("x0_m") == x and c.get("theta0_rad") == th), None
+        )
+        corners.append(
+            {
+                "x0_m": x,
+                "theta0_rad": th,
+                "kept": None if not run else not run["ball_lost"],
+                "held": None if not run else run["held"],
+                "note": "",
+            }
+        )
+    verdict = "holds" if inside and len(kept) == len(inside) else ("fails" if inside else "untested")
+    return {
+        "source": claim.source,
+        "family": claim.family,
+        "statement": (
+            f"the ball stays on the beam for every start in x0 ∈ [{xlo:g}, {xhi:g}] m, "
+            f"θ0 ∈ [{tlo:g}, {thi:g}] rad"
+        ),
+        "grid_points_inside": len(inside),
+        "kept": len(kept),
+        "held": len(held),
+        "lost_at": [(p["x0_m"], p["theta0_rad"]) for p in inside if p["ball_lost"]][:50],
+        "corners": corners,
+        "verdict": verdict,
+    }
+
+
+# --- writing ----------------------------------------------------------------------------------------------
+def write_sweep(result: SweepResult, out_dir: str | Path, *, overwrite: bool = False) -> Path:
+    """``sweep.json`` and ``map.png`` into ``out_dir``, atomically (a failure leaves the old one)."""
+    from twin.log import atomic_directory
+
+    with atomic_directory(out_dir, overwrite=overwrite) as tmp:
+        (tmp / "sweep.json").write_text(json.dumps(result.to_json(), indent=1) + "\n")
+        render_map(result, tmp / "map.png")
+    return Path(out_dir)
+
+
+def render_map(result: SweepResult, path: Path) -> None:
+    """The map: settling time (colour) where held, grey where kept but not held, dark red where lost;
+    the claims' rectangles dashed, their corner states marked."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.colors import ListedColormap
+    from matplotlib.patches import Patch, Rectangle
+
+    s = result.settings
+    xs, ths = s.x0.values(), s.theta0.values()
+    nx, nt = len(xs), len(ths)
+    settle = np.full((nt, nx), np.nan)
+    background = np.full((nt, nx), np.nan)  # 0 lost, 1 kept but not held, 2 held without a settling time
+    for k, p in enumerate(result.points):
+        if not p:
+            continue
+        i, j = divmod(k, nt)
+        if p["ball_lost"]:
+            background[j, i] = 0
+        elif not p["held"]:
+            background[j, i] = 1
+        elif p["settling_time_s"] is None:  # a limit cycle wider than the settling band (|x0| small)
+            background[j, i] = 2
+        else:
+            settle[j, i] = p["settling_time_s"]
+    dx = (xs[1] - xs[0]) / 2 if nx > 1 else 0.01
+    dt = (ths[1] - ths[0]) / 2 if nt > 1 else 0.01
+    extent = (xs[0] - dx, xs[-1] + dx, ths[0] - dt, ths[-1] + dt)
+    fig, ax = plt.subplots(figsize=(7.5, 6.6), dpi=120)
+    colours = ["#7f1d1d", "#c8c8c8", "#f2c4de"]
+    ax.imshow(
+        background, origin="lower", extent=extent, aspect="auto", cmap=ListedColormap(colours), vmin=0, vmax=2
+    )
+    image = ax.imshow(settle, origin="lower", extent=extent, aspect="auto", cmap="viridis")
+    fig.colorbar(image, ax=ax, label="settling time (s), held starts")
+    for claim in CLAIMS:
+        if s.controller not in claim.applies_to:
+            continue
+        (xlo, xhi), (tlo, thi) = claim.x0_m, claim.theta0_rad
+        rectangle = (xlo, tlo), xhi - xlo, thi - tlo
+        ax.add_patch(Rectangle(*rectangle, fill=False, ls="-", lw=2.4, ec="white"))  # visible on any colour
+        ax.add_patch(Rectangle(*rectangle, fill=False, ls="--", lw=1.0, ec="black", label="thesis's claim"))
+        cx, ct = zip(*claim.corners, strict=True)
+        ax.plot(cx, ct, "w*", ms=12, mec="black", label="thesis's corner states")
+    summary = summarize(result.points)
+    ax.set_title(
+        f"{s.controller}: held {summary['held']}, not held {summary['not_held']}, lost {summary['lost']} "
+        f"of {summary['points']}\n{s.duration_s:g} s runs, noise {'on' if s.noise else 'off'}, "
+        f"{'ideal sensors' if s.ideal_sensors else 'full I/O chain'}, plant {s.plant}"
+        + ("" if result.complete else " — INCOMPLETE"),
+        fontsize=10,
+    )
+    ax.set_xlabel("initial ball position x0 (m)")
+    ax.set_ylabel("initial beam angle θ0 (rad)")
+    handles = [
+        Patch(color=colours[0], label="ball lost"),
+        Patch(color=colours[1], label="kept, not held"),
+        Patch(color=colours[2], label="held, cycling wider than the settling band"),
+        *ax.get_legend_handles_labels()[0],
+    ]
+    ax.legend(
+        handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.11), ncol=3, fontsize=8, frameon=False
+    )
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)

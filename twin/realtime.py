@@ -1,0 +1,82 @@
+"""Real-time pacing of a closed loop (hardware-in-the-loop style): each tick starts when its DAQ block
+would be complete on the rig, on the wall clock, and the timing is measured.
+
+The rig software's timer fires every ``period_s``; a controller that needs longer than that misses the
+next block. ``WallClockPacer`` waits (sleep, then a short spin for the last half millisecond) until tick
+k's wall-clock deadline, start + (k + 1)·T, and records how late each tick began (jitter) and how long it
+took. An overrun is a tick that began a whole period late or took longer than a period.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = ["TickTiming", "WallClockPacer"]
+
+_SPIN_S = 0.0005  # sleep() overshoots by up to a scheduler quantum: spin for the last half millisecond
+
+
+@dataclass(frozen=True)
+class TickTiming:
+    """How a real-time run kept time (milliseconds)."""
+
+    ticks: int
+    period_ms: float
+    jitter_p50_ms: float
+    jitter_p99_ms: float
+    jitter_max_ms: float
+    compute_p50_ms: float
+    compute_max_ms: float
+    overruns: int
+
+    def to_json(self) -> dict[str, float | int]:
+        return {k: (round(v, 4) if isinstance(v, float) else v) for k, v in self.__dict__.items()}
+
+
+@dataclass
+class WallClockPacer:
+    """Call ``wait(k)`` before tick k and ``done()`` after it; ``timing()`` summarises."""
+
+    period_s: float
+    clock: Callable[[], float] = time.perf_counter
+    sleep: Callable[[float], None] = time.sleep
+    _start: float = math.nan
+    _late: list[float] = field(default_factory=list)
+    _compute: list[float] = field(default_factory=list)
+    _began: float = math.nan
+
+    def wait(self, k: int) -> None:
+        now = self.clock()
+        if math.isnan(self._start):
+            self._start = now  # the release: block 0 completes one period later
+        deadline = self._start + (k + 1) * self.period_s
+        if deadline - now > _SPIN_S:
+            self.sleep(deadline - now - _SPIN_S)
+        while (now := self.clock()) < deadline:
+            pass
+        self._began = now
+        self._late.append(now - deadline)
+
+    def done(self) -> None:
+        self._compute.append(self.clock() - self._began)
+
+    def timing(self) -> TickTiming:
+        late = np.array(self._late or [0.0]) * 1e3
+        compute = np.array(self._compute or [0.0]) * 1e3
+        period_ms = self.period_s * 1e3
+        overruns = int(np.sum((late >= period_ms) | (compute > period_ms)))
+        return TickTiming(
+            ticks=len(self._late),
+            period_ms=period_ms,
+            jitter_p50_ms=float(np.percentile(late, 50)),
+            jitter_p99_ms=float(np.percentile(late, 99)),
+            jitter_max_ms=float(late.max()),
+            compute_p50_ms=float(np.percentile(compute, 50)),
+            compute_max_ms=float(compute.max()),
+            overruns=overruns,
+        )
