@@ -26,6 +26,7 @@ from twin.app.catalogue import WithUserController, construct, one_line, user_con
 from twin.app.paths import check_output_dir, check_outputs, writing
 
 if TYPE_CHECKING:
+    from twin.app.montecarlo import Distribution
     from twin.engine import Catalogue
     from twin.parameters import Parameters
 
@@ -309,20 +310,46 @@ def _cmd_view(args: argparse.Namespace) -> int:
     return 0
 
 
-def _cmd_sweep(args: argparse.Namespace) -> int:
+def _check_job(args: argparse.Namespace, params: Parameters) -> None:
+    """What every many-run command checks before the work: durations, workers, the controller (built once:
+    a failing constructor is refused here) and the output directory."""
     from twin.app.catalogue import catalogue_for
-    from twin.app.sweep import DEFAULT_THETA0, DEFAULT_X0, SweepSettings, parse_range, run_sweep, write_sweep
     from twin.log import check_output_directory
     from twin.parameters import ParameterError
 
-    params = _load_params(args)
-    _check_finite(duration=args.duration)
-    if not 0 < args.duration <= MAX_SWEEP_RUN_S:
-        raise ParameterError(
-            f"--duration = {args.duration!r}: each run lasts more than 0 and at most {MAX_SWEEP_RUN_S:g} s"
-        )
+    duration = getattr(args, "duration", None)
+    if duration is not None:
+        _check_finite(duration=duration)
+        if not 0 < duration <= MAX_SWEEP_RUN_S:
+            raise ParameterError(
+                f"--duration = {duration!r}: each run lasts more than 0 and at most {MAX_SWEEP_RUN_S:g} s"
+            )
     if not 1 <= args.workers <= 256:
         raise ParameterError(f"--workers = {args.workers!r}: 1 … 256 local processes")
+    catalogue_for(args.controller, params)
+    if args.out is not None:
+        check_output_dir("--out", args.out)
+        check_output_directory(args.out, overwrite=args.overwrite)
+
+
+def _params_and_spread(args: argparse.Namespace) -> tuple[Parameters, Distribution | None]:
+    """The parameters and the Monte Carlo spread: a calibration brings both; else --params/--set and an
+    optional --spread file."""
+    from twin.app.montecarlo import load_calibration_spread, load_spread
+    from twin.parameters import ParameterError
+
+    if args.calibration is not None:
+        if args.params or args.set:
+            raise ParameterError("--calibration brings its own parameters: drop --params/--set")
+        return load_calibration_spread(args.calibration)
+    params = _load_params(args)
+    return params, load_spread(args.spread, params) if args.spread is not None else None
+
+
+def _cmd_sweep(args: argparse.Namespace) -> int:
+    from twin.app.sweep import DEFAULT_THETA0, DEFAULT_X0, SweepSettings, parse_range, run_sweep, write_sweep
+
+    params = _load_params(args)
     settings = SweepSettings(
         controller=args.controller,
         x0=parse_range("--x0", args.x0) if args.x0 else DEFAULT_X0,
@@ -333,10 +360,7 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
         ideal_sensors=bool(args.ideal_sensors or args.plant == "reference"),
         seed=args.seed,
     )
-    catalogue_for(args.controller, params)  # an unknown or failing controller is refused before the work
-    if args.out is not None:
-        check_output_dir("--out", args.out)
-        check_output_directory(args.out, overwrite=args.overwrite)
+    _check_job(args, params)
     result = run_sweep(
         settings, params, workers=args.workers, scheduler=args.scheduler, progress=_progress_bar("sweep")
     )
@@ -366,15 +390,7 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
 
 
 def _cmd_montecarlo(args: argparse.Namespace) -> int:
-    from twin.app.catalogue import catalogue_for
-    from twin.app.montecarlo import (
-        MonteCarloSettings,
-        load_calibration_spread,
-        load_spread,
-        run_montecarlo,
-        write_montecarlo,
-    )
-    from twin.log import check_output_directory
+    from twin.app.montecarlo import MonteCarloSettings, run_montecarlo, write_montecarlo
     from twin.parameters import ParameterError
     from twin.physics import check_initial_state
 
@@ -382,28 +398,14 @@ def _cmd_montecarlo(args: argparse.Namespace) -> int:
         raise ParameterError(
             "give one of --spread FILE or --calibration DIR (what to perturb, and by how much)"
         )
-    _check_finite(x0=args.x0, theta0=args.theta0, duration=args.duration)
-    if not 0 < args.duration <= MAX_SWEEP_RUN_S:
-        raise ParameterError(
-            f"--duration = {args.duration!r}: each run lasts more than 0 and at most {MAX_SWEEP_RUN_S:g} s"
-        )
-    if not 1 <= args.workers <= 256:
-        raise ParameterError(f"--workers = {args.workers!r}: 1 … 256 local processes")
-    if args.calibration is not None:
-        if args.params or args.set:
-            raise ParameterError("--calibration brings its own parameters: drop --params/--set")
-        base, spread = load_calibration_spread(args.calibration)
-    else:
-        base = _load_params(args)
-        spread = load_spread(args.spread, base)
+    _check_finite(x0=args.x0, theta0=args.theta0)
+    base, spread = _params_and_spread(args)
+    assert spread is not None
     try:
         check_initial_state(base, args.x0, args.theta0, 0.0, 0.0)
     except ValueError as exc:
         raise ParameterError(f"--x0/--theta0: {exc}") from None
-    catalogue_for(args.controller, base)
-    if args.out is not None:
-        check_output_dir("--out", args.out)
-        check_output_directory(args.out, overwrite=args.overwrite)
+    _check_job(args, base)
     settings = MonteCarloSettings(
         controller=args.controller,
         n=args.n,
@@ -459,28 +461,11 @@ def _cmd_montecarlo(args: argparse.Namespace) -> int:
 
 
 def _cmd_validate(args: argparse.Namespace) -> int:
-    from twin.app.catalogue import catalogue_for
-    from twin.app.montecarlo import load_calibration_spread, load_spread
     from twin.app.validate import ValidationCriteria, load_criteria, validate, write_validation
-    from twin.log import check_output_directory
-    from twin.parameters import ParameterError
 
-    if not 1 <= args.workers <= 256:
-        raise ParameterError(f"--workers = {args.workers!r}: 1 … 256 local processes")
-    spread = None
-    if args.calibration is not None:
-        if args.params or args.set:
-            raise ParameterError("--calibration brings its own parameters: drop --params/--set")
-        params, spread = load_calibration_spread(args.calibration)
-    else:
-        params = _load_params(args)
-        if args.spread is not None:
-            spread = load_spread(args.spread, params)
+    params, spread = _params_and_spread(args)
     criteria = load_criteria(args.criteria) if args.criteria else ValidationCriteria()
-    catalogue_for(args.controller, params)
-    if args.out is not None:
-        check_output_dir("--out", args.out)
-        check_output_directory(args.out, overwrite=args.overwrite)
+    _check_job(args, params)
     report = validate(
         args.controller,
         params,
