@@ -487,7 +487,7 @@ class Amplifier:
         gt=0.0,
         le=1e6,
         why="1e6 V is the reproduction's stand-in for chapter 4's unlimited voltage "
-        "(controllers/reproduction); a real amplifier's rails are at most a few hundred volts",
+        "(twin/app/reproduction); a real amplifier's rails are at most a few hundred volts",
     )
 
     def __post_init__(self) -> None:
