@@ -144,14 +144,18 @@ def _exists_error(path: Path) -> FileExistsError:
     return FileExistsError(f"{path}: exists; not overwritten (pass overwrite=True)")
 
 
+def _umask() -> int:
+    umask = os.umask(0)
+    os.umask(umask)
+    return umask
+
+
 def _file_mode(path: Path) -> int:
     """The mode of the file being replaced, or a new file's (0o666 less the umask)."""
     try:
         return stat.S_IMODE(os.stat(path).st_mode)
     except OSError:
-        umask = os.umask(0)
-        os.umask(umask)
-        return 0o666 & ~umask
+        return 0o666 & ~_umask()
 
 
 @contextmanager
@@ -221,6 +225,7 @@ def atomic_directory(path: str | Path, *, overwrite: bool = False) -> Iterator[P
     out = check_output_directory(path, overwrite=overwrite)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.resolve().parent))
     try:
+        os.chmod(tmp, _file_mode(out) | 0o111 if out.exists() else 0o777 & ~_umask())  # mkdtemp makes it 0700
         yield tmp
         if out.exists():
             old = Path(tempfile.mkdtemp(prefix=f".{out.name}.old.", dir=out.resolve().parent))
