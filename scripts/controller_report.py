@@ -16,6 +16,8 @@ from pathlib import Path
 from controllers import registry
 from controllers import thesis_numbers as T
 from twin.engine import run_closed_loop
+from twin.parameters import Parameters
+from twin.verdict import Criteria
 
 
 def _fmt(value: object, digits: int = 3) -> str:
@@ -58,13 +60,16 @@ def main() -> None:
             print(f"{name:22s} ({x0:+.2f}, {theta0:+.2f}): {result.verdict.reason}")
     (args.out / "controllers.json").write_text(json.dumps(rows, indent=1) + "\n")
 
+    c, free_run_ms = Criteria(), 1e3 * Parameters().start.free_run_s
     lines = [
         "# Named controllers on the twin (noise on)",
         "",
-        f"Duration {args.duration:g} s, seed {args.seed}, default start timing (the first command 10 ms after "
-        "release). The verdict and its bands are the README's (*held*: ball kept, offset within ±10 mm and the "
-        "limit cycle within 10 mm p-p over the final 3 s). *t_s*: last time |x − steady| exceeded max(2 % |x0|, "
-        "1 mm), from release; — when that is inside the final window.",
+        f"Duration {args.duration:g} s, seed {args.seed}, default start timing (the first command "
+        f"{free_run_ms:g} ms after release). The verdict and its bands are the README's (*held*: ball kept, "
+        f"offset within ±{1e3 * c.offset_band_m:g} mm and the limit cycle within {1e3 * c.limit_cycle_band_m:g} mm "
+        f"p-p over the final {c.window_s:g} s). *t_s*: last time |x − steady| exceeded "
+        f"max({100 * c.settling_fraction:g} % |x0|, {1e3 * c.settling_floor_m:g} mm), from release; — when that "
+        "is inside the final window.",
         "",
         "| controller | x0 (m) | θ0 (rad) | verdict | t_s (s) | steady x (mm) | x p-p (mm) | peak V | at rails "
         "| peak θ (rad) |",
