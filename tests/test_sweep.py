@@ -182,3 +182,36 @@ def test_the_command(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None
     assert "the grid leaves the rig" in capsys.readouterr().err
     assert main(["sweep", "--controller", "nope"]) == 2
     assert "unknown controller" in capsys.readouterr().err
+
+
+FRAGILE = '''
+from twin.interface import Controller, DaqSample
+
+
+class Fragile(Controller):
+    """Holds the command at zero volts at the motor; raises when the ball starts above 2.5 V."""
+
+    name = "fragile"
+
+    def start(self, sample: DaqSample) -> None:
+        if sample.ball_v > 2.5:
+            raise RuntimeError("ball reading above 2.5 V")
+
+    def update(self, sample: DaqSample) -> float:
+        return 2.5
+'''
+
+
+def test_a_failing_controller_fails_its_own_run_not_the_sweep(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    (tmp_path / "fragile_ctrl.py").write_text(FRAGILE)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    settings = SweepSettings(
+        controller="fragile_ctrl:Fragile", x0=Grid(-0.2, 0.2, 2), theta0=Grid(0.0, 0.0, 1), duration_s=1.0
+    )
+    result = run_sweep(settings)
+    assert result.complete
+    failed = [p for p in result.points if p["failed"]]
+    assert len(failed) == 1 and "raised RuntimeError" in failed[0]["reason"] and not failed[0]["held"]
+    assert result.to_json()["summary"]["failed"] == 1

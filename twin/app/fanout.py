@@ -16,7 +16,7 @@ import os
 import signal
 from collections.abc import Callable, Generator, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from typing import Any
 
 import numpy as np
@@ -55,29 +55,73 @@ class _Chunk:
 
 
 def run_chunk(chunk: _Chunk) -> list[dict[str, Any]]:
-    """Run one chunk through the batch engine: per run its start, seed and verdict as JSON values."""
+    """Run one chunk through the batch engine: per run its start, seed and verdict as JSON values. A
+    controller that fails (raises, returns no finite command) fails its own run, not the job: the chunk is
+    run again one run at a time and that run's record says why (``failed``, ``reason``)."""
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # an idle OpenBLAS thread spins after dlqr
+    from twin.engine import ControllerError
+
+    runs = range(len(chunk.seeds))
+    try:
+        return _records(chunk, runs)
+    except ControllerError:
+        pass
+    out = []
+    for i in runs:
+        try:
+            out += _records(chunk, [i])
+        except ControllerError as exc:
+            out.append(_failed(chunk, i, str(exc)))
+    return out
+
+
+def _records(chunk: _Chunk, runs: Sequence[int]) -> list[dict[str, Any]]:
     from twin.app.catalogue import catalogue_for
     from twin.batch import run_batch
 
     r = chunk.runs
+    pick = list(runs)
     results = run_batch(
         catalogue_for(r.controller, r.params),
         r.controller,
-        x0_m=np.array(chunk.x0_m),
-        theta0_rad=np.array(chunk.theta0_rad),
-        seeds=np.array(chunk.seeds, dtype=np.int64),
+        x0_m=np.array([chunk.x0_m[i] for i in pick]),
+        theta0_rad=np.array([chunk.theta0_rad[i] for i in pick]),
+        seeds=np.array([chunk.seeds[i] for i in pick], dtype=np.int64),
         duration_s=r.duration_s,
         noise=r.noise,
-        params=list(chunk.params) if chunk.params is not None else r.params,
+        params=[chunk.params[i] for i in pick] if chunk.params is not None else r.params,
         plant=r.plant,  # type: ignore[arg-type]
         ideal_sensors=r.ideal_sensors,
         nthread=chunk.nthread,
     )
     return [
-        {"x0_m": x, "theta0_rad": th, "seed": seed, **result.verdict.to_json()}
-        for x, th, seed, result in zip(chunk.x0_m, chunk.theta0_rad, chunk.seeds, results, strict=True)
+        {
+            "x0_m": chunk.x0_m[i],
+            "theta0_rad": chunk.theta0_rad[i],
+            "seed": chunk.seeds[i],
+            "failed": False,
+            **result.verdict.to_json(),
+        }
+        for i, result in zip(pick, results, strict=True)
     ]
+
+
+def _failed(chunk: _Chunk, i: int, reason: str) -> dict[str, Any]:
+    """The record of a run whose controller failed: not held, the reason, no figures."""
+    from twin.verdict import Verdict
+
+    empty = {f.name: None for f in fields(Verdict)}
+    return {
+        "x0_m": chunk.x0_m[i],
+        "theta0_rad": chunk.theta0_rad[i],
+        "seed": chunk.seeds[i],
+        "failed": True,
+        **empty,
+        "held": False,
+        "ball_lost": False,
+        "hit_stops": False,
+        "reason": f"the controller failed: {reason}",
+    }
 
 
 def _local(

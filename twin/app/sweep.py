@@ -165,6 +165,7 @@ def summarize(points: Sequence[dict[str, Any]]) -> dict[str, int]:
         "held": sum(bool(p["held"]) for p in done),
         "lost": sum(bool(p["ball_lost"]) for p in done),
         "not_held": sum(not p["held"] and not p["ball_lost"] for p in done),
+        "failed": sum(bool(p.get("failed")) for p in done),  # the controller raised or gave no command
     }
 
 
@@ -347,7 +348,7 @@ def render_map(result: SweepResult, path: Path) -> None:
     ax.set_ylabel("initial beam angle θ0 (rad)")
     handles = [
         Patch(color=colours[0], label="ball lost"),
-        Patch(color=colours[1], label="kept, not held"),
+        Patch(color=colours[1], label="kept, not held (or the controller failed)"),
         Patch(color=colours[2], label="held, cycling wider than the settling band"),
         *ax.get_legend_handles_labels()[0],
     ]
