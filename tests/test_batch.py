@@ -100,8 +100,17 @@ def _grid(seeds: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return x0.ravel(), theta0.ravel(), seed.ravel()
 
 
-@pytest.mark.parametrize("vectorized", [True, False], ids=["vectorized", "scalar-loop"])
-@pytest.mark.parametrize("name", ["appendix-sf", "appendix-clp", "lqr"])
+@pytest.mark.parametrize(
+    ("name", "vectorized"),
+    [
+        pytest.param("appendix-sf", True, id="appendix-sf-vectorized"),  # the fast tier keeps one of them
+        pytest.param("appendix-sf", False, id="appendix-sf-scalar-loop", marks=pytest.mark.slow),
+        pytest.param("appendix-clp", True, id="appendix-clp-vectorized", marks=pytest.mark.slow),
+        pytest.param("appendix-clp", False, id="appendix-clp-scalar-loop", marks=pytest.mark.slow),
+        pytest.param("lqr", True, id="lqr-vectorized", marks=pytest.mark.slow),
+        pytest.param("lqr", False, id="lqr-scalar-loop", marks=pytest.mark.slow),
+    ],
+)
 def test_batch_equals_single_runs_bit_for_bit(name: str, vectorized: bool) -> None:
     """3 seeds × 4 starts (held and lost balls), noise on: every log array and the verdict."""
     x0, theta0, seeds = _grid(SEEDS)

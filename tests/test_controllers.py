@@ -62,6 +62,7 @@ def _reference_settling_time(x0: float) -> float:
     return float(sol.t[outside[-1] + 1])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("x0", [0.2, -0.2])
 def test_thesis_sf_continuous_settles_as_the_thesis_says(x0: float) -> None:
     """Figs 4.4/4.5: "reaches the desired value in 2.5–3 s". Twin: 2.46 s and 2.96 s (2 % band), the

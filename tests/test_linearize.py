@@ -1,12 +1,11 @@
 """The MuJoCo twin's linearization equals the analytic reference model's (issue acceptance: 1 %)."""
 
 import json
-import subprocess
-import sys
 
 import numpy as np
 import pytest
 
+from twin.app.cli import main
 from twin.linearize import linearize_mujoco
 from twin.reference import ReferenceModel
 
@@ -23,48 +22,21 @@ def test_mujoco_linearization_matches_reference(params, reference: ReferenceMode
         assert np.all(np.abs(got[~big]) < 1e-3), f"{kind} {name}"
 
 
-def test_cli_prints_the_linearization_as_json() -> None:
-    out = subprocess.run(
-        [sys.executable, "-m", "twin.app.cli", "linearize", "--input", "voltage", "--json"],
-        capture_output=True,
-        text=True,
-        timeout=120,
-        check=True,
-    )
-    result = json.loads(out.stdout)
+def test_cli_prints_the_linearization_as_json(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["linearize", "--input", "voltage", "--json"]) == 0
+    result = json.loads(capsys.readouterr().out)
     assert result["state"] == ["x", "theta", "xdot", "thetadot"]
     assert result["input"] == "voltage"
     a, b = np.array(result["A"]), np.array(result["B"])
     assert a.shape == (4, 4) and b.shape == (4, 1)
-    ref = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "twin.app.cli",
-            "linearize",
-            "--input",
-            "voltage",
-            "--source",
-            "reference",
-            "--json",
-        ],
-        capture_output=True,
-        text=True,
-        timeout=120,
-        check=True,
-    )
-    np.testing.assert_allclose(a, np.array(json.loads(ref.stdout)["A"]), rtol=0.01, atol=1e-3)
+    assert main(["linearize", "--input", "voltage", "--source", "reference", "--json"]) == 0
+    np.testing.assert_allclose(a, np.array(json.loads(capsys.readouterr().out)["A"]), rtol=0.01, atol=1e-3)
 
 
-def test_cli_reports_a_bad_parameter_file(tmp_path) -> None:
+def test_cli_reports_a_bad_parameter_file(tmp_path, capsys: pytest.CaptureFixture[str]) -> None:
     bad = tmp_path / "rig.toml"
     bad.write_text("[motor]\nresistance_ohm = 0\n")
-    out = subprocess.run(
-        [sys.executable, "-m", "twin.app.cli", "linearize", "--params", str(bad)],
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
-    assert out.returncode == 2
-    assert "motor.resistance_ohm = 0.0" in out.stderr and str(bad) in out.stderr
-    assert "Traceback" not in out.stderr
+    assert main(["linearize", "--params", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert "motor.resistance_ohm = 0.0" in err and str(bad) in err
+    assert "Traceback" not in err

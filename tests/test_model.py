@@ -133,6 +133,7 @@ def test_bad_initial_states_are_refused() -> None:
         plant.step(float("nan"))
 
 
+@pytest.mark.slow
 def test_plain_install_ships_the_model(tmp_path) -> None:
     """A non-editable wheel carries models/ballbeam.xml inside the twin package."""
     pytest.importorskip("hatchling")

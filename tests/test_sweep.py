@@ -67,6 +67,7 @@ def test_every_point_is_its_single_run() -> None:
         assert {key: point[key] for key in single.verdict.to_json()} == single.verdict.to_json()
 
 
+@pytest.mark.slow
 def test_chunks_and_workers_change_nothing(monkeypatch: pytest.MonkeyPatch) -> None:
     whole = run_sweep(SMALL).to_json()
     monkeypatch.setattr(fanout, "CHUNK_RUNS", 2)
@@ -74,6 +75,7 @@ def test_chunks_and_workers_change_nothing(monkeypatch: pytest.MonkeyPatch) -> N
     assert run_sweep(SMALL, workers=2).to_json() == whole
 
 
+@pytest.mark.slow
 def test_a_dask_cluster_gives_the_local_result() -> None:
     distributed = pytest.importorskip("distributed")
     local = run_sweep(SMALL).to_json()

@@ -38,6 +38,7 @@ free_runs_s = [0.04]
 """
 
 
+@pytest.mark.slow
 def test_the_checks_come_from_the_runs() -> None:
     report = validate("appendix-clp", Parameters(), QUICK)
     names = [c.name for c in report.checks]
@@ -74,6 +75,7 @@ def test_criteria_files(tmp_path: Path) -> None:
             load_criteria(path)
 
 
+@pytest.mark.slow
 def test_the_exit_code_is_the_verdict(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     criteria = tmp_path / "criteria.toml"
     criteria.write_text(QUICK_TOML + "max_saturated_fraction = 0.0\n")  # no tick at the rails allowed

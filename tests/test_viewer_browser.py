@@ -259,6 +259,7 @@ def test_a_control_engineers_view(view: int, tmp_path: Path) -> None:
         browser.close()
 
 
+@pytest.mark.slow
 def test_a_taken_port_is_reported_not_changed() -> None:
     with socket.socket() as taken:
         taken.bind(("127.0.0.1", 0))
