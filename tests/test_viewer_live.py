@@ -127,3 +127,14 @@ def test_the_panel_lists_the_parameters_that_differ() -> None:
     assert parameter_changes(Parameters()) == []
     changed = Parameters().with_overrides({"start.free_run_s": 0.02, "ball.mass_kg": 0.03})
     assert parameter_changes(changed) == ["ball.mass_kg = 0.03", "start.free_run_s = 0.02"]
+
+
+def test_the_status_says_when_the_computer_cannot_keep_up() -> None:
+    live = _live()
+    live.speed = 4.0
+    live.achieved_speed = 3.75
+    assert "speed ×4 (achieved ×3.75: this computer cannot keep up)" in live.status_markdown()
+    live.achieved_speed = 3.95  # within 2 %: as asked
+    assert "achieved" not in live.status_markdown()
+    live.achieved_speed, live.running = 1.0, False  # paused: nothing to achieve
+    assert "achieved" not in live.status_markdown()

@@ -68,6 +68,7 @@ FLICK_DEFAULT_M_S = 0.1
 # Simulated time the pacing may owe the wall clock: one frame at the top speed plus one. Whatever the
 # speed, a frame never runs more than this many ticks and a stall never builds a debt.
 MAX_OWED_S = FRAME_S * (SPEED_MAX + 1.0)
+SPEED_WINDOW_S = 2.0  # the achieved speed is measured over the last 2 s of wall time
 MAX_ACTIONS_PER_FRAME = 64  # a flood of GUI messages cannot starve the simulation
 MAX_PENDING_ACTIONS = 1024  # beyond this, actions are dropped (a flood, not a user)
 MAX_MESSAGE_BYTES = 1 << 20  # a GUI message is a few hundred bytes; viser's own limit is 50 MB
@@ -283,6 +284,7 @@ class LiveTwin:
         self.catalogue = catalogue
         self.seed = seed
         self.speed = speed
+        self.achieved_speed: float | None = None  # measured by the pacing loop (simulated s per wall s)
         self.plant: PlantKind = plant
         self.ideal_sensors = ideal_sensors
         # The default start, inside a track or stops that a parameter file narrowed.
@@ -610,9 +612,16 @@ class LiveTwin:
         return (
             f"run {self.runs} · **t = {self.rig.time_s:.2f} s** · {state} · controller: "
             f"**{_markdown_text(self.controller_name)}** · {ball}  \n"
-            f"noise {'on' if self.noise else 'off'} · speed ×{self.speed:g} · "
+            f"noise {'on' if self.noise else 'off'} · speed ×{self.speed:g}{self._speed_note()} · "
             f"motor {self.rig.motor_volts_v:+.2f} V{judged}{pending}{error}{notice}"
         )
+
+    def _speed_note(self) -> str:
+        """The speed actually achieved, when the computer cannot keep up with the one asked for."""
+        achieved = self.achieved_speed
+        if not self.running or achieved is None or achieved >= 0.98 * self.speed:
+            return ""
+        return f" (achieved ×{achieved:.2f}: this computer cannot keep up)"
 
     def lost_banner_html(self) -> str:
         """The banner shown while the ball is off the track (empty otherwise)."""
@@ -1318,8 +1327,21 @@ class Viewer:
         sim_ticks = 0
         next_frame = start
         owed_s = 0.0  # simulated time owed to the wall clock at the current speed (at most MAX_OWED_S)
+        # Simulated time run against wall time over the last SPEED_WINDOW_S of running: the speed achieved.
+        recent: deque[tuple[float, int]] = deque()
         while not stop.is_set():
             now = time.perf_counter()
+            if live.running:
+                recent.append((now, sim_ticks))
+                while recent and now - recent[0][0] > SPEED_WINDOW_S:
+                    recent.popleft()
+                span = now - recent[0][0]
+                live.achieved_speed = (
+                    (sim_ticks - recent[0][1]) * FRAME_S / span if span > 0.5 * SPEED_WINDOW_S else None
+                )
+            else:
+                recent.clear()
+                live.achieved_speed = None
             if duration_s is not None and now - start >= duration_s:
                 break
             self._safely(live.apply_actions)
