@@ -1,28 +1,22 @@
 """Motor torque at the beam: eq 3.3.2, τ = 0.016383·(V − 0.154·θ̇), from MuJoCo's dcmotor."""
 
-import mujoco
 import numpy as np
 import pytest
 
+from twin.app import measurements
 from twin.dcmotor import beam_torque_nm
 from twin.parameters import Parameters
-from twin.plant import Plant
-
-
-def _joint_torque(plant: Plant, volts: float, thetadot: float) -> float:
-    plant.reset(theta_rad=0.0, thetadot_rad_s=thetadot)
-    plant.data.ctrl[0] = volts
-    mujoco.mj_forward(plant.model, plant.data)
-    return plant.motor_torque_nm()
 
 
 def test_joint_torque_follows_eq_3_3_2_over_the_operating_range(params: Parameters) -> None:
-    plant = Plant(params)
+    grid = measurements.motor_torque_grid(params)  # 13 volts in ±12 V × 11 rates in ±10 rad/s
+    np.testing.assert_array_equal(grid.volts_v, np.linspace(-12.0, 12.0, 13))
+    np.testing.assert_array_equal(grid.thetadot_rad_s, np.linspace(-10.0, 10.0, 11))
     worst = 0.0
-    for volts in np.linspace(-12.0, 12.0, 13):
-        for thetadot in np.linspace(-10.0, 10.0, 11):
+    for i, volts in enumerate(grid.volts_v):
+        for j, thetadot in enumerate(grid.thetadot_rad_s):
             expected = 0.016383 * (volts - 0.154 * thetadot)
-            got = _joint_torque(plant, float(volts), float(thetadot))
+            got = grid.torque_nm[i, j]
             assert got == pytest.approx(expected, rel=0.005, abs=1e-9)
             assert beam_torque_nm(params.motor, params.amplifier, volts, thetadot) == pytest.approx(
                 expected, rel=0.005, abs=1e-9
@@ -36,8 +30,7 @@ def test_joint_torque_follows_eq_3_3_2_over_the_operating_range(params: Paramete
 def test_commands_beyond_the_rails_give_the_rail_torque(
     params: Parameters, command: float, rail: float
 ) -> None:
-    plant = Plant(params)
-    assert _joint_torque(plant, command, 0.0) == pytest.approx(0.016383 * rail, rel=1e-4)
+    assert measurements.motor_torque_nm(params, command, 0.0) == pytest.approx(0.016383 * rail, rel=1e-4)
     assert beam_torque_nm(params.motor, params.amplifier, command, 0.0) == pytest.approx(
         0.016383 * rail, rel=1e-4
     )

@@ -5,21 +5,19 @@ import json
 import numpy as np
 import pytest
 
+from twin.app import measurements
 from twin.app.cli import main
-from twin.linearize import linearize_mujoco
-from twin.reference import ReferenceModel
+from twin.reference import InputKind
 
 
 @pytest.mark.parametrize("kind", ["torque", "voltage"])
-def test_mujoco_linearization_matches_reference(params, reference: ReferenceModel, kind: str) -> None:
-    a, b = linearize_mujoco(params, kind)
-    a_ref, b_ref = reference.linearize(kind)
-    for got, want, name in ((a, a_ref, "A"), (b, b_ref, "B")):
-        big = np.abs(want) > 1e-3
-        rel = np.abs(got - want)[big] / np.abs(want)[big]
-        assert rel.max() < 0.01, f"{kind} {name}: worst relative error {rel.max():.4f}"
-        # Entries the reference has as (near) zero stay small in the twin too.
-        assert np.all(np.abs(got[~big]) < 1e-3), f"{kind} {name}"
+def test_mujoco_linearization_matches_reference(params, kind: InputKind) -> None:
+    error = measurements.linearization_error(params, kind)
+    # Measured: 0.025 % (torque), 0.197 % (voltage); the acceptance bound is 1 %.
+    assert error.worst_rel_a < 0.01, f"{kind} A: worst relative error {error.worst_rel_a:.4f}"
+    assert error.worst_rel_b < 0.01, f"{kind} B: worst relative error {error.worst_rel_b:.4f}"
+    # Entries the reference has as (near) zero stay small in the twin too.
+    assert error.worst_small_abs < 1e-3, kind
 
 
 def test_cli_prints_the_linearization_as_json(capsys: pytest.CaptureFixture[str]) -> None:

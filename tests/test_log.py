@@ -1,11 +1,13 @@
 """Logs in the thesis software's format (appendix A ``save 'data_file' …``), MAT and CSV."""
 
+import dataclasses
 import math
 
 import numpy as np
 import pytest
 import scipy.io
 
+from twin.app import measurements
 from twin.log import THESIS_FIELDS, TRUTH_FIELDS, LogError, RunLog, load_csv, load_mat, save_csv, save_mat
 
 
@@ -20,20 +22,29 @@ def make_log(ticks: int = 50, physics_steps: int = 1000, seed: int = 0) -> RunLo
 
 
 def assert_identical(a: RunLog, b: RunLog) -> None:
-    for name in THESIS_FIELDS + TRUTH_FIELDS:
-        x, y = getattr(a, name), getattr(b, name)
-        assert x.dtype == y.dtype and x.shape == y.shape, name
-        if x.dtype == bool:
-            assert np.array_equal(x, y), name
-        else:
-            assert np.array_equal(x.view(np.uint64), y.view(np.uint64)), name  # bit-identical, NaN included
-    assert a.k == b.k
+    """Dtype, shape and every bit (NaN included) of every field, and k."""
+    assert set(THESIS_FIELDS + TRUTH_FIELDS) == {f.name for f in dataclasses.fields(RunLog)}
+    assert measurements.log_mismatches(a, b) == []
+
+
+def test_log_comparison_sees_one_bit_a_nan_and_a_length():
+    log = make_log()
+    flipped = make_log()
+    flipped.x3[7] = np.nextafter(flipped.x3[7], np.inf)
+    assert measurements.log_mismatches(log, flipped) == ["x3"]
+    other_nan = make_log()
+    other_nan.uhesap[3] = -math.nan  # another NaN's bits: np.array_equal would not see it either way
+    assert measurements.log_mismatches(log, other_nan) == ["uhesap"]
+    short = RunLog(
+        **{name: getattr(log, name)[:-1] for name in THESIS_FIELDS},
+        **{name: getattr(log, name) for name in TRUTH_FIELDS},
+    )
+    assert measurements.log_mismatches(log, short) == [*THESIS_FIELDS, "k"]
 
 
 def test_mat_round_trip_is_bit_identical(tmp_path):
-    log = make_log()
-    save_mat(log, tmp_path / "data_file.mat")
-    assert_identical(load_mat(tmp_path / "data_file.mat"), log)
+    assert measurements.mat_round_trip_mismatches(make_log(), tmp_path) == []
+    assert (tmp_path / "data_file.mat").is_file()
 
 
 def test_mat_has_the_thesis_variables_as_matlab_stores_them(tmp_path):
@@ -87,7 +98,7 @@ def test_overwrite_refused_unless_asked(tmp_path, save):
         save(make_log(), path)
     assert path.read_text() == "precious"
     save(make_log(), path, overwrite=True)
-    assert path.stat().st_size > 100
+    assert_identical((load_mat if save is save_mat else load_csv)(path), make_log())
 
 
 def test_malformed_mat_files(tmp_path):

@@ -12,6 +12,7 @@ from thesis_data import TABLE_6_3_POSITION_M, TABLE_6_3_VOLTAGE_V
 from twin import converters as C
 from twin import daq as D
 from twin import sensors as S
+from twin.app import measurements
 from twin.parameters import Parameters
 
 P = Parameters()
@@ -45,34 +46,48 @@ def test_counter_convention_and_range():
 
 def test_dac_reproduces_measured_eq_6_2_4():
     measured = {0: -5.042, 512: -0.014, 1023: 5.002}  # eq 6.2.4, measured on the rig
-    for di, volts in measured.items():
+    levels = measurements.counter_levels(P)
+    assert {level.di: level.measured_v for level in levels} == measured
+    for level in levels:
+        assert level.dac_v == S.counter_dac_v(level.di, P)
         # Eq 6.2.6 (the DAC model) agrees with every measurement within 1 ADC LSB: −5.042 (0 mV),
         # −0.015184 vs −0.014 (1.18 mV = 0.48 LSB), 5.001814 vs 5.002 (0.19 mV).
-        assert abs(S.counter_dac_v(di, P) - volts) <= ADC_LSB
+        assert abs(level.dac_v - level.measured_v) <= ADC_LSB
+        assert level.dac_error_lsb == pytest.approx(abs(level.dac_v - level.measured_v) / ADC_LSB, rel=1e-12)
+        assert level.adc_error_lsb == pytest.approx(abs(level.adc_v - level.measured_v) / ADC_LSB, rel=1e-12)
+    adc = {level.di: level.adc_v for level in levels}
     # After the ±5 V ADC only the mid-scale value is still within 1 LSB of the measurement (0.65 mV);
     # the two end values lie outside the ADC's range and saturate.
-    assert abs(D.adc_quantize_v(S.counter_dac_v(512, P), P.daq) - measured[512]) <= ADC_LSB
-    assert D.adc_quantize_v(S.counter_dac_v(0, P), P.daq) == -5.0
-    assert D.adc_quantize_v(S.counter_dac_v(1023, P), P.daq) == 5.0 - ADC_LSB
+    assert abs(adc[512] - measured[512]) <= ADC_LSB
+    assert adc[0] == -5.0
+    assert adc[1023] == 5.0 - ADC_LSB
     with pytest.raises(ValueError, match="di = 1024"):
         S.counter_dac_v(1024, P)
 
 
 def test_read_back_angle_is_a_staircase_of_one_count():
-    counts = np.arange(-216, 217)  # the whole ±43.4° range of the beam
     offsets = np.array([-0.45, -0.2, 0.0, 0.2, 0.45])  # positions within each count
-    readings = np.array([[still_reading_v((c + f) * STEP_RAD) for f in offsets] for c in counts])
+    staircase = measurements.angle_staircase(P, offsets)
+    counts = staircase.counts
+    np.testing.assert_array_equal(counts, np.arange(-216, 217))  # the whole ±43.4° range of the beam
+    assert staircase.count_step_rad == STEP_RAD
+    readings = staircase.readings_v
+    # The readings are the block means of a beam held still there (an independent call per point).
+    for c, f in ((-216, -0.45), (0, 0.0), (17, 0.2), (216, 0.45)):
+        assert readings[c + 216, list(offsets).index(f)] == still_reading_v((c + f) * STEP_RAD)
     assert np.all(readings == readings[:, :1])  # flat within each count
     volts = readings[:, 0]
     angle = C.beam_angle_rad(volts, P.software)
-    steps_lsb = np.diff(volts) / ADC_LSB
-    steps_rad = np.diff(angle)
+    np.testing.assert_array_equal(staircase.angle_rad, angle)
+    steps_lsb = staircase.steps_lsb
+    steps_count = staircase.steps_count
+    np.testing.assert_allclose(steps_lsb, np.diff(volts) / ADC_LSB, rtol=0, atol=1e-9)
     # One DAC step (0.009818 V = 4.02 ADC LSB) shows as 4 LSB, or as 5 LSB once every ≈ 46 counts.
     assert set(np.round(steps_lsb, 9)) == {4.0, 5.0}
     assert np.sum(np.round(steps_lsb) == 5) == 9
-    # Measured: 4-LSB steps are 0.9946 Δ; the mean step over the range is 0.99981 Δ.
-    assert np.all(np.abs(steps_rad[np.round(steps_lsb) == 4] / STEP_RAD - 1) < 0.01)
-    assert abs(steps_rad.mean() / STEP_RAD - 1) < 0.01
+    # Measured: 4-LSB steps are 0.9946 Δ, 5-LSB steps 1.2433 Δ; the mean step over the range is 0.99981 Δ.
+    assert np.all(np.abs(steps_count[np.round(steps_lsb) == 4] - 1) < 0.01)
+    assert abs(steps_count.mean() - 1) < 0.01
     # The read-back angle is the count's angle within 0.13 Δ (ADC quantization and converter offset).
     assert np.max(np.abs(angle - counts * STEP_RAD)) < 0.13 * STEP_RAD
 
@@ -181,29 +196,12 @@ def test_ball_at_rest_on_each_table_point():
         assert abs(C.ball_position_m(reading, P.software) - x) <= fit_residual_m + lsb_m
 
 
-def _fit_time_constant(times: np.ndarray, v: np.ndarray, v_final: float) -> float:
-    """τ from a straight-line fit of log|v − v_final| against time."""
-    slope = np.polyfit(times, np.log(np.abs(v - v_final)), 1)[0]
-    return -1.0 / slope
-
-
 def test_rc_time_constant_from_a_step():
-    chain = S.BallPositionChain(QUIET, seed=0, x_m=0.30)  # 4.340 V, at steady state
-    times, falling = [], []
-    for _k in range(150):  # the wiper opens (0 V): sample the capacitor every 0.1 ms for 15 ms
-        t = chain.time_s + np.array([0.0, 1e-4])
-        chain.advance(t, np.full(2, 0.30), in_contact=False)
-        times.append(t[-1])
-        falling.append(chain.filtered_v)
-    tau_fall = _fit_time_constant(np.array(times), np.array(falling), 0.0)
-    rising = []
-    for _k in range(150):  # contact again: the capacitor charges back towards 4.340 V
-        chain.advance(chain.time_s + np.array([0.0, 1e-4]), np.full(2, 0.30))
-        rising.append(chain.filtered_v)
-    tau_rise = _fit_time_constant(np.array(times), np.array(rising), 4.340)
-    for tau in (tau_fall, tau_rise):
-        assert tau == pytest.approx(147 * 22e-6, rel=0.02)  # 3.234 ms (§6.3)
-    assert chain.reading_v == D.adc_quantize_v(chain.filtered_v, P.daq)
+    """The wiper opens (0 V) for 15 ms, then closes (back to 4.340 V at x = 0.30 m), sampled every 0.1 ms."""
+    step = measurements.rc_step(P)
+    for tau in (step.tau_fall_s, step.tau_rise_s):
+        assert tau == pytest.approx(147 * 22e-6, rel=0.02)  # 3.234 ms (§6.3); measured: exact to 1e-4
+    assert step.final_reading_v == D.adc_quantize_v(step.final_filtered_v, P.daq)
 
 
 def test_rc_filter_is_exact_against_an_ode_solver():
@@ -265,13 +263,13 @@ def _run(chain: S.BallPositionChain, seconds: float, block_s: float = 0.02) -> n
 
 
 def test_dropout_rate_over_200_seconds():
-    chain = S.BallPositionChain(P, seed=2024, x_m=0.0)
-    _run(chain, 200.0)
+    drops = measurements.dropouts(P, seconds=200.0, seed=2024)
     expected = 5.0 * 200.0  # dropout_rate_hz × duration
-    assert abs(chain.dropout_count - expected) <= 3 * math.sqrt(expected)  # measured: 1012 (5.06 Hz)
-    durations = np.array([b - a for a, b in chain.dropout_intervals])
+    assert abs(drops.count - expected) <= 3 * math.sqrt(expected)  # measured: 1012 (5.06 Hz)
     mean_s = 0.5e-3  # exponential: σ of the mean = mean/√N
-    assert abs(durations.mean() - mean_s) <= 3 * mean_s / math.sqrt(durations.size)  # measured: 0.516 ms
+    assert abs(drops.durations_s.mean() - mean_s) <= 3 * mean_s / math.sqrt(
+        drops.durations_s.size
+    )  # measured: 0.516 ms
 
 
 def test_noise_off_means_no_dropouts_and_the_static_reading():
