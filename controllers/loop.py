@@ -162,14 +162,25 @@ class TrueStateLaw:
         self.u_kind = u_kind
         self.motor = motor
         self.period_s = period_s
-        self.telemetry = Telemetry()
+        self.reset()
 
     def reset(self) -> None:
-        self.telemetry = Telemetry()
+        self._last: tuple[np.ndarray, float, float] | None = None
+        self._telemetry = Telemetry()
+
+    @property
+    def telemetry(self) -> Telemetry:
+        """The last evaluation's state, u and volts (built when read: the law runs every physics step, the
+        log reads it once per tick)."""
+        if self._last is not None:
+            x, u, volts = self._last
+            self._telemetry = Telemetry(x, u, volts)
+            self._last = None
+        return self._telemetry
 
     def motor_volts(self, state: np.ndarray) -> float:
         x = np.asarray(state, dtype=float)
         u = float(self.law(x))
         volts = _volts(u, x, self.u_kind, self.motor, self.name)
-        self.telemetry = Telemetry(x.copy(), u, volts)
+        self._last = (x.copy(), u, volts)
         return volts

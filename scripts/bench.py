@@ -1,19 +1,33 @@
-"""Benchmarks (measured here, never asserted in tests).
+"""Benchmarks (measured here, never asserted in tests): the twin's costs as ratios to the physical floor.
 
-    OPENBLAS_NUM_THREADS=1 python scripts/bench.py [--view-seconds 60] [--skip-view] [--skip-batch]
+    python scripts/bench.py [--json] [--repeats 5] [--batch-side 41] [--skip-batch] [--skip-peers]
+                            [--skip-calibration] [--skip-view] [--view-seconds 60]
 
-- physics: µs per MuJoCo step of the rig, and per 20 ms tick of the TwinRig (sensor chains included);
-- runs: computer time per 15 s closed-loop run (50 Hz controllers, a 1 kHz chapter 4 law on the true state,
-  the reference rig), each as a ratio to the physical floor: raw ``mujoco.rollout`` of the same physics
-  steps in one call, measured in the same run;
-- batch: a 41×41 grid of 10 s appendix-sf runs (noise on) through the batch engine (``twin.batch``) on 2
-  threads, as a ratio to raw ``mujoco.rollout`` of the same physics on 2 threads (the same starts and the
-  motor volts the closed loop applied, so the same trajectories: checked bit for bit). Every run to the end
-  (``stop_when_lost=False``), and as a sweep runs it (lost balls leave the batch; its floor is the full
-  floor scaled by the physics steps done);
-- calibration: wall time of a 5-parameter fit to a 60 s log;
+One run measures, on the same work (a 10 s episode from x0 = 0.2 m, θ0 = 0.3 rad, noise on, seed 0):
+
+- (a) floor: raw ``mujoco.rollout`` of the episode's physics steps in one call, single thread, with the motor
+  volts the closed loop applied (so the same trajectory: checked bit for bit); and of the (c) grid's runs on
+  2 threads;
+- (b) episodes: the closed loop through the twin with the full I/O chain (``twin.engine.run_closed_loop``):
+  appendix-sf (the target: ≤ 1.5 × its floor), appendix-clp, lqr, and the 1 kHz chapter 4 laws on the true
+  state (thesis-sf/clp/smc-continuous: ≤ 3 × their floors), each against the floor of its own trajectory.
+  Every episode runs to the end (``stop_when_lost=False``);
+- (c) batch: a side × side grid (41 × 41 by default) of 10 s appendix-sf episodes (noise on) through the
+  batch engine (``twin.batch``) on 2 threads, all to the end and as a sweep runs it (lost balls leave the
+  batch; its floor is the full floor scaled by the physics steps done), against (a) on 2 threads;
+- (d) peers: the same episode on the analytic model (the nonlinear ``twin.reference`` equations, no sensor
+  chain) with §5.2.1's state feedback (``controllers.thesis_numbers.SF_DISC_K``) on the true state at 50 Hz,
+  held between samples and clamped to the amplifier's ±12 V, each 20 ms interval integrated with the held
+  input and the state output every 1 ms: python-control (``control.input_output_response`` on a
+  ``control.nlsys``) and ``scipy.integrate.solve_ivp`` (both with their default method and tolerances);
+- (e) calibration: wall time of a 5-parameter fit to a 60 s log;
+- physics: µs per MuJoCo step, ms per 20 ms tick of the TwinRig;
 - view: the live view's tick rate at speed 1.0 over the given wall time (target 50 Hz ± 1 %) and its CPU
-  time per tick, headless (no browser attached).
+  time per tick, headless.
+
+(a) and (b) are the best of ``--repeats`` interleaved repeats, wall time and CPU time (``process_time``, which
+other processes on a shared machine inflate less); compare ratios within one run. Ratios printed: (b)/(a),
+(c)/(a, 2 threads), (d)/(b) and (d)/(c per episode).
 """
 
 from __future__ import annotations
@@ -23,6 +37,8 @@ import json
 import os
 import socket
 import time
+from collections.abc import Callable
+from typing import Any
 
 # One BLAS thread: the batch's threads are MuJoCo's (set before numpy loads OpenBLAS).
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
@@ -32,11 +48,33 @@ import numpy as np
 from mujoco import rollout
 
 from controllers import registry
+from controllers import thesis_numbers as T
 from twin.batch import run_batch
-from twin.engine import run_closed_loop, update_ticks
+from twin.engine import RunResult, StateLaw, run_closed_loop
+from twin.interface import Telemetry
 from twin.parameters import Parameters
 from twin.plant import Plant
+from twin.reference import ReferenceModel
 from twin.rig import TwinRig
+
+_FULL = mujoco.mjtState.mjSTATE_FULLPHYSICS
+DURATION_S = 10.0
+X0_M, THETA0_RAD = 0.2, 0.3
+EPISODES = (
+    "appendix-sf",
+    "appendix-clp",
+    "lqr",
+    "thesis-sf-continuous",
+    "thesis-clp-continuous",
+    "thesis-smc-continuous",
+)
+
+
+def _timed(f: Callable[[], Any]) -> tuple[float, float]:
+    """(wall, CPU) seconds of one call."""
+    start, start_cpu = time.perf_counter(), time.process_time()
+    f()
+    return time.perf_counter() - start, time.process_time() - start_cpu
 
 
 def bench_physics() -> dict[str, float]:
@@ -58,50 +96,108 @@ def bench_physics() -> dict[str, float]:
     return {"mj_step_us": 1e6 * raw, "twinrig_tick_ms": 1e3 * tick, "realtime_factor_50hz": 0.02 / tick}
 
 
-def rollout_floor_s(duration_s: float) -> float:
-    """Raw ``mujoco.rollout`` of the physics steps a run of ``duration_s`` takes, in one call."""
+# --- (a) and (b): one episode against raw rollout of its own physics -------------------------------------
+class _RecordedLaw:
+    """A state law that also records the volts it asks for (the replay's control for a 1 kHz law)."""
+
+    def __init__(self, law: StateLaw, rail_v: float) -> None:
+        self.law, self.rail_v = law, rail_v
+        self.name, self.period_s = law.name, law.period_s
+        self.volts: list[float] = []
+
+    @property
+    def telemetry(self) -> Telemetry:
+        return self.law.telemetry
+
+    def reset(self) -> None:
+        self.law.reset()
+
+    def motor_volts(self, state: np.ndarray) -> float:
+        volts = self.law.motor_volts(state)
+        self.volts.append(min(max(volts, -self.rail_v), self.rail_v))  # the rig clamps to the rails
+        return volts
+
+
+def _episode(name: str, controller: Any = None) -> RunResult:
+    return run_closed_loop(
+        controller or registry.make(name),
+        x0_m=X0_M,
+        theta0_rad=THETA0_RAD,
+        duration_s=DURATION_S,
+        seed=0,
+        noise=True,
+        stop_when_lost=False,
+    )
+
+
+def _replay_control(name: str, params: Parameters) -> tuple[np.ndarray, RunResult]:
+    """The motor volts of every physics step of the episode (from release), and the episode."""
+    made = registry.make(name, params)
+    if registry.simulation_only(name):
+        recorded = _RecordedLaw(made, params.amplifier.rail_v)  # type: ignore[arg-type]
+        result = _episode(name, recorded)
+        volts = np.array(recorded.volts)
+    else:
+        result = _episode(name, made)
+        dt, per_tick = params.physics.timestep_s, int(round(params.daq.period_s / params.physics.timestep_s))
+        free = int(round(params.start.free_run_s / dt))
+        logged = result.log.motor_volts_v  # row k: after the k-th command (row 0: before the first)
+        volts = np.concatenate([np.full(free, logged[0]), np.repeat(logged[1:], per_tick)])
+    steps = int(round(result.log.true_time_s[-1] / params.physics.timestep_s))
+    # Before a state law's first evaluation the motor sees the zero command (0 V).
+    control = np.concatenate([np.zeros(max(0, steps - len(volts))), volts])[:steps]
+    return control, result
+
+
+def bench_episode(name: str, repeats: int) -> dict[str, float]:
+    """The episode and raw rollout of its physics, interleaved, best of ``repeats``."""
     params = Parameters()
-    steps = int(round((update_ticks(duration_s, params) * params.daq.period_s) / params.physics.timestep_s))
+    control, result = _replay_control(name, params)
     plant = Plant(params)
-    plant.reset(0.2, 0.3)
-    state = np.empty((1, mujoco.mj_stateSize(plant.model, mujoco.mjtState.mjSTATE_FULLPHYSICS)))
-    mujoco.mj_getState(plant.model, plant.data, state[0], mujoco.mjtState.mjSTATE_FULLPHYSICS)
-    control = np.zeros((1, steps, plant.model.nu))
-    start = time.perf_counter()
-    rollout.rollout(plant.model, plant.data, state, control)
-    return time.perf_counter() - start
+    plant.reset(X0_M, THETA0_RAD)
+    initial = np.empty((1, mujoco.mj_stateSize(plant.model, _FULL)))
+    mujoco.mj_getState(plant.model, plant.data, initial[0], _FULL)
+    ctrl = control[None, :, None]
+    states = np.empty((1, len(control), initial.shape[1]))  # allocated once: the floor is the stepping
+    runner = rollout.Rollout(nthread=0)
 
+    def floor() -> None:
+        runner.rollout(plant.model, plant.data, initial, ctrl, state=states)
 
-def bench_runs() -> dict[str, float]:
-    out: dict[str, float] = {"floor_15s_s": rollout_floor_s(15.0)}
-    for name, plant in (
-        ("appendix-clp", "twin"),
-        ("lqr", "twin"),
-        ("thesis-sf-continuous", "twin"),
-        ("appendix-clp", "reference"),
-    ):
-        start = time.perf_counter()
-        run_closed_loop(
-            registry.make(name),
-            x0_m=0.2,
-            theta0_rad=0.3,
-            duration_s=15.0,
-            seed=0,
-            plant=plant,
-            ideal_sensors=plant == "reference",
-            stop_when_lost=False,
+    best = {"floor": [np.inf, np.inf], "episode": [np.inf, np.inf]}
+    for _ in range(repeats):
+        for key, f in (("floor", floor), ("episode", lambda: _episode(name))):
+            wall, cpu = _timed(f)
+            best[key] = [min(best[key][0], wall), min(best[key][1], cpu)]
+    # The replay reproduces the run: the true state at its last tick with the ball on the track.
+    log = result.log
+    k = int(np.flatnonzero(~log.ball_lost & (log.true_time_s > 0))[-1])
+    step = int(round(log.true_time_s[k] / params.physics.timestep_s))
+    same = bool(
+        np.array_equal(
+            plant.row_states(states[0, step - 1 : step])[0],
+            [log.true_x_m[k], log.true_theta_rad[k], log.true_xdot_m_s[k], log.true_thetadot_rad_s[k]],
         )
-        elapsed = time.perf_counter() - start
-        out[f"run_15s_{name}_{plant}_s"] = elapsed
-        out[f"run_15s_{name}_{plant}_x_floor"] = elapsed / out["floor_15s_s"]
-    return out
+    )
+    (floor_s, floor_cpu), (run_s, run_cpu) = best["floor"], best["episode"]
+    return {
+        "physics_steps": float(len(control)),
+        "floor_s": floor_s,
+        "floor_cpu_s": floor_cpu,
+        "run_s": run_s,
+        "run_cpu_s": run_cpu,
+        "x_floor": run_s / floor_s,
+        "cpu_x_floor": run_cpu / floor_cpu,
+        "floor_reproduces_run": float(same),
+    }
 
 
+# --- (c): the sweep through the batch engine ----------------------------------------------------------------
 def _raw_rollout_s(
     plant: Plant, initial: np.ndarray, control: np.ndarray, nthread: int, chunk: int = 200
-) -> tuple[float, np.ndarray]:
+) -> tuple[float, float, np.ndarray]:
     """Raw ``mujoco.rollout`` of these runs on ``nthread`` threads (in chunks of runs, to bound the memory of
-    its state output): the wall time of the rollout calls and each run's final state."""
+    its state output): the wall and CPU time of the rollout calls and each run's final state."""
     datas = [mujoco.MjData(plant.model) for _ in range(nthread)]
     final = np.empty_like(initial)
     elapsed = cpu = 0.0
@@ -115,14 +211,14 @@ def _raw_rollout_s(
     return elapsed, cpu, final
 
 
-def bench_batch(side: int = 41, duration_s: float = 10.0, nthread: int = 2) -> dict[str, float]:
-    """The 41×41 sweep of appendix-sf through the batch engine against raw rollout of the same physics."""
+def bench_batch(side: int = 41, duration_s: float = DURATION_S, nthread: int = 2) -> dict[str, float]:
+    """The side × side sweep of appendix-sf through the batch engine against raw rollout of the same physics."""
     params = Parameters()
     x0, theta0 = (
         a.ravel() for a in np.meshgrid(np.linspace(-0.32, 0.32, side), np.linspace(-0.7, 0.7, side))
     )
     seeds = np.arange(len(x0))
-    kw = dict(x0_m=x0, theta0_rad=theta0, seeds=seeds, duration_s=duration_s, nthread=nthread)
+    kw: dict[str, Any] = dict(x0_m=x0, theta0_rad=theta0, seeds=seeds, duration_s=duration_s, nthread=nthread)
     start, start_cpu = time.perf_counter(), time.process_time()
     full = run_batch(registry, "appendix-sf", **kw, stop_when_lost=False, record=True)
     batch_full_s, batch_full_cpu = time.perf_counter() - start, time.process_time() - start_cpu
@@ -140,11 +236,10 @@ def bench_batch(side: int = 41, duration_s: float = 10.0, nthread: int = 2) -> d
     control[:, :free, 0] = volts[:, :1]
     control[:, free:, 0] = np.repeat(volts[:, 1:], per_tick, axis=1)[:, : steps - free]
     plant = Plant(params)
-    full_state = mujoco.mjtState.mjSTATE_FULLPHYSICS
-    initial = np.empty((len(x0), mujoco.mj_stateSize(plant.model, full_state)))
+    initial = np.empty((len(x0), mujoco.mj_stateSize(plant.model, _FULL)))
     for i in range(len(x0)):
         plant.reset(float(x0[i]), float(theta0[i]))
-        mujoco.mj_getState(plant.model, plant.data, initial[i], full_state)
+        mujoco.mj_getState(plant.model, plant.data, initial[i], _FULL)
     floor_s, floor_cpu, final = _raw_rollout_s(plant, initial, control, nthread)
     # The open loop reproduces the closed loop's trajectories bit for bit (runs whose ball stayed on).
     kept = np.array([not r.verdict.ball_lost for r in full])
@@ -170,6 +265,7 @@ def bench_batch(side: int = 41, duration_s: float = 10.0, nthread: int = 2) -> d
         "floor_2threads_s": floor_s,
         "open_loop_reproduces_closed_loop": float(same),
         "batch_all_to_end_s": batch_full_s,
+        "batch_all_to_end_per_episode_s": batch_full_s / len(x0),
         "batch_all_to_end_x_floor": batch_full_s / floor_s,
         "sweep_stop_when_lost_s": batch_sweep_s,
         "sweep_floor_scaled_s": sweep_floor_s,
@@ -185,6 +281,60 @@ def bench_batch(side: int = 41, duration_s: float = 10.0, nthread: int = 2) -> d
     }
 
 
+# --- (d): the peers a user would otherwise reach for ----------------------------------------------------
+def _sampled_state_feedback(
+    integrate: Callable[[float, np.ndarray, float], np.ndarray], params: Parameters
+) -> np.ndarray:
+    """The episode with §5.2.1's gains on the true state every 20 ms, the volts held in between: each
+    interval integrated by ``integrate(t0, x0, volts) -> states at 1 ms`` (its last row the next sample)."""
+    gain, rail = T.SF_DISC_K[0], params.amplifier.rail_v
+    x = np.array([X0_M, THETA0_RAD, 0.0, 0.0])
+    for k in range(int(round(DURATION_S / T.PERIOD_S))):
+        volts = min(max(-float(gain @ x), -rail), rail)
+        x = integrate(k * T.PERIOD_S, x, volts)[-1]
+    return x
+
+
+def bench_peers() -> dict[str, float]:
+    """(d): python-control and scipy on the analytic model, 50 Hz state feedback with a zero-order hold."""
+    import control
+    import scipy.integrate
+
+    params = Parameters()
+    model = ReferenceModel(params)
+    sample_offsets = T.PERIOD_S * np.arange(21) / 20  # the interval's start and its 20 ms at 1 ms
+
+    def update(_t: float, x: np.ndarray, u: np.ndarray, _params: dict[str, Any]) -> np.ndarray:
+        return model.derivative(x, float(u[0]))
+
+    plant = control.nlsys(update, None, inputs=1, outputs=4, states=4, name="ballbeam")
+
+    def with_control(t0: float, x0: np.ndarray, volts: float) -> np.ndarray:
+        response = control.input_output_response(plant, T=t0 + sample_offsets, U=volts, X0=x0)
+        return np.asarray(response.states).T
+
+    def with_scipy(t0: float, x0: np.ndarray, volts: float) -> np.ndarray:
+        times = t0 + sample_offsets
+        solution = scipy.integrate.solve_ivp(
+            lambda _t, x: model.derivative(x, volts), (times[0], times[-1]), x0, t_eval=times[1:]
+        )
+        return np.asarray(solution.y).T
+
+    out: dict[str, float] = {}
+    for key, integrate in (("python_control", with_control), ("scipy_solve_ivp", with_scipy)):
+        final: np.ndarray | None = None
+
+        def episode(integrate: Callable[[float, np.ndarray, float], np.ndarray] = integrate) -> None:
+            nonlocal final
+            final = _sampled_state_feedback(integrate, params)
+
+        wall, cpu = _timed(episode)
+        assert final is not None
+        out[f"{key}_s"], out[f"{key}_cpu_s"], out[f"{key}_final_x_m"] = wall, cpu, float(final[0])
+    return out
+
+
+# --- (e) and the live view -----------------------------------------------------------------------------------
 def bench_calibration() -> dict[str, float]:
     """Wall time of ``calibrate`` on a 60 s log of the recommended experiment, 5 parameters (the target:
     under 30 s on 2 cores)."""
@@ -219,22 +369,62 @@ def bench_view(seconds: float) -> dict[str, float]:
     return stats
 
 
+def ratios(results: dict[str, Any]) -> dict[str, float]:
+    """(b)/(a), (c)/(a, 2 threads), (d)/(b) and (d)/(c per episode), wall time (CPU time where noted)."""
+    episode = results["episodes"]["appendix-sf"]
+    out = {"b_over_a": episode["x_floor"], "b_over_a_cpu": episode["cpu_x_floor"]}
+    for name in EPISODES[3:]:
+        out[f"{name}_over_a"] = results["episodes"][name]["x_floor"]
+        out[f"{name}_over_a_cpu"] = results["episodes"][name]["cpu_x_floor"]
+    batch = results.get("batch")
+    if batch is not None:
+        out["c_over_a_2threads"] = batch["batch_all_to_end_x_floor"]
+        out["c_sweep_over_a_2threads"] = batch["sweep_x_floor"]
+    peers = results.get("peers")
+    if peers is not None:
+        for key in ("python_control", "scipy_solve_ivp"):
+            out[f"d_{key}_over_b"] = peers[f"{key}_s"] / episode["run_s"]
+            if batch is not None:
+                out[f"d_{key}_over_c_per_episode"] = (
+                    peers[f"{key}_s"] / batch["batch_all_to_end_per_episode_s"]
+                )
+    return out
+
+
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
+    parser.add_argument("--json", action="store_true", help="print one JSON object")
+    parser.add_argument("--repeats", type=int, default=5, help="repeats of (a) and (b); the best counts")
     parser.add_argument("--view-seconds", type=float, default=60.0)
     parser.add_argument("--skip-view", action="store_true")
     parser.add_argument("--skip-calibration", action="store_true")
     parser.add_argument("--skip-batch", action="store_true")
+    parser.add_argument("--skip-peers", action="store_true")
     parser.add_argument("--batch-side", type=int, default=41, help="the batch grid's points per side")
     args = parser.parse_args()
-    results = {"physics": bench_physics(), "runs": bench_runs()}
+    episodes = {name: bench_episode(name, max(1, args.repeats)) for name in EPISODES}
+    results: dict[str, Any] = {"physics": bench_physics(), "episodes": episodes}
     if not args.skip_batch:
         results["batch"] = bench_batch(args.batch_side)
+    if not args.skip_peers:
+        results["peers"] = bench_peers()
     if not args.skip_calibration:
         results["calibration"] = bench_calibration()
     if not args.skip_view:
         results["view"] = bench_view(args.view_seconds)
-    print(json.dumps(results, indent=2))
+    results["ratios"] = ratios(results)
+    if args.json:
+        print(json.dumps(results))
+        return
+    for section, values in results.items():
+        print(section)
+        for key, value in values.items():
+            if isinstance(value, dict):
+                print(f"  {key}")
+                for k, v in value.items():
+                    print(f"    {k:38s} {v:12.4f}")
+            else:
+                print(f"  {key:40s} {value:12.4f}")
 
 
 if __name__ == "__main__":

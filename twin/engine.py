@@ -48,7 +48,9 @@ class StateLaw(Protocol):
 
     name: str
     period_s: float
-    telemetry: Telemetry
+
+    @property
+    def telemetry(self) -> Telemetry: ...
 
     def reset(self) -> None: ...
 

@@ -239,16 +239,24 @@ class SimRig(Rig):
 
     def _advance_with_law(self, n: int, law, law_steps: int) -> PhysicsBlock:
         rail = self.params.amplifier.rail_v
-        parts = []
-        done = 0
-        while done < n:
-            m = min(law_steps, n - done)
-            volts = float(law(self.physics.state()))
+
+        def clamped_volts(state: np.ndarray) -> float:
+            volts = float(law(state))
             if not math.isfinite(volts):
                 raise FloatingPointError(
                     f"the state law returned {volts!r} volts at t = {self.physics.time_s:.3f} s"
                 )
-            self._applied_motor_v = self._pending_motor_v = min(max(volts, -rail), rail)
+            return min(max(volts, -rail), rail)
+
+        if isinstance(self.physics, Plant):  # MuJoCo steps one by one in the plant, the law between them
+            block, volts = self.physics.advance_with_law(n, clamped_volts, law_steps)
+            self._applied_motor_v = self._pending_motor_v = volts
+            return block
+        parts = []
+        done = 0
+        while done < n:
+            m = min(law_steps, n - done)
+            self._applied_motor_v = self._pending_motor_v = clamped_volts(self.physics.state())
             parts.append(self.physics.advance(np.full(m, self._applied_motor_v)))
             done += m
         return _join(parts)
