@@ -12,6 +12,8 @@ exactly as printed because they are what stabilised the real rig.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
@@ -56,6 +58,57 @@ class _AppendixCallback(Controller):
         return clip_command_v(dac_command_v(value_v, self.software), self.software)
 
 
+def state_feedback_step(prev: tuple[Any, ...], x1_k: Any, x2_k: Any) -> tuple[Any, Any, Any]:
+    """``d_cb_state_feedback``'s observer and law, as printed: (x3(k), x4(k), u_temp) from the values at
+    k − 1 ``prev`` = (x1, x2, x3, x4, u) and the measured x1(k), x2(k). Floats or arrays over a batch (the
+    same operations in the same order give the same bits)."""
+    x1, x2, x3, x4, u = prev
+    x3_k = 0.9207 * x3 - 0.1601 * x4 - 3.9409 * x1 - 8.0826 * x2 - 0.0055 * u + 4 * x1_k + 8 * x2_k
+    x4_k = 0.2927 * x3 + 0.7494 * x4 + 14.257 * x1 - 11.945 * x2 + 0.0717 * u - 15 * x1_k + 12 * x2_k
+    u_temp = -1 * (-36.3437 * x1_k + 24.5992 * x2_k - 15.9593 * x3_k + 3.9815 * x4_k)
+    return x3_k, x4_k, u_temp
+
+
+def control_law_step(
+    prev: tuple[Any, ...], x1_k: Any, x2_k: Any, sin: Callable, cos: Callable, power: Callable
+) -> tuple[Any, Any, Any, Any]:
+    """``d_cb_control_law``'s observer, β, F′, torque and voltage, as printed: (x3(k), x4(k), torque,
+    v_temp). ``sin``, ``cos`` and ``power`` are ``math.sin``, ``math.cos``, ``pow`` for floats and
+    ``np.sin``, ``np.cos``, ``np.float_power`` over a batch: MATLAB's x^2 is libm's pow, which differs
+    from x·x in the last bit now and then."""
+    x1, x2, x3, x4, u = prev
+    # REDUCED ORDER OBSERVER
+    x3_k = (
+        (u * 0.066)
+        + ((x1 * -40.011) + (x2 * 0.1797))
+        + ((x3 * 0.2) + (x4 * 0.0036))
+        + ((x1_k * 39.9998) + (x2_k * -0.227))
+    )
+    x4_k = (
+        (u * 3.0244)
+        + ((x1 * -0.462) + (x2 * -39.563))
+        + ((x3 * -0.0036) + (x4 * 0.2))
+        + ((x1_k * -0.0452) + (x2_k * 39.608))
+    )
+    # FIND_BETA
+    beta = (
+        (-0.0137 * sin(x2_k))
+        + (0.17 * x1_k * cos(x2_k))
+        + (0.0346 * x1_k * x3_k * x4_k)
+        + (-0.000373 * x1_k * power(x4_k, 2))
+    )
+    # FIND_FPRIME: D = -[-40 0; 0 38]*[x1; x2]; E = -[-23.5604 0; 0 5.1736]*[x3; x4]
+    d = (40.0 * x1_k, -38.0 * x2_k)  # negating the literals is exact: same bits as MATLAB
+    e = (23.5604 * x3_k, -5.1736 * x4_k)
+    b = (d[0] + e[0], d[1] + e[1])
+    c = (power(x1_k, 2) * 0.01732) + 0.004
+    f_prime = 0.003833 * b[0] + c * b[1]
+    # FIND_TORQUE, then voltage
+    t = beta + f_prime
+    v_temp = ((t * 9.4) / (0.022 * 7)) + (x4_k * 0.022 * 7)
+    return x3_k, x4_k, t, v_temp
+
+
 class AppendixStateFeedback(_AppendixCallback):
     """``d_cb_state_feedback`` (appendix A)."""
 
@@ -63,10 +116,7 @@ class AppendixStateFeedback(_AppendixCallback):
 
     def update(self, sample: DaqSample) -> float:
         x1_k, x2_k = self._measure(sample)
-        x1, x2, x3, x4, u = self.prev
-        x3_k = 0.9207 * x3 - 0.1601 * x4 - 3.9409 * x1 - 8.0826 * x2 - 0.0055 * u + 4 * x1_k + 8 * x2_k
-        x4_k = 0.2927 * x3 + 0.7494 * x4 + 14.257 * x1 - 11.945 * x2 + 0.0717 * u - 15 * x1_k + 12 * x2_k
-        u_temp = -1 * (-36.3437 * x1_k + 24.5992 * x2_k - 15.9593 * x3_k + 3.9815 * x4_k)
+        x3_k, x4_k, u_temp = state_feedback_step(self.prev, x1_k, x2_k)
         adat = self._command(u_temp)
         u_k = motor_volts_from_command(adat, self.software)  # u(k) = (adat-2.5)*9.6
         self.prev = (x1_k, x2_k, x3_k, x4_k, u_k)
@@ -81,36 +131,7 @@ class AppendixControlLaw(_AppendixCallback):
 
     def update(self, sample: DaqSample) -> float:
         x1_k, x2_k = self._measure(sample)
-        x1, x2, x3, x4, u = self.prev
-        # REDUCED ORDER OBSERVER
-        x3_k = (
-            (u * 0.066)
-            + ((x1 * -40.011) + (x2 * 0.1797))
-            + ((x3 * 0.2) + (x4 * 0.0036))
-            + ((x1_k * 39.9998) + (x2_k * -0.227))
-        )
-        x4_k = (
-            (u * 3.0244)
-            + ((x1 * -0.462) + (x2 * -39.563))
-            + ((x3 * -0.0036) + (x4 * 0.2))
-            + ((x1_k * -0.0452) + (x2_k * 39.608))
-        )
-        # FIND_BETA
-        beta = (
-            (-0.0137 * math.sin(x2_k))
-            + (0.17 * x1_k * math.cos(x2_k))
-            + (0.0346 * x1_k * x3_k * x4_k)
-            + (-0.000373 * x1_k * (x4_k**2))
-        )
-        # FIND_FPRIME: D = -[-40 0; 0 38]*[x1; x2]; E = -[-23.5604 0; 0 5.1736]*[x3; x4]
-        d = (40.0 * x1_k, -38.0 * x2_k)  # negating the literals is exact: same bits as MATLAB
-        e = (23.5604 * x3_k, -5.1736 * x4_k)
-        b = (d[0] + e[0], d[1] + e[1])
-        c = (x1_k**2 * 0.01732) + 0.004
-        f_prime = 0.003833 * b[0] + c * b[1]
-        # FIND_TORQUE, then voltage
-        t = beta + f_prime
-        v_temp = ((t * 9.4) / (0.022 * 7)) + (x4_k * 0.022 * 7)
+        x3_k, x4_k, t, v_temp = control_law_step(self.prev, x1_k, x2_k, math.sin, math.cos, pow)
         adat = self._command(v_temp)
         self.prev = (x1_k, x2_k, x3_k, x4_k, t)
         self.telemetry = Telemetry(np.array([x1_k, x2_k, x3_k, x4_k]), t, v_temp)

@@ -21,7 +21,12 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from controllers.appendix import AppendixControlLaw, AppendixStateFeedback
+from controllers.appendix import (
+    AppendixControlLaw,
+    AppendixStateFeedback,
+    control_law_step,
+    state_feedback_step,
+)
 from controllers.laws import KalmanState, StateFeedbackLaw
 from controllers.loop import LoopController, ObserverState
 from twin.batch import BatchSamples, BatchTelemetry
@@ -72,17 +77,14 @@ class _AppendixBatch:
 
 
 class BatchAppendixStateFeedback(_AppendixBatch):
-    """``AppendixStateFeedback.update``, line for line."""
+    """``AppendixStateFeedback.update`` over the batch (the same ``state_feedback_step``)."""
 
     def __init__(self, software: SoftwareCalibration) -> None:
         super().__init__(AppendixStateFeedback.name, software)
 
     def update(self, samples: BatchSamples) -> np.ndarray:
         x1_k, x2_k = _measure(samples, self.software)
-        x1, x2, x3, x4, u = self.prev
-        x3_k = 0.9207 * x3 - 0.1601 * x4 - 3.9409 * x1 - 8.0826 * x2 - 0.0055 * u + 4 * x1_k + 8 * x2_k
-        x4_k = 0.2927 * x3 + 0.7494 * x4 + 14.257 * x1 - 11.945 * x2 + 0.0717 * u - 15 * x1_k + 12 * x2_k
-        u_temp = -1 * (-36.3437 * x1_k + 24.5992 * x2_k - 15.9593 * x3_k + 3.9815 * x4_k)
+        x3_k, x4_k, u_temp = state_feedback_step(self.prev, x1_k, x2_k)
         adat = self._command(u_temp)
         u_k = motor_volts_from_command(adat, self.software)
         self.prev = (x1_k, x2_k, x3_k, x4_k, u_k)
@@ -91,39 +93,14 @@ class BatchAppendixStateFeedback(_AppendixBatch):
 
 
 class BatchAppendixControlLaw(_AppendixBatch):
-    """``AppendixControlLaw.update``, line for line."""
+    """``AppendixControlLaw.update`` over the batch (the same ``control_law_step``)."""
 
     def __init__(self, software: SoftwareCalibration) -> None:
         super().__init__(AppendixControlLaw.name, software)
 
     def update(self, samples: BatchSamples) -> np.ndarray:
         x1_k, x2_k = _measure(samples, self.software)
-        x1, x2, x3, x4, u = self.prev
-        x3_k = (
-            (u * 0.066)
-            + ((x1 * -40.011) + (x2 * 0.1797))
-            + ((x3 * 0.2) + (x4 * 0.0036))
-            + ((x1_k * 39.9998) + (x2_k * -0.227))
-        )
-        x4_k = (
-            (u * 3.0244)
-            + ((x1 * -0.462) + (x2 * -39.563))
-            + ((x3 * -0.0036) + (x4 * 0.2))
-            + ((x1_k * -0.0452) + (x2_k * 39.608))
-        )
-        beta = (
-            (-0.0137 * np.sin(x2_k))
-            + (0.17 * x1_k * np.cos(x2_k))
-            + (0.0346 * x1_k * x3_k * x4_k)
-            + (-0.000373 * x1_k * np.float_power(x4_k, 2))
-        )
-        d = (40.0 * x1_k, -38.0 * x2_k)
-        e = (23.5604 * x3_k, -5.1736 * x4_k)
-        b = (d[0] + e[0], d[1] + e[1])
-        c = (np.float_power(x1_k, 2) * 0.01732) + 0.004
-        f_prime = 0.003833 * b[0] + c * b[1]
-        t = beta + f_prime
-        v_temp = ((t * 9.4) / (0.022 * 7)) + (x4_k * 0.022 * 7)
+        x3_k, x4_k, t, v_temp = control_law_step(self.prev, x1_k, x2_k, np.sin, np.cos, np.float_power)
         adat = self._command(v_temp)
         self.prev = (x1_k, x2_k, x3_k, x4_k, t)
         self.telemetry = BatchTelemetry(np.stack([x1_k, x2_k, x3_k, x4_k], axis=1), t, v_temp)
