@@ -30,7 +30,15 @@ from mujoco import batch as mjbatch
 
 from twin.converters import angle_volts_v, ball_volts_v
 from twin.daq import block_time_s
-from twin.engine import Catalogue, ControllerError, RunResult, StateLaw, run_closed_loop, update_ticks
+from twin.engine import (
+    Catalogue,
+    ControllerError,
+    RunResult,
+    StateLaw,
+    checked_update,
+    run_closed_loop,
+    update_ticks,
+)
 from twin.interface import Controller, DaqSample
 from twin.log import THESIS_FIELDS, TRUTH_FIELDS, RunLog
 from twin.output_stage import amplifier_volts, motor_volts
@@ -128,19 +136,8 @@ class ScalarControllers:
     def update(self, samples: BatchSamples) -> np.ndarray:
         out = np.empty(len(self.controllers))
         for i, c in enumerate(self.controllers):
-            try:
-                command = c.update(
-                    DaqSample(samples.time_s, float(samples.ball_v[i]), float(samples.angle_v[i]))
-                )
-            except Exception as exc:  # noqa: BLE001
-                raise ControllerError(
-                    f"{c.name}.update raised {type(exc).__name__} (run {i}, t = {samples.time_s:.3f} s): {exc}"
-                ) from exc
-            if isinstance(command, bool) or not isinstance(command, (int, float, np.floating, np.integer)):
-                raise ControllerError(
-                    f"{c.name}.update returned {command!r} (run {i}, t = {samples.time_s:.3f} s): expected the "
-                    f"DAC command in volts"
-                )
+            sample = DaqSample(samples.time_s, float(samples.ball_v[i]), float(samples.angle_v[i]))
+            command = checked_update(c, sample, f"(run {i}, t = {samples.time_s:.3f} s)")
             out[i] = float(command)
         self._collect()
         return out

@@ -77,6 +77,24 @@ class ControllerError(RuntimeError):
     """A controller raised or returned something the I/O card cannot output; the message names the tick."""
 
 
+def checked_update(controller: Controller, sample: DaqSample, where: str) -> float:
+    """``controller.update(sample)`` as a DAC command in volts; a ``ControllerError`` naming the controller
+    and ``where`` (the tick, the run) if it raises or returns anything but a finite number."""
+    try:
+        command = controller.update(sample)
+    except Exception as exc:  # noqa: BLE001 - a user's controller may raise anything: report, do not crash
+        raise ControllerError(f"{controller.name}.update raised {type(exc).__name__} {where}: {exc}") from exc
+    if isinstance(command, bool) or not isinstance(command, (int, float, np.floating, np.integer)):
+        raise ControllerError(
+            f"{controller.name}.update returned {command!r} {where}: expected the DAC command in volts"
+        )
+    if not math.isfinite(command):
+        raise ControllerError(
+            f"{controller.name}.update returned {command!r} {where}: the DAC command must be a finite number of volts"
+        )
+    return float(command)
+
+
 class RunResult:
     """One run's verdict and, when it was recorded, its log (``twin.batch.run_batch`` may keep verdicts only)."""
 
@@ -223,24 +241,12 @@ class ClosedLoop:
             command = rig.command_v
         else:
             sample = rig.read()
-            try:
-                command = self.controller.update(sample)  # type: ignore[union-attr]
-            except Exception as exc:  # noqa: BLE001 - report which controller and tick, do not crash
-                raise ControllerError(
-                    f"{self.name}.update raised {type(exc).__name__} at tick k = {rig.ticks} "
-                    f"(t = {sample.time_s:.3f} s): {exc}"
-                ) from exc
-            if isinstance(command, bool) or not isinstance(command, (int, float, np.floating, np.integer)):
-                raise ControllerError(
-                    f"{self.name}.update returned {command!r} at tick k = {rig.ticks} (t = {sample.time_s:.3f} s): "
-                    f"expected the DAC command in volts"
-                )
-            if not math.isfinite(command):
-                raise ControllerError(
-                    f"{self.name}.update returned {command!r} at tick k = {rig.ticks} (t = {sample.time_s:.3f} s): "
-                    f"the DAC command must be a finite number of volts"
-                )
-            rig.write(float(command))
+            command = checked_update(
+                self.controller,  # type: ignore[arg-type]
+                sample,
+                f"at tick k = {rig.ticks} (t = {sample.time_s:.3f} s)",
+            )
+            rig.write(command)
         self.last_sample = sample
         self.command_v = float(command)
         if self.recorder is not None and self.recording:
