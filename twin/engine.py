@@ -119,34 +119,39 @@ class RunResult:
         )
 
 
+_COLUMNS = tuple(name for name in THESIS_FIELDS + TRUTH_FIELDS if name != "ball_lost")
+_ESTIMATE = slice(_COLUMNS.index("x1"), _COLUMNS.index("x4") + 1)
+_TRUE_STATE = slice(_COLUMNS.index("true_x_m"), _COLUMNS.index("true_thetadot_rad_s") + 1)
+
+
 class _Recorder:
-    """The log's columns, grown in place (one row per tick)."""
+    """The log's columns, grown in place (one row per tick, written in a few assignments: per tick, the
+    cost is the number of numpy calls). ``cols`` are views of the table's columns."""
 
     def __init__(self, capacity: int) -> None:
         self.n = 0
-        self.cols = {name: np.zeros(capacity) for name in THESIS_FIELDS + TRUTH_FIELDS if name != "ball_lost"}
+        self.table = np.zeros((capacity, len(_COLUMNS)))
+        self.cols = {name: self.table[:, j] for j, name in enumerate(_COLUMNS)}
         self.lost = np.zeros(capacity, dtype=bool)
         self.peak_theta = np.zeros(capacity)
 
     def _grow(self) -> None:
-        for name, col in self.cols.items():
-            self.cols[name] = np.concatenate([col, np.zeros_like(col)])
+        self.table = np.concatenate([self.table, np.zeros_like(self.table)])
+        self.cols = {name: self.table[:, j] for j, name in enumerate(_COLUMNS)}
         self.lost = np.concatenate([self.lost, np.zeros_like(self.lost)])
         self.peak_theta = np.concatenate([self.peak_theta, np.zeros_like(self.peak_theta)])
 
     def add(self, sample: DaqSample, command_v: float, tel: Telemetry, rig: SimRig) -> None:
         if self.n == len(self.lost):
             self._grow()
-        k, c = self.n, self.cols
-        c["timem"][k], c["datam1"][k], c["datam2"][k] = sample.time_s, sample.ball_v, sample.angle_v
-        c["aout"][k] = command_v
-        c["x1"][k], c["x2"][k], c["x3"][k], c["x4"][k] = tel.estimate
-        c["u"][k], c["uhesap"][k] = tel.u, tel.u_computed
-        c["true_time_s"][k] = rig.time_s
-        (c["true_x_m"][k], c["true_theta_rad"][k], c["true_xdot_m_s"][k], c["true_thetadot_rad_s"][k]) = (
-            rig.true_state()
-        )
-        c["motor_volts_v"][k] = rig.motor_volts_v
+        k = self.n
+        row = self.table[k]
+        # timem, datam1, datam2, aout, x1…x4, u, uhesap, true_time_s, true state, motor_volts_v (_COLUMNS)
+        row[:4] = (sample.time_s, sample.ball_v, sample.angle_v, command_v)
+        row[_ESTIMATE] = tel.estimate
+        row[8:11] = (tel.u, tel.u_computed, rig.time_s)
+        row[_TRUE_STATE] = rig.true_state()
+        row[-1] = rig.motor_volts_v
         self.lost[k] = rig.ball_lost
         block = rig.last_block
         if block is not None:

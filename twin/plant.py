@@ -386,9 +386,8 @@ class Plant:
         ball centre's world position (``ball_xyz[..., 0:3]``) at each step: elementwise, so the rows of a
         batch of runs (``twin.batch``) give the same bits as a run alone."""
         c, s = np.cos(theta_rad), np.sin(theta_rad)
-        dx = ball_xyz[..., 0] - self._pivot[0]
-        dy = ball_xyz[..., 1] - self._pivot[1]
-        dz = ball_xyz[..., 2] - self._pivot[2]
+        d = ball_xyz[..., 0:3] - self._pivot_m  # one subtraction for the three coordinates: the same bits
+        dx, dy, dz = d[..., 0], d[..., 1], d[..., 2]
         along = c * dx + s * dz
         height = -s * dx + c * dz
         on = (

@@ -298,8 +298,8 @@ class SimRig(Rig):
         if self.ideal_sensors:
             ball_v, angle_v = self._ideal.read_v(float(block.x_m[-1]), float(block.theta_rad[-1]))
         else:
-            angle_v = self._angle.read_v(block.time_s, block.theta_rad)
-            ball_v = self._ball.advance(block.time_s, block.x_m, block.on_track)
+            angle_v = self._angle.read_block_v(block.time_s, block.theta_rad)
+            ball_v = self._ball.advance_block(block.time_s, block.x_m, block.on_track)
         self._next_end_step = end + self._steps_per_tick
         self._ticks += 1
         return DaqSample(time_s=block_time_s(t_start, p.daq), ball_v=ball_v, angle_v=angle_v)

@@ -325,6 +325,8 @@ class AngleChain:
         self.params = params
         self.step_rad = angle_count_step_rad(params)
         self.last_reading_v: float | None = None
+        self._levels = _level_table(params.angle_sensor, params.daq)
+        self._zero_count = int(params.angle_sensor.counter_zero_count)
 
     def counter_value(self, theta_rad: float | np.ndarray) -> int | np.ndarray:
         return counter_value(theta_rad, self.params)
@@ -336,6 +338,20 @@ class AngleChain:
     def read_v(self, times_s: np.ndarray, theta_rad: np.ndarray) -> float:
         """The block-mean ADC volts for one block (see ``angle_block_mean_v``)."""
         self.last_reading_v = angle_block_mean_v(times_s, theta_rad, self.params)
+        return self.last_reading_v
+
+    def read_block_v(self, times_s: np.ndarray, theta_rad: np.ndarray) -> float:
+        """``read_v`` for a block the rig built (finite, increasing times covering the block): a block whose
+        count is the same at every knot (a still or slow beam, most blocks) reads that level from u's
+        extremes, as ``_block_mean`` does from every knot (floor is monotonic: the same level, the same bits),
+        without the per-knot Python; any other block goes through ``read_v``."""
+        sensor = self.params.angle_sensor
+        u = (theta_rad - sensor.zeroing_error_rad) / self.step_rad + 0.5
+        lo, hi = float(u.min()), float(u.max())
+        if not (math.isfinite(lo) and math.isfinite(hi)) or math.floor(lo) != math.floor(hi):
+            return self.read_v(times_s, theta_rad)
+        levels = self._levels
+        self.last_reading_v = levels[(self._zero_count + math.floor(lo)) % len(levels)]
         return self.last_reading_v
 
 
@@ -416,6 +432,7 @@ class BallPositionChain:
         self.filtered_v = self.wiper_v
         self.reading_v = float(adc_quantize_v(self.filtered_v, self.params.daq))
         self._dropouts: list[tuple[float, float]] = []
+        self._busy_until_s = -math.inf  # the latest end of a dropout so far
         self._first_open = 0
         self._forgotten = 0  # dropouts over and dropped from the history (it stays bounded in long sessions)
         self._next_start_s = (
@@ -452,7 +469,45 @@ class BallPositionChain:
         while self._next_start_s <= t_end:
             start = self._next_start_s
             self._dropouts.append((start, start + self._rng.exponential(mean_s)))
+            self._busy_until_s = max(self._busy_until_s, self._dropouts[-1][1])
             self._next_start_s = start + self._rng.exponential(1.0 / rate)
+
+    def _forget_finished(self, t0: float) -> None:
+        """Move past the dropouts over by ``t0``; forget the oldest once there are twice the history's."""
+        while self._first_open < len(self._dropouts) and self._dropouts[self._first_open][1] <= t0:
+            self._first_open += 1
+        if self._first_open > 2 * DROPOUT_HISTORY:
+            forget = self._first_open - DROPOUT_HISTORY
+            del self._dropouts[:forget]
+            self._first_open -= forget
+            self._forgotten += forget
+
+    def advance_block(self, times_s: np.ndarray, x_m: np.ndarray, in_contact: np.ndarray) -> float:
+        """``advance`` for a block the rig built (finite, increasing times from the chain's time, one contact
+        flag per time). The common block (no dropout in it, no table point or track end crossed, in contact
+        throughout) is filtered directly: ``advance`` would add no knots to it and take the same steps, so
+        the same bits (``BallChainBatch`` relies on the same fact); any other block goes through
+        ``advance``."""
+        t0, t_end = float(times_s[0]), float(times_s[-1])
+        if self._next_start_s > t_end and self._busy_until_s <= t0 and in_contact.all():
+            lo, hi = float(x_m.min()), float(x_m.max())
+            half = self.params.track.half_length_m
+            # Within the track at both extremes: every midpoint is too. One segment between breakpoints:
+            # searchsorted is monotonic, so the extremes' segments bound every knot's.
+            bp = self._breakpoints_m
+            if -half <= lo and hi <= half and np.searchsorted(bp, lo) == np.searchsorted(bp, hi):
+                self._forget_finished(t0)
+                vk = np.interp(x_m, self._curve_x, self._curve_v)
+                end = rc_filter_end_v(
+                    times_s, vk[None, :-1], vk[None, 1:], np.array([self.filtered_v]), self.tau_s
+                )
+                y = float(end[0])
+                self.filtered_v = y
+                self.wiper_v = float(vk[-1])
+                self.time_s = t_end
+                self.reading_v = float(adc_quantize_v(y, self.params.daq))
+                return self.reading_v
+        return self.advance(times_s, x_m, in_contact)
 
     def advance(self, times_s: np.ndarray, x_m: np.ndarray, in_contact: bool | np.ndarray = True) -> float:
         """Advance over one block and return the ADC reading of the ball channel at its end.
@@ -476,13 +531,7 @@ class BallPositionChain:
             )
         t0, t_end = float(t[0]), float(t[-1])
         self._schedule_until(t_end)
-        while self._first_open < len(self._dropouts) and self._dropouts[self._first_open][1] <= t0:
-            self._first_open += 1
-        if self._first_open > 2 * DROPOUT_HISTORY:  # forget the oldest finished ones
-            forget = self._first_open - DROPOUT_HISTORY
-            del self._dropouts[:forget]
-            self._first_open -= forget
-            self._forgotten += forget
+        self._forget_finished(t0)
         drops = [d for d in self._dropouts[self._first_open :] if d[1] > t0]
 
         # Extra breakpoints: where x crosses a table point or a track end (the wiper's slope or contact
