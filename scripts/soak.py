@@ -95,9 +95,11 @@ def main() -> None:
 
     def click(control: str) -> None:
         uuid = viewer.controls[control]._impl.uuid
-        ws.send(
-            msgspec.msgpack.encode({"type": "GuiUpdateMessage", "uuid": uuid, "updates": {"value": True}})
-        )
+        message = {"type": "GuiUpdateMessage", "uuid": uuid, "updates": {"value": True}}
+        try:
+            ws.send(msgspec.msgpack.encode(message))
+        except websockets.exceptions.ConnectionClosed:  # the server stopped at the end of the soak
+            pass
 
     live = viewer.live
     start = time.perf_counter()
@@ -106,7 +108,7 @@ def main() -> None:
     while server.is_alive():
         time.sleep(1.0)
         elapsed = time.perf_counter() - start
-        if elapsed >= 60 * (minute + 1):
+        if elapsed >= 60 * (minute + 1) and server.is_alive():
             minute += 1
             click("reset" if minute % 10 == 0 else "flick_right")
         if not samples or elapsed >= samples[-1]["wall_s"] + 300 or not server.is_alive():
