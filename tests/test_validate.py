@@ -89,3 +89,26 @@ def test_the_exit_code_is_the_verdict(tmp_path: Path, capsys: pytest.CaptureFixt
     assert saturation["passed"] == (saturation["measured"] == "at most 0.0 %")
     assert (out / "report.md").read_text().startswith("# Validation of `appendix-sf`")
     assert json.loads((out / "validation.json").read_text()) == data
+
+
+def test_ctrl_c_keeps_the_checks_done(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys) -> None:
+    import twin.app.fanout as fanout
+
+    criteria = tmp_path / "criteria.toml"
+    criteria.write_text(QUICK_TOML)
+    real, calls = fanout.run_chunk, []
+
+    def interrupted(chunk):
+        calls.append(chunk)
+        if len(calls) == 2:  # the nominal runs are done; Ctrl-C during the region
+            raise KeyboardInterrupt
+        return real(chunk)
+
+    monkeypatch.setattr(fanout, "run_chunk", interrupted)
+    out = tmp_path / "report"
+    code = main(["validate", "--controller", "appendix-sf", "--criteria", str(criteria), "--out", str(out)])
+    assert code == 130 and "interrupted" in capsys.readouterr().err
+    data = json.loads((out / "validation.json").read_text())
+    assert not data["complete"] and not data["passed"]
+    assert [c["name"] for c in data["checks"]] == ["nominal", "saturation"]
+    assert "interrupted" in (out / "report.md").read_text()

@@ -487,6 +487,9 @@ def _cmd_validate(args: argparse.Namespace) -> int:
         print(f"{args.controller}: {'PASS' if report.passed else 'FAIL'} ({report.wall_s:.0f} s)")
         if args.out is not None:
             print(f"wrote {Path(args.out) / 'report.md'}")
+    if not report.complete:
+        print("ballbeam validate: interrupted: the checks done so far are reported", file=sys.stderr)
+        return 130
     return 0 if report.passed else 1
 
 
@@ -938,6 +941,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         return int(args.func(args))
     except BrokenPipeError:  # output piped into e.g. head
         return 0
+    except KeyboardInterrupt:  # Ctrl-C outside the long jobs (which keep what they did and return 130)
+        print("ballbeam: interrupted", file=sys.stderr)
+        return 130
     except (ValueError, OSError) as exc:  # bad input, or an output that cannot be written: no traceback
         print(f"ballbeam: error: {one_line(exc)}", file=sys.stderr)
         return 2

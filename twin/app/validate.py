@@ -111,15 +111,17 @@ class ValidationReport:
     region: SweepResult | None
     wall_s: float
     criteria: ValidationCriteria
+    complete: bool = True  # False: interrupted (Ctrl-C); the checks done so far
 
     @property
     def passed(self) -> bool:
-        return all(c.passed is not False for c in self.checks)
+        return self.complete and all(c.passed is not False for c in self.checks)
 
     def to_json(self) -> dict[str, Any]:
         return {
             "controller": self.controller,
             "passed": self.passed,
+            "complete": self.complete,
             "criteria": asdict(self.criteria),
             "checks": [asdict(c) for c in self.checks],
             "wall_s": round(self.wall_s, 1),
@@ -150,7 +152,9 @@ def validate(
     starts = [*T.CHAPTER4_STARTS, *T.HARDWARE_STARTS.values()]
     grid = np.array([s for s in starts for _ in range(c.nominal_seeds)], dtype=float)
     seeds = point_seeds(seed, len(grid))
-    records, _ = run_starts(runs, grid, seeds, workers=workers, progress=progress)
+    records, complete = run_starts(runs, grid, seeds, workers=workers, progress=progress)
+    if not complete:
+        return ValidationReport(controller, checks, None, time.perf_counter() - started, c, complete=False)
     held, n = _runs_held(records)
     checks.append(
         Check(
@@ -181,6 +185,8 @@ def validate(
         seed=seed,
     )
     region = run_sweep(settings, params, workers=workers, progress=progress)
+    if not region.complete:
+        return ValidationReport(controller, checks, None, time.perf_counter() - started, c, complete=False)
     (xlo, xhi), (tlo, thi) = c.required_x0_m, c.required_theta0_rad
     inside = [p for p in region.points if p and xlo <= p["x0_m"] <= xhi and tlo <= p["theta0_rad"] <= thi]
     lost_inside = [(p["x0_m"], p["theta0_rad"]) for p in inside if p["ball_lost"]]
@@ -220,9 +226,11 @@ def validate(
             per_run.append(p)
             labels.append((name, label, start))
     grid = np.array([start for _, _, start in labels], dtype=float)
-    records, _ = run_starts(
+    records, complete = run_starts(
         runs, grid, point_seeds(seed + 1, len(grid)), params=per_run, workers=workers, progress=progress
     )
+    if not complete:
+        return ValidationReport(controller, checks, region, time.perf_counter() - started, c, complete=False)
     by_param: dict[str, list[tuple[str, dict[str, Any]]]] = {}
     for (name, label, _), record in zip(labels, records, strict=True):
         if record:
@@ -264,6 +272,10 @@ def validate(
             workers=workers,
             progress=progress,
         )
+        if not mc.complete:
+            return ValidationReport(
+                controller, checks, region, time.perf_counter() - started, c, complete=False
+            )
         s = mc.summary
         checks.append(
             Check(
@@ -295,15 +307,19 @@ def render_markdown(report: ValidationReport) -> str:
     lines = [
         f"# Validation of `{report.controller}`",
         "",
-        f"**Verdict: {'PASS' if report.passed else 'FAIL'}** ({report.wall_s:.0f} s of computing)",
+        f"**Verdict: {'PASS' if report.passed else 'FAIL'}** ({report.wall_s:.0f} s of computing)"
+        + ("" if report.complete else " — **interrupted**: only the checks below were run"),
         "",
         "| check | result | criterion | measured |",
         "| --- | --- | --- | --- |",
     ]
     for c in report.checks:
         lines.append(f"| {c.name} | {mark[c.passed]} | {c.criterion} | {c.measured} |")
-    lines += ["", "![region of attraction](region.png)", ""]
-    nominal = next(c for c in report.checks if c.name == "nominal")
+    if report.region is not None:
+        lines += ["", "![region of attraction](region.png)", ""]
+    nominal = next((c for c in report.checks if c.name == "nominal"), None)
+    if nominal is None:
+        return "\n".join(lines) + "\n"
     lines += [
         "## Nominal runs",
         "",
