@@ -364,9 +364,7 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     result = run_sweep(
         settings, params, workers=args.workers, scheduler=args.scheduler, progress=_progress_bar("sweep")
     )
-    if args.out is not None:
-        with writing("--out", args.out):
-            write_sweep(result, args.out, overwrite=args.overwrite)
+    _write_out(args, write_sweep, result)
     report = result.to_json()
     if args.json:
         print(json.dumps(report))
@@ -425,9 +423,7 @@ def _cmd_montecarlo(args: argparse.Namespace) -> int:
         scheduler=args.scheduler,
         progress=_progress_bar("montecarlo"),
     )
-    if args.out is not None:
-        with writing("--out", args.out):
-            write_montecarlo(result, args.out, overwrite=args.overwrite)
+    _write_out(args, write_montecarlo, result)
     if args.json:
         print(json.dumps(result.to_json()))
     else:
@@ -475,9 +471,7 @@ def _cmd_validate(args: argparse.Namespace) -> int:
         workers=args.workers,
         progress=_progress_bar("validate"),
     )
-    if args.out is not None:
-        with writing("--out", args.out):
-            write_validation(report, args.out, overwrite=args.overwrite)
+    _write_out(args, write_validation, report)
     if args.json:
         print(json.dumps(report.to_json()))
     else:
@@ -491,6 +485,13 @@ def _cmd_validate(args: argparse.Namespace) -> int:
         print("ballbeam validate: interrupted: the checks done so far are reported", file=sys.stderr)
         return 130
     return 0 if report.passed else 1
+
+
+def _write_out(args: argparse.Namespace, write: Callable[..., Any], result: Any) -> None:
+    """Write a job's result to ``--out`` (checked before the job), an OSError as one line naming it."""
+    if args.out is not None:
+        with writing("--out", args.out):
+            write(result, args.out, overwrite=args.overwrite)
 
 
 def _progress_bar(what: str) -> Callable[[int, int], None]:
@@ -530,9 +531,7 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
             print(f"  {line}", file=sys.stderr, flush=True)
 
     cal = calibrate(logs, fit, start, window_s=args.window, progress=progress)
-    if args.out is not None:
-        with writing("--out", args.out):
-            write_report(cal, args.out, overwrite=args.overwrite)
+    _write_out(args, write_report, cal)
     if args.json:
         print(json.dumps(cal.to_json()))
     else:
