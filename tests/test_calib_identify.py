@@ -142,7 +142,11 @@ def test_cli_calibrate_writes_a_parameter_file_the_twin_loads(tmp_path: Path, ca
     assert main([*args, "--set", "beam.pivot_damping_nm_s_per_rad=0.001"]) == 0
     report = json.loads(capsys.readouterr().out)
     entry = report["params"]["motor.resistance_ohm"]
-    assert set(entry) == {"value", "ci_low", "ci_high", "initial", "unit"}
+    assert set(entry) == {"value", "ci_low", "ci_high", "initial", "sd", "unit"}
+    # The interval is Student's t times the standard uncertainty: wider than the normal 1.96 σ, symmetric.
+    half = (entry["ci_high"] - entry["ci_low"]) / 2
+    assert half / entry["sd"] >= 1.959 and entry["value"] == pytest.approx(entry["ci_low"] + half)
+    assert report["correlation"]["names"] == ["motor.resistance_ohm"]
     assert entry["value"] == pytest.approx(10.0, rel=0.01) and entry["initial"] == 9.4
     assert {p.name for p in out.iterdir()} >= {"params.toml", "calibration.json", "report.md", "fit.png"}
     assert Parameters.from_file(out / "params.toml").motor.resistance_ohm == pytest.approx(entry["value"])
