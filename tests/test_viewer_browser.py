@@ -218,9 +218,16 @@ def test_a_control_engineers_view(view: int, tmp_path: Path) -> None:
         _number_input(page, 2, "0.7")
         page.wait_for_function("() => document.body.innerText.includes('apply on Reset')", timeout=30000)
         page.get_by_role("button", name="Reset").click()
-        alert = page.get_by_role("alert").filter(has_text="Ball lost at t =")
-        alert.wait_for(timeout=30000)
-        assert "Press Reset to start again" in alert.inner_text()
+        # Two alerts: the banner atop the panel and a notification that stays while the ball is lost (the
+        # banner may be scrolled out of sight).
+        alerts = page.get_by_role("alert").filter(has_text="Ball lost at t =")
+        alerts.first.wait_for(timeout=30000)
+        page.wait_for_function(
+            "() => [...document.querySelectorAll('[role=alert]')].filter(e => e.innerText.includes('Ball lost at t ='))"
+            ".length === 2",
+            timeout=30000,
+        )
+        assert all("Press Reset to start again" in text for text in alerts.all_inner_texts())
         assert "paused" in _page_text(page)
         lost_at = _sim_time(page)
         time.sleep(1.0)

@@ -623,20 +623,27 @@ class LiveTwin:
             return ""
         return f" (achieved ×{achieved:.2f}: this computer cannot keep up)"
 
-    def lost_banner_html(self) -> str:
-        """The banner shown while the ball is off the track (empty otherwise)."""
+    def lost_text(self) -> str:
+        """What a person must know while the ball is off the track (empty otherwise)."""
         if not self.rig.ball_lost:
             return ""
         verdict = self.verdict()
         x = float(self.rig.true_state()[0])
         where = f" at x = {x:+.3f} m" if math.isfinite(x) else ""
-        text = (
+        return (
             f"Ball lost at t = {self.rig.ball_lost_time_s:.2f} s: it left the track{where}. The run is paused "
             f"({verdict_text(verdict, self.setpoint_m) if verdict is not None else 'no verdict'}). "
             "Press Reset to start again."
         )
+
+    def lost_banner_html(self) -> str:
+        """The banner shown while the ball is off the track (empty otherwise)."""
+        text = self.lost_text()
+        if not text:
+            return ""
         return (
-            '<div role="alert" style="background:#c92a2a;color:#fff;padding:8px 10px;border-radius:6px;'
+            '<div role="alert" style="box-sizing:border-box;background:#c92a2a;color:#fff;padding:8px 10px;'
+            "border-radius:6px;"
             f'font-weight:600;font-size:0.9em">{html.escape(text)}</div>'
         )
 
@@ -1019,6 +1026,8 @@ class Viewer:
         self._last_notify = -math.inf
         self._notified_error: str | None = None
         self._last_loop_error = ""
+        self._lost_run: int | None = None  # the run whose lost ball is notified
+        self._lost_notices: list[Any] = []
 
     def _refused_connection(self, reason: str) -> None:
         self.refused_connections += 1
@@ -1256,10 +1265,21 @@ class Viewer:
         if live.error is not None and live.error != self._notified_error:
             self._notify("Run failed", live.error, "orange")
         self._notified_error = live.error
+        # A lost ball stays on screen (the banner may be scrolled away) until the run it belongs to ends.
+        lost = live.runs if live.rig.ball_lost else None
+        if lost != self._lost_run:
+            for handle in self._lost_notices:
+                handle.remove()
+            self._lost_notices = []
+            if lost is not None:
+                self._lost_notices = self._notify("Ball lost", live.lost_text(), "red", seconds=None)
+            self._lost_run = lost
 
-    def _notify(self, title: str, body: str, color: Any) -> None:
-        for client in self.server.get_clients().values():
-            client.add_notification(title, body, auto_close_seconds=8.0, color=color)
+    def _notify(self, title: str, body: str, color: Any, seconds: float | None = 8.0) -> list[Any]:
+        return [
+            client.add_notification(title, body, auto_close_seconds=seconds, color=color)
+            for client in self.server.get_clients().values()
+        ]
 
     def publish(self) -> None:
         """Send one frame: body poses (and every tenth frame the plots and status), as one batch."""
