@@ -178,6 +178,11 @@ class Calibration:
     ci_inflation: float
     traces: dict[str, np.ndarray] = field(default_factory=dict)
 
+    @property
+    def correlation_names(self) -> list[str]:
+        """The values ``correlation`` is over: the smooth fit's (the dropout rate is estimated apart)."""
+        return [name for name in self.values if name != DROPOUT]
+
     def to_json(self) -> dict[str, object]:
         return {
             "params": {
@@ -192,7 +197,7 @@ class Calibration:
                 for name, v in self.values.items()
             },
             "correlation": {
-                "names": [name for name in self.values if name != DROPOUT],  # the fitted (smooth) ones
+                "names": self.correlation_names,
                 "matrix": np.round(self.correlation, 4).tolist(),
             },
             "rms_residual": {

@@ -76,7 +76,7 @@ def _figures(cal: Calibration, out: Path) -> None:
     fig.savefig(out / "residuals.png", dpi=100)
     plt.close(fig)
 
-    names = list(cal.values)
+    names = cal.correlation_names
     if names:
         fig, ax = plt.subplots(figsize=(1.2 + 0.9 * len(names), 1.0 + 0.8 * len(names)))
         im = ax.imshow(cal.correlation, vmin=-1, vmax=1, cmap="RdBu_r")

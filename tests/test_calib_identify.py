@@ -138,7 +138,10 @@ def test_cli_calibrate_writes_a_parameter_file_the_twin_loads(tmp_path: Path, ca
         log,
     )
     out = tmp_path / "cal"
-    args = ["calibrate", str(log), "--fit", "motor.resistance_ohm", "--out", str(out), "--json"]
+    fit = (
+        "motor.resistance_ohm,ball_sensor.dropout_rate_hz"  # the rate is estimated apart from the smooth fit
+    )
+    args = ["calibrate", str(log), "--fit", fit, "--out", str(out), "--json"]
     assert main([*args, "--set", "beam.pivot_damping_nm_s_per_rad=0.001"]) == 0
     report = json.loads(capsys.readouterr().out)
     entry = report["params"]["motor.resistance_ohm"]
@@ -148,7 +151,13 @@ def test_cli_calibrate_writes_a_parameter_file_the_twin_loads(tmp_path: Path, ca
     assert half / entry["sd"] >= 1.959 and entry["value"] == pytest.approx(entry["ci_low"] + half)
     assert report["correlation"]["names"] == ["motor.resistance_ohm"]
     assert entry["value"] == pytest.approx(10.0, rel=0.01) and entry["initial"] == 9.4
-    assert {p.name for p in out.iterdir()} >= {"params.toml", "calibration.json", "report.md", "fit.png"}
+    assert {p.name for p in out.iterdir()} >= {
+        "params.toml",
+        "calibration.json",
+        "report.md",
+        "fit.png",
+        "correlation.png",
+    }
     assert Parameters.from_file(out / "params.toml").motor.resistance_ohm == pytest.approx(entry["value"])
     # An existing output is not overwritten; nothing is computed for it.
     before = (out / "calibration.json").read_bytes()
