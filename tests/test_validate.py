@@ -112,3 +112,13 @@ def test_ctrl_c_keeps_the_checks_done(tmp_path: Path, monkeypatch: pytest.Monkey
     assert not data["complete"] and not data["passed"]
     assert [c["name"] for c in data["checks"]] == ["nominal", "saturation"]
     assert "interrupted" in (out / "report.md").read_text()
+
+
+def test_the_progress_bar_restarts_for_each_stage(capsys: pytest.CaptureFixture[str]) -> None:
+    from twin.app.cli import _progress_bar
+
+    update = _progress_bar("validate")
+    for done, total in [(0, 3), (2, 3), (3, 3), (0, 5), (5, 5), (0, 5), (4, 5)]:
+        update(done, total)
+    err = capsys.readouterr().err
+    assert "3/3" in err and "5/5" in err and "4/5" in err

@@ -495,15 +495,19 @@ def _write_out(args: argparse.Namespace, write: Callable[..., Any], result: Any)
 
 
 def _progress_bar(what: str) -> Callable[[int, int], None]:
-    """A progress bar with ETA on stderr (tqdm), advanced by ``(done, total)`` calls."""
+    """A progress bar with ETA on stderr (tqdm), advanced by ``(done, total)`` calls; a job of several
+    stages (validate) gets a bar per stage."""
     from tqdm import tqdm
 
     bar: list[Any] = []
 
     def update(done: int, total: int) -> None:
-        if not bar:
+        if not bar or bar[0].total != total or done < bar[0].n:
+            if bar:
+                bar.pop().close()
             bar.append(tqdm(total=total, desc=what, unit="run", file=sys.stderr, dynamic_ncols=True))
-        bar[0].update(done - bar[0].n)
+        if done > bar[0].n:
+            bar[0].update(done - bar[0].n)
         if done >= total:
             bar[0].close()
 

@@ -204,6 +204,8 @@ def run_starts(
     results: list[dict[str, Any] | None] = [None] * n
     source = _dask(chunks, scheduler) if scheduler else _local(chunks, workers)
     done = 0
+    if progress is not None:
+        progress(0, n)  # the bar (and its clock for the ETA) starts with the job
     try:
         for lo, records in source:
             results[lo : lo + len(records)] = records
