@@ -121,4 +121,5 @@ def test_the_progress_bar_restarts_for_each_stage(capsys: pytest.CaptureFixture[
     for done, total in [(0, 3), (2, 3), (3, 3), (0, 5), (5, 5), (0, 5), (4, 5)]:
         update(done, total)
     err = capsys.readouterr().err
-    assert "3/3" in err and "5/5" in err and "4/5" in err
+    assert "3/3" in err and "5/5" in err  # each finished stage's bar is drawn full
+    assert err.count(" 0/3 ") == 1 and err.count(" 0/5 ") == 2  # a new bar for each stage, from zero
