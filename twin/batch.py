@@ -35,7 +35,9 @@ from twin.engine import (
     ControllerError,
     RunResult,
     StateLaw,
+    checked_start,
     checked_update,
+    judge,
     run_closed_loop,
     update_ticks,
 )
@@ -46,7 +48,7 @@ from twin.parameters import Parameters
 from twin.plant import Plant
 from twin.rig import PlantKind, RigError, whole_steps
 from twin.sensors import BallChainBatch, angle_block_means_v
-from twin.verdict import Criteria, evaluate
+from twin.verdict import Criteria
 
 __all__ = [
     "BatchCatalogue",
@@ -127,18 +129,15 @@ class ScalarControllers:
 
     def start(self, samples: BatchSamples) -> None:
         for i, c in enumerate(self.controllers):
-            try:
-                c.start(DaqSample(samples.time_s, float(samples.ball_v[i]), float(samples.angle_v[i])))
-            except Exception as exc:  # noqa: BLE001 - a user's controller may raise anything: report it
-                raise ControllerError(f"{c.name}.start raised {type(exc).__name__} (run {i}): {exc}") from exc
+            sample = DaqSample(samples.time_s, float(samples.ball_v[i]), float(samples.angle_v[i]))
+            checked_start(c, sample, f"(run {i})")
         self._collect()
 
     def update(self, samples: BatchSamples) -> np.ndarray:
         out = np.empty(len(self.controllers))
         for i, c in enumerate(self.controllers):
             sample = DaqSample(samples.time_s, float(samples.ball_v[i]), float(samples.angle_v[i]))
-            command = checked_update(c, sample, f"(run {i}, t = {samples.time_s:.3f} s)")
-            out[i] = float(command)
+            out[i] = checked_update(c, sample, f"(run {i}, t = {samples.time_s:.3f} s)")
         self._collect()
         return out
 
@@ -568,17 +567,16 @@ class _Group:
         return [self._result(i, int(rows_done[i]), cols, controller.name, criteria) for i in range(self.n)]
 
     def _result(self, i: int, n: int, cols: _Columns, name: str, criteria: Criteria | None) -> RunResult:
-        c, p = cols.cols, self.p
-        verdict = evaluate(
+        c = cols.cols
+        verdict = judge(
+            self.p,
             c["true_time_s"][:n, i],
-            c["true_x_m"][:n, i] - 0.0,  # as ClosedLoop.verdict with no setpoint
+            c["true_x_m"][:n, i],
             c["true_theta_rad"][:n, i],
             c["motor_volts_v"][:n, i],
             cols.peak_theta[:n, i],
-            x0_m=float(self.x0[i]) - 0.0,
+            x0_m=float(self.x0[i]),
             ball_lost_time_s=self.lost_time_s[i],
-            rail_v=p.amplifier.rail_v,
-            stop_angle_rad=p.beam.stop_angle_rad,
             criteria=criteria,
         )
         log = None

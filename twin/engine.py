@@ -77,6 +77,16 @@ class ControllerError(RuntimeError):
     """A controller raised or returned something the I/O card cannot output; the message names the tick."""
 
 
+def checked_start(controller: Controller, sample: DaqSample, where: str = "") -> None:
+    """``controller.start(sample)``; a ``ControllerError`` naming the controller (and ``where``: the run)
+    if it raises."""
+    try:
+        controller.start(sample)
+    except Exception as exc:  # noqa: BLE001 - a user's controller may raise anything: report, do not crash
+        place = f" {where}" if where else ""
+        raise ControllerError(f"{controller.name}.start raised {type(exc).__name__}{place}: {exc}") from exc
+
+
 def checked_update(controller: Controller, sample: DaqSample, where: str) -> float:
     """``controller.update(sample)`` as a DAC command in volts; a ``ControllerError`` naming the controller
     and ``where`` (the tick, the run) if it raises or returns anything but a finite number."""
@@ -220,13 +230,13 @@ class ClosedLoop:
     def start(self) -> None:
         """The software's Start/Clear Buffer phase: the held rig's block starts the controller."""
         sample = self.rig.read()
-        try:
-            if self.is_state_law:
+        if self.is_state_law:
+            try:
                 self.controller.reset()  # type: ignore[union-attr]
-            else:
-                self.controller.start(sample)  # type: ignore[union-attr]
-        except Exception as exc:  # noqa: BLE001 - a user's controller may raise anything: report, do not crash
-            raise ControllerError(f"{self.name}.start raised {type(exc).__name__}: {exc}") from exc
+            except Exception as exc:  # noqa: BLE001 - report, do not crash
+                raise ControllerError(f"{self.name}.start raised {type(exc).__name__}: {exc}") from exc
+        else:
+            checked_start(self.controller, sample)  # type: ignore[arg-type]
         self.last_sample = sample
         self.started = True
         if self.recorder is not None and self.recording:
@@ -278,20 +288,48 @@ class ClosedLoop:
         ``x_ref_m`` (a setpoint; the offsets and the settling band are measured from it)."""
         if self.recorder is None:
             raise RuntimeError("this closed loop was built with record=False")
-        r, p = self.recorder, self.rig.params
-        n = r.n
-        return evaluate(
+        r, n = self.recorder, self.recorder.n
+        return judge(
+            self.rig.params,
             r.cols["true_time_s"][:n],
-            r.cols["true_x_m"][:n] - x_ref_m,
+            r.cols["true_x_m"][:n],
             r.cols["true_theta_rad"][:n],
             r.cols["motor_volts_v"][:n],
             r.peak_theta[:n],
-            x0_m=x0_m - x_ref_m,
+            x0_m=x0_m,
             ball_lost_time_s=self.rig.ball_lost_time_s,
-            rail_v=p.amplifier.rail_v,
-            stop_angle_rad=p.beam.stop_angle_rad,
             criteria=criteria,
+            x_ref_m=x_ref_m,
         )
+
+
+def judge(
+    params: Parameters,
+    t_s: np.ndarray,
+    x_m: np.ndarray,
+    theta_rad: np.ndarray,
+    motor_volts_v: np.ndarray,
+    peak_abs_theta_rad: np.ndarray,
+    *,
+    x0_m: float,
+    ball_lost_time_s: float | None,
+    criteria: Criteria | None = None,
+    x_ref_m: float = 0.0,
+) -> Verdict:
+    """A run's verdict from its recorded ticks on the rig of ``params`` (its rails and stops), judged about
+    the ball position ``x_ref_m``: the single run's and the batch's one call of ``twin.verdict.evaluate``."""
+    return evaluate(
+        t_s,
+        x_m - x_ref_m,
+        theta_rad,
+        motor_volts_v,
+        peak_abs_theta_rad,
+        x0_m=x0_m - x_ref_m,
+        ball_lost_time_s=ball_lost_time_s,
+        rail_v=params.amplifier.rail_v,
+        stop_angle_rad=params.beam.stop_angle_rad,
+        criteria=criteria,
+    )
 
 
 def update_ticks(duration_s: float, params: Parameters) -> int:
