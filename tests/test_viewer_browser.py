@@ -243,6 +243,8 @@ def test_a_control_engineers_view(view: int, tmp_path: Path) -> None:
         page.get_by_role("button", name="Reset").click()
         page.wait_for_function("() => document.body.innerText.includes('ball on the beam')", timeout=30000)
         assert "apply on Reset" not in _page_text(page)
+        # Banner and notification both go (the notification leaves with a short animation: wait for it).
+        page.get_by_role("alert").filter(has_text="Ball lost").first.wait_for(state="detached", timeout=30000)
         assert page.get_by_role("alert").filter(has_text="Ball lost").count() == 0
         page.wait_for_function(
             "() => { const m = /t = ([0-9.]+) s/.exec(document.body.innerText); return m && parseFloat(m[1]) > 1.5; }",
