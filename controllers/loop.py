@@ -12,7 +12,7 @@ A torque law is turned into motor volts by inverting the motor law (eq 3.3.1, tw
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Literal, Protocol
 
@@ -73,9 +73,11 @@ class MotorInverse:
         )
 
 
-def _volts(law_u: float, x: np.ndarray, u_kind: str, motor: MotorInverse | None, name: str) -> float:
+def _volts(
+    law_u: float, x: np.ndarray | Sequence[float], u_kind: str, motor: MotorInverse | None, name: str
+) -> float:
     if not math.isfinite(law_u):
-        raise FloatingPointError(f"{name}: control law returned {law_u!r} for state {x.tolist()}")
+        raise FloatingPointError(f"{name}: control law returned {law_u!r} for state {np.asarray(x).tolist()}")
     if u_kind == "torque":
         assert motor is not None
         return motor.volts(law_u, float(x[3]))
@@ -162,10 +164,13 @@ class TrueStateLaw:
         self.u_kind = u_kind
         self.motor = motor
         self.period_s = period_s
+        # The laws of controllers.laws also take the state as four Python floats (``of_floats``): no arrays
+        # per physics step. Looked up once: ``law`` is this object's for good.
+        self._of_floats: Callable[..., float] | None = getattr(law, "of_floats", None)
         self.reset()
 
     def reset(self) -> None:
-        self._last: tuple[np.ndarray, float, float] | None = None
+        self._last: tuple[tuple[float, ...], float, float] | None = None
         self._telemetry = Telemetry()
 
     @property
@@ -174,13 +179,20 @@ class TrueStateLaw:
         log reads it once per tick)."""
         if self._last is not None:
             x, u, volts = self._last
-            self._telemetry = Telemetry(x, u, volts)
+            self._telemetry = Telemetry(np.array(x), u, volts)
             self._last = None
         return self._telemetry
 
     def motor_volts(self, state: np.ndarray) -> float:
-        x = np.asarray(state, dtype=float)
-        u = float(self.law(x))
+        return self.motor_volts_of_floats(*np.asarray(state, dtype=float).tolist())
+
+    def motor_volts_of_floats(
+        self, x_m: float, theta_rad: float, xdot_m_s: float, thetadot_rad_s: float
+    ) -> float:
+        """``motor_volts`` on the state as four Python floats (twin.engine passes it so every physics step)."""
+        x = (x_m, theta_rad, xdot_m_s, thetadot_rad_s)
+        of_floats = self._of_floats
+        u = float(of_floats(*x) if of_floats is not None else self.law(np.array(x)))
         volts = _volts(u, x, self.u_kind, self.motor, self.name)
-        self._last = (x.copy(), u, volts)
+        self._last = (x, u, volts)
         return volts

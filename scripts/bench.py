@@ -1,6 +1,6 @@
 """Benchmarks (measured here, never asserted in tests): the twin's costs as ratios to the physical floor.
 
-    python scripts/bench.py [--json] [--repeats 5] [--batch-side 41] [--skip-batch] [--skip-peers]
+    python scripts/bench.py [--json] [--repeats 15] [--batch-side 41] [--skip-batch] [--skip-peers]
                             [--skip-calibration] [--skip-view] [--view-seconds 60]
 
 One run measures, on the same work (a 10 s episode from x0 = 0.2 m, θ0 = 0.3 rad, noise on, seed 0):
@@ -25,8 +25,9 @@ One run measures, on the same work (a 10 s episode from x0 = 0.2 m, θ0 = 0.3 ra
 - view: the live view's tick rate at speed 1.0 over the given wall time (target 50 Hz ± 1 %) and its CPU
   time per tick, headless.
 
-(a) and (b) are the best of ``--repeats`` interleaved repeats, wall time and CPU time (``process_time``, which
-other processes on a shared machine inflate less); compare ratios within one run. Ratios printed: (b)/(a),
+(a) and (b) are the best of ``--repeats`` interleaved repeats (15 by default: the shared machine's bursts of
+load last seconds), wall time and CPU time (``process_time``, which other processes on a shared machine
+inflate less); compare ratios within one run. Ratios printed: (b)/(a),
 (c)/(a, 2 threads), (d)/(b) and (d)/(c per episode).
 """
 
@@ -394,7 +395,7 @@ def ratios(results: dict[str, Any]) -> dict[str, float]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
     parser.add_argument("--json", action="store_true", help="print one JSON object")
-    parser.add_argument("--repeats", type=int, default=5, help="repeats of (a) and (b); the best counts")
+    parser.add_argument("--repeats", type=int, default=15, help="repeats of (a) and (b); the best counts")
     parser.add_argument("--view-seconds", type=float, default=60.0)
     parser.add_argument("--skip-view", action="store_true")
     parser.add_argument("--skip-calibration", action="store_true")

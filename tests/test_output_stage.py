@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from twin.app import measurements
-from twin.output_stage import amplifier_volts, motor_volts
+from twin.output_stage import amplifier_volts, motor_volts, motor_volts_of
 from twin.parameters import Parameters
 
 P = Parameters()
@@ -49,3 +49,15 @@ def test_amplifier_alone():
 def test_non_finite_command_raises_naming_it(bad):
     with pytest.raises(ValueError, match=f"command_v contains {bad!r}"):
         motor_volts(bad, P)
+
+
+def test_the_bound_per_tick_form_equals_motor_volts():
+    """The rig's per-tick form gives motor_volts' bits for every command, in range and beyond both rails,
+    with other amplifier and card constants too, and refuses what motor_volts refuses."""
+    rng = np.random.default_rng(7)
+    commands = np.concatenate([rng.uniform(-1.0, 6.0, 20000), [0.0, 1.25, 2.5, 3.75, 5.0, -0.0]])
+    for params in (P, P.with_overrides({"amplifier.gain_v_per_v": 7.3, "daq.dac_bits": 10})):
+        bound = motor_volts_of(params)
+        assert all(bound(c) == motor_volts(c, params) for c in commands.tolist())
+        with pytest.raises(ValueError, match="finite"):
+            bound(math.nan)

@@ -325,3 +325,36 @@ def test_ball_chain_bad_input():
         chain.advance(KNOTS, np.zeros(21), in_contact=np.ones(3, dtype=bool))
     with pytest.raises(ValueError, match="seed = -1"):
         S.BallPositionChain(P, seed=-1)
+
+
+def test_rig_block_filter_equals_the_piecewise_filter():
+    """The rig's blocks (equal steps, one piece of the curve) take the uniform-step filter plus each dropout's
+    closed-form effect; the piecewise filter of ``advance`` (proven against solve_ivp above) must agree to
+    float rounding, block after block, with dropouts of every kind: inside one step, across steps, several
+    overlapping, covering the block's end."""
+    params = P.with_overrides(
+        {"ball_sensor.dropout_rate_hz": 120.0, "ball_sensor.dropout_mean_duration_s": 1.5e-3}
+    )
+    fast, piecewise = (
+        S.BallPositionChain(params, seed=11, x_m=0.05),
+        S.BallPositionChain(params, seed=11, x_m=0.05),
+    )
+    rng = np.random.default_rng(3)
+    worst, with_dropouts = 0.0, 0
+    for k in range(400):
+        times = 0.02 * k + KNOTS
+        x = 0.05 + 0.004 * np.sin(7 * times + rng.uniform(0, 0.1))  # stays between two table points
+        contact = np.ones(times.size, dtype=bool)
+        reading = fast.advance_rig_block(times, x, contact, True)
+        assert reading == piecewise.advance(times, x, contact)
+        worst = max(worst, abs(fast.filtered_v - piecewise.filtered_v))
+        with_dropouts += any(a < times[-1] and b > times[0] for a, b in fast.dropout_intervals)
+    off = np.zeros(KNOTS.size, dtype=bool)  # then the ball off the track: the wiper open throughout
+    for k in range(400, 450):
+        times = 0.02 * k + KNOTS
+        x = np.full(times.size, 0.4)
+        assert fast.advance_rig_block(times, x, off, True) == piecewise.advance(times, x, off)
+        worst = max(worst, abs(fast.filtered_v - piecewise.filtered_v))
+    assert fast.dropout_intervals == piecewise.dropout_intervals  # the same draws in the same order
+    assert with_dropouts > 300
+    assert worst < 1e-13

@@ -10,7 +10,9 @@ The inverse conversions (``ball_volts_v``, ``angle_volts_v``) give the volts tha
 into a given position or angle: the ideal sensors of the twin (``twin.sensors.IdealSensors``) use them.
 
 All functions take a float or a numpy array and return the same kind. NaN or infinite input raises
-``ValueError`` naming the argument (MATLAB would silently propagate NaN to the motor).
+``ValueError`` naming the argument (MATLAB would silently propagate NaN to the motor). A controller calls
+them every tick on single readings: a finite Python float is checked and converted inline (the same IEEE
+operations as on a 0-d array, without numpy's or a helper's cost per call).
 """
 
 from __future__ import annotations
@@ -71,8 +73,9 @@ def ball_position_m(volts: float, sw: SoftwareCalibration) -> float: ...
 def ball_position_m(volts: np.ndarray, sw: SoftwareCalibration) -> np.ndarray: ...
 def ball_position_m(volts: float | np.ndarray, sw: SoftwareCalibration) -> float | np.ndarray:
     """Ball position (m) from the ball channel's volts: 0.0693·V + 0.0018 (eq 6.3.1, appendix A)."""
-    v = finite_input(volts, "volts")
-    return _same_kind((sw.ball_gain_m_per_v * v) + sw.ball_offset_m, volts)
+    v = volts if type(volts) is float and math.isfinite(volts) else finite_values(volts, "volts")
+    out = (sw.ball_gain_m_per_v * v) + sw.ball_offset_m
+    return out if type(out) is float else _same_kind(out, volts)
 
 
 @overload
@@ -107,8 +110,9 @@ def beam_angle_rad(volts: float, sw: SoftwareCalibration) -> float: ...
 def beam_angle_rad(volts: np.ndarray, sw: SoftwareCalibration) -> np.ndarray: ...
 def beam_angle_rad(volts: float | np.ndarray, sw: SoftwareCalibration) -> float | np.ndarray:
     """Beam angle (rad) exactly as appendix A computes it: eq 6.2.10 in degrees, times 3.141592654/180."""
-    deg = _angle_deg(finite_input(volts, "volts"), sw)
-    return _same_kind(deg * (sw.software_pi / 180), volts)
+    v = volts if type(volts) is float and math.isfinite(volts) else finite_values(volts, "volts")
+    out = _angle_deg(v, sw) * (sw.software_pi / 180)
+    return out if type(out) is float else _same_kind(out, volts)
 
 
 @overload
@@ -130,8 +134,13 @@ def dac_command_v(motor_volts: float, sw: SoftwareCalibration) -> float: ...
 def dac_command_v(motor_volts: np.ndarray, sw: SoftwareCalibration) -> np.ndarray: ...
 def dac_command_v(motor_volts: float | np.ndarray, sw: SoftwareCalibration) -> float | np.ndarray:
     """DAC command from desired motor volts: V/9.6 + 2.5 (§6.4; appendix A ``adat``), not clipped."""
-    v = finite_input(motor_volts, "motor_volts")
-    return _same_kind((v / sw.command_gain_v_per_v) + sw.command_zero_v, motor_volts)
+    v = (
+        motor_volts
+        if type(motor_volts) is float and math.isfinite(motor_volts)
+        else finite_values(motor_volts, "motor_volts")
+    )
+    out = (v / sw.command_gain_v_per_v) + sw.command_zero_v
+    return out if type(out) is float else _same_kind(out, motor_volts)
 
 
 @overload
@@ -140,8 +149,13 @@ def motor_volts_from_command(command_v: float, sw: SoftwareCalibration) -> float
 def motor_volts_from_command(command_v: np.ndarray, sw: SoftwareCalibration) -> np.ndarray: ...
 def motor_volts_from_command(command_v: float | np.ndarray, sw: SoftwareCalibration) -> float | np.ndarray:
     """Motor volts the software assumes for a DAC command: (cmd − 2.5)·9.6 (appendix A ``u(k)``)."""
-    c = finite_input(command_v, "command_v")
-    return _same_kind((c - sw.command_zero_v) * sw.command_gain_v_per_v, command_v)
+    c = (
+        command_v
+        if type(command_v) is float and math.isfinite(command_v)
+        else finite_values(command_v, "command_v")
+    )
+    out = (c - sw.command_zero_v) * sw.command_gain_v_per_v
+    return out if type(out) is float else _same_kind(out, command_v)
 
 
 @overload
@@ -161,9 +175,13 @@ def clip_command_v(
     """The software's command limits (appendix A: 1.25…3.75 V; appendix B's first-run limits are 2…3 V).
 
     ``low``/``high`` default to the software calibration's ``command_low_v``/``command_high_v``."""
-    c = finite_input(command_v, "command_v")
-    lo = float(finite_input(sw.command_low_v if low is None else low, "low"))
-    hi = float(finite_input(sw.command_high_v if high is None else high, "high"))
+    c = (
+        command_v
+        if type(command_v) is float and math.isfinite(command_v)
+        else finite_values(command_v, "command_v")
+    )
+    lo = float(sw.command_low_v) if low is None else float(finite_input(low, "low"))
+    hi = float(sw.command_high_v) if high is None else float(finite_input(high, "high"))
     if not lo < hi:
         raise ValueError(f"low = {lo!r} V must be below high = {hi!r} V")
     if type(c) is float:  # min/max is np.clip on a finite number

@@ -21,7 +21,9 @@ the block's end, so the time stamp of a block is exactly its end and the next bl
 
 from __future__ import annotations
 
+import functools
 import math
+from collections.abc import Callable
 
 import numpy as np
 
@@ -34,11 +36,14 @@ __all__ = [
     "adc_code",
     "adc_lsb_v",
     "adc_quantize_v",
+    "adc_quantizer",
     "block_sample_times_s",
+    "block_span_s",
     "block_time_s",
     "dac_code",
     "dac_lsb_v",
     "dac_quantize_v",
+    "dac_quantizer",
     "software_block_reading_v",
 ]
 
@@ -61,12 +66,17 @@ def _code(v: np.ndarray, v_min: float, lsb: float, bits: float) -> np.ndarray:
     return np.clip(np.floor((v - v_min) / lsb + 0.5), 0, 2 ** int(bits) - 1)
 
 
+def _quantize_float(v_min: float, lsb: float, top: int, volts: float) -> float:
+    """``_quantize`` of one Python float with ``top`` = 2**bits − 1: the same IEEE operations as numpy's path."""
+    if not math.isfinite(volts):
+        raise ValueError(f"volts = {volts!r}: it must be finite")
+    return v_min + min(max(math.floor((volts - v_min) / lsb + 0.5), 0), top) * lsb
+
+
 def _quantize(volts: float | np.ndarray, v_min: float, lsb: float, bits: float) -> float | np.ndarray:
     """v_min + code·LSB; a plain float takes a math-only path (same IEEE operations, 10x faster)."""
     if type(volts) is float:
-        if not math.isfinite(volts):
-            raise ValueError(f"volts = {volts!r}: it must be finite")
-        return v_min + min(max(math.floor((volts - v_min) / lsb + 0.5), 0), 2 ** int(bits) - 1) * lsb
+        return _quantize_float(v_min, lsb, 2 ** int(bits) - 1, volts)
     v = finite_values(volts, "volts")
     out = v_min + _code(v, v_min, lsb, bits) * lsb
     return float(out) if np.ndim(volts) == 0 else out
@@ -82,6 +92,16 @@ def adc_code(volts: float | np.ndarray, daq: Daq) -> int | np.ndarray:
 def adc_quantize_v(volts: float | np.ndarray, daq: Daq) -> float | np.ndarray:
     """The volts the software reads for an analog input (12 bit over −5…+5 V, saturating)."""
     return _quantize(volts, daq.adc_min_v, adc_lsb_v(daq), daq.adc_bits)
+
+
+def adc_quantizer(daq: Daq) -> Callable[[float], float]:
+    """``adc_quantize_v`` of one Python float with the card's constants bound once (a per-tick reading)."""
+    return functools.partial(_quantize_float, daq.adc_min_v, adc_lsb_v(daq), 2 ** int(daq.adc_bits) - 1)
+
+
+def dac_quantizer(daq: Daq) -> Callable[[float], float]:
+    """``dac_quantize_v`` of one Python float with the card's constants bound once (a per-tick command)."""
+    return functools.partial(_quantize_float, daq.dac_min_v, dac_lsb_v(daq), 2 ** int(daq.dac_bits) - 1)
 
 
 def dac_code(volts: float | np.ndarray, daq: Daq) -> int | np.ndarray:
@@ -102,10 +122,15 @@ def block_sample_times_s(block_start_s: float, daq: Daq) -> np.ndarray:
     return t0 + np.arange(1, daq.block_size + 1) / daq.sample_rate_hz
 
 
+def block_span_s(daq: Daq) -> float:
+    """From a block's start to its last sample: 800/f_s."""
+    return daq.block_size / daq.sample_rate_hz
+
+
 def block_time_s(block_start_s: float, daq: Daq) -> float:
     """Time stamp of the block (appendix A ``time(blocksize)``): its last sample, t0 + 800/f_s."""
     t0 = float(finite_input(block_start_s, "block_start_s"))
-    return t0 + daq.block_size / daq.sample_rate_hz
+    return t0 + block_span_s(daq)
 
 
 def software_block_reading_v(data_v: np.ndarray, daq: Daq) -> tuple[float, float]:

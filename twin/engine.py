@@ -17,7 +17,9 @@ episode and computes the verdict (twin.verdict) once.
 
 from __future__ import annotations
 
+import itertools
 import math
+from collections.abc import Callable
 from typing import Protocol, runtime_checkable
 
 import numpy as np
@@ -87,22 +89,32 @@ def checked_start(controller: Controller, sample: DaqSample, where: str = "") ->
         raise ControllerError(f"{controller.name}.start raised {type(exc).__name__}{place}: {exc}") from exc
 
 
-def checked_update(controller: Controller, sample: DaqSample, where: str) -> float:
+def checked_update(controller: Controller, sample: DaqSample, where: str | Callable[[], str]) -> float:
     """``controller.update(sample)`` as a DAC command in volts; a ``ControllerError`` naming the controller
-    and ``where`` (the tick, the run) if it raises or returns anything but a finite number."""
+    and ``where`` (the tick, the run; a function giving it, so that the text is only made for an error)
+    if it raises or returns anything but a finite number."""
     try:
         command = controller.update(sample)
     except Exception as exc:  # noqa: BLE001 - a user's controller may raise anything: report, do not crash
-        raise ControllerError(f"{controller.name}.update raised {type(exc).__name__} {where}: {exc}") from exc
+        raise ControllerError(
+            f"{controller.name}.update raised {type(exc).__name__} {_where(where)}: {exc}"
+        ) from exc
+    if type(command) is float and math.isfinite(command):  # the common case, checked first
+        return command
     if isinstance(command, bool) or not isinstance(command, (int, float, np.floating, np.integer)):
         raise ControllerError(
-            f"{controller.name}.update returned {command!r} {where}: expected the DAC command in volts"
+            f"{controller.name}.update returned {command!r} {_where(where)}: expected the DAC command in volts"
         )
     if not math.isfinite(command):
         raise ControllerError(
-            f"{controller.name}.update returned {command!r} {where}: the DAC command must be a finite number of volts"
+            f"{controller.name}.update returned {command!r} {_where(where)}: the DAC command must be a finite "
+            "number of volts"
         )
     return float(command)
+
+
+def _where(where: str | Callable[[], str]) -> str:
+    return where if isinstance(where, str) else where()
 
 
 class RunResult:
@@ -131,52 +143,142 @@ class RunResult:
 
 _COLUMNS = tuple(name for name in THESIS_FIELDS + TRUTH_FIELDS if name != "ball_lost")
 _ESTIMATE = slice(_COLUMNS.index("x1"), _COLUMNS.index("x4") + 1)
+_TRUE_TIME = _COLUMNS.index("true_time_s")
 _TRUE_STATE = slice(_COLUMNS.index("true_x_m"), _COLUMNS.index("true_thetadot_rad_s") + 1)
 
 
 class _Recorder:
-    """The log's columns, grown in place (one row per tick, written in a few assignments: per tick, the
-    cost is the number of numpy calls). ``cols`` are views of the table's columns."""
+    """The log's columns. A tick is appended as one tuple of Python floats (per tick, the cost is the number
+    of numpy calls, and a tuple needs none) and written into the table when the columns are read
+    (``flush``); ``cols`` are views of the table's columns. The true state of a tick on the MuJoCo plant is
+    kept as a copy of its state row and computed for all such ticks at once in ``flush``: the same bits
+    (``SimRig.true_states_of_rows``), a fraction of the cost."""
 
-    def __init__(self, capacity: int) -> None:
-        self.n = 0
+    def __init__(self, capacity: int, rig: SimRig) -> None:
+        self.rig = rig
+        self.flushed = 0
         self.table = np.zeros((capacity, len(_COLUMNS)))
         self.cols = {name: self.table[:, j] for j, name in enumerate(_COLUMNS)}
         self.lost = np.zeros(capacity, dtype=bool)
         self.peak_theta = np.zeros(capacity)
+        self._ticks: list[tuple[float, ...]] = []  # appended since the last flush
+        self._state_rows: list[tuple[int, np.ndarray]] = []  # (tick, state row) whose state is pending
 
-    def _grow(self) -> None:
-        self.table = np.concatenate([self.table, np.zeros_like(self.table)])
-        self.cols = {name: self.table[:, j] for j, name in enumerate(_COLUMNS)}
-        self.lost = np.concatenate([self.lost, np.zeros_like(self.lost)])
-        self.peak_theta = np.concatenate([self.peak_theta, np.zeros_like(self.peak_theta)])
+    @property
+    def n(self) -> int:
+        """Ticks recorded."""
+        return self.flushed + len(self._ticks)
 
     def add(self, sample: DaqSample, command_v: float, tel: Telemetry, rig: SimRig) -> None:
-        if self.n == len(self.lost):
-            self._grow()
-        k = self.n
-        row = self.table[k]
-        # timem, datam1, datam2, aout, x1…x4, u, uhesap, true_time_s, true state, motor_volts_v (_COLUMNS)
-        row[:4] = (sample.time_s, sample.ball_v, sample.angle_v, command_v)
-        row[_ESTIMATE] = tel.estimate
-        row[8:11] = (tel.u, tel.u_computed, rig.time_s)
-        row[_TRUE_STATE] = rig.true_state()
-        row[-1] = rig.motor_volts_v
-        self.lost[k] = rig.ball_lost
+        state_row = rig.true_state_row()
+        if state_row is None:
+            time_s, state = rig.time_s, rig.true_state().tolist()
+        else:  # the row holds the simulation clock and the state: both computed in ``flush``
+            self._state_rows.append((self.n, state_row.copy()))
+            time_s, state = math.nan, _NAN4
         block = rig.last_block
+        peak = 0.0
         if block is not None:
-            on = block.on_track
-            if on.all():  # the common case: no mask to apply
-                self.peak_theta[k] = float(np.max(np.abs(block.theta_rad)))
-            elif on.any():
-                self.peak_theta[k] = float(np.max(np.abs(block.theta_rad[on])))
-        self.n += 1
+            if block.all_on_track and block.theta_range_rad is not None:  # the common case: the extremes
+                lo, hi = block.theta_range_rad
+                peak = max(abs(lo), abs(hi))
+            elif block.on_track.all():
+                peak = float(np.max(np.abs(block.theta_rad)))
+            elif block.on_track.any():
+                peak = float(np.max(np.abs(block.theta_rad[block.on_track])))
+        # timem, datam1, datam2, aout, x1…x4, u, uhesap, true_time_s, true state, motor_volts_v (_COLUMNS),
+        # then the lost flag and the peak |θ|
+        self._ticks.append(
+            (
+                sample.time_s,
+                sample.ball_v,
+                sample.angle_v,
+                command_v,
+                *_four(tel.estimate),
+                tel.u,
+                tel.u_computed,
+                time_s,
+                *state,
+                rig.motor_volts_v,
+                rig.ball_lost,
+                peak,
+            )
+        )
+
+    def flush(self) -> None:
+        """Write the appended ticks into the table, their pending true states computed at once."""
+        if not self._ticks:
+            return
+        start, stop = self.flushed, self.n
+        while stop > len(self.lost):
+            self.table = np.concatenate([self.table, np.zeros_like(self.table)])
+            self.cols = {name: self.table[:, j] for j, name in enumerate(_COLUMNS)}
+            self.lost = np.concatenate([self.lost, np.zeros_like(self.lost)])
+            self.peak_theta = np.concatenate([self.peak_theta, np.zeros_like(self.peak_theta)])
+        width = len(self._ticks[0])
+        values = np.fromiter(itertools.chain.from_iterable(self._ticks), float, (stop - start) * width)
+        values = values.reshape(stop - start, width)
+        self.table[start:stop] = values[:, : len(_COLUMNS)]
+        self.lost[start:stop] = values[:, -2] != 0.0
+        self.peak_theta[start:stop] = values[:, -1]
+        if self._state_rows:
+            ticks = [k for k, _ in self._state_rows]
+            rows = np.array([row for _, row in self._state_rows])
+            self.table[ticks, _TRUE_STATE] = self.rig.true_states_of_rows(rows)
+            self.table[ticks, _TRUE_TIME] = rows[:, 0]  # the row's time is the simulation clock, ``time_s``
+        self._ticks, self._state_rows = [], []
+        self.flushed = stop
 
     def log(self) -> RunLog:
+        self.flush()
         n = self.n
         return RunLog(
             **{name: col[:n].copy() for name, col in self.cols.items()}, ball_lost=self.lost[:n].copy()
         )
+
+
+_NAN4 = (math.nan,) * 4
+
+
+def _four(estimate: np.ndarray) -> list[float]:
+    """x1…x4 as floats (an estimate given in another shape broadcasts to the four, as into a table row)."""
+    if type(estimate) is np.ndarray and estimate.shape == (4,):
+        return estimate.tolist()
+    return np.broadcast_to(np.asarray(estimate, dtype=float), (4,)).tolist()
+
+
+class _StateLawVolts:
+    """A ``ClosedLoop``'s state law as the rig calls it: the terminal volts for the plant's state, a
+    ``ControllerError`` naming the law and the time when it raises or returns a non-finite value.
+
+    ``of_floats`` takes the state as four Python floats, as the rig then passes it every physics step; a law
+    that takes them too (``motor_volts_of_floats``, as ``controllers.loop.TrueStateLaw``) gets them without an
+    array."""
+
+    def __init__(self, loop: ClosedLoop) -> None:
+        self.loop = loop
+        law = loop.controller
+        self._motor_volts = law.motor_volts  # type: ignore[union-attr]
+        self._motor_volts_of_floats = getattr(law, "motor_volts_of_floats", None)
+
+    def __call__(self, state: np.ndarray) -> float:
+        return self.of_floats(*np.asarray(state, dtype=float).tolist())
+
+    def of_floats(self, x_m: float, theta_rad: float, xdot_m_s: float, thetadot_rad_s: float) -> float:
+        try:
+            if self._motor_volts_of_floats is None:
+                volts = float(self._motor_volts(np.array([x_m, theta_rad, xdot_m_s, thetadot_rad_s])))
+            else:
+                volts = float(self._motor_volts_of_floats(x_m, theta_rad, xdot_m_s, thetadot_rad_s))
+        except Exception as exc:  # noqa: BLE001
+            loop = self.loop
+            raise ControllerError(
+                f"{loop.name} raised {type(exc).__name__} at t = {loop.rig.time_s:.3f} s: {exc}"
+            ) from exc
+        if not math.isfinite(volts):
+            loop = self.loop
+            raise ControllerError(f"{loop.name} returned {volts!r} volts at t = {loop.rig.time_s:.3f} s")
+        return volts
 
 
 class ClosedLoop:
@@ -211,7 +313,7 @@ class ClosedLoop:
                 f"daq.period_s = {rig.period_s!r} s; set daq.period_s to the controller's period (a parameter "
                 f"file) or change the controller"
             )
-        self.recorder = _Recorder(256) if record else None
+        self.recorder = _Recorder(256, rig) if record else None
         self.record_limit = record_limit
         self.last_sample: DaqSample | None = None
         self.command_v = rig.command_v
@@ -259,7 +361,7 @@ class ClosedLoop:
             command = checked_update(
                 self.controller,  # type: ignore[arg-type]
                 sample,
-                f"at tick k = {rig.ticks} (t = {sample.time_s:.3f} s)",
+                lambda: f"at tick k = {rig.ticks} (t = {sample.time_s:.3f} s)",
             )
             rig.write(command)
         self.last_sample = sample
@@ -267,16 +369,10 @@ class ClosedLoop:
         if self.recorder is not None and self.recording:
             self.recorder.add(sample, self.command_v, self.controller.telemetry, rig)
 
-    def _law_volts(self, state: np.ndarray) -> float:
-        try:
-            volts = float(self.controller.motor_volts(state))  # type: ignore[union-attr]
-        except Exception as exc:  # noqa: BLE001
-            raise ControllerError(
-                f"{self.name} raised {type(exc).__name__} at t = {self.rig.time_s:.3f} s: {exc}"
-            ) from exc
-        if not math.isfinite(volts):
-            raise ControllerError(f"{self.name} returned {volts!r} volts at t = {self.rig.time_s:.3f} s")
-        return volts
+    @property
+    def _law_volts(self) -> _StateLawVolts:
+        """The state law's terminal volts as the rig asks for them (``SimRig.read_with_state_law``)."""
+        return _StateLawVolts(self)
 
     def log(self) -> RunLog:
         if self.recorder is None:
@@ -289,6 +385,7 @@ class ClosedLoop:
         if self.recorder is None:
             raise RuntimeError("this closed loop was built with record=False")
         r, n = self.recorder, self.recorder.n
+        r.flush()
         return judge(
             self.rig.params,
             r.cols["true_time_s"][:n],

@@ -10,21 +10,27 @@ forgets them still cannot drive the motor beyond the amplifier's ±12 V.
 
 from __future__ import annotations
 
+import math
+from collections.abc import Callable
+
 import numpy as np
 
-from twin.converters import finite_input
-from twin.daq import dac_quantize_v
+from twin.converters import finite_input, finite_values
+from twin.daq import dac_quantize_v, dac_quantizer
 from twin.parameters import Amplifier, Parameters
 
-__all__ = ["amplifier_volts", "motor_volts"]
+__all__ = ["amplifier_volts", "motor_volts", "motor_volts_of"]
 
 
 def amplifier_volts(dac_output_v: float | np.ndarray, amplifier: Amplifier) -> float | np.ndarray:
     """Motor volts for the DAC's actual output: 9.6·(V − 2.5) clipped to ±12 V (§6.4)."""
-    v = finite_input(dac_output_v, "dac_output_v")
+    if type(dac_output_v) is float and math.isfinite(dac_output_v):  # one command per tick: no numpy
+        v: float | np.ndarray = dac_output_v
+    else:
+        v = finite_values(dac_output_v, "dac_output_v")
     volts = amplifier.gain_v_per_v * (v - amplifier.zero_command_v)
-    if type(volts) is float:  # one command per tick: min/max is np.clip on a finite number, same bits
-        return float(min(max(volts, -amplifier.rail_v), amplifier.rail_v))
+    if type(volts) is float:  # min/max is np.clip on a finite number, same bits
+        return min(max(volts, -amplifier.rail_v), amplifier.rail_v)
     out = np.clip(volts, -amplifier.rail_v, amplifier.rail_v)
     return float(out) if np.ndim(dac_output_v) == 0 else out
 
@@ -38,3 +44,16 @@ def motor_volts(command_v: float | np.ndarray, params: Parameters) -> float | np
     if type(out) is float:
         return out
     return float(out) if np.ndim(command_v) == 0 else out
+
+
+def motor_volts_of(params: Parameters) -> Callable[[float], float]:
+    """``motor_volts`` of one finite Python float with the constants bound once (the rig's per-tick write):
+    the DAC's quantization (``twin.daq``) then the amplifier, the same operations in one call
+    (``tests/test_output_stage.py`` checks it against ``motor_volts``)."""
+    dac = dac_quantizer(params.daq)
+    gain, zero, rail = params.amplifier.gain_v_per_v, params.amplifier.zero_command_v, params.amplifier.rail_v
+
+    def volts(command_v: float) -> float:
+        return min(max(gain * (dac(command_v) - zero), -rail), rail)
+
+    return volts

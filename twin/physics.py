@@ -10,8 +10,7 @@ block the I/O card delivers.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
-from typing import Protocol
+from typing import NamedTuple, Protocol
 
 import numpy as np
 
@@ -20,14 +19,22 @@ from twin.parameters import Parameters
 __all__ = ["Physics", "PhysicsBlock", "check_initial_state"]
 
 
-@dataclass(frozen=True)
-class PhysicsBlock:
-    """One stretch of simulated time, at the physics steps: index 0 is the state before the first step."""
+class PhysicsBlock(NamedTuple):
+    """One stretch of simulated time, at the physics steps: index 0 is the state before the first step.
+
+    A backend that has the block's extremes at hand passes them on (the sensor chains' and the log's
+    per-tick tests read them instead of scanning the arrays again); ``None`` means "not given"."""
 
     time_s: np.ndarray  # (n + 1,)
     x_m: np.ndarray  # ball centre along the beam (m)
     theta_rad: np.ndarray  # beam angle (rad)
     on_track: np.ndarray  # (n + 1,) bool: the ball sits on both wires within the track
+    x_range_m: tuple[float, float] | None = None  # (min, max) of x_m
+    theta_range_rad: tuple[float, float] | None = None  # (min, max) of theta_rad
+    all_on_track: bool | None = None  # on_track.all()
+    equal_steps: bool = (
+        False  # the times are equally spaced (one physics step apart, up to the clock's rounding)
+    )
 
 
 class Physics(Protocol):
@@ -53,6 +60,10 @@ class Physics(Protocol):
 
     def advance(self, motor_volts: np.ndarray) -> PhysicsBlock:
         """One physics step per entry of ``motor_volts`` (terminal volts, held over the step)."""
+        ...
+
+    def advance_held(self, motor_volts: float, n_steps: int) -> PhysicsBlock:
+        """``advance`` with the same terminal volts for ``n_steps`` steps."""
         ...
 
     def state(self) -> np.ndarray:

@@ -33,6 +33,12 @@ _CTRL = mujoco.mjtState.mjSTATE_CTRL
 LOST_HEIGHT_TOLERANCE_M = 2e-3
 
 
+def _all_finite(values: np.ndarray) -> bool:
+    """Whether every value is finite: a NaN or an infinity makes the sum of squares non-finite (one BLAS
+    call); only when it is not (or it overflowed) are the values looked at one by one."""
+    return math.isfinite(values.dot(values)) or bool(np.isfinite(values).all())
+
+
 @dataclass(frozen=True)
 class BallKinematics:
     """The ball relative to the beam, in the beam frame."""
@@ -83,9 +89,11 @@ class Plant:
         mujoco.mj_kinematics(self.model, self.data)
         self._pivot = tuple(float(v) for v in self.data.xpos[self._beam])  # the beam body's origin is P
         self._pivot_m = np.array(self._pivot)
+        self._pivot_0d = tuple(np.array(v) for v in self._pivot)
         self._nstate = mujoco.mj_stateSize(m, _FULL)
         self._warmstart = np.empty((1, m.nv))
         self._rollout = rollout.Rollout(nthread=0)
+        self._models, self._datas = [m], [self.data]  # rollout's arguments, built once
         self._buffers: dict[int, _StepBuffers] = {}
         # Indices into a state row (time, qpos, qvel) and the track's limits, for the per-step reads.
         self._row_ball, self._row_ball_v = 1 + self._ball_qpos, 1 + m.nq + self._ball_dof
@@ -96,6 +104,7 @@ class Plant:
         self._lateral_limit_m = p.track.contact_spacing_m / 2
         self._seat_height_m = p.ball_centre_height_m
         self._dot_buffers = (np.zeros(3), np.zeros(3), np.zeros(3))  # offset, velocity, beam axis
+        self._all_on_cache: dict[int, np.ndarray] = {}
         self.reset()
 
     # --- state ------------------------------------------------------------------------------------
@@ -146,6 +155,7 @@ class Plant:
         self.ball_lost = False
         self.ball_lost_time_s = None
         self.lost_state: np.ndarray | None = None
+        self._end_row: np.ndarray | None = None  # the last advance's final state row (MjData's state now)
 
     def _beam_axes(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The beam frame's unit vectors in world coordinates: a rotation by θ about (0, −1, 0).
@@ -190,17 +200,31 @@ class Plant:
         state at the step it left the track: what falls afterwards is no longer the rig's state."""
         if self.lost_state is not None:
             return self.lost_state.copy()
+        if self._hinge_qpos is None:
+            return self._held_state()
         d = self.data
-        theta, thetadot = self._theta(), self._theta_dot()
+        # A state row (time, qpos, qvel) as Python floats: ``_state_of_row``'s operations are the ones
+        # ``row_states`` and ``ball_kinematics`` take, so the same bits.
+        return self._state_of_row([0.0, *d.qpos.tolist(), *d.qvel.tolist()])
+
+    def state_row(self) -> np.ndarray | None:
+        """The full-physics state row (time, qpos, qvel, …) ``state`` reads now — a view, valid until the plant
+        steps again — or ``None`` when ``state`` is not that row's (ball lost, beam held, MjData set since
+        the last advance): ``row_states`` of the row is ``state``, bit for bit, so a log can defer it."""
+        row = self._end_row
+        if row is None or self.lost_state is not None or self._hinge_qpos is None or row[0] != self.data.time:
+            return None
+        return row
+
+    def _held_state(self) -> np.ndarray:
+        """``state`` of a rig built with the beam held (no hinge joint)."""
+        d = self.data
+        theta = self._theta()
         q, v = self._ball_qpos, self._ball_dof
         offset = d.qpos[q : q + 3] - self._pivot_m
         ox, oz = float(offset[0]), float(offset[2])
-        # Velocity relative to the rotating beam: v − ω×offset with ω = θ̇ about (0, −1, 0) (what
-        # ``ball_kinematics`` computes with np.cross, component for component).
+        thetadot = 0.0  # the velocity relative to the beam, as ``state`` takes it: v − ω×offset
         v_rel = np.array([d.qvel[v] + thetadot * oz, d.qvel[v + 1], d.qvel[v + 2] - thetadot * ox])
-        # Along the beam: the projections on the beam's x axis are kept as numpy dot products, as
-        # ``ball_kinematics`` takes them: BLAS fuses the multiply-add, so c·x + s·z written out would differ
-        # in the last bit from the logs recorded so far.
         ex = np.array([math.cos(theta), 0.0, math.sin(theta)])
         return np.array([offset @ ex, theta, v_rel @ ex, thetadot])
 
@@ -230,31 +254,47 @@ class Plant:
     def step(self, motor_volts: float, n_steps: int = 1) -> None:
         """Advance ``n_steps`` physics steps with the motor's terminal volts held (the dcmotor clamps them to
         the amplifier's rails), updating the latched ``ball_lost`` flag."""
-        if not math.isfinite(motor_volts):
+        self.advance_held(motor_volts, n_steps)
+
+    def advance_held(self, motor_volts: float, n_steps: int) -> PhysicsBlock:
+        """``advance`` with the same terminal volts for all ``n_steps`` steps (a control period's usual case:
+        the volts are filled into the rollout's control buffer, not built as an array and checked)."""
+        if not isinstance(motor_volts, (int, float)) or not math.isfinite(motor_volts):
             raise ValueError(f"motor_volts = {motor_volts!r} is not finite")
-        self.advance(np.full(n_steps, float(motor_volts)))
+        buf = self._buffers.get(n_steps) or self._step_buffers(n_steps)
+        buf.control.fill(motor_volts)
+        return self._roll(buf, n_steps)
 
     def advance(self, motor_volts: np.ndarray) -> PhysicsBlock:
         """One physics step per entry of ``motor_volts`` in one C call; the ball and beam at every step.
 
         The ``ball_lost`` flag latches at the first step after which the ball no longer sits on both wires
-        within the track (see ``_on_track``)."""
-        m, d = self.model, self.data
+        within the track (see ``track_coordinates``)."""
         volts = np.asarray(motor_volts, dtype=np.float64)
         n = volts.size
-        if not np.isfinite(volts).all():
+        if not _all_finite(volts):
             raise ValueError(f"motor_volts contains {volts[~np.isfinite(volts)][0]!r}: it must be finite")
         buf = self._step_buffers(n)
+        if n and self.model.nu:
+            buf.control[0, :, 0] = volts
+        return self._roll(buf, n)
+
+    def _roll(self, buf: _StepBuffers, n: int) -> PhysicsBlock:
+        """Roll out ``n`` steps with the control in ``buf``, from MjData's state (or the row the last advance
+        left it in, which is that state: no read-back), into ``buf.rows``; the block."""
+        m, d = self.model, self.data
         rows = buf.rows  # (n + 1, nstate): time, qpos, qvel; row 0 the state before the first step
         t0 = float(d.time)
-        mujoco.mj_getState(m, d, rows[0], _FULL)
+        carried = self._end_row
+        if carried is not None and carried[0] == t0:  # MjData is in the state the last advance left
+            rows[0] = carried
+        else:
+            mujoco.mj_getState(m, d, rows[0], _FULL)
         if n:
-            if m.nu:
-                buf.control[0, :, 0] = volts
             self._warmstart[0] = d.qacc_warmstart
             self._rollout.rollout(
-                [m],
-                [d],
+                self._models,
+                self._datas,
                 buf.initial_state,
                 buf.control,
                 control_spec=_CTRL.value,
@@ -265,19 +305,21 @@ class Plant:
                 sensordata=None,
                 chunk_size=None,
             )
-        if not np.isfinite(rows[-1]).all():
+        if not _all_finite(rows[-1]):
             raise FloatingPointError(f"MuJoCo state is not finite at t = {float(rows[-1, 0]):.3f} s")
         return self._block(rows, t0 + buf.step_offsets_s)
 
     def advance_with_law(
-        self, n: int, volts_for_state: Callable[[np.ndarray], float], law_steps: int
+        self, n: int, volts_for_state: Callable[[float, float, float, float], float], law_steps: int
     ) -> tuple[PhysicsBlock, float]:
         """``n`` physics steps with the motor's terminal volts recomputed every ``law_steps`` steps by
-        ``volts_for_state(state)`` (the state as ``state`` gives it then): the block and the last volts.
+        ``volts_for_state(x_m, θ_rad, ẋ_m_s, θ̇_rad_s)`` (the state as ``state`` gives it then, as four Python
+        floats): the block and the last volts.
 
         The same trajectory, block and lost-ball latch as ``advance`` called once per law period, at a
         fraction of the cost: ``mj_step`` on the plant's own MjData (a one-step rollout call costs about
-        7 µs more than the step) and the state read from the step's row as Python floats."""
+        7 µs more than the step) and the state read from the step's row as Python floats, and handed on
+        so: a law run every step pays for each array made per step."""
         if self._hinge_qpos is None or n < 1 or law_steps < 1:
             raise ValueError("advance_with_law needs the beam's hinge, n ≥ 1 and law_steps ≥ 1")
         m, d = self.model, self.data
@@ -285,22 +327,48 @@ class Plant:
         rows = buf.rows
         mujoco.mj_getState(m, d, rows[0], _FULL)
         ctrl = d.ctrl
-        step, get_state = mujoco.mj_step, mujoco.mj_getState
-        row = rows[0].tolist()
+        step, get_state, cos, sin = mujoco.mj_step, mujoco.mj_getState, math.cos, math.sin
+        full = _FULL.value  # the spec as an int: pybind converts it faster than the enum
+        row_theta, q = self._row_theta, self._row_ball
+        px, py, pz = self._pivot
+        along_limit, lateral_limit = self._along_limit_m, self._lateral_limit_m
+        seat, tolerance = self._seat_height_m, LOST_HEIGHT_TOLERANCE_M
+        write, dot = self._dot_buffer_views(), np.empty(())
         lost_state = self.lost_state
+        state: tuple[float, ...]
+        if lost_state is None:
+            row = rows[0].tolist()
+            theta = row[row_theta]
+            state = self._state_floats(row, cos(theta), sin(theta), write, dot)
+        else:
+            state = tuple(lost_state.tolist())
         volts = math.nan
-        for k in range(n):
-            if k % law_steps == 0:
-                volts = volts_for_state(self._state_of_row(row) if lost_state is None else lost_state.copy())
+        for k in range(1, n + 1):  # k: the row after the step
+            if (k - 1) % law_steps == 0:
+                volts = volts_for_state(*state)
                 ctrl[0] = volts
             step(m, d)
-            get_state(m, d, rows[k + 1], _FULL)
-            row = rows[k + 1].tolist()
-            if lost_state is None and not self._row_on_track(row):
-                lost_state = self._row_state(rows[k + 1])
-            if (k + 1) % law_steps == 0 or k + 1 == n:  # where advance checks, once per law period
-                if not math.isfinite(sum(row)):
-                    raise FloatingPointError(f"MuJoCo state is not finite at t = {row[0]:.3f} s")
+            dest = rows[k]
+            get_state(m, d, dest, full)
+            row = dest.tolist()
+            law_reads = k % law_steps == 0  # the law reads this row's state (the next call's, for the last)
+            if lost_state is None:
+                theta = row[row_theta]
+                c, s = cos(theta), sin(theta)
+                # ``on_track``'s test on ``beam_frame``'s coordinates, in Python floats: the same operations,
+                # so the same answer (numpy's cos and sin equal math's); inline, as a call costs as much.
+                dx, dy, dz = row[q] - px, row[q + 1] - py, row[q + 2] - pz
+                if not (
+                    abs(c * dx + s * dz) <= along_limit
+                    and abs(dy) < lateral_limit
+                    and abs(c * dz - s * dx - seat) < tolerance
+                ):
+                    lost_state = self._row_state(dest)
+                    state = tuple(lost_state.tolist())
+                elif law_reads and k < n:
+                    state = self._state_floats(row, c, s, write, dot)
+            if (law_reads or k == n) and not math.isfinite(sum(row)):  # where advance checks, once a period
+                raise FloatingPointError(f"MuJoCo state is not finite at t = {row[0]:.3f} s")
         # Times as advance makes them: each law period's start time plus whole steps.
         starts = rows[0:n:law_steps, 0]
         times = np.empty(n + 1)
@@ -310,16 +378,34 @@ class Plant:
 
     def _block(self, rows: np.ndarray, times: np.ndarray) -> PhysicsBlock:
         """The block of these state rows (row 0 the state before the first step), latching ``ball_lost`` at
-        the first row off the track."""
+        the first row off the track. The common block (on the track throughout) is told from the extremes
+        of the ball's beam-frame coordinates, which the sensor chains then reuse."""
         n = len(rows) - 1
+        self._end_row = rows[-1]
         if self._hinge_qpos is None:
             theta = np.full(n + 1, self._theta())
         else:
-            theta = rows[:, 1 + self._hinge_qpos].copy()
-        along, on = self.track_coordinates(theta, rows[:, 1 + self._ball_qpos : 4 + self._ball_qpos])
+            theta = rows[:, self._row_theta].copy()
+        q = self._row_ball
+        along, lateral, height = self.beam_frame(theta, rows[:, q : q + 3])
+        al, th, lat, hgt = along.tolist(), theta.tolist(), lateral.tolist(), height.tolist()
+        x_range, theta_range = (min(al), max(al)), (min(th), max(th))
+        # ``on_track(...).all()`` from the extremes: |·| below a bound everywhere ⇔ at both extremes, and
+        # subtracting the seat height is monotonic in float arithmetic, so the same answer.
+        seat, tol, lat_limit = self._seat_height_m, LOST_HEIGHT_TOLERANCE_M, self._lateral_limit_m
         if self.ball_lost:
-            on[:] = False
+            on = np.zeros(n + 1, dtype=bool)
+        elif (
+            -self._along_limit_m <= x_range[0]
+            and x_range[1] <= self._along_limit_m
+            and -lat_limit < min(lat)
+            and max(lat) < lat_limit
+            and -tol < min(hgt) - seat
+            and max(hgt) - seat < tol
+        ):
+            return PhysicsBlock(times, along, theta, self._all_on(n + 1), x_range, theta_range, True, True)
         else:
+            on = self.on_track(along, lateral, height)
             on[0] = True
             if not on.all():  # latched from the first step off the track
                 first_off = int(np.flatnonzero(~on)[0])
@@ -327,7 +413,15 @@ class Plant:
                 self.ball_lost_time_s = float(rows[first_off, 0])
                 self.lost_state = self._row_state(rows[first_off])
                 on[first_off:] = False
-        return PhysicsBlock(time_s=times, x_m=along, theta_rad=theta, on_track=on)
+        return PhysicsBlock(times, along, theta, on, x_range, theta_range, bool(on.all()), True)
+
+    def _all_on(self, size: int) -> np.ndarray:
+        """A read-only all-True ``on_track`` of this size (shared: the common block's flags)."""
+        on = self._all_on_cache.get(size)
+        if on is None:
+            on = self._all_on_cache[size] = np.ones(size, dtype=bool)
+            on.flags.writeable = False
+        return on
 
     def _step_buffers(self, n: int) -> _StepBuffers:
         buf = self._buffers.get(n)
@@ -337,34 +431,42 @@ class Plant:
         return buf
 
     def _state_of_row(self, r: list[float]) -> np.ndarray:
-        """``state`` from one state row as Python floats (time, qpos, qvel), with ``state``'s operations, so
-        the same bits: its two dot products are the same BLAS dot (``ndarray.dot`` of two vectors is what
-        ``@`` calls, with less overhead), here on reused buffers (per step, allocation is the cost)."""
-        theta, thetadot = r[self._row_theta], r[self._row_thetadot]
+        """``state`` from one state row as Python floats (time, qpos, qvel) (see ``_state_floats``)."""
+        theta = r[self._row_theta]
+        state = self._state_floats(r, math.cos(theta), math.sin(theta), self._dot_buffers, np.empty(()))
+        return np.array(state)
+
+    def _dot_buffer_views(self) -> tuple[memoryview[float], memoryview[float], memoryview[float]]:
+        """The dot buffers as memoryviews: item assignment through them costs less than numpy's."""
+        offset, v_rel, ex = (b.data.cast("B").cast("d") for b in self._dot_buffers)
+        return offset, v_rel, ex
+
+    def _state_floats(
+        self,
+        r: list[float],
+        c: float,
+        s: float,
+        write: tuple[np.ndarray, np.ndarray, np.ndarray] | tuple[memoryview[float], ...],
+        dot: np.ndarray,
+    ) -> tuple[float, float, float, float]:
+        """(x, θ, ẋ, θ̇) of one state row as Python floats (time, qpos, qvel), given c = cos θ and s = sin θ,
+        with ``state``'s operations, so the same bits: its two dot products are the same BLAS dot
+        (``ndarray.dot`` of two vectors is what ``@`` calls, with less overhead), here on the reused dot
+        buffers (per step, allocation is the cost), filled through ``write`` (them, or their
+        ``_dot_buffer_views``), each product into the 0-d array ``dot`` (cheaper than the float it returns)."""
+        thetadot = r[self._row_thetadot]
         q, v = self._row_ball, self._row_ball_v
         px, py, pz = self._pivot
         ox, oz = r[q] - px, r[q + 2] - pz
-        offset, v_rel, ex = self._dot_buffers
+        offset, v_rel, ex = write
         offset[0], offset[1], offset[2] = ox, r[q + 1] - py, oz
         v_rel[0], v_rel[1], v_rel[2] = r[v] + thetadot * oz, r[v + 1], r[v + 2] - thetadot * ox
-        ex[0], ex[2] = math.cos(theta), math.sin(theta)
-        return np.array([offset.dot(ex), theta, v_rel.dot(ex), thetadot])
-
-    def _row_on_track(self, r: list[float]) -> bool:
-        """``track_coordinates``' test for one state row as Python floats (the same operations, so the same
-        answer: numpy's cos and sin equal math's)."""
-        theta = r[self._row_theta]
-        c, s = math.cos(theta), math.sin(theta)
-        q = self._row_ball
-        px, py, pz = self._pivot
-        dx, dy, dz = r[q] - px, r[q + 1] - py, r[q + 2] - pz
-        along = c * dx + s * dz
-        height = -s * dx + c * dz
-        return (
-            abs(along) <= self._along_limit_m
-            and abs(dy) < self._lateral_limit_m
-            and abs(height - self._seat_height_m) < LOST_HEIGHT_TOLERANCE_M
-        )
+        ex[0], ex[2] = c, s
+        offset_array, v_rel_array, ex_array = self._dot_buffers
+        offset_array.dot(ex_array, dot)
+        along = dot.item()
+        v_rel_array.dot(ex_array, dot)
+        return along, r[self._row_theta], dot.item(), thetadot
 
     def _row_state(self, row: np.ndarray) -> np.ndarray:
         """(x, θ, ẋ, θ̇) from one row of (time, qpos, qvel): the ball relative to the beam, as ``state``."""
@@ -381,21 +483,30 @@ class Plant:
         c, s = math.cos(theta), math.sin(theta)
         return np.array([c * ox + s * oz, theta, c * vx + s * vz, thetadot])
 
-    def track_coordinates(self, theta_rad: np.ndarray, ball_xyz: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The ball's position along the beam and whether it sits on the track, from the beam angle and the
-        ball centre's world position (``ball_xyz[..., 0:3]``) at each step: elementwise, so the rows of a
-        batch of runs (``twin.batch``) give the same bits as a run alone."""
+    def beam_frame(
+        self, theta_rad: np.ndarray, ball_xyz: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The ball centre's coordinates in the beam frame (along, lateral, height above P) from the beam
+        angle and the ball centre's world position (``ball_xyz[..., 0:3]``) at each step: elementwise, so
+        the rows of a batch of runs (``twin.batch``) give the same bits as a run alone."""
         c, s = np.cos(theta_rad), np.sin(theta_rad)
-        d = ball_xyz[..., 0:3] - self._pivot_m  # one subtraction for the three coordinates: the same bits
-        dx, dy, dz = d[..., 0], d[..., 1], d[..., 2]
-        along = c * dx + s * dz
-        height = -s * dx + c * dz
-        on = (
+        px, py, pz = self._pivot_0d  # 0-d arrays: numpy converts a Python float operand on every call
+        dx, dz = ball_xyz[..., 0] - px, ball_xyz[..., 2] - pz
+        return c * dx + s * dz, ball_xyz[..., 1] - py, c * dz - s * dx
+
+    def on_track(self, along: np.ndarray, lateral: np.ndarray, height: np.ndarray) -> np.ndarray:
+        """Whether the ball sits on both wires within the track, from its beam-frame coordinates."""
+        return (
             (np.abs(along) <= self._along_limit_m)
-            & (np.abs(dy) < self._lateral_limit_m)
+            & (np.abs(lateral) < self._lateral_limit_m)
             & (np.abs(height - self._seat_height_m) < LOST_HEIGHT_TOLERANCE_M)
         )
-        return along, on
+
+    def track_coordinates(self, theta_rad: np.ndarray, ball_xyz: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The ball's position along the beam and whether it sits on the track at each step (see
+        ``beam_frame``)."""
+        along, lateral, height = self.beam_frame(theta_rad, ball_xyz)
+        return along, self.on_track(along, lateral, height)
 
     def kick_ball(self, dv_m_s: float) -> None:
         """Give the ball a velocity kick along the beam (a flick with a finger), keeping it rolling."""

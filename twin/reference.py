@@ -270,6 +270,11 @@ class ReferencePlant:
             x, th, xd, thd = self._s
             self._s = (x, th, xd + dv_m_s, thd)
 
+    def advance_held(self, motor_volts: float, n_steps: int) -> PhysicsBlock:
+        if not isinstance(motor_volts, (int, float)) or not math.isfinite(motor_volts):
+            raise ValueError(f"motor_volts = {motor_volts!r} is not finite")
+        return self.advance(np.full(n_steps, float(motor_volts)))
+
     def advance(self, motor_volts: np.ndarray) -> PhysicsBlock:
         p = self.params
         h = p.physics.timestep_s

@@ -26,9 +26,9 @@ from typing import Literal
 
 import numpy as np
 
-from twin.daq import block_time_s
+from twin.daq import block_span_s
 from twin.interface import DaqSample, Rig
-from twin.output_stage import amplifier_volts, motor_volts
+from twin.output_stage import amplifier_volts, motor_volts_of
 from twin.parameters import Parameters
 from twin.physics import Physics, PhysicsBlock
 from twin.plant import Plant
@@ -91,6 +91,9 @@ class SimRig(Rig):
         self._latency_steps = whole_steps(p.daq.output_latency_s, dt, "daq.output_latency_s")
         self._free_run_steps = whole_steps(p.start.free_run_s, dt, "start.free_run_s")
         self.physics: Physics = Plant(p) if plant == "twin" else ReferencePlant(p)
+        self._chains = not self.ideal_sensors  # the sensor chains read each block (else ideal converters)
+        self._motor_volts = motor_volts_of(p)
+        self._block_span_s = block_span_s(p.daq)
         self._angle = AngleChain(p)
         self._ball = BallPositionChain(p, seed)
         self._ideal = IdealSensors(p)
@@ -149,6 +152,19 @@ class SimRig(Rig):
     def true_state(self) -> np.ndarray:
         """The true (x_m, θ_rad, ẋ_m_s, θ̇_rad_s): for validation and logs, never for a controller."""
         return self._held.copy() if self.held else self.physics.state()
+
+    def true_state_row(self) -> np.ndarray | None:
+        """The MuJoCo state row the true state is computed from (``Plant.state_row``: a view valid until the
+        next tick), or ``None`` when ``true_state`` must be asked (held, ball lost, the reference model)."""
+        if self.held or not isinstance(self.physics, Plant):
+            return None
+        return self.physics.state_row()
+
+    def true_states_of_rows(self, rows: np.ndarray) -> np.ndarray:
+        """``true_state`` for state rows ``true_state_row`` gave, one per row, bit for bit."""
+        if not isinstance(self.physics, Plant):
+            raise RigError("true_states_of_rows needs the MuJoCo plant")
+        return self.physics.row_states(rows)
 
     @property
     def held(self) -> bool:
@@ -214,7 +230,7 @@ class SimRig(Rig):
             return float(
                 amplifier_volts(min(max(command_v, daq.dac_min_v), daq.dac_max_v), self.params.amplifier)
             )
-        return float(motor_volts(command_v, self.params))
+        return self._motor_volts(command_v)
 
     def _set_motor_volts(self, volts: float) -> None:
         self._pending_motor_v = volts
@@ -239,14 +255,22 @@ class SimRig(Rig):
 
     def _advance_with_law(self, n: int, law, law_steps: int) -> PhysicsBlock:
         rail = self.params.amplifier.rail_v
+        # A law that also takes the state as four Python floats (``of_floats``, as twin.engine's does) gets
+        # it so: no state array per physics step.
+        of_floats = getattr(law, "of_floats", None)
 
-        def clamped_volts(state: np.ndarray) -> float:
-            volts = float(law(state))
+        def clamped_volts(x_m: float, theta_rad: float, xdot_m_s: float, thetadot_rad_s: float) -> float:
+            if of_floats is None:
+                volts = float(law(np.array([x_m, theta_rad, xdot_m_s, thetadot_rad_s])))
+            else:
+                volts = float(of_floats(x_m, theta_rad, xdot_m_s, thetadot_rad_s))
             if not math.isfinite(volts):
                 raise FloatingPointError(
                     f"the state law returned {volts!r} volts at t = {self.physics.time_s:.3f} s"
                 )
-            return min(max(volts, -rail), rail)
+            # min(max(volts, −rail), rail), the same float, without the builtins' calls
+            volts = -rail if volts < -rail else volts
+            return rail if volts > rail else volts
 
         if isinstance(self.physics, Plant):  # MuJoCo steps one by one in the plant, the law between them
             block, volts = self.physics.advance_with_law(n, clamped_volts, law_steps)
@@ -256,15 +280,23 @@ class SimRig(Rig):
         done = 0
         while done < n:
             m = min(law_steps, n - done)
-            self._applied_motor_v = self._pending_motor_v = clamped_volts(self.physics.state())
+            self._applied_motor_v = self._pending_motor_v = clamped_volts(*self.physics.state().tolist())
             parts.append(self.physics.advance(np.full(m, self._applied_motor_v)))
             done += m
         return _join(parts)
 
     def _read(self, law) -> DaqSample:
-        p = self.params
         end = self._next_end_step
         start = end - self._steps_per_tick
+        if law is None and start == self._steps_done >= 0 and self._switch_in_steps is None and self._chains:
+            # The common tick: one control period of physics at the volts the motor has, the full chains.
+            t_start = self.physics.time_s
+            block = self.last_block = self.physics.advance_held(self._applied_motor_v, self._steps_per_tick)
+            self._steps_done = end
+            self._next_end_step = end + self._steps_per_tick
+            self._ticks += 1
+            angle_v = self._angle.read_block_v(block)
+            return DaqSample(t_start + self._block_span_s, self._ball.advance_block(block), angle_v)
         t_start = self._step_time(start) if start < 0 else self.physics.time_s
         n_free = end - max(start, 0) if end > 0 else 0
         if start > self._steps_done:  # released before this block begins: run free up to it, unobserved
@@ -298,11 +330,11 @@ class SimRig(Rig):
         if self.ideal_sensors:
             ball_v, angle_v = self._ideal.read_v(float(block.x_m[-1]), float(block.theta_rad[-1]))
         else:
-            angle_v = self._angle.read_block_v(block.time_s, block.theta_rad)
-            ball_v = self._ball.advance_block(block.time_s, block.x_m, block.on_track)
+            angle_v = self._angle.read_block_v(block)
+            ball_v = self._ball.advance_block(block)
         self._next_end_step = end + self._steps_per_tick
         self._ticks += 1
-        return DaqSample(time_s=block_time_s(t_start, p.daq), ball_v=ball_v, angle_v=angle_v)
+        return DaqSample(time_s=t_start + self._block_span_s, ball_v=ball_v, angle_v=angle_v)
 
 
 def _join(parts: list[PhysicsBlock]) -> PhysicsBlock:

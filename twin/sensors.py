@@ -28,15 +28,17 @@ Ball position (seeded randomness)::
 
 from __future__ import annotations
 
+import bisect
 import functools
-import itertools
 import math
+import operator
 
 import numpy as np
 
 from twin.converters import angle_volts_v, ball_volts_v, finite_values
-from twin.daq import adc_quantize_v
+from twin.daq import adc_quantize_v, adc_quantizer
 from twin.parameters import AngleSensor, BallSensor, Daq, Parameters
+from twin.physics import PhysicsBlock
 
 __all__ = [
     "CONTINUITY_TOLERANCE_SAMPLES",
@@ -67,6 +69,9 @@ CONTINUITY_TOLERANCE_SAMPLES = 0.01
 # Above this many count changes within one block (a beam faster than ≈ 16 rad/s) the 800-sample evaluation
 # is cheaper than per-crossing bookkeeping (measured crossover ≈ 90 crossings, ~80 µs); both are exact.
 _MAX_CROSSINGS_FAST = 90
+
+
+_HALF_0D = np.array(0.5)
 
 
 # --- beam angle ------------------------------------------------------------------------------------------
@@ -135,7 +140,7 @@ def _check_trajectory(
     return t, v
 
 
-def _sample_positions(t: np.ndarray, daq: Daq) -> list[float]:
+def _snapped_positions(t: np.ndarray, daq: Daq) -> list[float]:
     """Knot times in sample periods from the block start, snapped to sample instants within tolerance."""
     t0, fs = float(t[0]), daq.sample_rate_hz
     positions = []
@@ -143,6 +148,28 @@ def _sample_positions(t: np.ndarray, daq: Daq) -> list[float]:
         sk = (tk - t0) * fs
         nearest = round(sk)
         positions.append(float(nearest) if abs(sk - nearest) < SNAP_TOLERANCE_SAMPLES else sk)
+    return positions
+
+
+_POSITIONS: dict[tuple[bytes, float], list[float]] = {}
+
+
+def _snapped_positions_cached(t: np.ndarray, daq: Daq) -> list[float]:
+    """``_snapped_positions``, remembered by the knots' offsets from the first (a function of those alone:
+    the rig's blocks repeat a few offset patterns, the clock's rounding)."""
+    key = ((t - t[0]).tobytes(), daq.sample_rate_hz)
+    positions = _POSITIONS.get(key)
+    if positions is None:
+        if len(_POSITIONS) > 256:
+            _POSITIONS.clear()
+        positions = _POSITIONS[key] = _snapped_positions(t, daq)
+    return positions
+
+
+def _sample_positions(t: np.ndarray, daq: Daq) -> list[float]:
+    """``_snapped_positions``, checked to cover the whole block."""
+    positions = _snapped_positions(t, daq)
+    t0, fs = float(t[0]), daq.sample_rate_hz
     if positions[-1] < daq.block_size:
         raise ValueError(
             f"times_s ends at {t[-1]!r} s, before the block's last sample at "
@@ -268,6 +295,18 @@ def _block_means_crossing(
     return total / n
 
 
+@functools.lru_cache(maxsize=64)
+def _interval_samples(s: tuple[float, ...], n: int) -> tuple[tuple[int, int, int, int], ...]:
+    """(j, first, last, count) for each knot interval (s_j, s_j+1] holding samples first … last (count of
+    them) of the block's n (the rig's blocks share a few knot patterns: computed once per pattern)."""
+    out = []
+    for j in range(len(s) - 1):
+        first, last = math.floor(s[j]) + 1, min(math.floor(s[j + 1]), n)
+        if last >= first:
+            out.append((j, first, last, last - first + 1))
+    return tuple(out)
+
+
 def _block_mean(s: list[float], u: list[float], levels: tuple[float, ...], params: Parameters) -> float:
     """Block mean from knot positions ``s`` (sample periods) and ``u`` = (θ − θ_zero)/Δ + 0.5 at the knots.
 
@@ -278,16 +317,12 @@ def _block_mean(s: list[float], u: list[float], levels: tuple[float, ...], param
     c = [math.floor(v) for v in u]
     if min(c) == max(c):
         return levels[(zero + c[0]) % modulus]
-    if sum(abs(b - a) for a, b in itertools.pairwise(c)) > _MAX_CROSSINGS_FAST:
+    if sum(map(abs, map(operator.sub, c[1:], c[:-1]))) > _MAX_CROSSINGS_FAST:
         return _block_mean_samplewise(s, u, levels, zero, n)
     total = 0.0
-    for j in range(len(s) - 1):
-        first = math.floor(s[j]) + 1
-        last = min(math.floor(s[j + 1]), n)
-        if last < first:
-            continue
+    for j, first, last, count in _interval_samples(tuple(s), n):
         c0, c1 = c[j], c[j + 1]
-        total += (last - first + 1) * levels[(zero + c0) % modulus]
+        total += count * levels[(zero + c0) % modulus]
         if c1 == c0:
             continue
         # u is linear on the interval; it reaches boundary m at s* = s_j + (m − u_j)/(u_j+1 − u_j)·(s_j+1 − s_j).
@@ -326,6 +361,7 @@ class AngleChain:
         self.step_rad = angle_count_step_rad(params)
         self.last_reading_v: float | None = None
         self._levels = _level_table(params.angle_sensor, params.daq)
+        self._zero_step_0d = (np.array(params.angle_sensor.zeroing_error_rad), np.array(self.step_rad))
         self._zero_count = int(params.angle_sensor.counter_zero_count)
 
     def counter_value(self, theta_rad: float | np.ndarray) -> int | np.ndarray:
@@ -340,18 +376,23 @@ class AngleChain:
         self.last_reading_v = angle_block_mean_v(times_s, theta_rad, self.params)
         return self.last_reading_v
 
-    def read_block_v(self, times_s: np.ndarray, theta_rad: np.ndarray) -> float:
+    def read_block_v(self, block: PhysicsBlock) -> float:
         """``read_v`` for a block the rig built (finite, increasing times covering the block): a block whose
-        count is the same at every knot (a still or slow beam, most blocks) reads that level from u's
-        extremes, as ``_block_mean`` does from every knot (floor is monotonic: the same level, the same bits),
-        without the per-knot Python; any other block goes through ``read_v``."""
-        sensor = self.params.angle_sensor
-        u = (theta_rad - sensor.zeroing_error_rad) / self.step_rad + 0.5
-        lo, hi = float(u.min()), float(u.max())
-        if not (math.isfinite(lo) and math.isfinite(hi)) or math.floor(lo) != math.floor(hi):
-            return self.read_v(times_s, theta_rad)
+        count is the same at both extremes of θ (a still or slow beam, most blocks) reads that level, as
+        ``_block_mean`` does from every knot (u is monotonic in θ in float arithmetic and floor is
+        monotonic: the same level, the same bits), without the per-knot Python; any other block goes through
+        ``read_v``."""
+        lo, hi = block.theta_range_rad or (float(block.theta_rad.min()), float(block.theta_rad.max()))
+        zero, step = self.params.angle_sensor.zeroing_error_rad, self.step_rad
+        count = math.floor((lo - zero) / step + 0.5)
+        if count != math.floor((hi - zero) / step + 0.5):  # ``read_v`` without re-checking the rig's block
+            zero_0d, step_0d = self._zero_step_0d  # 0-d arrays: numpy converts Python floats every call
+            u = ((block.theta_rad - zero_0d) / step_0d + _HALF_0D).tolist()
+            positions = _snapped_positions_cached(block.time_s, self.params.daq)
+            self.last_reading_v = _block_mean(positions, u, self._levels, self.params)
+            return self.last_reading_v
         levels = self._levels
-        self.last_reading_v = levels[(self._zero_count + math.floor(lo)) % len(levels)]
+        self.last_reading_v = levels[(self._zero_count + count) % len(levels)]
         return self.last_reading_v
 
 
@@ -385,11 +426,14 @@ class BallPositionChain:
         self.params = params
         s = params.ball_sensor
         self.tau_s = s.rc_resistance_ohm * s.rc_capacitance_f
+        self._adc = adc_quantizer(params.daq)
+        self._dropout_v = s.dropout_voltage_v
         self._curve_x = np.asarray(s.curve_position_m)
         self._curve_v = np.asarray(s.curve_volts_v)
         # Positions where the wiper's slope or the contact changes: the curve's points and the track's ends.
         half = params.track.half_length_m
         self._breakpoints_m = np.unique(np.concatenate([self._curve_x, [-half, half]]))
+        self._breakpoint_list = self._breakpoints_m.tolist()  # bisect on a list: np.searchsorted's answer
 
     @staticmethod
     def _make_rng(seed: int | np.random.Generator | None) -> np.random.Generator:
@@ -482,32 +526,92 @@ class BallPositionChain:
             self._first_open -= forget
             self._forgotten += forget
 
-    def advance_block(self, times_s: np.ndarray, x_m: np.ndarray, in_contact: np.ndarray) -> float:
-        """``advance`` for a block the rig built (finite, increasing times from the chain's time, one contact
-        flag per time). The common block (no dropout in it, no table point or track end crossed, in contact
-        throughout) is filtered directly: ``advance`` would add no knots to it and take the same steps, so
-        the same bits (``BallChainBatch`` relies on the same fact); any other block goes through
-        ``advance``."""
+    def advance_block(self, block: PhysicsBlock) -> float:
+        """``advance`` for a block the rig built (see ``advance_rig_block``)."""
+        return self.advance_rig_block(
+            block.time_s, block.x_m, block.on_track, block.equal_steps, block.x_range_m, block.all_on_track
+        )
+
+    def advance_rig_block(
+        self,
+        times_s: np.ndarray,
+        x_m: np.ndarray,
+        in_contact: np.ndarray,
+        equal_steps: bool,
+        x_range_m: tuple[float, float] | None = None,
+        all_on_track: bool | None = None,
+    ) -> float:
+        """``advance`` for a block the rig built: finite times from the chain's time, one contact flag per
+        time; ``equal_steps`` if the times are equally spaced (physics steps only: no held stretch before
+        release); ``x_range_m``, ``all_on_track``: x's extremes and ``in_contact.all()`` when the caller
+        has them. The common block — equal steps, in contact throughout, no table point or track end
+        crossed — has the wiper on one linear piece of the curve between equally spaced knots: its filter
+        is one dot product with cached weights (``rc_filter_uniform_end_v``), plus, for each dropout in it,
+        the closed-form effect of the wiper at the open-contact volts there (``_dropout_effect_v``). Any
+        other block goes through ``advance``'s piecewise filter."""
         t0, t_end = float(times_s[0]), float(times_s[-1])
-        if self._next_start_s > t_end and self._busy_until_s <= t0 and in_contact.all():
-            lo, hi = float(x_m.min()), float(x_m.max())
-            half = self.params.track.half_length_m
-            # Within the track at both extremes: every midpoint is too. One segment between breakpoints:
-            # searchsorted is monotonic, so the extremes' segments bound every knot's.
-            bp = self._breakpoints_m
-            if -half <= lo and hi <= half and np.searchsorted(bp, lo) == np.searchsorted(bp, hi):
-                self._forget_finished(t0)
+        if equal_steps and (all_on_track if all_on_track is not None else bool(in_contact.all())):
+            lo, hi = x_range_m or (float(x_m.min()), float(x_m.max()))
+            # Within the track at both extremes (clear of its ends by more than interpolation's rounding):
+            # every point in between is too. One segment between breakpoints: bisect is monotonic, so the
+            # extremes' segments bound every knot's.
+            bp = self._breakpoint_list
+            if max(-lo, hi) < self.params.track.half_length_m * (1.0 - 1e-9) and bisect.bisect_left(
+                bp, lo
+            ) == bisect.bisect_left(bp, hi):
+                self._schedule_until(t_end)
+                if self._first_open < len(self._dropouts):
+                    self._forget_finished(t0)
                 vk = np.interp(x_m, self._curve_x, self._curve_v)
-                end = rc_filter_end_v(
-                    times_s, vk[None, :-1], vk[None, 1:], np.array([self.filtered_v]), self.tau_s
-                )
-                y = float(end[0])
+                decay, weights, _ = _uniform_rc_weights(len(vk) - 1, t_end - t0, self.tau_s)
+                y = decay * self.filtered_v + float(vk.dot(weights))
+                if self._busy_until_s > t0:  # a dropout reaches into the block
+                    y += self._dropout_effect_v(times_s.tolist(), vk.tolist())
                 self.filtered_v = y
-                self.wiper_v = float(vk[-1])
+                self.wiper_v = float(vk[-1]) if self._busy_until_s < t_end else self._dropout_v
                 self.time_s = t_end
-                self.reading_v = float(adc_quantize_v(y, self.params.daq))
+                self.reading_v = self._adc(y)
                 return self.reading_v
-        return self.advance(times_s, x_m, in_contact)
+        if equal_steps and all_on_track is not True and not in_contact[1:].any():
+            # Out of contact throughout (the ball off the track): the wiper sits at the open-contact volts.
+            self._schedule_until(t_end)  # the noise process draws as it would
+            self._forget_finished(t0)
+            decay, _, gain = _uniform_rc_weights(len(times_s) - 1, t_end - t0, self.tau_s)
+            y = decay * self.filtered_v + self._dropout_v * gain
+            self.filtered_v, self.wiper_v, self.time_s = y, self._dropout_v, t_end
+            self.reading_v = self._adc(y)
+            return self.reading_v
+        return self._advance(times_s, x_m, in_contact, None)
+
+    def _dropout_effect_v(self, t: list[float], v: list[float]) -> float:
+        """What the dropouts in (t[0], t[-1]] change in the filter's output at t[-1]: the integral of
+        (v_drop − v(t))·e^(−(t_end − t)/τ)/τ over the dropped time, v the wiper on the curve, linear between
+        the knots ``t`` with values ``v``. On a piece [a, b] of one knot interval, with v_drop − v = α + β·(s − a),
+        u = (b − a)/τ and w = e^(−(t_end − b)/τ), it is exactly w·(α·(1 − e^(−u)) + β·τ·(u − (1 − e^(−u))))."""
+        t0, t_end, tau = t[0], t[-1], self.tau_s
+        dropped: list[list[float]] = []  # the dropouts within the block, overlapping ones merged
+        for a, b in sorted((max(a, t0), min(b, t_end)) for a, b in self._dropouts[self._first_open :]):
+            if b <= a:
+                continue
+            if dropped and a <= dropped[-1][1]:
+                dropped[-1][1] = max(dropped[-1][1], b)
+            else:
+                dropped.append([a, b])
+        effect = 0.0
+        for a, b in dropped:
+            j = max(bisect.bisect_right(t, a) - 1, 0)
+            while j < len(t) - 1 and t[j] < b:
+                lo, hi = max(a, t[j]), min(b, t[j + 1])
+                if hi > lo:
+                    slope = (v[j + 1] - v[j]) / (t[j + 1] - t[j])
+                    alpha = self._dropout_v - (v[j] + slope * (lo - t[j]))
+                    u = (hi - lo) / tau
+                    one_minus = -math.expm1(-u)
+                    # u − (1 − e^(−u)) by its series for tiny u (cancellation)
+                    excess = u * u / 2.0 - u**3 / 6.0 + u**4 / 24.0 if u < 1e-4 else u - one_minus
+                    effect += math.exp((hi - t_end) / tau) * (alpha * one_minus - slope * tau * excess)
+                j += 1
+        return effect
 
     def advance(self, times_s: np.ndarray, x_m: np.ndarray, in_contact: bool | np.ndarray = True) -> float:
         """Advance over one block and return the ADC reading of the ball channel at its end.
@@ -529,6 +633,14 @@ class BallPositionChain:
             raise ValueError(
                 f"in_contact = {in_contact!r}: it must be a bool or one bool per time in times_s"
             )
+        return self._advance(t, x, contact, None)
+
+    def _advance(
+        self, t: np.ndarray, x: np.ndarray, contact: np.ndarray, known: tuple[float, float] | None
+    ) -> float:
+        """``advance`` on checked input. ``known`` = x's (min, max) when the caller knows the ball stays in
+        contact throughout and within one segment between breakpoints (only dropouts split the block): the
+        tests that would find nothing are skipped (their answers are all-True or empty)."""
         t0, t_end = float(t[0]), float(t[-1])
         self._schedule_until(t_end)
         self._forget_finished(t0)
@@ -536,23 +648,27 @@ class BallPositionChain:
 
         # Extra breakpoints: where x crosses a table point or a track end (the wiper's slope or contact
         # changes there) and where a dropout starts or ends.
-        segment = np.searchsorted(self._breakpoints_m, x)
         extra = [edge for d in drops for edge in d if t0 < edge < t_end]
-        for j in np.flatnonzero(segment[1:] != segment[:-1]).tolist():
-            lo, hi = sorted((segment[j], segment[j + 1]))
-            crossed = self._breakpoints_m[lo:hi]
-            extra.extend((t[j] + (crossed - x[j]) / (x[j + 1] - x[j]) * (t[j + 1] - t[j])).tolist())
+        if known is None:
+            segment = np.searchsorted(self._breakpoints_m, x)
+            for j in np.flatnonzero(segment[1:] != segment[:-1]).tolist():
+                lo, hi = sorted((segment[j], segment[j + 1]))
+                crossed = self._breakpoints_m[lo:hi]
+                extra.extend((t[j] + (crossed - x[j]) / (x[j + 1] - x[j]) * (t[j + 1] - t[j])).tolist())
         if extra:
             knots = np.unique(np.concatenate([t, extra]))
             xk = np.interp(knots, t, x)
         else:
             knots, xk = t, x
-        connected = np.abs(0.5 * (xk[:-1] + xk[1:])) <= self.params.track.half_length_m
-        if contact.ndim == 0:
-            connected &= bool(contact)
-        elif not contact.all():
-            mid = 0.5 * (knots[:-1] + knots[1:])
-            connected &= contact[np.searchsorted(t, mid, side="left")]
+        if known is None:
+            connected = np.abs(0.5 * (xk[:-1] + xk[1:])) <= self.params.track.half_length_m
+            if contact.ndim == 0:
+                connected &= bool(contact)
+            elif not contact.all():
+                mid = 0.5 * (knots[:-1] + knots[1:])
+                connected &= contact[np.searchsorted(t, mid, side="left")]
+        else:  # in contact throughout, within the track (every midpoint lies between x's extremes)
+            connected = np.ones(len(knots) - 1, dtype=bool)
         if drops:
             mid = 0.5 * (knots[:-1] + knots[1:])
             d = np.array(drops)
@@ -572,7 +688,7 @@ class BallPositionChain:
         self.filtered_v = y
         self.wiper_v = float(v_end[-1])
         self.time_s = t_end
-        self.reading_v = float(adc_quantize_v(y, self.params.daq))
+        self.reading_v = self._adc(y)
         return self.reading_v
 
 
@@ -580,8 +696,8 @@ class BallChainBatch:
     """The ball chains of a batch of runs in step (one seed each), advanced block by block together.
 
     A run's block that crosses no table point or track end, has no dropout in it and stays in contact (the
-    common block) is filtered in numpy over the batch with ``rc_filter_end_v``, the function a run alone
-    uses; any other block goes through the run's own ``BallPositionChain``, which also owns its noise
+    common block) is filtered in numpy over the batch with ``rc_filter_uniform_end_v``, as a run alone
+    filters it; any other block goes through the run's own ``BallPositionChain``, which also owns its noise
     process (the next dropout is drawn there, so each run draws the same numbers in the same order as
     alone). Same bits as ``BallPositionChain`` run by run."""
 
@@ -606,19 +722,19 @@ class BallChainBatch:
         chain0 = self.chains[0]
         half = self.params.track.half_length_m
         segment = np.searchsorted(chain0._breakpoints_m, x_m)
+        equal_steps = equally_spaced(times_s)
         common = (
-            (self._next_start_s[runs] > t_end)
+            equal_steps
+            & (self._next_start_s[runs] > t_end)
             & (self._busy_until_s[runs] <= t0)
             & (segment == segment[:, :1]).all(axis=1)
-            & (np.abs(0.5 * (x_m[:, :-1] + x_m[:, 1:])) <= half).all(axis=1)
+            & (np.abs(x_m).max(axis=1) < half * (1.0 - 1e-9))  # as ``advance_rig_block`` tells it
             & on_track.all(axis=1)
         )
         y = np.empty(len(runs))
         if common.any():
             vk = np.interp(x_m[common], chain0._curve_x, chain0._curve_v)
-            y[common] = rc_filter_end_v(
-                times_s, vk[:, :-1], vk[:, 1:], self.filtered_v[runs[common]], chain0.tau_s
-            )
+            y[common] = rc_filter_uniform_end_v(vk, self.filtered_v[runs[common]], t_end - t0, chain0.tau_s)
         readings = np.empty(len(runs))
         if common.any():
             readings[common] = adc_quantize_v(y[common], self.params.daq)
@@ -626,7 +742,7 @@ class BallChainBatch:
             i = int(runs[j])
             chain = self.chains[i]
             chain.filtered_v, chain.time_s = float(self.filtered_v[i]), self.time_s
-            readings[j] = chain.advance(times_s, x_m[j], on_track[j])
+            readings[j] = chain.advance_rig_block(times_s, x_m[j], on_track[j], equal_steps)
             y[j] = chain.filtered_v
             self._next_start_s[i] = chain._next_start_s
             if chain._dropouts:
@@ -660,6 +776,38 @@ def rc_filter_end_v(
     weight = np.exp((knots[1:] - t_end) / tau_s)
     # (1, K) @ (K, 1) per row: numpy's matmul takes the same BLAS dot as np.dot of two vectors.
     return math.exp((t0 - t_end) / tau_s) * y0_v + np.matmul(drive[:, None, :], weight[:, None])[:, 0, 0]
+
+
+def equally_spaced(times_s: np.ndarray) -> bool:
+    """Whether the knots are equally spaced up to the clock's rounding (a block of physics steps alone)."""
+    steps = np.diff(times_s)
+    return bool(steps.max() - steps.min() <= 1e-9 * (times_s[-1] - times_s[0]))
+
+
+@functools.lru_cache(maxsize=256)
+def _uniform_rc_weights(n: int, span_s: float, tau_s: float) -> tuple[float, np.ndarray, float]:
+    """(decay, P, ΣP) such that y_end = decay·y_0 + P·v for the RC filter driven by a wiper linear between
+    n + 1 equally spaced knots over ``span_s`` (volts v_0 … v_n): ``rc_filter_end_v``'s sum with every piece
+    the same length, its terms gathered per knot (ΣP: the gain for a constant wiper). Cached: a run's blocks
+    have a handful of distinct spans (the clock's rounding), and the weights are the filter's whole cost."""
+    a = span_s / n / tau_s
+    one_minus = -math.expm1(-a)
+    ramp = a / 2.0 - a * a / 6.0 + a**3 / 24.0 if a < 1e-4 else 1.0 - one_minus / a
+    decay_per_piece = np.exp(-a * np.arange(n - 1, -1, -1, dtype=np.float64))  # e^(−(n − 1 − k)·a)
+    weights = np.zeros(n + 1)
+    weights[:-1] += decay_per_piece * (one_minus - ramp)
+    weights[1:] += decay_per_piece * ramp
+    weights.flags.writeable = False
+    return math.exp(-span_s / tau_s), weights, float(weights.sum())
+
+
+def rc_filter_uniform_end_v(v: np.ndarray, y0_v: np.ndarray, span_s: float, tau_s: float) -> np.ndarray:
+    """The RC filter's output at the end of ``span_s`` for each row of ``v`` (B, n + 1): the wiper volts at
+    n + 1 equally spaced knots, linear in between, the capacitor at ``y0_v`` at the first. Equal to
+    ``rc_filter_end_v`` on those knots up to float rounding (~1e-16 V); one run is a batch of one (its
+    dot product is numpy's matmul of one row by one column, the same BLAS dot as ``ndarray.dot``)."""
+    decay, weights, _ = _uniform_rc_weights(v.shape[1] - 1, span_s, tau_s)
+    return decay * y0_v + np.matmul(v[:, None, :], weights[:, None])[:, 0, 0]
 
 
 class IdealSensors:
