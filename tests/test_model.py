@@ -172,3 +172,18 @@ def test_plain_install_ships_the_model(tmp_path) -> None:
     )
     assert probe.returncode == 0, probe.stderr
     assert Path(probe.stdout.strip()).is_relative_to(target)
+
+
+def test_compiled_once_and_each_caller_gets_its_own_copy():
+    """``build_model`` compiles once per parameters and hands out copies: a caller that changes its model
+    (the linearization switches the integrator) changes no other's, and different parameters compile anew."""
+    first, second = mdl.build_model(), mdl.build_model()
+    assert first is not second
+    first.opt.timestep = 0.005
+    first.actuator_gainprm[0, 0] = 0.0
+    third = mdl.build_model()
+    assert third.opt.timestep == second.opt.timestep == Parameters().physics.timestep_s
+    assert third.actuator_gainprm[0, 0] == second.actuator_gainprm[0, 0] != 0.0
+    heavier = mdl.build_model(Parameters().with_overrides({"ball.mass_kg": 0.1}))
+    assert heavier.body(mdl.BALL_BODY).mass[0] == pytest.approx(0.1)
+    assert mdl.build_model().body(mdl.BALL_BODY).mass[0] == pytest.approx(Parameters().ball.mass_kg)
