@@ -47,13 +47,7 @@ def motor_volts(command_v: float | np.ndarray, params: Parameters) -> float | np
 
 
 def motor_volts_of(params: Parameters) -> Callable[[float], float]:
-    """``motor_volts`` of one finite Python float with the constants bound once (the rig's per-tick write):
-    the DAC's quantization (``twin.daq``) then the amplifier, the same operations in one call
-    (``tests/test_output_stage.py`` checks it against ``motor_volts``)."""
-    dac = dac_quantizer(params.daq)
-    gain, zero, rail = params.amplifier.gain_v_per_v, params.amplifier.zero_command_v, params.amplifier.rail_v
-
-    def volts(command_v: float) -> float:
-        return min(max(gain * (dac(command_v) - zero), -rail), rail)
-
-    return volts
+    """``motor_volts`` of one finite Python float with the DAC's constants bound once (the rig's per-tick
+    write): the same two steps (``tests/test_output_stage.py`` checks it against ``motor_volts``)."""
+    dac, amplifier = dac_quantizer(params.daq), params.amplifier
+    return lambda command_v: float(amplifier_volts(dac(command_v), amplifier))

@@ -72,6 +72,9 @@ _MAX_CROSSINGS_FAST = 90
 
 
 _HALF_0D = np.array(0.5)
+# A rig block whose |x| stays below this fraction of the track's half length is on the track at every point
+# interpolated between its knots (clear of the ends by more than interpolation's rounding).
+_CLEAR_OF_ENDS = 1.0 - 1e-9
 
 
 # --- beam angle ------------------------------------------------------------------------------------------
@@ -556,7 +559,7 @@ class BallPositionChain:
             # every point in between is too. One segment between breakpoints: bisect is monotonic, so the
             # extremes' segments bound every knot's.
             bp = self._breakpoint_list
-            if max(-lo, hi) < self.params.track.half_length_m * (1.0 - 1e-9) and bisect.bisect_left(
+            if max(-lo, hi) < self.params.track.half_length_m * _CLEAR_OF_ENDS and bisect.bisect_left(
                 bp, lo
             ) == bisect.bisect_left(bp, hi):
                 self._schedule_until(t_end)
@@ -581,7 +584,7 @@ class BallPositionChain:
             self.filtered_v, self.wiper_v, self.time_s = y, self._dropout_v, t_end
             self.reading_v = self._adc(y)
             return self.reading_v
-        return self._advance(times_s, x_m, in_contact, None)
+        return self._advance(times_s, x_m, in_contact)
 
     def _dropout_effect_v(self, t: list[float], v: list[float]) -> float:
         """What the dropouts in (t[0], t[-1]] change in the filter's output at t[-1]: the integral of
@@ -633,14 +636,10 @@ class BallPositionChain:
             raise ValueError(
                 f"in_contact = {in_contact!r}: it must be a bool or one bool per time in times_s"
             )
-        return self._advance(t, x, contact, None)
+        return self._advance(t, x, contact)
 
-    def _advance(
-        self, t: np.ndarray, x: np.ndarray, contact: np.ndarray, known: tuple[float, float] | None
-    ) -> float:
-        """``advance`` on checked input. ``known`` = x's (min, max) when the caller knows the ball stays in
-        contact throughout and within one segment between breakpoints (only dropouts split the block): the
-        tests that would find nothing are skipped (their answers are all-True or empty)."""
+    def _advance(self, t: np.ndarray, x: np.ndarray, contact: np.ndarray) -> float:
+        """``advance`` on checked input: the piecewise filter."""
         t0, t_end = float(t[0]), float(t[-1])
         self._schedule_until(t_end)
         self._forget_finished(t0)
@@ -649,26 +648,22 @@ class BallPositionChain:
         # Extra breakpoints: where x crosses a table point or a track end (the wiper's slope or contact
         # changes there) and where a dropout starts or ends.
         extra = [edge for d in drops for edge in d if t0 < edge < t_end]
-        if known is None:
-            segment = np.searchsorted(self._breakpoints_m, x)
-            for j in np.flatnonzero(segment[1:] != segment[:-1]).tolist():
-                lo, hi = sorted((segment[j], segment[j + 1]))
-                crossed = self._breakpoints_m[lo:hi]
-                extra.extend((t[j] + (crossed - x[j]) / (x[j + 1] - x[j]) * (t[j + 1] - t[j])).tolist())
+        segment = np.searchsorted(self._breakpoints_m, x)
+        for j in np.flatnonzero(segment[1:] != segment[:-1]).tolist():
+            lo, hi = sorted((segment[j], segment[j + 1]))
+            crossed = self._breakpoints_m[lo:hi]
+            extra.extend((t[j] + (crossed - x[j]) / (x[j + 1] - x[j]) * (t[j + 1] - t[j])).tolist())
         if extra:
             knots = np.unique(np.concatenate([t, extra]))
             xk = np.interp(knots, t, x)
         else:
             knots, xk = t, x
-        if known is None:
-            connected = np.abs(0.5 * (xk[:-1] + xk[1:])) <= self.params.track.half_length_m
-            if contact.ndim == 0:
-                connected &= bool(contact)
-            elif not contact.all():
-                mid = 0.5 * (knots[:-1] + knots[1:])
-                connected &= contact[np.searchsorted(t, mid, side="left")]
-        else:  # in contact throughout, within the track (every midpoint lies between x's extremes)
-            connected = np.ones(len(knots) - 1, dtype=bool)
+        connected = np.abs(0.5 * (xk[:-1] + xk[1:])) <= self.params.track.half_length_m
+        if contact.ndim == 0:
+            connected &= bool(contact)
+        elif not contact.all():
+            mid = 0.5 * (knots[:-1] + knots[1:])
+            connected &= contact[np.searchsorted(t, mid, side="left")]
         if drops:
             mid = 0.5 * (knots[:-1] + knots[1:])
             d = np.array(drops)
@@ -728,7 +723,7 @@ class BallChainBatch:
             & (self._next_start_s[runs] > t_end)
             & (self._busy_until_s[runs] <= t0)
             & (segment == segment[:, :1]).all(axis=1)
-            & (np.abs(x_m).max(axis=1) < half * (1.0 - 1e-9))  # as ``advance_rig_block`` tells it
+            & (np.abs(x_m).max(axis=1) < half * _CLEAR_OF_ENDS)  # as ``advance_rig_block`` tells it
             & on_track.all(axis=1)
         )
         y = np.empty(len(runs))
