@@ -19,7 +19,8 @@ from __future__ import annotations
 
 import itertools
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
 import numpy as np
@@ -32,6 +33,7 @@ from twin.verdict import Criteria, Verdict, evaluate
 
 __all__ = [
     "Catalogue",
+    "CatalogueEntry",
     "ClosedLoop",
     "ControllerError",
     "RunResult",
@@ -59,10 +61,23 @@ class StateLaw(Protocol):
     def motor_volts(self, state: np.ndarray) -> float: ...
 
 
+@dataclass(frozen=True)
+class CatalogueEntry:
+    """One named controller as data: what the CLI lists and the live view offers, without building it."""
+
+    name: str
+    build: Callable[[Parameters], Controller | StateLaw]  # designs and builds one for the given rig
+    description: str  # one line: what it is and where it comes from
+    simulation_only: bool  # a law on the true state (chapter 4): it cannot drive the hardware
+    batched: bool  # has a vectorized version for the batch engine (twin.batch)
+    setpoint: bool  # the built controller implements twin.interface.Setpoint
+
+
 class Catalogue(Protocol):
     """The named controllers the application layer hands down (``controllers.registry`` is one)."""
 
     NAMES: tuple[str, ...]
+    ENTRIES: Mapping[str, CatalogueEntry]
 
     def make(self, name: str, params: Parameters | None = None) -> Controller | StateLaw: ...
 

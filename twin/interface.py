@@ -16,10 +16,11 @@ from __future__ import annotations
 import math
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-__all__ = ["DaqSample", "Rig", "Controller", "Telemetry"]
+__all__ = ["DaqSample", "Rig", "Controller", "Setpoint", "Telemetry"]
 
 
 @dataclass(frozen=True)
@@ -81,3 +82,13 @@ class Controller(ABC):
     @abstractmethod
     def update(self, sample: DaqSample) -> float:
         """One tick: the block just acquired → the DAC command (V). Updates ``self.telemetry``."""
+
+
+@runtime_checkable
+class Setpoint(Protocol):
+    """A capability a controller (or a simulation-only law) declares when it regulates the ball to a settable
+    position: ``setpoint_m`` (m along the beam, 0 = the centre) is read and assigned between ticks. The live
+    view, the excitation experiments and the verdict's "about the setpoint" read it; a controller without it
+    regulates to its own fixed point (the centre)."""
+
+    setpoint_m: float
