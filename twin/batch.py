@@ -35,16 +35,18 @@ from twin.engine import (
     ControllerError,
     RunResult,
     StateLaw,
+    check_period_s,
     checked_start,
     checked_update,
     judge,
     run_closed_loop,
     update_ticks,
 )
+from twin.guard import Guard, safe_name
 from twin.interface import Controller, DaqSample
 from twin.log import THESIS_FIELDS, TRUTH_FIELDS, RunLog
 from twin.output_stage import amplifier_volts, motor_volts
-from twin.parameters import Parameters
+from twin.parameters import Daq, Parameters
 from twin.plant import Plant
 from twin.rig import PlantKind, RigError, whole_steps
 from twin.sensors import BallChainBatch, angle_block_means_v
@@ -113,10 +115,19 @@ class BatchCatalogue(Catalogue, Protocol):
 class ScalarControllers:
     """One scalar ``Controller`` per run, called in a loop: any controller runs in a batch this way."""
 
-    def __init__(self, controllers: Sequence[Controller]) -> None:
+    def __init__(
+        self, controllers: Sequence[Controller], timeout_s: float | None = None, daq: Daq | None = None
+    ) -> None:
+        """``timeout_s``: each call's watchdog budget (``twin.guard.Guard.for_period``); ``daq``: the card
+        whose DAC range a command must be in."""
         self.controllers = list(controllers)
-        self.name = self.controllers[0].name
-        self.period_s = self.controllers[0].period_s
+        self.name = safe_name(self.controllers[0])
+        self.period_s = check_period_s(self.controllers[0])
+        for c in self.controllers[1:]:
+            check_period_s(c)
+        self.guard = Guard.for_period(self.period_s, timeout_s)
+        self.daq = daq
+        self.tick = 0
         self.telemetry = BatchTelemetry(np.empty((0, 4)), np.empty(0), np.empty(0))
 
     def _collect(self) -> None:
@@ -130,14 +141,16 @@ class ScalarControllers:
     def start(self, samples: BatchSamples) -> None:
         for i, c in enumerate(self.controllers):
             sample = DaqSample(samples.time_s, float(samples.ball_v[i]), float(samples.angle_v[i]))
-            checked_start(c, sample, f"(run {i})")
+            checked_start(c, sample, f"(run {i})", self.guard)
         self._collect()
 
     def update(self, samples: BatchSamples) -> np.ndarray:
         out = np.empty(len(self.controllers))
+        self.tick += 1
         for i, c in enumerate(self.controllers):
             sample = DaqSample(samples.time_s, float(samples.ball_v[i]), float(samples.angle_v[i]))
-            out[i] = checked_update(c, sample, f"(run {i}, t = {samples.time_s:.3f} s)")
+            where = f"at tick k = {self.tick} (t = {samples.time_s:.3f} s, run {i})"
+            out[i] = checked_update(c, sample, where, self.guard, self.daq)
         self._collect()
         return out
 
@@ -162,6 +175,7 @@ def run_batch(
     nthread: int | None = None,
     record: bool = False,
     vectorized: bool = True,
+    controller_timeout_s: float | None = None,
 ) -> list[RunResult]:
     """Run controller ``name`` from each (x0_m[i], theta0_rad[i]) with noise seed seeds[i]: element i is
     ``run_closed_loop(catalogue.make(name, params_i), x0_m=x0_m[i], …, seed=seeds[i], …)`` bit for bit.
@@ -170,7 +184,8 @@ def run_batch(
     parameters agree share one batch; each run's physics has its own MuJoCo model). ``nthread``: physics
     threads (default: every CPU). ``record``: keep each run's log (17 arrays per run); without it a result's
     ``log`` is not kept (``RunResult.recorded`` is false) and only the verdict is. ``vectorized=False``
-    calls one scalar controller per run even when the catalogue has a batched one (for tests)."""
+    calls one scalar controller per run even when the catalogue has a batched one (for tests).
+    ``controller_timeout_s``: the watchdog's budget per call of a scalar controller (``twin.guard``)."""
     x0 = np.asarray(x0_m, dtype=float).reshape(-1)
     th0 = np.asarray(theta0_rad, dtype=float).reshape(-1)
     seed_arr = np.asarray(seeds).reshape(-1)
@@ -205,6 +220,7 @@ def run_batch(
                 ideal_sensors=ideal_sensors,
                 stop_when_lost=stop_when_lost,
                 criteria=criteria,
+                controller_timeout_s=controller_timeout_s,
             )
             for i in range(n)
         ]
@@ -226,7 +242,7 @@ def run_batch(
             scalar = [c for c in made if isinstance(c, Controller)]
             if len(scalar) != len(made):
                 raise TypeError(f"{name}: the catalogue made something that is not a Controller")
-            controller = ScalarControllers(scalar)
+            controller = ScalarControllers(scalar, controller_timeout_s, group_params[0].daq)
         group = _Group(
             [noisy[id(run_params[i])] for i in idx],
             x0[rows],

@@ -19,15 +19,17 @@ from __future__ import annotations
 
 import itertools
 import math
+import sys
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
 import numpy as np
 
+from twin.guard import Fault, Guard, describe, is_interrupt, safe_name
 from twin.interface import Controller, DaqSample, Telemetry
 from twin.log import THESIS_FIELDS, TRUTH_FIELDS, RunLog
-from twin.parameters import Parameters
+from twin.parameters import Daq, Parameters
 from twin.rig import PlantKind, RigError, SimRig, make_rig, whole_steps
 from twin.verdict import Criteria, Verdict, evaluate
 
@@ -38,12 +40,16 @@ __all__ = [
     "ControllerError",
     "RunResult",
     "StateLaw",
+    "check_period_s",
+    "checked_start",
+    "checked_update",
     "run_closed_loop",
     "update_ticks",
 ]
 
 # Two periods agree when they differ by less than this (they are typed as decimal seconds).
 _PERIOD_TOLERANCE_S = 1e-12
+_MAX_FLOAT = sys.float_info.max
 
 
 @runtime_checkable
@@ -94,38 +100,116 @@ class ControllerError(RuntimeError):
     """A controller raised or returned something the I/O card cannot output; the message names the tick."""
 
 
-def checked_start(controller: Controller, sample: DaqSample, where: str = "") -> None:
+def checked_start(
+    controller: Controller, sample: DaqSample, where: str = "", guard: Guard | None = None
+) -> None:
     """``controller.start(sample)``; a ``ControllerError`` naming the controller (and ``where``: the run)
-    if it raises."""
+    if it raises anything (``SystemExit`` included; only the process's own Ctrl-C passes) or, with a
+    ``guard``, does not return within ``twin.guard.first_call_budget_s``."""
     try:
-        controller.start(sample)
-    except Exception as exc:  # noqa: BLE001 - a user's controller may raise anything: report, do not crash
-        place = f" {where}" if where else ""
-        raise ControllerError(f"{controller.name}.start raised {type(exc).__name__}{place}: {exc}") from exc
+        if guard is None:
+            controller.start(sample)
+        else:
+            guard.call(controller.start, sample, guard.first_budget_s)
+    except BaseException as exc:  # noqa: BLE001 - a user's controller may raise anything: report, do not crash
+        raise ControllerError(_failure(controller, "start", exc, where)) from _cause(exc)
 
 
-def checked_update(controller: Controller, sample: DaqSample, where: str | Callable[[], str]) -> float:
+def checked_update(
+    controller: Controller,
+    sample: DaqSample,
+    where: str | Callable[[], str],
+    guard: Guard | None = None,
+    daq: Daq | None = None,
+) -> float:
     """``controller.update(sample)`` as a DAC command in volts; a ``ControllerError`` naming the controller
     and ``where`` (the tick, the run; a function giving it, so that the text is only made for an error)
-    if it raises or returns anything but a finite number."""
+    if it raises anything (only the process's own Ctrl-C passes), does not return within the ``guard``'s
+    update budget, or returns anything but a finite real number (in ``daq``'s DAC range, when given)."""
     try:
-        command = controller.update(sample)
-    except Exception as exc:  # noqa: BLE001 - a user's controller may raise anything: report, do not crash
-        raise ControllerError(
-            f"{controller.name}.update raised {type(exc).__name__} {_where(where)}: {exc}"
-        ) from exc
-    if type(command) is float and math.isfinite(command):  # the common case, checked first
+        if guard is None:
+            command = controller.update(sample)
+        else:
+            command = guard.call(controller.update, sample, guard.update_budget_s)
+    except BaseException as exc:  # noqa: BLE001 - a user's controller may raise anything: report, do not crash
+        raise ControllerError(_failure(controller, "update", exc, where)) from _cause(exc)
+    low, high = (-_MAX_FLOAT, _MAX_FLOAT) if daq is None else (daq.dac_min_v, daq.dac_max_v)
+    if type(command) is float and low <= command <= high:  # the common case (nan and ±inf fail it)
         return command
-    if isinstance(command, bool) or not isinstance(command, (int, float, np.floating, np.integer)):
+    return _refused_command(controller, command, where, low, high)
+
+
+def _refused_command(
+    controller: Controller, command: object, where: str | Callable[[], str], low: float, high: float
+) -> float:
+    """A command that is not a plain float in range: a real number converted, anything else refused."""
+    name = safe_name(controller)
+    if isinstance(command, (bool, np.bool_)) or not isinstance(
+        command, (int, float, np.floating, np.integer)
+    ):
         raise ControllerError(
-            f"{controller.name}.update returned {command!r} {_where(where)}: expected the DAC command in volts"
+            f"{name}.update returned {_short_repr(command)} {_where(where)}: expected the DAC command in "
+            "volts (a real number)"
         )
-    if not math.isfinite(command):
+    try:
+        volts = float(command)
+    except OverflowError:  # an int too large for a float, e.g. 10**400
+        volts = math.inf
+    if not math.isfinite(volts):
         raise ControllerError(
-            f"{controller.name}.update returned {command!r} {_where(where)}: the DAC command must be a finite "
-            "number of volts"
+            f"{name}.update returned {_short_repr(command)} {_where(where)}: the DAC command must be a "
+            "finite number of volts"
         )
-    return float(command)
+    if not low <= volts <= high:
+        raise ControllerError(
+            f"{name}.update returned {volts!r} V {_where(where)}: outside the DAC's range "
+            f"daq.dac_min_v … daq.dac_max_v = {low!r} … {high!r} V"
+        )
+    return volts
+
+
+def _short_repr(value: object) -> str:
+    try:
+        text = repr(value)
+    except Exception:  # noqa: BLE001 - a value whose repr fails is still named
+        text = f"a {type(value).__name__}"
+    text = " ".join(text.split())
+    return text if len(text) <= 60 else f"{text[:40]}… (a {type(value).__name__})"
+
+
+def _failure(controller: object, phase: str, exc: BaseException, where: str | Callable[[], str]) -> str:
+    """The one-line report of a failed call, or ``exc`` re-raised when it is the process's own Ctrl-C."""
+    if isinstance(exc, Fault):
+        return describe(exc, safe_name(controller), phase, _where(where))
+    if is_interrupt(exc):
+        raise exc
+    return describe(Fault(exc), safe_name(controller), phase, _where(where))
+
+
+def _cause(exc: BaseException) -> BaseException | None:
+    return exc.exc if isinstance(exc, Fault) else exc
+
+
+def check_period_s(controller: object) -> float:
+    """The controller's ``period_s`` as a float, or a ``ControllerError`` when it is not a positive finite
+    number of seconds (a string, a bool, nan, 0, negative) or reading it raises."""
+    name = safe_name(controller)
+    try:
+        period = controller.period_s  # type: ignore[attr-defined]
+    except BaseException as exc:  # noqa: BLE001 - a property of user code may raise anything
+        if is_interrupt(exc):
+            raise
+        raise ControllerError(describe(Fault(exc), name, "period_s", "")) from exc
+    if (
+        isinstance(period, (bool, np.bool_))
+        or not isinstance(period, (int, float, np.floating, np.integer))
+        or not math.isfinite(float(period))
+        or not period > 0
+    ):
+        raise ControllerError(
+            f"{name}: period_s = {_short_repr(period)} must be a positive finite number of seconds"
+        )
+    return float(period)
 
 
 def _where(where: str | Callable[[], str]) -> str:
@@ -285,8 +369,10 @@ class _StateLawVolts:
                 volts = float(self._motor_volts(np.array([x_m, theta_rad, xdot_m_s, thetadot_rad_s])))
             else:
                 volts = float(self._motor_volts_of_floats(x_m, theta_rad, xdot_m_s, thetadot_rad_s))
-        except Exception as exc:  # noqa: BLE001
+        except BaseException as exc:  # noqa: BLE001 - only the process's own Ctrl-C passes
             loop = self.loop
+            if is_interrupt(exc):
+                raise
             raise ControllerError(
                 f"{loop.name} raised {type(exc).__name__} at t = {loop.rig.time_s:.3f} s: {exc}"
             ) from exc
@@ -306,28 +392,31 @@ class ClosedLoop:
         *,
         record: bool = True,
         record_limit: int | None = None,
+        controller_timeout_s: float | None = None,
     ) -> None:
         """``record_limit``: the most ticks recorded (a long live session keeps its first ones and its
-        memory bounded); ``None`` records every tick."""
+        memory bounded); ``None`` records every tick. ``controller_timeout_s``: a controller's update that
+        does not return within it fails the run (default ``twin.guard.update_budget_s``; ``math.inf``:
+        no watchdog); its start gets at least ``twin.guard.FIRST_CALL_BUDGET_S``."""
         self.rig = rig
         self.controller = controller
         self.is_state_law = isinstance(controller, StateLaw) and not isinstance(controller, Controller)
+        period_s = check_period_s(controller)
         if self.is_state_law:
-            law_steps = whole_steps(
-                controller.period_s, rig.params.physics.timestep_s, f"{controller.name} period_s"
-            )
+            law_steps = whole_steps(period_s, rig.params.physics.timestep_s, f"{controller.name} period_s")
             tick_steps = whole_steps(rig.period_s, rig.params.physics.timestep_s, "daq.period_s")
             if law_steps < 1 or tick_steps % law_steps:
                 raise RigError(
                     f"{controller.name}: period_s = {controller.period_s!r} s must divide daq.period_s = "
                     f"{rig.period_s!r} s into whole physics steps"
                 )
-        elif abs(controller.period_s - rig.period_s) > _PERIOD_TOLERANCE_S:
+        elif abs(period_s - rig.period_s) > _PERIOD_TOLERANCE_S:
             raise RigError(
                 f"{controller.name}: period_s = {controller.period_s!r} s does not match the DAQ's "
                 f"daq.period_s = {rig.period_s!r} s; set daq.period_s to the controller's period (a parameter "
                 f"file) or change the controller"
             )
+        self.guard = None if self.is_state_law else Guard.for_period(rig.period_s, controller_timeout_s)
         self.recorder = _Recorder(256, rig) if record else None
         self.record_limit = record_limit
         self.last_sample: DaqSample | None = None
@@ -350,10 +439,10 @@ class ClosedLoop:
         if self.is_state_law:
             try:
                 self.controller.reset()  # type: ignore[union-attr]
-            except Exception as exc:  # noqa: BLE001 - report, do not crash
-                raise ControllerError(f"{self.name}.start raised {type(exc).__name__}: {exc}") from exc
+            except BaseException as exc:  # noqa: BLE001 - report, do not crash
+                raise ControllerError(_failure(self.controller, "start", exc, "")) from exc
         else:
-            checked_start(self.controller, sample)  # type: ignore[arg-type]
+            checked_start(self.controller, sample, guard=self.guard)  # type: ignore[arg-type]
         self.last_sample = sample
         self.started = True
         if self.recorder is not None and self.recording:
@@ -377,6 +466,8 @@ class ClosedLoop:
                 self.controller,  # type: ignore[arg-type]
                 sample,
                 lambda: f"at tick k = {rig.ticks} (t = {sample.time_s:.3f} s)",
+                self.guard,
+                rig.params.daq,
             )
             rig.write(command)
         self.last_sample = sample
@@ -464,18 +555,20 @@ def run_closed_loop(
     stop_when_lost: bool = True,
     criteria: Criteria | None = None,
     pacer: Pacer | None = None,
+    controller_timeout_s: float | None = None,
 ) -> RunResult:
     """Run ``controller`` on a fresh simulated rig from (x0, θ0) at rest for ``duration_s`` after release.
 
     The rig is held while the controller's ``start`` reads it, released at t = 0 and driven from
     t = ``start.free_run_s`` on (twin.rig). Initial velocities are zero; the controller's observer starts
-    from zero velocity, as on the rig. ``stop_when_lost`` ends the run at the tick the ball is lost."""
+    from zero velocity, as on the rig. ``stop_when_lost`` ends the run at the tick the ball is lost.
+    ``controller_timeout_s``: the watchdog's budget per update (``ClosedLoop``)."""
     if not (isinstance(duration_s, (int, float)) and math.isfinite(duration_s) and duration_s > 0):
         raise ValueError(f"duration_s = {duration_s!r} must be a positive number of seconds")
     p = params or Parameters()
     rig = make_rig(p, plant=plant, ideal_sensors=ideal_sensors, seed=seed, noise=noise)
     rig.reset(x0_m, theta0_rad)
-    loop = ClosedLoop(rig, controller)
+    loop = ClosedLoop(rig, controller, controller_timeout_s=controller_timeout_s)
     loop.start()
     for k in range(update_ticks(duration_s, rig.params)):
         if pacer is not None:

@@ -12,10 +12,12 @@ import importlib
 import inspect
 import os
 import sys
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from twin.engine import Catalogue, StateLaw
+    from twin.guard import Fault, Guard
     from twin.interface import Controller
     from twin.parameters import Parameters
 
@@ -26,8 +28,23 @@ def one_line(exc: BaseException) -> str:
     return " ".join(str(exc).split()) or type(exc).__name__
 
 
-def user_controller(spec: str) -> type[Controller] | None:
-    """The class named by ``MODULE:CLASS``, or None for a registry name (checked against the registry)."""
+def _first_call_guard(timeout_s: float | None) -> Guard:
+    from twin.guard import Guard, first_call_budget_s
+
+    return Guard(first_budget_s=first_call_budget_s(timeout_s))
+
+
+def _what(fault: Fault) -> str:
+    """What went wrong in a guarded import or construction, in one line."""
+    from twin.guard import fault_text
+
+    return fault_text(fault)
+
+
+def user_controller(spec: str, timeout_s: float | None = None) -> type[Controller] | None:
+    """The class named by ``MODULE:CLASS``, or None for a registry name (checked against the registry).
+    Whatever the import raises (``SystemExit`` included) or an import that does not return within
+    ``twin.guard.first_call_budget_s(timeout_s)`` is a ``ParameterError``."""
     from twin.parameters import ParameterError
 
     if ":" not in spec:
@@ -39,6 +56,7 @@ def user_controller(spec: str) -> type[Controller] | None:
                 "or MODULE:CLASS for your own"
             )
         return None
+    from twin.guard import Fault
     from twin.interface import Controller
 
     module_name, _, qualname = spec.partition(":")
@@ -47,18 +65,15 @@ def user_controller(spec: str) -> type[Controller] | None:
     cwd = os.getcwd()
     if "" not in sys.path and cwd not in sys.path:  # as `python -m`: the user's modules where they are
         sys.path.insert(0, cwd)
+    guard = _first_call_guard(timeout_s)
     try:
-        module = importlib.import_module(module_name)
-    except ModuleNotFoundError as exc:
-        if exc.name and (module_name == exc.name or module_name.startswith(exc.name + ".")):
-            raise ParameterError(f"--controller {spec}: no module named {exc.name!r}") from None
-        raise ParameterError(
-            f"--controller {spec}: importing {module_name} failed: {one_line(exc)}"
-        ) from None
-    except Exception as exc:  # noqa: BLE001 - the user's module may raise anything while it is imported
-        raise ParameterError(
-            f"--controller {spec}: importing {module_name} failed: {type(exc).__name__}: {one_line(exc)}"
-        ) from None
+        module = guard.call(importlib.import_module, module_name, guard.first_budget_s)
+    except Fault as fault:
+        exc = fault.exc
+        if isinstance(exc, ModuleNotFoundError) and exc.name:
+            if module_name == exc.name or module_name.startswith(exc.name + "."):
+                raise ParameterError(f"--controller {spec}: no module named {exc.name!r}") from None
+        raise ParameterError(f"--controller {spec}: importing {module_name} failed: {_what(fault)}") from None
     obj: Any = module
     for part in qualname.split("."):
         try:
@@ -73,8 +88,13 @@ def user_controller(spec: str) -> type[Controller] | None:
     return obj
 
 
-def construct(cls: type[Controller], spec: str, params: Parameters) -> Controller:
-    """``cls(software)`` if the constructor has a parameter ``software``, else ``cls()``."""
+def construct(
+    cls: type[Controller], spec: str, params: Parameters, timeout_s: float | None = None
+) -> Controller:
+    """``cls(software)`` if the constructor has a parameter ``software``, else ``cls()``; whatever it raises,
+    a constructor that does not return within ``twin.guard.first_call_budget_s(timeout_s)`` or a ``period_s``
+    that is not a positive number of seconds is a ``ParameterError``."""
+    from twin.guard import Fault
     from twin.parameters import ParameterError
 
     try:
@@ -82,17 +102,23 @@ def construct(cls: type[Controller], spec: str, params: Parameters) -> Controlle
     except (TypeError, ValueError):  # no signature to read: call it without arguments
         software = None
     call = f"{cls.__name__}({'' if software is None else 'software'})"
+    if software is None:
+        make: Callable[[Any], Controller] = lambda _: cls()  # noqa: E731
+    elif software.kind is inspect.Parameter.POSITIONAL_ONLY:
+        make = cls
+    else:
+        make = lambda sw: cls(software=sw)  # type: ignore[call-arg]  # noqa: E731
+    guard = _first_call_guard(timeout_s)
     try:
-        if software is None:
-            controller = cls()
-        elif software.kind is inspect.Parameter.POSITIONAL_ONLY:
-            controller = cls(params.software)  # type: ignore[call-arg]
-        else:
-            controller = cls(software=params.software)  # type: ignore[call-arg]
-    except Exception as exc:  # noqa: BLE001 - the user's constructor may raise anything
-        raise ParameterError(
-            f"--controller {spec}: {call} failed: {type(exc).__name__}: {one_line(exc)}"
-        ) from None
+        controller = guard.call(make, params.software, guard.first_budget_s)
+    except Fault as fault:
+        raise ParameterError(f"--controller {spec}: {call} failed: {_what(fault)}") from None
+    from twin.engine import ControllerError, check_period_s
+
+    try:
+        check_period_s(controller)
+    except ControllerError as exc:
+        raise ParameterError(f"--controller {spec}: {exc}") from None
     return controller
 
 
