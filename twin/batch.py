@@ -127,7 +127,7 @@ class ScalarControllers:
             check_period_s(c)
         self.guard = Guard.for_period(self.period_s, timeout_s)
         self.daq = daq
-        self.tick = 0
+        self.tick = 1  # the blocks read, as ``SimRig.ticks``: the start's block is the first
         self.telemetry = BatchTelemetry(np.empty((0, 4)), np.empty(0), np.empty(0))
 
     def _collect(self) -> None:

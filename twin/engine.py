@@ -174,7 +174,7 @@ def _short_repr(value: object) -> str:
     except Exception:  # noqa: BLE001 - a value whose repr fails is still named
         text = f"a {type(value).__name__}"
     text = " ".join(text.split())
-    return text if len(text) <= 60 else f"{text[:40]}… (a {type(value).__name__})"
+    return text if len(text) <= 60 else f"{text[:24]}… ({type(value).__name__}, {len(text)} characters)"
 
 
 def _failure(controller: object, phase: str, exc: BaseException, where: str | Callable[[], str]) -> str:

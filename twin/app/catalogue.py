@@ -125,25 +125,27 @@ def construct(
 class WithUserController:
     """The registry plus the user's ``MODULE:CLASS`` controller, as a catalogue for the live view."""
 
-    def __init__(self, base: Catalogue, spec: str, cls: type[Controller]) -> None:
-        self.base, self.spec, self.cls = base, spec, cls
+    def __init__(
+        self, base: Catalogue, spec: str, cls: type[Controller], timeout_s: float | None = None
+    ) -> None:
+        self.base, self.spec, self.cls, self.timeout_s = base, spec, cls, timeout_s
         self.NAMES: tuple[str, ...] = (*base.NAMES, spec)
 
     def make(self, name: str, params: Parameters | None = None) -> Controller | StateLaw:
         from twin.parameters import Parameters
 
         if name == self.spec:
-            return construct(self.cls, name, params or Parameters())
+            return construct(self.cls, name, params or Parameters(), self.timeout_s)
         return self.base.make(name, params)
 
 
-def catalogue_for(spec: str, params: Parameters) -> Catalogue:
+def catalogue_for(spec: str, params: Parameters, timeout_s: float | None = None) -> Catalogue:
     """The registry, or the registry plus the user's ``MODULE:CLASS`` (its constructor tried once here, so
-    that a failing one is refused before any work)."""
+    that a failing one is refused before any work); ``timeout_s``: the watchdog's budget (``twin.guard``)."""
     from controllers import registry
 
-    user = user_controller(spec)
+    user = user_controller(spec, timeout_s)
     if user is None:
         return registry
-    construct(user, spec, params)
-    return WithUserController(registry, spec, user)
+    construct(user, spec, params, timeout_s)
+    return WithUserController(registry, spec, user, timeout_s)

@@ -384,7 +384,7 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     if not result.complete:
         print("ballbeam sweep: interrupted: the starts done so far are kept", file=sys.stderr)
         return 130
-    return 0
+    return _controller_failures(result.points, "sweep")
 
 
 def _cmd_montecarlo(args: argparse.Namespace) -> int:
@@ -453,7 +453,7 @@ def _cmd_montecarlo(args: argparse.Namespace) -> int:
     if not result.complete:
         print("ballbeam montecarlo: interrupted: the runs done so far are kept", file=sys.stderr)
         return 130
-    return 0
+    return _controller_failures(result.runs, "montecarlo")
 
 
 def _cmd_validate(args: argparse.Namespace) -> int:
@@ -870,7 +870,36 @@ def build_parser() -> argparse.ArgumentParser:
     _add_params_options(par)
     par.add_argument("--json", action="store_true", help="print JSON")
     par.set_defaults(func=_cmd_params)
+    for command in (run, sweep, mc, val, view):
+        _add_controller_timeout(command)
     return parser
+
+
+def _add_controller_timeout(command: argparse.ArgumentParser) -> None:
+    from twin.guard import FIRST_CALL_BUDGET_S, MIN_UPDATE_BUDGET_S, UPDATE_BUDGET_PERIODS
+
+    command.add_argument(
+        "--controller-timeout",
+        type=float,
+        metavar="SECONDS",
+        help=f"fail a controller whose update does not return within SECONDS (default: "
+        f"{UPDATE_BUDGET_PERIODS} control periods, at least {MIN_UPDATE_BUDGET_S:g} s; its import, "
+        f"construction and start get at least {FIRST_CALL_BUDGET_S:g} s); inf: no watchdog (a debugger)",
+    )
+
+
+def _controller_failures(records: Sequence[dict[str, Any] | None], what: str) -> int:
+    """0, or 1 with a line on stderr when a job's controller failed in some of its runs (a failed run is
+    not a verdict: the exit code says so)."""
+    failed = [r for r in records if r and r.get("failed")]
+    if not failed:
+        return 0
+    print(
+        f"ballbeam {what}: the controller failed in {len(failed)} of {len(records)} runs; the first: "
+        f"{str(failed[0].get('reason', '')).removeprefix('the controller failed: ')}",
+        file=sys.stderr,
+    )
+    return 1
 
 
 def _option_strings(parser: argparse.ArgumentParser) -> tuple[set[str], set[str]]:
@@ -940,10 +969,19 @@ def main(argv: Sequence[str] | None = None) -> int:
         args = parser.parse_args(join_negative_numbers(sys.argv[1:] if argv is None else argv, parser))
     except SystemExit as exc:  # --help, --version, or a usage error already reported on one line
         return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 2)
+    from twin.guard import check_timeout_s, install_interrupt_handler, set_default_timeout_s
+
+    install_interrupt_handler()  # the user's Ctrl-C told apart from a controller's KeyboardInterrupt
     try:
+        set_default_timeout_s(
+            check_timeout_s(getattr(args, "controller_timeout", None), "--controller-timeout")
+        )
         return int(args.func(args))
     except BrokenPipeError:  # output piped into e.g. head
         return 0
+    except SystemExit as exc:  # not ours (the controllers' calls are guarded): never a silent success
+        print(f"ballbeam: error: unexpected SystemExit({exc.code!r})", file=sys.stderr)
+        return 1
     except KeyboardInterrupt:  # Ctrl-C outside the long jobs (which keep what they did and return 130)
         print("ballbeam: interrupted", file=sys.stderr)
         return 130

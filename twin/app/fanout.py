@@ -52,12 +52,14 @@ class _Chunk:
     seeds: tuple[int, ...]
     params: tuple[Parameters, ...] | None  # one per run, or None: ``runs.params`` for all
     nthread: int
+    controller_timeout_s: float | None = None  # the watchdog's budget per controller call (twin.guard)
 
 
 def run_chunk(chunk: _Chunk) -> list[dict[str, Any]]:
     """Run one chunk through the batch engine: per run its start, seed and verdict as JSON values. A
-    controller that fails (raises, returns no finite command) fails its own run, not the job: the chunk is
-    run again one run at a time and that run's record says why (``failed``, ``reason``)."""
+    controller that fails (raises anything, ``SystemExit`` included, stalls past its watchdog budget, or
+    returns no command in the DAC range) fails its own run, not the job: the chunk is run again one run at a
+    time and that run's record says why (``failed``, ``reason``)."""
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # an idle OpenBLAS thread spins after dlqr
     from twin.engine import ControllerError
 
@@ -82,7 +84,7 @@ def _records(chunk: _Chunk, runs: Sequence[int]) -> list[dict[str, Any]]:
     r = chunk.runs
     pick = list(runs)
     results = run_batch(
-        catalogue_for(r.controller, r.params),
+        catalogue_for(r.controller, r.params, chunk.controller_timeout_s),
         r.controller,
         x0_m=np.array([chunk.x0_m[i] for i in pick]),
         theta0_rad=np.array([chunk.theta0_rad[i] for i in pick]),
@@ -93,6 +95,7 @@ def _records(chunk: _Chunk, runs: Sequence[int]) -> list[dict[str, Any]]:
         plant=r.plant,  # type: ignore[arg-type]
         ideal_sensors=r.ideal_sensors,
         nthread=chunk.nthread,
+        controller_timeout_s=chunk.controller_timeout_s,
     )
     return [
         {
@@ -184,7 +187,11 @@ def run_starts(
     """Every start ((N, 2): x0, θ0) with its seed (and its parameters, when given): the records in the
     starts' order (None where not run) and whether all ran. ``workers`` local processes (1: here), or a Dask
     ``scheduler`` address; ``nthread``: rollout threads per batch (default: the cores shared by the
-    workers)."""
+    workers). Each controller call's watchdog budget is the process's (``twin.guard.default_timeout_s``,
+    the CLI's ``--controller-timeout``), carried to the workers with the chunks."""
+    from twin.guard import default_timeout_s
+
+    timeout_s = default_timeout_s()
     n = len(starts)
     threads = nthread or max(1, (os.cpu_count() or 1) // max(workers, 1))
     chunks = [
@@ -197,6 +204,7 @@ def run_starts(
                 seeds=tuple(int(v) for v in seeds[lo : lo + CHUNK_RUNS]),
                 params=tuple(params[lo : lo + CHUNK_RUNS]) if params is not None else None,
                 nthread=threads,
+                controller_timeout_s=timeout_s,
             ),
         )
         for lo in range(0, n, CHUNK_RUNS)

@@ -165,7 +165,8 @@ def validate(
             [r for r in records if r],
         )
     )
-    saturated = max((r["saturated_fraction"] for r in records if r), default=0.0)
+    # A run whose controller failed has no figures (it already fails the nominal check).
+    saturated = max((r["saturated_fraction"] for r in records if r and not r.get("failed")), default=0.0)
     checks.append(
         Check(
             "saturation",
@@ -330,9 +331,13 @@ def render_markdown(report: ValidationReport) -> str:
         settle = "—" if r["settling_time_s"] is None else f"{r['settling_time_s']:.2f}"
         steady = "—" if r["steady_x_m"] is None else f"{1e3 * r['steady_x_m']:+.1f}"
         cycle = "—" if r["limit_cycle_x_pp_m"] is None else f"{1e3 * r['limit_cycle_x_pp_m']:.1f}"
+        if r.get("failed"):  # the controller failed: no figures
+            peak, rails = "—", "—"
+        else:
+            peak, rails = f"{r['peak_motor_voltage_v']:.1f}", f"{100 * r['saturated_fraction']:.0f} %"
         lines.append(
             f"| {r['x0_m']:+.2f} | {r['theta0_rad']:+.2f} | {r['seed']} | {'yes' if r['held'] else r['reason']} | "
-            f"{settle} | {steady} | {cycle} | {r['peak_motor_voltage_v']:.1f} | {100 * r['saturated_fraction']:.0f} % |"
+            f"{settle} | {steady} | {cycle} | {peak} | {rails} |"
         )
     lines += ["", "Criteria (override with `--criteria FILE`):", ""]
     lines += [f"- `{k}` = {v}" for k, v in asdict(report.criteria).items()]
