@@ -42,7 +42,7 @@ from twin.engine import (
     run_closed_loop,
     update_ticks,
 )
-from twin.guard import Guard, safe_name
+from twin.guard import Guard, install_interrupt_handler, safe_name
 from twin.interface import Controller, DaqSample
 from twin.log import THESIS_FIELDS, TRUTH_FIELDS, RunLog
 from twin.output_stage import amplifier_volts, motor_volts
@@ -120,6 +120,7 @@ class ScalarControllers:
     ) -> None:
         """``timeout_s``: each call's watchdog budget (``twin.guard.Guard.for_period``); ``daq``: the card
         whose DAC range a command must be in."""
+        install_interrupt_handler()  # before any user code runs: its KeyboardInterrupt is not the Ctrl-C
         self.controllers = list(controllers)
         self.name = safe_name(self.controllers[0])
         self.period_s = check_period_s(self.controllers[0])
@@ -205,7 +206,7 @@ def run_batch(
     if n == 0:
         return []
     probe = catalogue.make(name, run_params[0])
-    if plant != "twin" or (isinstance(probe, StateLaw) and not isinstance(probe, Controller)):
+    if plant != "twin" or (not isinstance(probe, Controller) and isinstance(probe, StateLaw)):
         # The reference plant and the 1 kHz laws on the true state stay on the single-run path.
         return [
             run_closed_loop(

@@ -26,7 +26,7 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-from twin.guard import Fault, Guard, describe, is_interrupt, safe_name
+from twin.guard import Fault, Guard, describe, install_interrupt_handler, is_interrupt, safe_name
 from twin.interface import Controller, DaqSample, Telemetry
 from twin.log import THESIS_FIELDS, TRUTH_FIELDS, RunLog
 from twin.parameters import Daq, Parameters
@@ -400,7 +400,9 @@ class ClosedLoop:
         no watchdog); its start gets at least ``twin.guard.FIRST_CALL_BUDGET_S``."""
         self.rig = rig
         self.controller = controller
-        self.is_state_law = isinstance(controller, StateLaw) and not isinstance(controller, Controller)
+        install_interrupt_handler()  # before any user code runs: its KeyboardInterrupt is not the Ctrl-C
+        # (a Controller first: the protocol's check reads attributes, which user code may make raise)
+        self.is_state_law = not isinstance(controller, Controller) and isinstance(controller, StateLaw)
         period_s = check_period_s(controller)
         if self.is_state_law:
             law_steps = whole_steps(period_s, rig.params.physics.timestep_s, f"{controller.name} period_s")
