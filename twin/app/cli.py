@@ -969,9 +969,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         args = parser.parse_args(join_negative_numbers(sys.argv[1:] if argv is None else argv, parser))
     except SystemExit as exc:  # --help, --version, or a usage error already reported on one line
         return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 2)
-    from twin.guard import check_timeout_s, install_interrupt_handler, set_default_timeout_s
+    from twin.guard import (
+        check_timeout_s,
+        default_timeout_s,
+        install_interrupt_handler,
+        set_default_timeout_s,
+    )
 
     install_interrupt_handler()  # the user's Ctrl-C told apart from a controller's KeyboardInterrupt
+    previous_timeout_s = default_timeout_s()
     try:
         set_default_timeout_s(
             check_timeout_s(getattr(args, "controller_timeout", None), "--controller-timeout")
@@ -988,6 +994,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (ValueError, OSError) as exc:  # bad input, or an output that cannot be written: no traceback
         print(f"ballbeam: error: {one_line(exc)}", file=sys.stderr)
         return 2
+    finally:
+        set_default_timeout_s(previous_timeout_s)  # the caller's own default (main called in-process)
 
 
 if __name__ == "__main__":
