@@ -404,17 +404,18 @@ class ClosedLoop:
         # (a Controller first: the protocol's check reads attributes, which user code may make raise)
         self.is_state_law = not isinstance(controller, Controller) and isinstance(controller, StateLaw)
         period_s = check_period_s(controller)
+        self._name = safe_name(controller)  # read once: user code's property may raise
         if self.is_state_law:
-            law_steps = whole_steps(period_s, rig.params.physics.timestep_s, f"{controller.name} period_s")
+            law_steps = whole_steps(period_s, rig.params.physics.timestep_s, f"{self._name} period_s")
             tick_steps = whole_steps(rig.period_s, rig.params.physics.timestep_s, "daq.period_s")
             if law_steps < 1 or tick_steps % law_steps:
                 raise RigError(
-                    f"{controller.name}: period_s = {controller.period_s!r} s must divide daq.period_s = "
+                    f"{self._name}: period_s = {period_s!r} s must divide daq.period_s = "
                     f"{rig.period_s!r} s into whole physics steps"
                 )
         elif abs(period_s - rig.period_s) > _PERIOD_TOLERANCE_S:
             raise RigError(
-                f"{controller.name}: period_s = {controller.period_s!r} s does not match the DAQ's "
+                f"{self._name}: period_s = {period_s!r} s does not match the DAQ's "
                 f"daq.period_s = {rig.period_s!r} s; set daq.period_s to the controller's period (a parameter "
                 f"file) or change the controller"
             )
@@ -427,7 +428,7 @@ class ClosedLoop:
 
     @property
     def name(self) -> str:
-        return self.controller.name
+        return self._name
 
     @property
     def recording(self) -> bool:
@@ -580,4 +581,4 @@ def run_closed_loop(
             pacer.done()
         if stop_when_lost and rig.ball_lost:
             break
-    return RunResult(controller=controller.name, log=loop.log(), verdict=loop.verdict(x0_m, criteria))
+    return RunResult(controller=loop.name, log=loop.log(), verdict=loop.verdict(x0_m, criteria))
