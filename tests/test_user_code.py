@@ -152,6 +152,19 @@ def test_a_misbehaving_user_controller_fails_the_command(
     assert seconds < BOUND_S
 
 
+@pytest.mark.parametrize("mode", ["sleep", "update_kbi"])
+def test_worker_processes_fail_the_run_too(user_dir: Path, mode: str) -> None:
+    """In the fan-out's worker processes (which ignore SIGINT) a stall and a KeyboardInterrupt fail each run."""
+    argv = [*COMMANDS["sweep"], "--controller", "bad:Bad", "--controller-timeout", "0.2", "--workers", "2"]
+    rc, stderr, seconds = _cli(user_dir, mode, argv)
+    says = "did not return within 0.2 s" if mode == "sleep" else "raised KeyboardInterrupt"
+    assert rc == 1 and "Traceback" not in stderr and seconds < BOUND_S
+    assert _last_line(stderr) == (
+        f"ballbeam sweep: the controller failed in 2 of 2 runs; the first: bad.update {says} at tick k = 4 "
+        f"(t = 0.050 s)" + (": stalled" if mode == "sleep" else "")
+    )
+
+
 def test_the_users_ctrl_c_still_interrupts_a_blocked_controller(user_dir: Path) -> None:
     """A real Ctrl-C (SIGINT to the process) is 130, a controller's own KeyboardInterrupt is 1 (above)."""
     mark = user_dir / "asleep"

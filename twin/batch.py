@@ -150,7 +150,8 @@ class ScalarControllers:
         self.tick += 1
         for i, c in enumerate(self.controllers):
             sample = DaqSample(samples.time_s, float(samples.ball_v[i]), float(samples.angle_v[i]))
-            where = f"at tick k = {self.tick} (t = {samples.time_s:.3f} s, run {i})"
+            run = f", run {i}" if len(self.controllers) > 1 else ""  # a run alone is the run
+            where = f"at tick k = {self.tick} (t = {samples.time_s:.3f} s{run})"
             out[i] = checked_update(c, sample, where, self.guard, self.daq)
         self._collect()
         return out
