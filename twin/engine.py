@@ -171,7 +171,9 @@ def _refused_command(
 def _short_repr(value: object) -> str:
     try:
         text = repr(value)
-    except Exception:  # noqa: BLE001 - a value whose repr fails is still named
+    except BaseException as exc:  # noqa: BLE001 - a value whose repr fails (user code) is still named
+        if is_interrupt(exc):
+            raise
         text = f"a {type(value).__name__}"
     text = " ".join(text.split())
     return text if len(text) <= 60 else f"{text[:24]}… ({type(value).__name__}, {len(text)} characters)"

@@ -108,7 +108,9 @@ def _exception_parts(exc: BaseException) -> tuple[str, str]:
         return "SystemExit", f"sys.exit({exc.code!r})" if exc.code is not None else "sys.exit()"
     try:
         text = " ".join(str(exc).split())
-    except Exception:  # noqa: BLE001 - an exception whose str fails is still named
+    except BaseException as err:  # noqa: BLE001 - an exception whose str fails (user code) is still named
+        if is_interrupt(err):
+            raise
         text = ""
     return type(exc).__name__, text
 
