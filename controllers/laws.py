@@ -14,7 +14,7 @@ import numpy as np
 from twin.parameters import Parameters
 from twin.reference import EquationCoefficients
 
-__all__ = ["StateFeedbackLaw", "ClpTerms", "ClpLaw", "SlidingModeLaw", "KalmanState"]
+__all__ = ["StateFeedbackLaw", "ClpTerms", "ClpLaw", "SlidingModeLaw", "KalmanState", "IntegralStateFeedbackLaw"]
 
 # The laws run every physics step on the true state (1 kHz, controllers.loop.TrueStateLaw), where each numpy
 # call counts: ``of_floats`` takes the state as four Python floats and does the elementwise arithmetic in
@@ -230,3 +230,31 @@ class KalmanState:
         predicted = self.phi @ self._x + self.gamma[:, 0] * u_prev
         self._x = predicted + self.gain @ (xa - self.h @ predicted)
         return self._x.copy()
+
+
+@dataclass
+class IntegralStateFeedbackLaw:
+    """LQI: u = −K·(x − x_ref) − k_i·z with z[k+1] = z[k] + T·(x[k] − ref), one call per tick (z is state:
+    ``reset`` before a run). Anti-windup by conditional integration: z is held while u is at or beyond a
+    command limit (``u_min_v``/``u_max_v``, the motor volts the software's limits allow) and this tick's
+    error would push it further out."""
+
+    gain: np.ndarray  # K (1×4)
+    integral_gain: float  # k_i, V per (m·s)
+    period_s: float
+    u_min_v: float
+    u_max_v: float
+    ref_x_m: float = 0.0
+    integral_m_s: float = 0.0
+
+    def reset(self) -> None:
+        self.integral_m_s = 0.0
+
+    def __call__(self, x: np.ndarray) -> float:
+        error = np.asarray(x, dtype=float) - np.array([self.ref_x_m, 0.0, 0.0, 0.0])
+        u = -(self.gain @ error).item() - self.integral_gain * self.integral_m_s
+        step_m_s = self.period_s * float(error[0])
+        push_v = -self.integral_gain * step_m_s  # what this step of z adds to the next command
+        if not ((u >= self.u_max_v and push_v > 0) or (u <= self.u_min_v and push_v < 0)):
+            self.integral_m_s += step_m_s
+        return u

@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Literal, Protocol
+from typing import Any, Literal, Protocol
 
 import numpy as np
 
@@ -24,7 +24,16 @@ from twin.dcmotor import volts_for_torque_v
 from twin.interface import Controller, DaqSample, Telemetry
 from twin.parameters import SoftwareCalibration
 
-__all__ = ["LoopController", "MotorInverse", "ObserverState", "StateSource", "TrueStateLaw", "measured_xa"]
+__all__ = [
+    "LoopController",
+    "MotorInverse",
+    "ObserverState",
+    "SetpointLoopController",
+    "SetpointTrueStateLaw",
+    "StateSource",
+    "TrueStateLaw",
+    "measured_xa",
+]
 
 
 class StateSource(Protocol):
@@ -196,3 +205,46 @@ class TrueStateLaw:
         volts = _volts(u, x, self.u_kind, self.motor, self.name)
         self._last = (x, u, volts)
         return volts
+
+
+class _LawSetpoint:
+    """``setpoint_m`` (twin.interface.Setpoint): the ball position the law regulates to, its ``ref_x_m``. A
+    class of its own (not a property of every loop) so that only loops whose law has a setpoint declare one."""
+
+    law: Any
+
+    @property
+    def setpoint_m(self) -> float:
+        return self.law.ref_x_m
+
+    @setpoint_m.setter
+    def setpoint_m(self, value: float) -> None:
+        self.law.ref_x_m = value
+
+
+def _require_setpoint(name: str, law: object) -> None:
+    if not hasattr(law, "ref_x_m"):
+        raise TypeError(f"{name}: its law has no ball setpoint (ref_x_m)")
+
+
+class SetpointLoopController(_LawSetpoint, LoopController):
+    """A ``LoopController`` whose law has a ball setpoint. A law with an integrator (``reset``) starts it
+    from zero at each ``start``, so that a reused controller runs as a fresh one."""
+
+    def __init__(self, name: str, state: StateSource, law: Callable[[np.ndarray], float], **kwargs: Any) -> None:
+        _require_setpoint(name, law)
+        super().__init__(name, state, law, **kwargs)
+
+    def start(self, sample: DaqSample) -> None:
+        reset = getattr(self.law, "reset", None)
+        if reset is not None:
+            reset()
+        super().start(sample)
+
+
+class SetpointTrueStateLaw(_LawSetpoint, TrueStateLaw):
+    """A ``TrueStateLaw`` whose law has a ball setpoint."""
+
+    def __init__(self, name: str, law: Callable[[np.ndarray], float], **kwargs: Any) -> None:
+        _require_setpoint(name, law)
+        super().__init__(name, law, **kwargs)
