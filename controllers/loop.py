@@ -231,7 +231,9 @@ class SetpointLoopController(_LawSetpoint, LoopController):
     """A ``LoopController`` whose law has a ball setpoint. A law with an integrator (``reset``) starts it
     from zero at each ``start``, so that a reused controller runs as a fresh one."""
 
-    def __init__(self, name: str, state: StateSource, law: Callable[[np.ndarray], float], **kwargs: Any) -> None:
+    def __init__(
+        self, name: str, state: StateSource, law: Callable[[np.ndarray], float], **kwargs: Any
+    ) -> None:
         _require_setpoint(name, law)
         super().__init__(name, state, law, **kwargs)
 

@@ -8,8 +8,9 @@ Outputs (``--log``, ``--plot``, ``--out``) are checked before any work (twin.app
 not an existing file unless ``--overwrite``, two options never naming the same file, a directory that exists
 and can be written. They are written atomically: a failed write leaves an existing file as it was.
 
-``--help`` imports nothing heavy: the controller registry (python-control), MuJoCo's runs and the plots are
-imported by the commands that use them.
+``--help`` imports nothing heavy: it lists the registry's names (``controllers.registry`` loads no design code
+until a controller is built); python-control, MuJoCo's runs and the plots are imported by the commands that
+use them.
 """
 
 from __future__ import annotations
@@ -27,24 +28,10 @@ from twin.app.paths import check_output_dir, check_outputs, writing
 
 if TYPE_CHECKING:
     from twin.app.montecarlo import Distribution
-    from twin.engine import Catalogue
+    from twin.engine import Catalogue, RunResult
     from twin.parameters import Parameters
+    from twin.verdict import Verdict
 
-# controllers.registry.NAMES, kept here as text so that --help need not import the registry (and python-control);
-# tests/test_cli.py checks that the two agree. A name is validated against the registry itself.
-CONTROLLER_NAMES = (
-    "thesis-sf-continuous",
-    "thesis-clp-continuous",
-    "thesis-smc-continuous",
-    "thesis-sf",
-    "thesis-clp",
-    "appendix-sf",
-    "appendix-clp",
-    "sf",
-    "clp",
-    "smc",
-    "lqr",
-)
 CONTROLLER_HELP = (
     "a named controller ({names}) or MODULE:CLASS, your own twin.interface.Controller subclass imported from "
     "MODULE (the current directory is searched first); it is built as CLASS(software=params.software), with "
@@ -198,6 +185,47 @@ def _log_bytes(text: str | None, duration_s: float, params: Parameters) -> int:
     return ticks * _LOG_BYTES_PER_TICK.get(Path(text).suffix.lower(), 0)
 
 
+def _apply_setpoint(controller: object, spec: str, setpoint_m: float, params: Parameters) -> None:
+    """``--setpoint``: on the track, and only for a controller that declares one (twin.interface.Setpoint)."""
+    from twin.interface import Setpoint
+    from twin.parameters import ParameterError
+
+    _check_finite(setpoint=setpoint_m)
+    half_m = params.track.half_length_m
+    if abs(setpoint_m) > half_m:
+        raise ParameterError(f"--setpoint = {setpoint_m!r} m is off the track (|x| ≤ {half_m:g} m)")
+    if not isinstance(controller, Setpoint):
+        from controllers import registry
+
+        named = ", ".join(name for name, entry in registry.ENTRIES.items() if entry.setpoint)
+        raise ParameterError(
+            f"--setpoint: {spec} has no ball setpoint (it regulates the ball to its own fixed point); "
+            f"named controllers with one: {named} (your own: implement twin.interface.Setpoint)"
+        )
+    controller.setpoint_m = setpoint_m
+
+
+def _verdict_about(result: RunResult, params: Parameters, x0_m: float, setpoint_m: float) -> Verdict:
+    """The run's verdict judged about the setpoint: ``twin.engine.judge`` on the logged true state. The
+    per-tick peak |θ| is not logged; only its maximum enters the verdict, and the run's verdict holds it."""
+    import numpy as np
+
+    from twin.engine import judge
+
+    log, first = result.log, result.verdict
+    return judge(
+        params,
+        log.true_time_s,
+        log.true_x_m,
+        log.true_theta_rad,
+        log.motor_volts_v,
+        np.array([first.peak_theta_rad]),
+        x0_m=x0_m,
+        ball_lost_time_s=first.ball_lost_time_s,
+        x_ref_m=setpoint_m,
+    )
+
+
 def _cmd_run(args: argparse.Namespace) -> int:
     from controllers import registry
     from twin.engine import ControllerError, run_closed_loop
@@ -217,6 +245,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
     controller = (
         registry.make(args.controller, params) if user is None else construct(user, args.controller, params)
     )
+    if args.setpoint is not None:
+        _apply_setpoint(controller, args.controller, args.setpoint, params)
     pacer = None
     if args.realtime:
         from twin.realtime import WallClockPacer
@@ -238,6 +268,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
     except ControllerError as exc:
         print(f"ballbeam run: the controller failed: {exc}", file=sys.stderr)
         return 1
+    if args.setpoint is not None:
+        result.verdict = _verdict_about(result, params, args.x0, args.setpoint)
     if "--log" in paths:
         log_path = paths["--log"]
         save = save_csv if log_path.suffix.lower() == ".csv" else save_mat
@@ -257,6 +289,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         "plant": args.plant,
         "ideal_sensors": bool(args.ideal_sensors or args.plant == "reference"),
         "free_run_s": params.start.free_run_s,
+        **({} if args.setpoint is None else {"setpoint_m": args.setpoint}),
         **result.verdict.to_json(),
     }
     if pacer is not None:
@@ -652,7 +685,9 @@ def _add_plant_options(parser: argparse.ArgumentParser) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    controller_help = CONTROLLER_HELP.format(names=", ".join(CONTROLLER_NAMES))
+    from controllers import registry  # its names only: importing it loads no design code
+
+    controller_help = CONTROLLER_HELP.format(names=", ".join(registry.NAMES))
     parser = _Parser(prog="ballbeam", description="Digital twin of the two-wire ball-and-beam rig.")
     parser.add_argument("--version", action=_VersionAction, help="print the version and exit")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -684,6 +719,13 @@ def build_parser() -> argparse.ArgumentParser:
         help=f"simulated seconds (default 15, at most {MAX_RUN_S:g}: the log keeps every tick in memory)",
     )
     run.add_argument("--seed", type=int, default=0, help="seed of the sensor noise (default 0)")
+    run.add_argument(
+        "--setpoint",
+        type=float,
+        metavar="M",
+        help="ball setpoint (m, on the track) for a controller that has one (twin.interface.Setpoint); the "
+        "verdict is then judged about it",
+    )
     run.add_argument("--no-noise", action="store_true", help="switch the ball sensor's contact noise off")
     run.add_argument(
         "--realtime",
