@@ -200,3 +200,14 @@ def test_run_refuses_a_setpoint_the_controller_does_not_have(capsys) -> None:
     assert "--setpoint = 0.4 m is off the track" in capsys.readouterr().err
     assert main([*base, "--controller", "lqi", "--setpoint", "nan"]) == 2
     assert "--setpoint = nan" in capsys.readouterr().err
+
+
+def test_a_setpoint_at_the_centre_judges_as_without_one(capsys) -> None:
+    """The verdict about the setpoint (judged again from the logged true state) is the run's own at x = 0."""
+    args = ["run", "--controller", "lqi", "--x0", "0.14", "--theta0", "-0.2", "--duration", "8", "--json"]
+    assert main(args) == 0
+    plain = json.loads(capsys.readouterr().out)
+    assert main([*args, "--setpoint", "0"]) == 0
+    about = json.loads(capsys.readouterr().out)
+    assert about.pop("setpoint_m") == 0.0 and "setpoint_m" not in plain
+    assert about == plain
