@@ -178,7 +178,7 @@ def continuous_poles_to_discrete(poles: Poles, period_s: float) -> np.ndarray:
     return np.exp(np.asarray(poles, dtype=complex) * period_s)
 
 
-def _bryson_weights(state_scale: np.ndarray, input_scale_v: float) -> tuple[np.ndarray, np.ndarray]:
+def _bryson_weights(state_scale: Sequence[float], input_scale_v: float) -> tuple[np.ndarray, np.ndarray]:
     """Bryson's rule: Q = diag(1/xᵢ²), R = 1/u² for the largest acceptable excursions xᵢ and input u."""
     return np.diag(1.0 / np.asarray(state_scale, dtype=float) ** 2), np.array([[1.0 / input_scale_v**2]])
 
@@ -208,7 +208,7 @@ def lqr_design(
     phi: np.ndarray,
     gamma: np.ndarray,
     *,
-    state_scale: np.ndarray,
+    state_scale: Sequence[float],
     input_scale_v: float,
     input_noise_v: float,
     measurement_noise: Sequence[float],
@@ -236,7 +236,7 @@ def lqi_design(
     gamma: np.ndarray,
     period_s: float,
     *,
-    state_scale: np.ndarray,
+    state_scale: Sequence[float],
     integral_scale_m_s: float,
     input_scale_v: float,
     input_noise_v: float,
@@ -251,7 +251,7 @@ def lqi_design(
     phi_a[n, 0] = period_s
     phi_a[n, n] = 1.0
     gamma_a = np.vstack([gamma, np.zeros((1, gamma.shape[1]))])
-    q, r = _bryson_weights(np.append(state_scale, integral_scale_m_s), input_scale_v)
+    q, r = _bryson_weights((*state_scale, integral_scale_m_s), input_scale_v)
     gain_a, _, _ = control.dlqr(phi_a, gamma_a, q, r)
     gain_a = np.atleast_2d(gain_a)
     return LqiDesign(

@@ -26,9 +26,9 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Literal
 
-import numpy as np
-
 if TYPE_CHECKING:
+    import numpy as np
+
     from controllers.design import LqrDesign, Poles, ReducedObserver
     from controllers.laws import ClpTerms
     from controllers.loop import MotorInverse, TrueStateLaw
@@ -237,7 +237,7 @@ def _smc(params: Parameters) -> Controller:
 
 # LQR weights (Bryson's rule): 10 cm of ball, 0.2 rad of beam, 0.5 m/s, 2 rad/s, against 12 V of motor.
 # Tighter x/θ weights (5 cm, 0.1 rad) saturate the motor from (−0.2 m, 0.3 rad) and lose the ball.
-LQR_STATE_SCALE = np.array([0.1, 0.2, 0.5, 2.0])
+LQR_STATE_SCALE = (0.1, 0.2, 0.5, 2.0)  # (a tuple: importing the registry does not load numpy)
 LQR_INPUT_SCALE_V = 12.0
 # LQI: the integral of the ball's error weighted as 1 cm held for 10 s (0.1 m·s), against the same 12 V.
 # A heavier weight stiffens the state gains too: at 0.05 m·s (0.02 m·s) the motor saturates from one (two)
@@ -252,6 +252,8 @@ SETPOINT_PROBE_M = 0.10
 
 
 def _measurement_noise(params: Parameters) -> tuple[float, float]:
+    import numpy as np
+
     from twin.sensors import angle_count_step_rad
 
     return KALMAN_BALL_NOISE_M, angle_count_step_rad(params) / np.sqrt(12)
@@ -325,6 +327,8 @@ def lqr_steady_error_m(setpoint_m: float, params: Parameters | None = None) -> f
     """How far from a setpoint ``setpoint_m`` the linear model says ``lqr`` settles (m; + beyond it): its
     state feedback has no integral action, so the motor torque that holds the ball's weight off centre
     comes from a steady error."""
+    import numpy as np
+
     from controllers.design import steady_state
     from twin.parameters import Parameters
 

@@ -53,12 +53,12 @@ def test_a_declared_setpoint_is_the_law_reference(name: str) -> None:
 
 
 def test_importing_the_registry_loads_no_design_code() -> None:
-    """``ballbeam --help`` lists the registry's names: importing it must not load python-control, scipy or
-    MuJoCo (the builders do); reading ENTRIES designs lqr (its description's figure) and loads them."""
+    """``ballbeam --help`` lists the registry's names: importing it must not load numpy, python-control, scipy
+    or MuJoCo (the builders do); reading ENTRIES designs lqr (its description's figure) and loads them."""
     code = (
         "import sys\n"
         "import controllers.registry as r\n"
-        "heavy = ('control', 'scipy', 'mujoco', 'twin.engine', 'controllers.design')\n"
+        "heavy = ('numpy', 'control', 'scipy', 'mujoco', 'twin.engine', 'controllers.design')\n"
         "print('BEFORE', [m for m in heavy if m in sys.modules], len(r.NAMES))\n"
         "r.ENTRIES\n"
         "print('AFTER', [m for m in heavy if m in sys.modules])\n"
@@ -67,7 +67,7 @@ def test_importing_the_registry_loads_no_design_code() -> None:
         [sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=True
     ).stdout
     assert f"BEFORE [] {len(registry.NAMES)}" in out, out
-    assert "AFTER ['control', 'scipy', 'mujoco', 'twin.engine', 'controllers.design']" in out, out
+    assert "AFTER ['numpy', 'control', 'scipy', 'mujoco', 'twin.engine', 'controllers.design']" in out, out
 
 
 def test_unknown_names_are_refused_by_every_reader() -> None:

@@ -375,7 +375,7 @@ def test_help_imports_no_controller_code() -> None:
         "import sys\n"
         "from twin.app.cli import main\n"
         "assert main(['--help']) == 0 and main(['run', '--help']) == 0 and main(['view', '--help']) == 0\n"
-        "heavy = [m for m in ('control', 'scipy', 'mujoco', 'controllers.design', 'controllers.laws', "
+        "heavy = [m for m in ('numpy', 'control', 'scipy', 'mujoco', 'controllers.design', 'controllers.laws', "
         "'controllers.loop', 'controllers.batch', 'twin.engine', 'calib', 'matplotlib', 'viser', 'twin.viewer') "
         "if m in sys.modules]\n"
         "print('HEAVY', heavy)\n"
