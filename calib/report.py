@@ -22,8 +22,8 @@ from twin.outputs import atomic_directory
 
 __all__ = ["OUTPUT_FILES", "write_report"]
 
-# What write_report puts into its folder (checked before the fit); correlation.png only when two or more
-# parameters were fitted together.
+# What write_report puts into its folder (checked before the fit); correlation.png only when the fit has a
+# correlation matrix.
 OUTPUT_FILES = ("params.toml", "calibration.json", "report.md", "fit.png", "residuals.png", "correlation.png")
 
 

@@ -189,18 +189,17 @@ def check_output(
     given = Path(text)
     path = _resolve(what, given)
     through = f" (a link to {path})" if given.is_symlink() else ""
+    kind = _kind(os.stat(path).st_mode) if os.path.lexists(path) else None
+    if kind is not None:
+        raise OutputError(f"{what}{through}: is {kind}, not a file to write")
     suffix = path.suffix
     if suffix.lower() not in suffixes:
         known = " or ".join(suffixes)
         if suffix:
             raise OutputError(f"{what}{through}: unknown extension {suffix!r} (use {known})")
         raise OutputError(f"{what}{through}: no extension (use {known})")
-    if os.path.lexists(path):
-        kind = _kind(os.stat(path).st_mode)
-        if kind is not None:
-            raise OutputError(f"{what}{through}: is {kind}, not a file to write")
-        if not overwrite:
-            raise OutputExistsError(f"{what}: exists; not overwritten (pass --overwrite)")
+    if os.path.lexists(path) and not overwrite:
+        raise OutputExistsError(f"{what}: exists; not overwritten (pass --overwrite)")
     _refuse_inputs(what, path, inputs)
     _probe(path.parent, what, needed_bytes)
     return path
@@ -230,14 +229,14 @@ def _unsafe_folder(path: Path) -> str | None:
     """Why ``path`` (resolved) must never be an output folder, or None."""
     if path == Path(path.anchor):
         return "the root folder"
+    home = Path.home().resolve()
+    if path == home:
+        return "the home folder"
     cwd = Path.cwd().resolve()
     if path == cwd:
         return "the current folder"
     if path in cwd.parents:
         return "a parent of the current folder"
-    home = Path.home().resolve()
-    if path == home:
-        return "the home folder"
     if path in home.parents:
         return "a parent of the home folder"
     if path == _PACKAGE_ROOT:
