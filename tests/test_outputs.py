@@ -386,3 +386,48 @@ def test_calibrate_overwrite_keeps_the_rig_log_it_fitted(tmp_path: Path, capsys)
     after = _snapshot(cal)
     assert {k: after[k] for k in before} == before
     assert {"params.toml", "calibration.json", "report.md", "fit.png"} <= set(after) - set(before)
+
+
+# --- analysis apart from rendering ------------------------------------------------------------------------
+COMPUTING = [
+    "twin/log.py",
+    "twin/app/sweep.py",
+    "twin/app/montecarlo.py",
+    "twin/app/validate.py",
+    "calib/static.py",
+]
+COMPUTING += ["calib/report.py"]
+
+
+@pytest.mark.parametrize("name", COMPUTING)
+def test_computation_modules_never_import_matplotlib(name: str) -> None:
+    """Rendering lives in the *_render modules, imported by a writer when it writes (never at import)."""
+    import ast
+
+    tree = ast.parse((ROOT / name).read_text(encoding="utf-8"))
+    imported = [
+        (node.lineno, alias.name)
+        for node in ast.walk(tree)
+        if isinstance(node, ast.Import)
+        for alias in node.names
+    ] + [(node.lineno, node.module or "") for node in ast.walk(tree) if isinstance(node, ast.ImportFrom)]
+    assert not [(line, m) for line, m in imported if m.split(".")[0] == "matplotlib"]
+    top = {node.module for node in tree.body if isinstance(node, ast.ImportFrom)}
+    assert not [m for m in top if m and m.endswith("_render")], "a render module imported at module level"
+
+
+def test_importing_the_analyses_loads_no_matplotlib_and_outputs_loads_no_numpy() -> None:
+    import subprocess
+    import sys
+
+    code = (
+        "import sys\n"
+        "import twin.outputs\n"
+        "assert 'numpy' not in sys.modules, 'twin.outputs loads numpy'\n"
+        "import twin.log, twin.app.sweep, twin.app.montecarlo, twin.app.validate\n"
+        "print(sorted(m for m in sys.modules if m.split('.')[0] == 'matplotlib' or m.endswith('_render')))\n"
+    )
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, cwd=ROOT)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "[]"
