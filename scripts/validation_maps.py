@@ -16,6 +16,7 @@ import sys
 from pathlib import Path
 
 from twin.app.sweep import SweepSettings, run_sweep, summarize, write_sweep
+from twin.outputs import write_atomic
 from twin.parameters import Parameters
 
 PAIR = ("appendix-sf", "appendix-clp")
@@ -82,9 +83,9 @@ def main() -> None:
         f"by {sf}.",
         "",
     ]
-    (args.out / "claims.md").write_text("\n".join(lines))
+    write_atomic(args.out / "claims.md", "\n".join(lines), overwrite=True)
     summary = {"kept": kept, "held": held, "only_clp": only_clp, "only_sf": only_sf, "clp_larger": larger}
-    (args.out / "claims.json").write_text(json.dumps(summary, indent=1) + "\n")
+    write_atomic(args.out / "claims.json", json.dumps(summary, indent=1) + "\n", overwrite=True)
     print(json.dumps(summary))
 
 

@@ -431,3 +431,13 @@ def test_importing_the_analyses_loads_no_matplotlib_and_outputs_loads_no_numpy()
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, cwd=ROOT)
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip() == "[]"
+
+
+def test_write_atomic_writes_utf8_and_refuses_an_existing_file_unless_asked(tmp_path: Path) -> None:
+    path = tmp_path / "claims.md"
+    outputs.write_atomic(path, "θ — held\n")
+    assert path.read_bytes() == "θ — held\n".encode()
+    with pytest.raises(FileExistsError, match="not overwritten"):
+        outputs.write_atomic(path, b"other")
+    outputs.write_atomic(path, b"other", overwrite=True)
+    assert path.read_bytes() == b"other" and sorted(p.name for p in tmp_path.iterdir()) == ["claims.md"]

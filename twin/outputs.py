@@ -43,6 +43,7 @@ __all__ = [
     "check_output",
     "check_output_folder",
     "check_outputs",
+    "write_atomic",
     "writing",
 ]
 
@@ -366,6 +367,12 @@ def atomic_output(path: str | Path, *, overwrite: bool = False) -> Iterator[Bina
         tmp.unlink()
     except OSError:
         pass
+
+
+def write_atomic(path: str | Path, data: bytes | str, *, overwrite: bool = False) -> None:
+    """Write ``data`` (text as UTF-8) to ``path`` through ``atomic_output``: a failure keeps the old file."""
+    with atomic_output(path, overwrite=overwrite) as fh:
+        fh.write(data.encode("utf-8") if isinstance(data, str) else data)
 
 
 def _sha256(path: Path) -> str:

@@ -771,7 +771,7 @@ def build_parser() -> argparse.ArgumentParser:
         "(pip install 'ballbeam-twin[distributed]'); results equal the local run's",
     )
     sweep.add_argument("--out", metavar="DIR", help="write DIR/sweep.json and DIR/map.png")
-    sweep.add_argument("--overwrite", action="store_true", help="replace an existing --out directory")
+    sweep.add_argument("--overwrite", action="store_true", help="replace its own files in an existing --out")
     sweep.add_argument("--json", action="store_true", help="print the whole result as JSON")
     sweep.set_defaults(func=_cmd_sweep)
 
@@ -806,7 +806,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--scheduler", metavar="ADDRESS", help="a Dask distributed scheduler to fan the runs out to"
     )
     mc.add_argument("--out", metavar="DIR", help="write DIR/montecarlo.json and DIR/distributions.png")
-    mc.add_argument("--overwrite", action="store_true", help="replace an existing --out directory")
+    mc.add_argument("--overwrite", action="store_true", help="replace its own files in an existing --out")
     mc.add_argument("--json", action="store_true", help="print the whole result as JSON")
     mc.set_defaults(func=_cmd_montecarlo)
 
@@ -826,7 +826,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_params_options(val)
     val.add_argument("--workers", type=int, default=1, help="local processes (default 1: this process)")
     val.add_argument("--out", metavar="DIR", help="write DIR/report.md, DIR/validation.json, DIR/region.png")
-    val.add_argument("--overwrite", action="store_true", help="replace an existing --out directory")
+    val.add_argument("--overwrite", action="store_true", help="replace its own files in an existing --out")
     val.add_argument("--json", action="store_true", help="print the report as JSON")
     val.set_defaults(func=_cmd_validate)
 
@@ -873,7 +873,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="parameters to fit, e.g. motor.resistance_ohm,beam.inertia_pivot_kgm2 (see README)",
     )
     cal.add_argument("--out", metavar="DIR", help="write params.toml, calibration.json and report.md here")
-    cal.add_argument("--overwrite", action="store_true", help="replace an existing --out directory")
+    cal.add_argument("--overwrite", action="store_true", help="replace its own files in an existing --out")
     cal.add_argument("--window", type=float, default=1.0, metavar="S", help="window length (default 1 s)")
     cal.add_argument("--json", action="store_true", help="print calibration.json")
     _add_params_options(cal)
