@@ -18,19 +18,22 @@ import json
 from pathlib import Path
 
 from calib.identify import Calibration
-from twin.outputs import atomic_directory
+from twin.outputs import JobFiles, atomic_directory
 
 __all__ = ["OUTPUT_FILES", "write_report"]
 
 # What write_report puts into its folder (checked before the fit); correlation.png only when the fit has a
 # correlation matrix.
-OUTPUT_FILES = ("params.toml", "calibration.json", "report.md", "fit.png", "residuals.png", "correlation.png")
+OUTPUT_FILES = JobFiles(
+    "calibrate",
+    ("params.toml", "calibration.json", "report.md", "fit.png", "residuals.png", "correlation.png"),
+)
 
 
 def write_report(cal: Calibration, out_dir: str | Path, *, overwrite: bool = False) -> Path:
     from calib.report_render import render_figures, render_markdown
 
-    with atomic_directory(out_dir, "calibrate", OUTPUT_FILES, overwrite=overwrite) as tmp:
+    with atomic_directory(out_dir, OUTPUT_FILES, overwrite=overwrite) as tmp:
         cal.params.save(tmp / "params.toml")
         (tmp / "calibration.json").write_text(json.dumps(cal.to_json(), indent=2) + "\n")
         render_figures(cal, tmp)

@@ -17,10 +17,9 @@ from pathlib import Path
 import pytest
 
 import twin.app.fanout as fanout
-import twin.engine
 from twin import outputs
 from twin.app.cli import main
-from twin.outputs import MANIFEST, OutputError, atomic_directory
+from twin.outputs import MANIFEST, JobFiles, OutputError, atomic_directory
 
 ROOT = Path(__file__).resolve().parent.parent
 SWEEP = [
@@ -58,8 +57,20 @@ def no_work(monkeypatch: pytest.MonkeyPatch) -> None:
     def fail(*args: object, **kwargs: object) -> None:
         raise AssertionError("the work started although an output was bad")
 
+    import calib.experiments
+    import calib.identify
+    import twin.app.montecarlo
+    import twin.app.sweep
+    import twin.app.validate
+    import twin.engine
+
+    # Imported first, so that no module binds the failing stand-ins by name for the later tests.
     monkeypatch.setattr(twin.engine, "run_closed_loop", fail)
-    monkeypatch.setattr(fanout, "run_starts", fail)
+    monkeypatch.setattr(fanout, "run_chunk", fail)
+    for module in (twin.app.sweep, twin.app.montecarlo, twin.app.validate):
+        monkeypatch.setattr(module, "run_starts", fail)
+    monkeypatch.setattr(calib.identify, "calibrate", fail)
+    monkeypatch.setattr(calib.experiments, "run_closed_loop", fail)
 
 
 def _snapshot(folder: Path) -> dict[str, str]:
@@ -105,13 +116,53 @@ def test_sweep_overwrite_keeps_every_file_it_did_not_write(tmp_path: Path, capsy
         == hashlib.sha256((out / "sweep.json").read_bytes()).hexdigest()
     )
     # Again: its own two files are replaced, the rest still untouched, no temporary folder left.
-    (out / "map.png").write_bytes(b"old map")
-    assert main([*SWEEP, "--out", str(out), "--overwrite"]) == 0
-    capsys.readouterr()
+    (out / "sweep.json").write_text("{}")  # an older sweep's, recorded as such
+    manifest["jobs"]["sweep"]["sweep.json"] = hashlib.sha256(b"{}").hexdigest()
+    (out / MANIFEST).write_text(json.dumps(manifest))
+    assert main([*SWEEP, "--out", str(out), "--overwrite", "--json"]) == 0
+    assert json.loads((out / "sweep.json").read_text()) == json.loads(capsys.readouterr().out)
     again = _snapshot(out)
     assert {k: again[k] for k in before} == before
-    assert (out / "map.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert sorted(p.name for p in out.iterdir() if p.name.startswith(".ballbeam-tmp")) == []
+
+
+def test_overwrite_refuses_a_file_of_the_jobs_name_it_does_not_own(tmp_path: Path, capsys, no_work) -> None:
+    """The user's own params.toml in cal/ (not an input), a sweep.json from before manifests, a map.png
+    edited since the sweep wrote it, a link: named, refused before the work, kept bit for bit."""
+    cal = tmp_path / "cal"
+    cal.mkdir()
+    before = _users_folder(cal)
+    (cal / "log.mat").write_bytes(MAT_HEADER)
+    argv = [
+        "calibrate",
+        str(cal / "log.mat"),
+        "--fit",
+        "motor.resistance_ohm",
+        "--out",
+        str(cal),
+        "--overwrite",
+    ]
+    _refused(capsys, argv, "--out", "holds params.toml not written there by calibrate", "move them")
+    assert {k: v for k, v in _snapshot(cal).items() if k in before} == before
+    roa = tmp_path / "roa"
+    roa.mkdir()
+    (roa / "sweep.json").write_text('{"points": []}')
+    _refused(
+        capsys, [*SWEEP, "--out", str(roa), "--overwrite"], "holds sweep.json not written there by sweep"
+    )
+    (roa / "sweep.json").unlink()
+    (roa / "map.png").symlink_to(cal / "params.toml")
+    _refused(capsys, [*SWEEP, "--out", str(roa), "--overwrite"], "holds map.png not written there by sweep")
+    assert (cal / "params.toml").read_text() == "[motor]\nresistance_ohm = 9.1\n"
+
+
+def test_a_file_edited_since_the_job_wrote_it_is_the_users(tmp_path: Path, capsys) -> None:
+    out = tmp_path / "roa"
+    assert main([*SWEEP, "--out", str(out)]) == 0
+    capsys.readouterr()
+    (out / "map.png").write_bytes(b"my annotated map")
+    _refused(capsys, [*SWEEP, "--out", str(out), "--overwrite"], "holds map.png not written there by sweep")
+    assert (out / "map.png").read_bytes() == b"my annotated map"
 
 
 def test_montecarlo_into_a_calibration_folder_keeps_its_files(tmp_path: Path, capsys) -> None:
@@ -136,7 +187,7 @@ def test_without_overwrite_an_existing_folder_is_refused_before_the_work(
     line = _refused(
         capsys, [*SWEEP, "--out", str(out)], "--out", "exists; not overwritten", "other files are kept"
     )
-    assert "sweep.json, map.png" in line
+    assert "only the sweep files it wrote there are replaced" in line
     assert _snapshot(out) == before
 
 
@@ -150,25 +201,25 @@ def test_a_directory_where_the_job_writes_a_file_is_refused_before_the_work(
     assert (out / "map.png" / "mine.txt").read_text() == "mine"
 
 
-def test_a_link_in_the_folder_is_replaced_and_its_target_kept(tmp_path: Path, capsys) -> None:
-    out = tmp_path / "roa"
-    out.mkdir()
-    notes = tmp_path / "notes.toml"
-    notes.write_text("precious = true\n")
-    (out / "map.png").symlink_to(notes)
-    assert main([*SWEEP, "--out", str(out), "--overwrite"]) == 0
-    capsys.readouterr()
-    assert notes.read_text() == "precious = true\n"
-    assert not (out / "map.png").is_symlink() and (out / "map.png").read_bytes()[:4] == b"\x89PNG"
+def test_another_commands_file_is_not_replaced(tmp_path: Path) -> None:
+    """validate and calibrate both write report.md: validate into a calibration folder is refused."""
+    out = tmp_path / "cal"
+    with atomic_directory(out, JobFiles("calibrate", ("params.toml", "report.md"))) as tmp:
+        (tmp / "report.md").write_text("the calibration")
+    with pytest.raises(OutputError, match="holds report.md not written there by validate"):
+        with atomic_directory(out, JobFiles("validate", ("report.md",)), overwrite=True):
+            raise AssertionError("not reached")
+    assert (out / "report.md").read_text() == "the calibration"
 
 
 def test_a_failed_write_leaves_the_folder_as_it_was(tmp_path: Path) -> None:
     out = tmp_path / "out"
-    out.mkdir()
-    (out / "a.json").write_text("old a")
+    job = JobFiles("job", ("a.json", "b.png"))
+    with atomic_directory(out, job) as tmp:
+        (tmp / "a.json").write_text("old a")
     before = _users_folder(out)
     with pytest.raises(RuntimeError, match="disk full"):
-        with atomic_directory(out, "job", ("a.json", "b.png"), overwrite=True) as tmp:
+        with atomic_directory(out, job, overwrite=True) as tmp:
             (tmp / "a.json").write_text("new a")
             raise RuntimeError("disk full")
     assert _snapshot(out) == before
@@ -179,45 +230,48 @@ def test_a_file_the_job_did_not_declare_is_not_moved_in(tmp_path: Path) -> None:
     out.mkdir()
     before = _users_folder(out)
     with pytest.raises(RuntimeError, match="undeclared"):
-        with atomic_directory(out, "job", ("a.json",), overwrite=True) as tmp:
+        with atomic_directory(out, JobFiles("job", ("a.json",)), overwrite=True) as tmp:
             (tmp / "a.json").write_text("a")
             (tmp / "rig_log.mat").write_text("not a log")
     assert _snapshot(out) == before
 
 
-def test_a_stale_file_of_the_same_job_goes_only_while_unchanged(tmp_path: Path) -> None:
-    """An interrupted validate writes no region.png: the previous run's goes, unless the user changed it
-    since (then it is theirs) - and another job's files are never touched."""
+def test_a_stale_file_of_the_same_job_goes_and_an_edited_one_stops_it(tmp_path: Path) -> None:
+    """An interrupted validate writes no region.png: the previous run's goes (the job owns it) and another
+    job's files stay; once the user has edited region.png it is theirs, and the job is refused."""
     out = tmp_path / "report"
+    validate = JobFiles("validate", ("report.md", "region.png"))
 
-    def write(job: str, names: tuple[str, ...], text: str) -> None:
-        with atomic_directory(out, job, ("report.md", "region.png", "other.json"), overwrite=True) as tmp:
+    def write(job: JobFiles, names: tuple[str, ...], text: str) -> None:
+        with atomic_directory(out, job, overwrite=True) as tmp:
             for name in names:
                 (tmp / name).write_text(f"{text} {name}")
 
-    write("validate", ("report.md", "region.png"), "first")
-    write("sweep", ("other.json",), "sweep's")
-    write("validate", ("report.md",), "second")
+    write(validate, ("report.md", "region.png"), "first")
+    write(JobFiles("sweep", ("other.json",)), ("other.json",), "sweep's")
+    write(validate, ("report.md",), "second")
     assert not (out / "region.png").exists()
     assert (out / "report.md").read_text() == "second report.md"
-    assert (out / "other.json").read_text() == "sweep's other.json"  # another job's: kept
-    write("validate", ("report.md", "region.png"), "third")
+    assert (out / "other.json").read_text() == "sweep's other.json"
+    write(validate, ("report.md", "region.png"), "third")
     (out / "region.png").write_text("edited by the user")
-    write("validate", ("report.md",), "fourth")
+    with pytest.raises(OutputError, match="holds region.png not written there by validate"):
+        write(validate, ("report.md",), "fourth")
     assert (out / "region.png").read_text() == "edited by the user"
+    assert (out / "report.md").read_text() == "third report.md"
     jobs = json.loads((out / MANIFEST).read_text())["jobs"]
-    assert set(jobs) == {"validate", "sweep"} and set(jobs["validate"]) == {"report.md"}
+    assert set(jobs) == {"validate", "sweep"} and set(jobs["validate"]) == {"report.md", "region.png"}
 
 
 def test_a_new_folder_appears_complete(tmp_path: Path) -> None:
     out = tmp_path / "new"
-    with atomic_directory(out, "job", ("a.json", "b.png")) as tmp:
+    with atomic_directory(out, JobFiles("job", ("a.json", "b.png"))) as tmp:
         (tmp / "a.json").write_text("a")
         assert not out.exists()
     assert sorted(p.name for p in out.iterdir()) == [MANIFEST, "a.json"]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["new"]
     with pytest.raises(FileExistsError, match="not overwritten"):
-        with atomic_directory(out, "job", ("a.json",)):
+        with atomic_directory(out, JobFiles("job", ("a.json",))):
             pass
 
 
@@ -312,7 +366,11 @@ def test_a_user_controllers_module_is_an_input(tmp_path: Path, monkeypatch: pyte
     assert ("--controller", str(module)) in cli._inputs(args)
     with pytest.raises(OutputError, match="is the input --controller"):
         outputs.check_output_folder(
-            "--out", str(tmp_path), ("myctl_outputs.py",), overwrite=True, inputs=cli._inputs(args)
+            "--out",
+            str(tmp_path),
+            JobFiles("x", ("myctl_outputs.py",)),
+            overwrite=True,
+            inputs=cli._inputs(args),
         )
 
 

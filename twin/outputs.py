@@ -9,13 +9,14 @@ through a temporary file beside the target and one ``os.replace``, so a failed w
 
 Folders (``--out`` of sweep, montecarlo, validate, calibrate): ``check_output_folder`` refuses ``/``, the home
 folder, the current folder or one of its parents, and the repository's root before any work; an existing
-folder needs ``--overwrite``, and then only the files the job writes (its declared names) are replaced:
-every other file in it (a ``.git/``, a rig log, a params, spread or criteria file) is kept as it is. A file
-the job would replace that is one of its inputs is refused. ``atomic_directory`` writes the job's files into a
-new temporary folder, then moves them into place one by one (each an ``os.replace``) and records what it
-wrote in ``MANIFEST`` (name and SHA-256 per job); a file of the same job's earlier run that this run does not
-write is removed only while its bytes are still the ones recorded (else it is the user's now, and kept).
-A folder is never deleted wholesale.
+folder needs ``--overwrite``, and then only the files the job owns are replaced: every other file in it (a
+``.git/``, a rig log, a params, spread or criteria file) is kept as it is. The job owns a file it wrote there
+itself, recorded in ``MANIFEST`` (per job, each file's SHA-256) and unchanged since; a file with one of the
+job's names that it does not own (the user's, another command's, edited since, or a link) is refused, named,
+and so is one of the job's inputs. ``atomic_directory`` writes the job's files into a new temporary folder,
+then moves them into place one by one (each an ``os.replace``) and updates the manifest; a file of the same
+job's earlier run that this run does not write is removed only while it is still owned. A folder is never
+deleted wholesale.
 
 This module imports nothing heavy: ``ballbeam --help`` must stay fast.
 """
@@ -30,11 +31,13 @@ import stat
 import tempfile
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
 from typing import BinaryIO
 
 __all__ = [
     "MANIFEST",
+    "JobFiles",
     "OutputError",
     "OutputExistsError",
     "atomic_directory",
@@ -56,6 +59,15 @@ _PACKAGE_ROOT = Path(__file__).resolve().parents[1]
 
 # (option, text as given) of each input file or folder of a job.
 Inputs = Sequence[tuple[str, str]]
+
+
+@dataclass(frozen=True)
+class JobFiles:
+    """What one kind of job writes into its output folder: its name (its key in ``MANIFEST``) and the names of
+    the files it may write (all checked before the job runs)."""
+
+    job: str
+    files: tuple[str, ...]
 
 
 class OutputError(ValueError):
@@ -245,12 +257,23 @@ def _unsafe_folder(path: Path) -> str | None:
     return None
 
 
+def _owned(folder: Path, recorded: dict[str, str], name: str) -> bool:
+    """Whether ``folder/name`` is a regular file with the bytes the job recorded when it wrote it."""
+    entry = folder / name
+    if name not in recorded or entry.is_symlink() or not entry.is_file():
+        return False
+    try:
+        return _sha256(entry) == recorded[name]
+    except OSError:
+        return False
+
+
 def check_output_folder(
-    option: str, text: str, files: Sequence[str], *, overwrite: bool, inputs: Inputs = ()
+    option: str, text: str, outputs: JobFiles, *, overwrite: bool, inputs: Inputs = ()
 ) -> Path:
-    """The resolved path of an output folder a job writes ``files`` into, or an ``OutputError`` naming
-    ``option`` and ``text``. An existing folder needs ``overwrite``; in it, an entry with a job file's name
-    that is a directory or a special file, or that is one of the job's ``inputs``, is refused."""
+    """The resolved path of the folder a job writes ``outputs`` into, or an ``OutputError`` naming ``option``
+    and ``text``. An existing folder needs ``overwrite``, and in it every entry with one of the job's file
+    names must be a file the job owns (it wrote it and it is unchanged) and not one of the job's ``inputs``."""
     if not text.strip():
         raise OutputError(f"{option}: the path is empty")
     what = f"{option} {text}"
@@ -265,16 +288,27 @@ def check_output_folder(
         raise OutputError(f"{what}: exists and is not a directory")
     if not overwrite:
         raise OutputExistsError(
-            f"{what}: exists; not overwritten (pass --overwrite: only its {', '.join(files)} are replaced, "
-            "other files are kept)"
+            f"{what}: exists; not overwritten (pass --overwrite: only the {outputs.job} files it wrote there "
+            "are replaced, other files are kept)"
         )
-    for name in files:
+    recorded = _read_manifest(path).get(outputs.job, {})
+    foreign = []
+    for name in outputs.files:
         entry = path / name
-        if os.path.lexists(entry):
-            kind = _kind(os.lstat(entry).st_mode)
-            if kind is not None and not stat.S_ISLNK(os.lstat(entry).st_mode):
-                raise OutputError(f"{what}: {entry} is {kind}, where the command writes a file")
+        if not os.path.lexists(entry):
+            continue
+        mode = os.lstat(entry).st_mode
+        kind = _kind(mode)
+        if kind is not None and not stat.S_ISLNK(mode):
+            raise OutputError(f"{what}: {entry} is {kind}, where the command writes a file")
         _refuse_inputs(what, entry, inputs)
+        if not _owned(path, recorded, name):
+            foreign.append(name)
+    if foreign:
+        raise OutputError(
+            f"{what}: holds {', '.join(foreign)} not written there by {outputs.job} (or changed since): "
+            "--overwrite replaces only its own files; move them or give another folder"
+        )
     _probe(path, what, 0)
     return path
 
@@ -404,29 +438,27 @@ def _manifest_bytes(jobs: dict[str, dict[str, str]]) -> bytes:
 
 
 @contextmanager
-def atomic_directory(
-    path: str | Path, job: str, files: Sequence[str], *, overwrite: bool = False
-) -> Iterator[Path]:
-    """A new temporary folder to write the job's ``files`` (names, no folders) into; when the block ends
-    without error they take their places in ``path``.
+def atomic_directory(path: str | Path, outputs: JobFiles, *, overwrite: bool = False) -> Iterator[Path]:
+    """A new temporary folder to write the job's files (``outputs.files``, names only) into; when the block
+    ends without error they take their places in ``path``.
 
     A new ``path`` is the temporary folder renamed (it appears complete or not at all). An existing one
-    (only with ``overwrite``) gets each file by ``os.replace``: every other entry in it is kept, and a file
-    ``job`` wrote there before and does not write now is removed only if its bytes are the ones recorded in
-    ``MANIFEST``. On an error the temporary folder is removed and ``path`` is as it was (a failure while the
-    files are being moved in leaves those already moved)."""
-    out = check_output_folder("output folder", str(path), files, overwrite=overwrite)
+    (only with ``overwrite``, and only if the job owns every file it replaces: ``check_output_folder``) gets
+    each file by ``os.replace``, every other entry kept; a file the job wrote there before, does not write
+    now and still owns is removed. On an error the temporary folder is removed and ``path`` is as it was (a
+    failure while the files are being moved in leaves those already moved)."""
+    out = check_output_folder("output folder", str(path), outputs, overwrite=overwrite)
     exists = os.path.lexists(out)
     tmp = Path(tempfile.mkdtemp(prefix=".ballbeam-tmp.", dir=out if exists else out.parent))
     try:
         yield tmp
         written = sorted(p.name for p in tmp.iterdir())
-        undeclared = [name for name in written if name not in files]
+        undeclared = [name for name in written if name not in outputs.files]
         if undeclared:  # a writer's bug: an undeclared name was not checked against the inputs
             raise RuntimeError(f"{out}: the job wrote undeclared files {undeclared}")
         record = {name: _sha256(tmp / name) for name in written}
         if not exists:
-            (tmp / MANIFEST).write_bytes(_manifest_bytes({job: record}))
+            (tmp / MANIFEST).write_bytes(_manifest_bytes({outputs.job: record}))
             os.chmod(tmp, 0o777 & ~_umask())  # mkdtemp makes it 0700
             try:
                 os.rename(tmp, out)  # an empty folder created meanwhile is replaced, a non-empty one refuses
@@ -435,21 +467,18 @@ def atomic_directory(
                     raise _exists_error(out) from None
                 raise
             return
+        check_output_folder("output folder", str(out), outputs, overwrite=True)  # nothing changed meanwhile
         jobs = _read_manifest(out)
-        before = jobs.get(job, {})
+        before = jobs.get(outputs.job, {})
+        stale = [n for n in before if n not in record and n in outputs.files and _owned(out, before, n)]
         for name in written:
             target = out / name
-            mode = _file_mode(target) if os.path.lexists(target) and not target.is_symlink() else None
-            if mode is not None:
-                os.chmod(tmp / name, mode)
-            os.replace(tmp / name, target)  # a link there is replaced, its target untouched
-        for name, digest in before.items():
-            stale = out / name
-            if name in record or name not in files or os.path.islink(stale) or not stale.is_file():
-                continue
-            if _sha256(stale) == digest:  # still the bytes this job wrote: its own, no longer current
-                stale.unlink()
-        jobs[job] = record
+            if os.path.lexists(target):
+                os.chmod(tmp / name, _file_mode(target))
+            os.replace(tmp / name, target)
+        for name in stale:
+            (out / name).unlink()
+        jobs[outputs.job] = record
         with atomic_output(out / MANIFEST, overwrite=True) as fh:
             fh.write(_manifest_bytes(jobs))
         tmp.rmdir()

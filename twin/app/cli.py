@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, NoReturn
 
 from twin.app.catalogue import WithUserController, construct, one_line, user_controller
-from twin.outputs import check_output_folder, check_outputs, writing
+from twin.outputs import JobFiles, check_output_folder, check_outputs, writing
 
 if TYPE_CHECKING:
     from twin.app.montecarlo import Distribution
@@ -335,9 +335,9 @@ def _inputs(args: argparse.Namespace) -> list[tuple[str, str]]:
     return found
 
 
-def _check_job(args: argparse.Namespace, params: Parameters, files: Sequence[str]) -> None:
+def _check_job(args: argparse.Namespace, params: Parameters, outputs: JobFiles) -> None:
     """What every many-run command checks before the work: durations, workers, the controller (built once:
-    a failing constructor is refused here) and the output folder the job writes ``files`` into."""
+    a failing constructor is refused here) and the output folder the job writes ``outputs`` into."""
     from twin.app.catalogue import catalogue_for
     from twin.parameters import ParameterError
 
@@ -352,7 +352,7 @@ def _check_job(args: argparse.Namespace, params: Parameters, files: Sequence[str
         raise ParameterError(f"--workers = {args.workers!r}: 1 … 256 local processes")
     catalogue_for(args.controller, params)
     if args.out is not None:
-        check_output_folder("--out", args.out, files, overwrite=args.overwrite, inputs=_inputs(args))
+        check_output_folder("--out", args.out, outputs, overwrite=args.overwrite, inputs=_inputs(args))
 
 
 def _params_and_spread(args: argparse.Namespace) -> tuple[Parameters, Distribution | None]:

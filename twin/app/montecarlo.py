@@ -34,6 +34,7 @@ import numpy as np
 
 from twin.app.fanout import Progress, Runs, run_starts
 from twin.app.sweep import point_seeds
+from twin.outputs import JobFiles, atomic_directory
 from twin.parameters import ParameterError, Parameters
 
 __all__ = [
@@ -50,7 +51,7 @@ __all__ = [
 
 MAX_RUNS = 100_000
 # What write_montecarlo puts into its folder (checked before the runs).
-OUTPUT_FILES = ("montecarlo.json", "distributions.png")
+OUTPUT_FILES = JobFiles("montecarlo", ("montecarlo.json", "distributions.png"))
 MAX_REDRAWS = 100  # a spread that puts a parameter outside its bounds this often is refused
 WORST_SHOWN = 10
 _READING = ("ball_reading.gain", "ball_reading.offset_m")  # calibration's reading model (not twin fields)
@@ -329,9 +330,8 @@ def write_montecarlo(result: MonteCarloResult, out_dir: str | Path, *, overwrite
     """``montecarlo.json`` and ``distributions.png`` (``twin.app.montecarlo_render``) into ``out_dir``,
     atomically (``twin.outputs.atomic_directory``: the folder's other files are kept)."""
     from twin.app.montecarlo_render import render_distributions
-    from twin.outputs import atomic_directory
 
-    with atomic_directory(out_dir, "montecarlo", OUTPUT_FILES, overwrite=overwrite) as tmp:
+    with atomic_directory(out_dir, OUTPUT_FILES, overwrite=overwrite) as tmp:
         (tmp / "montecarlo.json").write_text(json.dumps(result.to_json(), indent=1) + "\n")
         render_distributions(result, tmp / "distributions.png")
     return Path(out_dir)

@@ -26,6 +26,7 @@ import numpy as np
 
 from controllers import thesis_numbers as T
 from twin.app.fanout import Progress, Runs, run_starts
+from twin.outputs import JobFiles, atomic_directory
 from twin.parameters import ParameterError, Parameters
 from twin.physics import check_initial_state
 
@@ -56,7 +57,7 @@ class Grid:
 
 
 # What write_sweep puts into its folder (checked before the sweep runs).
-OUTPUT_FILES = ("sweep.json", "map.png")
+OUTPUT_FILES = JobFiles("sweep", ("sweep.json", "map.png"))
 # The thesis's chapter 7 grid: the whole track (|x| ≤ 0.323 m) and nearly the whole stroke (|θ| ≤ 43.4°).
 DEFAULT_X0 = Grid(-0.32, 0.32, 41)
 DEFAULT_THETA0 = Grid(-0.7, 0.7, 41)
@@ -288,9 +289,8 @@ def write_sweep(result: SweepResult, out_dir: str | Path, *, overwrite: bool = F
     """``sweep.json`` and ``map.png`` into ``out_dir`` (``twin.outputs.atomic_directory``: a failure leaves
     the old ones; the folder's other files are kept)."""
     from twin.app.sweep_render import render_map
-    from twin.outputs import atomic_directory
 
-    with atomic_directory(out_dir, "sweep", OUTPUT_FILES, overwrite=overwrite) as tmp:
+    with atomic_directory(out_dir, OUTPUT_FILES, overwrite=overwrite) as tmp:
         (tmp / "sweep.json").write_text(json.dumps(result.to_json(), indent=1) + "\n")
         render_map(result, tmp / "map.png")
     return Path(out_dir)

@@ -31,6 +31,7 @@ from controllers import thesis_numbers as T
 from twin.app.fanout import Progress, Runs, run_starts
 from twin.app.montecarlo import Distribution, MonteCarloSettings, run_montecarlo
 from twin.app.sweep import Grid, SweepResult, SweepSettings, point_seeds, run_sweep
+from twin.outputs import JobFiles, atomic_directory
 from twin.parameters import ParameterError, Parameters
 from twin.sensors import angle_count_step_rad
 
@@ -291,7 +292,7 @@ def validate(
 
 
 # What write_validation puts into its folder (checked before the battery runs).
-OUTPUT_FILES = ("validation.json", "region.png", "report.md")
+OUTPUT_FILES = JobFiles("validate", ("validation.json", "region.png", "report.md"))
 
 
 def write_validation(report: ValidationReport, out_dir: str | Path, *, overwrite: bool = False) -> Path:
@@ -300,9 +301,8 @@ def write_validation(report: ValidationReport, out_dir: str | Path, *, overwrite
     other files are kept)."""
     from twin.app.sweep_render import render_map
     from twin.app.validate_render import render_markdown
-    from twin.outputs import atomic_directory
 
-    with atomic_directory(out_dir, "validate", OUTPUT_FILES, overwrite=overwrite) as tmp:
+    with atomic_directory(out_dir, OUTPUT_FILES, overwrite=overwrite) as tmp:
         (tmp / "validation.json").write_text(json.dumps(report.to_json(), indent=1) + "\n")
         if report.region is not None:
             render_map(report.region, tmp / "region.png")
