@@ -19,7 +19,8 @@ from pathlib import Path
 import pytest
 
 import twin.engine
-from twin.app import cli, paths
+from twin import outputs
+from twin.app import cli
 from twin.app.cli import main
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -253,14 +254,14 @@ def test_an_unwritable_directory_is_refused_before_the_run(
     """What os.access says (as for a user without write permission), and what the probe file finds (as on a
     read-only mount, where root too is refused)."""
     with monkeypatch.context() as m:
-        m.setattr(paths.os, "access", lambda *args, **kwargs: False)
+        m.setattr(outputs.os, "access", lambda *args, **kwargs: False)
         _refused(capsys, [*RUN, "--log", str(tmp_path / "run.mat")], "--log", "not writable")
 
     def read_only(*args: object, **kwargs: object) -> None:
         raise OSError(errno.EROFS, os.strerror(errno.EROFS))
 
     with monkeypatch.context() as m:
-        m.setattr(paths.tempfile, "mkstemp", read_only)
+        m.setattr(outputs.tempfile, "mkstemp", read_only)
         _refused(capsys, [*RUN, "--plot", str(tmp_path / "run.png")], "--plot", "Read-only file system")
     assert _listing(tmp_path) == []
 
@@ -269,7 +270,7 @@ def test_a_full_disk_is_refused_before_the_run(tmp_path: Path, capsys, no_run, m
     import shutil
 
     usage = shutil.disk_usage(tmp_path)
-    monkeypatch.setattr(paths.shutil, "disk_usage", lambda _: usage._replace(free=1000))
+    monkeypatch.setattr(outputs.shutil, "disk_usage", lambda _: usage._replace(free=1000))
     line = _refused(
         capsys, [*RUN, "--duration", "60", "--log", str(tmp_path / "run.mat")], "--log", "MB free"
     )
@@ -282,7 +283,7 @@ def test_a_failed_probe_write_is_refused_before_the_run(tmp_path: Path, capsys, 
     def full(fd: int) -> None:
         raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
 
-    monkeypatch.setattr(paths.os, "fsync", full)
+    monkeypatch.setattr(outputs.os, "fsync", full)
     _refused(capsys, [*RUN, "--log", str(tmp_path / "run.csv")], "--log", "No space left on device")
     assert _listing(tmp_path) == []  # the probe file is removed
 

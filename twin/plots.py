@@ -10,7 +10,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 from twin.engine import RunResult  # noqa: E402
-from twin.log import atomic_output  # noqa: E402
+from twin.outputs import atomic_output  # noqa: E402
 
 __all__ = ["plot_run"]
 
@@ -20,7 +20,7 @@ def plot_run(
 ) -> None:
     """Ball position (true, measured, estimated), beam angle, motor volts against time, as one PNG.
 
-    The file is written atomically (``twin.log.atomic_output``): a failed write leaves an existing file as
+    The file is written atomically (``twin.outputs.atomic_output``): a failed write leaves an existing file as
     it was; without ``overwrite`` an existing file is refused (``FileExistsError``)."""
     log = result.log
     fig, axes = plt.subplots(3, 1, figsize=(8, 7.5), sharex=True)

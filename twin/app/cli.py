@@ -4,9 +4,11 @@ Exit codes: 0 success (for ``run``: the ball was held), 1 a run whose ball was l
 controller failed, 2 bad input (arguments, parameter files, output paths), each with a one-line message
 and no traceback.
 
-Outputs (``--log``, ``--plot``, ``--out``) are checked before any work (twin.app.paths): a known extension,
-not an existing file unless ``--overwrite``, two options never naming the same file, a directory that exists
-and can be written. They are written atomically: a failed write leaves an existing file as it was.
+Outputs (``--log``, ``--plot``, ``--out``) are checked before any work (twin.outputs): a known extension of
+the file written (a link's target), not an existing file unless ``--overwrite``, never an input of the
+command, two options never naming the same file, a directory that exists and can be written; an ``--out``
+folder never ``.``, ``..``, ``/`` or the home folder, and with ``--overwrite`` only the command's own files in
+it are replaced. They are written atomically: a failed write leaves an existing file as it was.
 
 ``--help`` imports nothing heavy: it lists the registry's names (``controllers.registry`` loads no design code
 until a controller is built); python-control, MuJoCo's runs and the plots are imported by the commands that
@@ -24,7 +26,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, NoReturn
 
 from twin.app.catalogue import WithUserController, construct, one_line, user_controller
-from twin.app.paths import check_output_dir, check_outputs, writing
+from twin.outputs import JobFiles, check_output_folder, check_outputs, writing
 
 if TYPE_CHECKING:
     from twin.app.montecarlo import Distribution
@@ -241,6 +243,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
             ("--plot", args.plot, PLOT_SUFFIXES, _PLOT_BYTES),
         ],
         overwrite=args.overwrite,
+        inputs=_inputs(args),
     )
     controller = (
         registry.make(args.controller, params) if user is None else construct(user, args.controller, params)
@@ -343,11 +346,32 @@ def _cmd_view(args: argparse.Namespace) -> int:
     return 0
 
 
-def _check_job(args: argparse.Namespace, params: Parameters) -> None:
+def _inputs(args: argparse.Namespace) -> list[tuple[str, str]]:
+    """The files a command reads, as (option, path): no output may replace one. A calibration folder brings
+    its two files; a user controller its module's file (imported by then)."""
+    found: list[tuple[str, str]] = []
+    for option in ("params", "spread", "criteria", "table"):
+        value = getattr(args, option, None)
+        if value:
+            found.append((f"--{option}" if option != "table" else "TABLE", value))
+    for log in getattr(args, "logs", None) or ():
+        found.append(("LOG", log))
+    calibration = getattr(args, "calibration", None)
+    if calibration:
+        found += [
+            ("--calibration", str(Path(calibration) / name)) for name in ("params.toml", "calibration.json")
+        ]
+    module_name, colon, _ = str(getattr(args, "controller", "")).partition(":")
+    module_file = getattr(sys.modules.get(module_name), "__file__", None) if colon else None
+    if module_file:
+        found.append(("--controller", module_file))
+    return found
+
+
+def _check_job(args: argparse.Namespace, params: Parameters, outputs: JobFiles) -> None:
     """What every many-run command checks before the work: durations, workers, the controller (built once:
-    a failing constructor is refused here) and the output directory."""
+    a failing constructor is refused here) and the output folder the job writes ``outputs`` into."""
     from twin.app.catalogue import catalogue_for
-    from twin.log import check_output_directory
     from twin.parameters import ParameterError
 
     duration = getattr(args, "duration", None)
@@ -361,8 +385,7 @@ def _check_job(args: argparse.Namespace, params: Parameters) -> None:
         raise ParameterError(f"--workers = {args.workers!r}: 1 … 256 local processes")
     catalogue_for(args.controller, params)
     if args.out is not None:
-        check_output_dir("--out", args.out)
-        check_output_directory(args.out, overwrite=args.overwrite)
+        check_output_folder("--out", args.out, outputs, overwrite=args.overwrite, inputs=_inputs(args))
 
 
 def _params_and_spread(args: argparse.Namespace) -> tuple[Parameters, Distribution | None]:
@@ -380,7 +403,15 @@ def _params_and_spread(args: argparse.Namespace) -> tuple[Parameters, Distributi
 
 
 def _cmd_sweep(args: argparse.Namespace) -> int:
-    from twin.app.sweep import DEFAULT_THETA0, DEFAULT_X0, SweepSettings, parse_range, run_sweep, write_sweep
+    from twin.app.sweep import (
+        DEFAULT_THETA0,
+        DEFAULT_X0,
+        OUTPUT_FILES,
+        SweepSettings,
+        parse_range,
+        run_sweep,
+        write_sweep,
+    )
 
     params = _load_params(args)
     settings = SweepSettings(
@@ -393,7 +424,7 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
         ideal_sensors=bool(args.ideal_sensors or args.plant == "reference"),
         seed=args.seed,
     )
-    _check_job(args, params)
+    _check_job(args, params, OUTPUT_FILES)
     result = run_sweep(
         settings, params, workers=args.workers, scheduler=args.scheduler, progress=_progress_bar("sweep")
     )
@@ -421,7 +452,7 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
 
 
 def _cmd_montecarlo(args: argparse.Namespace) -> int:
-    from twin.app.montecarlo import MonteCarloSettings, run_montecarlo, write_montecarlo
+    from twin.app.montecarlo import OUTPUT_FILES, MonteCarloSettings, run_montecarlo, write_montecarlo
     from twin.parameters import ParameterError
     from twin.physics import check_initial_state
 
@@ -436,7 +467,7 @@ def _cmd_montecarlo(args: argparse.Namespace) -> int:
         check_initial_state(base, args.x0, args.theta0, 0.0, 0.0)
     except ValueError as exc:
         raise ParameterError(f"--x0/--theta0: {exc}") from None
-    _check_job(args, base)
+    _check_job(args, base, OUTPUT_FILES)
     settings = MonteCarloSettings(
         controller=args.controller,
         n=args.n,
@@ -490,11 +521,11 @@ def _cmd_montecarlo(args: argparse.Namespace) -> int:
 
 
 def _cmd_validate(args: argparse.Namespace) -> int:
-    from twin.app.validate import ValidationCriteria, load_criteria, validate, write_validation
+    from twin.app.validate import OUTPUT_FILES, ValidationCriteria, load_criteria, validate, write_validation
 
     params, spread = _params_and_spread(args)
     criteria = load_criteria(args.criteria) if args.criteria else ValidationCriteria()
-    _check_job(args, params)
+    _check_job(args, params, OUTPUT_FILES)
     report = validate(
         args.controller,
         params,
@@ -550,7 +581,7 @@ def _progress_bar(what: str) -> Callable[[int, int], None]:
 def _cmd_calibrate(args: argparse.Namespace) -> int:
     from calib.identify import FITTABLE, calibrate
     from calib.logs import load_rig_log
-    from calib.report import check_out_dir, write_report
+    from calib.report import OUTPUT_FILES, write_report
     from twin.parameters import ParameterError
 
     start = _load_params(args)
@@ -559,8 +590,7 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
     if not fit or unknown:
         raise ParameterError(f"--fit {args.fit!r}: choose from {', '.join(FITTABLE)}")
     if args.out is not None:
-        check_output_dir("--out", args.out)
-        check_out_dir(args.out, args.overwrite)
+        check_output_folder("--out", args.out, OUTPUT_FILES, overwrite=args.overwrite, inputs=_inputs(args))
     logs = [load_rig_log(path) for path in args.logs]
 
     def progress(line: str) -> None:
@@ -585,11 +615,14 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
 
 
 def _cmd_calibrate_static(args: argparse.Namespace) -> int:
-    from calib.static import calibrate, load_table, render_lines, render_toml
-    from twin.log import atomic_output
+    from calib.static import calibrate, load_table
+    from calib.static_render import render_lines, render_toml
+    from twin.outputs import atomic_output
 
     params = _load_params(args)
-    paths = check_outputs([("--out", args.out, PARAMS_OUT_SUFFIXES, 0)], overwrite=args.overwrite)
+    paths = check_outputs(
+        [("--out", args.out, PARAMS_OUT_SUFFIXES, 0)], overwrite=args.overwrite, inputs=_inputs(args)
+    )
     result = calibrate(load_table(args.table), params)
     print(json.dumps(result.to_json(), indent=2) if args.json else "\n".join(render_lines(result)))
     if "--out" in paths:
@@ -614,6 +647,7 @@ def _cmd_experiment(args: argparse.Namespace) -> int:
     out = check_outputs(
         [("--out", args.out, LOG_SUFFIXES, _log_bytes(args.out, args.duration, params))],
         overwrite=args.overwrite,
+        inputs=_inputs(args),
     )["--out"]
     result = run_experiment(args.name, params, duration_s=args.duration, seed=args.seed)
     save = save_csv if out.suffix.lower() == ".csv" else save_mat
@@ -779,7 +813,7 @@ def build_parser() -> argparse.ArgumentParser:
         "(pip install 'ballbeam-twin[distributed]'); results equal the local run's",
     )
     sweep.add_argument("--out", metavar="DIR", help="write DIR/sweep.json and DIR/map.png")
-    sweep.add_argument("--overwrite", action="store_true", help="replace an existing --out directory")
+    sweep.add_argument("--overwrite", action="store_true", help="replace its own files in an existing --out")
     sweep.add_argument("--json", action="store_true", help="print the whole result as JSON")
     sweep.set_defaults(func=_cmd_sweep)
 
@@ -814,7 +848,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--scheduler", metavar="ADDRESS", help="a Dask distributed scheduler to fan the runs out to"
     )
     mc.add_argument("--out", metavar="DIR", help="write DIR/montecarlo.json and DIR/distributions.png")
-    mc.add_argument("--overwrite", action="store_true", help="replace an existing --out directory")
+    mc.add_argument("--overwrite", action="store_true", help="replace its own files in an existing --out")
     mc.add_argument("--json", action="store_true", help="print the whole result as JSON")
     mc.set_defaults(func=_cmd_montecarlo)
 
@@ -834,7 +868,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_params_options(val)
     val.add_argument("--workers", type=int, default=1, help="local processes (default 1: this process)")
     val.add_argument("--out", metavar="DIR", help="write DIR/report.md, DIR/validation.json, DIR/region.png")
-    val.add_argument("--overwrite", action="store_true", help="replace an existing --out directory")
+    val.add_argument("--overwrite", action="store_true", help="replace its own files in an existing --out")
     val.add_argument("--json", action="store_true", help="print the report as JSON")
     val.set_defaults(func=_cmd_validate)
 
@@ -881,7 +915,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="parameters to fit, e.g. motor.resistance_ohm,beam.inertia_pivot_kgm2 (see README)",
     )
     cal.add_argument("--out", metavar="DIR", help="write params.toml, calibration.json and report.md here")
-    cal.add_argument("--overwrite", action="store_true", help="replace an existing --out directory")
+    cal.add_argument("--overwrite", action="store_true", help="replace its own files in an existing --out")
     cal.add_argument("--window", type=float, default=1.0, metavar="S", help="window length (default 1 s)")
     cal.add_argument("--json", action="store_true", help="print calibration.json")
     _add_params_options(cal)

@@ -30,7 +30,8 @@ import numpy as np
 from controllers import thesis_numbers as T
 from twin.app.fanout import Progress, Runs, run_starts
 from twin.app.montecarlo import Distribution, MonteCarloSettings, run_montecarlo
-from twin.app.sweep import Grid, SweepResult, SweepSettings, point_seeds, render_map, run_sweep
+from twin.app.sweep import Grid, SweepResult, SweepSettings, point_seeds, run_sweep
+from twin.outputs import JobFiles, atomic_directory
 from twin.parameters import ParameterError, Parameters
 from twin.sensors import angle_count_step_rad
 
@@ -290,50 +291,20 @@ def validate(
     return ValidationReport(controller, checks, region, time.perf_counter() - started, c)
 
 
-def write_validation(report: ValidationReport, out_dir: str | Path, *, overwrite: bool = False) -> Path:
-    """``report.md``, ``validation.json`` and ``region.png`` into ``out_dir``, atomically."""
-    from twin.log import atomic_directory
+# What write_validation puts into its folder (checked before the battery runs).
+OUTPUT_FILES = JobFiles("validate", ("validation.json", "region.png", "report.md"))
 
-    with atomic_directory(out_dir, overwrite=overwrite) as tmp:
+
+def write_validation(report: ValidationReport, out_dir: str | Path, *, overwrite: bool = False) -> Path:
+    """``report.md``, ``validation.json`` and ``region.png`` (``twin.app.validate_render``,
+    ``twin.app.sweep_render``) into ``out_dir``, atomically (``twin.outputs.atomic_directory``: the folder's
+    other files are kept)."""
+    from twin.app.sweep_render import render_map
+    from twin.app.validate_render import render_markdown
+
+    with atomic_directory(out_dir, OUTPUT_FILES, overwrite=overwrite) as tmp:
         (tmp / "validation.json").write_text(json.dumps(report.to_json(), indent=1) + "\n")
         if report.region is not None:
             render_map(report.region, tmp / "region.png")
         (tmp / "report.md").write_text(render_markdown(report))
     return Path(out_dir)
-
-
-def render_markdown(report: ValidationReport) -> str:
-    mark = {True: "pass", False: "**FAIL**", None: "not run"}
-    lines = [
-        f"# Validation of `{report.controller}`",
-        "",
-        f"**Verdict: {'PASS' if report.passed else 'FAIL'}** ({report.wall_s:.0f} s of computing)"
-        + ("" if report.complete else " — **interrupted**: only the checks below were run"),
-        "",
-        "| check | result | criterion | measured |",
-        "| --- | --- | --- | --- |",
-    ]
-    for c in report.checks:
-        lines.append(f"| {c.name} | {mark[c.passed]} | {c.criterion} | {c.measured} |")
-    if report.region is not None:
-        lines += ["", "![region of attraction](region.png)", ""]
-    nominal = next((c for c in report.checks if c.name == "nominal"), None)
-    if nominal is None:
-        return "\n".join(lines) + "\n"
-    lines += [
-        "## Nominal runs",
-        "",
-        "| x0 (m) | θ0 (rad) | seed | held | settling (s) | steady x (mm) | cycle (mm p-p) | peak V | rails |",
-        "| --- | --- | --- | --- | --- | --- | --- | --- | --- |",
-    ]
-    for r in nominal.rows:
-        settle = "—" if r["settling_time_s"] is None else f"{r['settling_time_s']:.2f}"
-        steady = "—" if r["steady_x_m"] is None else f"{1e3 * r['steady_x_m']:+.1f}"
-        cycle = "—" if r["limit_cycle_x_pp_m"] is None else f"{1e3 * r['limit_cycle_x_pp_m']:.1f}"
-        lines.append(
-            f"| {r['x0_m']:+.2f} | {r['theta0_rad']:+.2f} | {r['seed']} | {'yes' if r['held'] else r['reason']} | "
-            f"{settle} | {steady} | {cycle} | {r['peak_motor_voltage_v']:.1f} | {100 * r['saturated_fraction']:.0f} % |"
-        )
-    lines += ["", "Criteria (override with `--criteria FILE`):", ""]
-    lines += [f"- `{k}` = {v}" for k, v in asdict(report.criteria).items()]
-    return "\n".join(lines) + "\n"
