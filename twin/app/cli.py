@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, NoReturn
 
 from twin.app.catalogue import WithUserController, construct, one_line, user_controller
-from twin.app.options import GridType, NumberType, count, finite_float, seed
+from twin.app.options import MAX_JOB_RUN_S, GridType, NumberType, count, finite_float, seed
 from twin.app.paths import check_output_dir, check_outputs, writing
 
 if TYPE_CHECKING:
@@ -54,7 +54,6 @@ CONTROLLER_HELP = (
 # A run keeps every tick of its log in memory (and the log on disk holds them all): one simulated hour is
 # 180 000 ticks at 50 Hz.
 MAX_RUN_S = 3600.0
-MAX_SWEEP_RUN_S = 600.0  # one run of a sweep: its verdict, not its log, is kept
 MAX_WORKERS = 256  # local processes
 # The live view's speed slider (twin.viewer) runs from 0.1 to 4.
 SPEED_MIN, SPEED_MAX = 0.1, 4.0
@@ -434,10 +433,21 @@ def _cmd_montecarlo(args: argparse.Namespace) -> int:
 
 
 def _cmd_validate(args: argparse.Namespace) -> int:
-    from twin.app.validate import ValidationCriteria, load_criteria, validate, write_validation
+    from twin.app.validate import (
+        ValidationCriteria,
+        check_criteria_for,
+        load_criteria,
+        validate,
+        write_validation,
+    )
+    from twin.parameters import ParameterError
 
     params, spread = _params_and_spread(args)
     criteria = load_criteria(args.criteria) if args.criteria else ValidationCriteria()
+    try:
+        check_criteria_for(criteria, params)
+    except ParameterError as exc:
+        raise ParameterError(f"{args.criteria or 'the default criteria'}: {exc}") from None
     _check_job(args, params)
     report = validate(
         args.controller,
@@ -645,7 +655,7 @@ def _sweep_max_points() -> float:
 
 # The numeric options shared by several commands (their types check them when parsed: see twin.app.options).
 _JOB_RUN_S = finite_float(
-    0, MAX_SWEEP_RUN_S, lo_open=True, unit="s", why="each run of a many-run job; its verdict is kept"
+    0, MAX_JOB_RUN_S, lo_open=True, unit="s", why="each run of a many-run job; its verdict is kept"
 )
 _WORKERS = count(1, MAX_WORKERS, unit="local processes")
 

@@ -16,6 +16,9 @@ from collections.abc import Callable
 
 Limit = float | Callable[[], float]
 
+# One run of a many-run job (sweep, Monte Carlo, validate): its verdict, not its log, is kept.
+MAX_JOB_RUN_S = 600.0
+
 # Seeds feed numpy's SeedSequence and are written to JSON reports and int64 arrays: a non-negative int64.
 SEED_MAX = 2**63 - 1
 
