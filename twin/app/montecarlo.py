@@ -34,7 +34,7 @@ import numpy as np
 
 from twin.app.fanout import Progress, Runs, run_starts
 from twin.app.sweep import point_seeds
-from twin.parameters import ParameterError, Parameters
+from twin.parameters import DuplicateKeyError, ParameterError, Parameters, load_json
 
 __all__ = [
     "Distribution",
@@ -93,9 +93,11 @@ def load_spread(path: str | Path, params: Parameters) -> Distribution:
     path = Path(path)
     try:
         text = path.read_text(encoding="utf-8-sig")
-        data = json.loads(text) if path.suffix.lower() == ".json" else tomllib.loads(text)
+        data = load_json(text) if path.suffix.lower() == ".json" else tomllib.loads(text)
     except (OSError, UnicodeDecodeError) as exc:
         raise ParameterError(f"{path}: cannot read: {exc}") from None
+    except DuplicateKeyError as exc:
+        raise ParameterError(f"{path}: {exc}") from None
     except (tomllib.TOMLDecodeError, json.JSONDecodeError, RecursionError) as exc:
         raise ParameterError(
             f"{path}: not valid {path.suffix.lstrip('.').upper() or 'TOML'}: {exc}"
