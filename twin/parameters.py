@@ -1109,6 +1109,18 @@ class Parameters:
     def to_dict(self) -> dict[str, dict[str, Any]]:
         return {group: dataclasses.asdict(getattr(self, group)) for group in _GROUPS}
 
+    def changed(self) -> dict[str, Any]:
+        """The values that differ from the defaults, by dotted name (``{"motor.resistance_ohm": 1e-09}``)."""
+        default = Parameters()
+        out: dict[str, Any] = {}
+        for group in _GROUPS:
+            mine, theirs = getattr(self, group), getattr(default, group)
+            for f in fields(mine):
+                value = getattr(mine, f.name)
+                if value != getattr(theirs, f.name):
+                    out[f"{group}.{f.name}"] = value
+        return out
+
     def save(self, path: str | Path, *, overwrite: bool = False) -> None:
         """Write all values as TOML (or JSON for a .json path). Refuses to overwrite unless asked."""
         path = Path(path)

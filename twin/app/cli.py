@@ -185,6 +185,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from controllers import registry
     from twin.engine import ControllerError, run_closed_loop
     from twin.log import save_csv, save_mat
+    from twin.plant import NumericalError
 
     params = _load_params(args)
     user = user_controller(args.controller)
@@ -218,6 +219,9 @@ def _cmd_run(args: argparse.Namespace) -> int:
         )
     except ControllerError as exc:
         print(f"ballbeam run: the controller failed: {exc}", file=sys.stderr)
+        return 1
+    except NumericalError as exc:  # the simulation failed: no physical verdict
+        print(f"ballbeam run: {one_line(exc)}", file=sys.stderr)
         return 1
     if "--log" in paths:
         log_path = paths["--log"]
@@ -982,6 +986,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (ValueError, OSError) as exc:  # bad input, or an output that cannot be written: no traceback
         print(f"ballbeam: error: {one_line(exc)}", file=sys.stderr)
         return 2
+    except FloatingPointError as exc:  # twin.plant.NumericalError: the simulation failed, not the input
+        print(f"ballbeam: {one_line(exc)}", file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":
