@@ -16,6 +16,7 @@ from calib.logs import ADC_STEP_V, DAC_STEP_V, load_rig_log, read_mat73
 from twin.app import options
 from twin.app.cli import main
 from twin.app.validate import ValidationCriteria, check_criteria_for, load_criteria
+from twin.engine import RunResult
 from twin.log import LogError, load_mat
 from twin.parameters import ParameterError, Parameters
 
@@ -349,3 +350,153 @@ def test_a_broken_v73_file_is_one_message(tmp_path: Path) -> None:
     path.write_bytes(data[:600])  # the header and HDF5's signature, then nothing
     with pytest.raises(LogError, match=f"{path}: a MATLAB v7.3"):
         load_rig_log(path)
+
+
+# --- numerical failures --------------------------------------------------------------------------------
+TINY_R = {"motor.resistance_ohm": 1e-9}  # 1 nΩ: a torque per volt of 10⁷ N·m, far past what a 1 ms step holds
+
+
+def test_parameters_changed_lists_what_differs_from_the_defaults(params: Parameters) -> None:
+    assert params.changed() == {}
+    p = params.with_overrides({**TINY_R, "start.free_run_s": 0.02})
+    assert p.changed() == {"motor.resistance_ohm": 1e-9, "start.free_run_s": 0.02}
+
+
+def test_the_stops_yield_bound_is_the_no_load_speed_over_a_step_and_a_time_constant(
+    params: Parameters,
+) -> None:
+    from twin.plant import stop_overshoot_bound_rad
+
+    # rail_v / (N·K_b) = 12 / (7 · 0.022) = 77.9 rad/s at the beam, over 1 ms + 2 ms
+    assert stop_overshoot_bound_rad(params) == pytest.approx(12.0 / (7 * 0.022) * 0.003, rel=1e-12)
+    assert stop_overshoot_bound_rad(params) == pytest.approx(0.2338, abs=1e-4)
+
+
+def test_an_unstable_simulation_is_a_numerical_failure_not_a_lost_ball(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    argv = ["run", "--controller", "lqr", "--x0", "0.1", "--theta0", "0", "--duration", "1", "--json"]
+    rc = main([*argv, "--set", "motor.resistance_ohm=1e-9"])
+    captured = capsys.readouterr()
+    assert rc == 1 and captured.out == ""
+    lines = captured.err.strip().splitlines()
+    assert len(lines) == 1, captured.err
+    line = lines[0]
+    assert line.startswith("ballbeam run: numerical failure: MuJoCo reported an unstable simulation (BADQACC")
+    # the step that failed is the first one driven: the free run ends at 10 ms
+    assert "at t = 0.010 s" in line
+    assert "the parameters differ from the defaults in motor.resistance_ohm = 1e-09" in line
+    assert "the physics step is 1 ms" in line and "lost" not in line
+
+
+def test_mujoco_prints_nothing_of_its_own(tmp_path: Path) -> None:
+    import os
+    import subprocess
+    import sys
+
+    root = Path(__file__).resolve().parent.parent
+    env = {**os.environ, "PYTHONPATH": str(root)}
+    argv = ["run", "--controller", "lqr", "--x0", "0.1", "--theta0", "0", "--duration", "1"]
+    done = subprocess.run(
+        [sys.executable, "-m", "twin.app.cli", *argv, "--set", "motor.resistance_ohm=1e-9"],
+        capture_output=True,
+        text=True,
+        env=env,
+        cwd=tmp_path,
+        timeout=120,
+    )
+    assert done.returncode == 1
+    assert "WARNING" not in done.stderr and "Traceback" not in done.stderr
+    assert len(done.stderr.strip().splitlines()) == 1, done.stderr
+
+
+def test_the_batch_names_the_failing_run_and_the_job_records_it_as_numerical(params: Parameters) -> None:
+    from controllers import registry
+    from twin.app.fanout import Runs, run_starts
+    from twin.batch import run_batch
+    from twin.plant import NumericalError
+
+    bad = params.with_overrides(TINY_R)
+    with pytest.raises(NumericalError, match=r"^run 1: numerical failure: MuJoCo reported .*BADQACC.*1e-09"):
+        run_batch(
+            registry,
+            "appendix-clp",
+            x0_m=np.array([0.1, 0.1]),
+            theta0_rad=np.zeros(2),
+            seeds=np.arange(2),
+            duration_s=1.0,
+            params=[params, bad],
+            nthread=1,
+        )
+    runs = Runs("appendix-clp", params, 4.0, True, "twin", False)
+    records, complete = run_starts(
+        runs, np.array([[0.1, 0.0], [0.1, 0.0]]), np.array([3, 3]), params=[params, bad]
+    )
+    assert complete
+    good, failed = records
+    assert good is not None and failed is not None
+    assert good["failed"] is False and "numerical" not in good
+    single = twin_run("appendix-clp", params, seed=3)
+    steady = single.verdict.steady_x_m
+    assert (
+        steady is not None and good["held"] == single.verdict.held and good["steady_x_m"] == round(steady, 6)
+    )
+    assert failed["failed"] is True and failed["numerical"] is True
+    assert failed["ball_lost"] is False and failed["held"] is False  # not counted as a lost ball
+    assert failed["reason"].startswith("numerical failure: MuJoCo reported an unstable simulation (BADQACC")
+    assert "motor.resistance_ohm = 1e-09" in failed["reason"]
+
+
+def twin_run(name: str, params: Parameters, seed: int) -> RunResult:
+    from controllers import registry
+    from twin.engine import run_closed_loop
+
+    return run_closed_loop(registry.make(name, params), x0_m=0.1, theta0_rad=0.0, duration_s=4.0, seed=seed)
+
+
+def test_an_amplifier_gain_of_1000_hits_the_stops_within_their_softness(params: Parameters) -> None:
+    """The beam slammed into its stops yields a few mrad (soft stops, 2 ms, acting from the next 1 ms step):
+    physical for the twin, reported as hit_stops; the bound is 0.234 rad."""
+    from controllers import registry
+    from twin.engine import run_closed_loop
+
+    p = params.with_overrides({"amplifier.gain_v_per_v": 1000.0})
+    r = run_closed_loop(registry.make("appendix-sf", p), x0_m=0.2, theta0_rad=0.3, duration_s=2.0, params=p)
+    over_rad = r.verdict.peak_theta_rad - p.beam.stop_angle_rad
+    assert r.verdict.hit_stops and 0.001 < over_rad < 0.006  # measured: 3.55 mrad
+    assert np.abs(r.log.true_thetadot_rad_s).max() < 8.0  # rad/s, measured 4.9 at the ticks
+
+
+@pytest.mark.parametrize("where", ["single", "batch"])
+def test_a_beam_past_what_the_stops_yield_is_numerical(
+    params: Parameters, monkeypatch: pytest.MonkeyPatch, where: str
+) -> None:
+    """With the yield bound shrunk to 1 mrad, the same gain-1000 run (3.55 mrad past the stops) fails
+    numerically, in the single run and in the batch: the check reads every step's angle."""
+    import twin.batch
+    import twin.plant
+    from controllers import registry
+    from twin.engine import run_closed_loop
+    from twin.plant import NumericalError
+
+    for module in (twin.plant, twin.batch):
+        monkeypatch.setattr(module, "stop_overshoot_bound_rad", lambda p: 0.001)
+    p = params.with_overrides({"amplifier.gain_v_per_v": 1000.0})
+    pattern = r"numerical failure: the beam at 0\.7\d+ rad, past its stops \(0\.7575 rad\) by more than they can yield"
+    with pytest.raises(NumericalError, match=pattern):
+        if where == "single":
+            run_closed_loop(
+                registry.make("appendix-sf", p), x0_m=0.2, theta0_rad=0.3, duration_s=2.0, params=p
+            )
+        else:
+            twin.batch.run_batch(
+                registry, "appendix-sf", x0_m=np.array([0.2]), theta0_rad=np.array([0.3]), seeds=np.zeros(1),
+                duration_s=2.0, params=p, nthread=1,
+            )  # fmt: skip
+
+
+def test_a_model_mujoco_cannot_compile_is_one_line(capsys: pytest.CaptureFixture[str]) -> None:
+    argv = ["run", "--controller", "lqr", "--x0", "0.1", "--theta0", "0", "--set", "ball.mass_kg=1e-12"]
+    line = _refused(capsys, argv, "MuJoCo cannot build the model from these parameters")
+    assert "mass and inertia of moving bodies must be larger than mjMINVAL" in line
+    assert "(parameters that differ from the defaults: ball.mass_kg = 1e-12)" in line
