@@ -275,6 +275,20 @@ def test_a_spread_file_with_a_byte_order_mark_is_read(tmp_path: Path, params: Pa
     assert spread.sd == pytest.approx((0.1 * params.motor.resistance_ohm,), rel=1e-15)
 
 
+def test_a_relative_spread_of_a_zero_parameter_is_refused(tmp_path: Path, params: Parameters) -> None:
+    from twin.app.montecarlo import load_spread
+
+    path = tmp_path / "spread.toml"
+    path.write_text("[angle_sensor]\nzeroing_error_rad = { rel_sd = 0.1 }\n")
+    assert params.angle_sensor.zeroing_error_rad == 0.0
+    with pytest.raises(
+        ParameterError, match=r"zeroing_error_rad = \{'rel_sd': 0.1\}: its nominal value is 0"
+    ):
+        load_spread(path, params)
+    path.write_text("[angle_sensor]\nzeroing_error_rad = { sd = 0.003 }\n")
+    assert load_spread(path, params).sd == (0.003,)
+
+
 @pytest.mark.parametrize(
     ("index", "volts", "previous"),
     [(22, 4.34, 4.34), (5, -3.5, -3.045)],  # constant at the end; decreasing in the middle

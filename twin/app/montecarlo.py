@@ -127,6 +127,11 @@ def load_spread(path: str | Path, params: Parameters) -> Distribution:
                 s = float(values["sd"]) if "sd" in keys else float(values["rel_sd"]) * abs(nominal)
                 if s < 0:
                     raise ParameterError(f"{path}: {full}: a standard deviation is ≥ 0")
+                if "rel_sd" in keys and nominal == 0 and values["rel_sd"] != 0:
+                    raise ParameterError(
+                        f"{path}: {full} = {spec!r}: its nominal value is 0, so a relative spread perturbs "
+                        "nothing; give { sd = … } in its unit"
+                    )
                 rows.append((full, nominal, s, math.nan, math.nan))
             elif keys == {"low", "high"}:
                 lo, hi = float(values["low"]), float(values["high"])
