@@ -39,6 +39,10 @@ from twin.sensors import angle_count_step_rad
 __all__ = ["ValidationCriteria", "ValidationReport", "load_criteria", "validate", "write_validation"]
 
 
+# A validation runs 6 starts × nominal_seeds nominal runs; past 1000 seeds it is a typing error, not a study.
+MAX_NOMINAL_SEEDS = 1000
+
+
 @dataclass(frozen=True)
 class ValidationCriteria:
     """What passing means. Each default with its reason."""
@@ -121,10 +125,6 @@ class ValidationCriteria:
                 f"unreachable: with montecarlo_runs = {self.montecarlo_runs} even all runs held give a 95 % "
                 f"lower bound of {best:.6g}",
             )
-
-
-# A validation runs 6 starts × nominal_seeds nominal runs; past 1000 seeds it is a typing error, not a study.
-MAX_NOMINAL_SEEDS = 1000
 
 
 def best_success_lower_bound(runs: int) -> float:
