@@ -45,7 +45,14 @@ from twin.interface import Controller, DaqSample
 from twin.log import THESIS_FIELDS, TRUTH_FIELDS, RunLog
 from twin.output_stage import amplifier_volts, motor_volts
 from twin.parameters import Parameters
-from twin.plant import Plant
+from twin.plant import (
+    Plant,
+    beyond_stops,
+    failure_time_s,
+    numerical_failure,
+    stop_overshoot_bound_rad,
+    warning_text,
+)
 from twin.rig import PlantKind, RigError, whole_steps
 from twin.sensors import BallChainBatch, angle_block_means_v
 from twin.verdict import Criteria
@@ -318,6 +325,8 @@ class _Group:
         if len(self.distinct) > 1:
             self.batch.set_models([plant.model for plant in self.plants])
         self.batch.state[:] = states
+        # Each run's furthest physical beam angle (Plant._check_numerics): past it, a numerical failure.
+        self.theta_limit_rad = np.array([q.beam.stop_angle_rad + stop_overshoot_bound_rad(q) for q in params])
         plant0 = self.distinct[0]
         assert plant0._hinge_qpos is not None
         self.theta_col = 1 + plant0._hinge_qpos
@@ -378,10 +387,13 @@ class _Group:
         live, m = self.live, volts.shape[1]
         t0 = self.physics_time_s
         out = self.batch.rollout(m, control=volts[:, :, None], record=(_FULL,), ids=live)[_FULL]
+        self._check_numerics(t0, out)
         last = out[:, -1]
         if not np.isfinite(last).all():
             i = int(live[np.flatnonzero(~np.isfinite(last).all(axis=1))[0]])
-            raise FloatingPointError(f"run {i}: MuJoCo state is not finite at t = {float(last[0, 0]):.3f} s")
+            raise numerical_failure(
+                self.plants[i].params, f"run {i}: the MuJoCo state is not finite", float(last[0, 0])
+            )
         if not (last[:, 0] == last[0, 0]).all():
             raise RuntimeError("the runs of a batch fell out of step")
         theta = np.concatenate(
@@ -415,6 +427,31 @@ class _Group:
         self.physics_time_s = float(last[0, 0])
         times = t0 + np.arange(m + 1) * self.dt  # as Plant.advance: its clock plus the step offsets
         return times, along, theta, on
+
+    def _check_numerics(self, t0: float, out: np.ndarray) -> None:
+        """Plant._check_numerics for every live run: a NumericalError for the first run MuJoCo warned in
+        (a simulation that warns stops stepping: its clock stops) or whose beam went past its stops further
+        than they can yield."""
+        live = self.live
+        warned = np.flatnonzero(self.batch.warning[live, :, 1].any(axis=1))  # (lastinfo, number) per warning
+        theta = np.abs(out[:, :, self.theta_col])
+        past = np.flatnonzero((theta > self.theta_limit_rad[live, None]).any(axis=1))
+        if not (warned.size or past.size):
+            return
+        run = f"run {int(live[(warned if warned.size else past)[0]])}: " if self.n > 1 else ""
+        if warned.size:
+            j = int(warned[0])
+            i = int(live[j])
+            counts = dict(enumerate(self.batch.warning[i, :, 1].tolist()))
+            error = numerical_failure(
+                self.plants[i].params, warning_text(counts), failure_time_s(np.r_[t0, out[j, :, 0]])
+            )
+        else:
+            j = int(past[0])
+            i = int(live[j])
+            k = int(np.flatnonzero(theta[j] > self.theta_limit_rad[i])[0])
+            error = beyond_stops(self.plants[i].params, float(theta[j, k]), float(out[j, k, 0]))
+        raise type(error)(run + str(error))
 
     def read(self) -> BatchSamples:
         """SimRig._read for every live run."""

@@ -202,17 +202,27 @@ def _check_values(path: Path, kind: str, values: dict[str, np.ndarray], hint: st
         )
 
 
-def load_mat(path: str | Path) -> RunLog:
+def load_mat(path: str | Path, *, variables: dict[str, np.ndarray] | None = None) -> RunLog:
     """Read a log written by ``save_mat`` or by the rig's Plot button (``data_file.mat``).
 
-    Only timem, datam1, datam2 and aout are required (see the module docstring); the file is only read."""
+    Only timem, datam1, datam2 and aout are required (see the module docstring); the file is only read.
+    ``variables``: the file's variables already read as scipy.io.loadmat gives them (a MATLAB v7.3 file,
+    which calib.logs reads with h5py); ``path`` then only names the file in messages."""
     path = Path(path)
-    if not path.is_file():
+    if variables is not None:
+        raw = dict(variables)
+    elif not path.is_file():
         raise LogError(f"{path}: no such file")
-    try:
-        raw = scipy.io.loadmat(path, appendmat=False)
-    except Exception as exc:  # noqa: BLE001 - for bytes that are not MAT, scipy raises many types (IndexError…)
-        raise LogError(f"{path}: not a MATLAB .mat file ({exc})") from None
+    else:
+        try:
+            raw = scipy.io.loadmat(path, appendmat=False)
+        except NotImplementedError:  # scipy's answer to a v7.3 (HDF5) file
+            raise LogError(
+                f"{path}: a MATLAB v7.3 (HDF5) .mat file: ballbeam calibrate reads it; for other readers save "
+                "it with save(..., '-v7') in MATLAB"
+            ) from None
+        except Exception as exc:  # noqa: BLE001 - for bytes that are not MAT, scipy raises many types (IndexError…)
+            raise LogError(f"{path}: not a MATLAB .mat file ({exc})") from None
     k: int | None = None
     if "k" in raw:
         k_values = _vector(path, "k", raw["k"])

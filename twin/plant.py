@@ -12,7 +12,7 @@ trajectory is bit-identical to stepping ``mj_step`` one step at a time.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
 import mujoco
@@ -20,13 +20,103 @@ import numpy as np
 from mujoco import rollout
 
 from twin import model as mdl
-from twin.parameters import Parameters
+from twin.parameters import ParameterError, Parameters
 from twin.physics import PhysicsBlock, check_initial_state
 
-__all__ = ["Plant", "BallKinematics"]
+__all__ = [
+    "BallKinematics",
+    "NumericalError",
+    "Plant",
+    "beyond_stops",
+    "failure_time_s",
+    "numerical_failure",
+    "stop_overshoot_bound_rad",
+    "warning_text",
+]
 
 _FULL = mujoco.mjtState.mjSTATE_FULLPHYSICS
 _CTRL = mujoco.mjtState.mjSTATE_CTRL
+
+# MuJoCo's warnings, each a sign that the simulation (not the rig) failed: its step reset the state (BADQ*),
+# its buffers overflowed (contacts, constraints) or the model is not physical. They are counted in MjData
+# and reported per run as a NumericalError; MuJoCo's default handler would also print each one to stderr.
+_WARNING_TEXT = {
+    mujoco.mjtWarning.mjWARN_INERTIA: "a body inertia that is not physical (INERTIA)",
+    mujoco.mjtWarning.mjWARN_CONTACTFULL: "a full contact buffer (CONTACTFULL)",
+    mujoco.mjtWarning.mjWARN_CNSTRFULL: "a full constraint buffer (CNSTRFULL)",
+    mujoco.mjtWarning.mjWARN_BADQPOS: "an unstable simulation (BADQPOS: a NaN, infinite or huge position)",
+    mujoco.mjtWarning.mjWARN_BADQVEL: "an unstable simulation (BADQVEL: a NaN, infinite or huge velocity)",
+    mujoco.mjtWarning.mjWARN_BADQACC: "an unstable simulation (BADQACC: a NaN, infinite or huge acceleration)",
+    mujoco.mjtWarning.mjWARN_BADCTRL: "a bad actuator input (BADCTRL)",
+}
+mujoco.set_mju_user_warning(lambda message: None)
+
+
+class NumericalError(FloatingPointError):
+    """The simulation failed, not the rig: MuJoCo warned (an unstable step, a full buffer, …), its state is
+    not finite, or the beam went past its stops by more than they can yield. A run that raises it has no
+    physical verdict; the message names the time, what happened and the parameters that differ from the
+    defaults."""
+
+
+def numerical_failure(params: Parameters, what: str, t_s: float) -> NumericalError:
+    """``numerical failure: {what} at t = … s — the parameters differ from the defaults in …; the physics
+    step is … ms``."""
+    changed = changed_text(params)
+    which = (
+        f"the parameters differ from the defaults in {changed}"
+        if changed
+        else "the parameters are the defaults"
+    )
+    return NumericalError(
+        f"numerical failure: {what} at t = {t_s:.3f} s — {which}; the physics step is "
+        f"{params.physics.timestep_s * 1e3:g} ms"
+    )
+
+
+def changed_text(params: Parameters, most: int = 6) -> str:
+    """The parameters that differ from the defaults, ``motor.resistance_ohm = 1e-09, …`` ('' for none)."""
+    changed = params.changed()
+    shown = ", ".join(f"{name} = {value!r}" for name, value in list(changed.items())[:most])
+    return shown + (f" and {len(changed) - most} more" if len(changed) > most else "")
+
+
+def warning_text(counts: Mapping[int, int]) -> str:
+    """What MuJoCo reported, from its warning counters (mjtWarning index → count)."""
+    return "MuJoCo reported " + " and ".join(
+        _WARNING_TEXT[mujoco.mjtWarning(i)] for i, n in counts.items() if n
+    )
+
+
+def failure_time_s(times_s: np.ndarray) -> float:
+    """When a block that MuJoCo warned in went wrong: its clock stops advancing there (a BADQ* warning resets
+    the state and the time; a batch's simulation stops stepping), else its end."""
+    bad = np.flatnonzero(~(np.diff(times_s) > 0))
+    return float(times_s[bad[0]]) if bad.size else float(times_s[-1])
+
+
+def beyond_stops(params: Parameters, theta_abs_rad: float, t_s: float) -> NumericalError:
+    """The failure of a beam at |θ| = ``theta_abs_rad``, past its stops further than they can yield."""
+    stop, bound = params.beam.stop_angle_rad, stop_overshoot_bound_rad(params)
+    return numerical_failure(
+        params,
+        f"the beam at {theta_abs_rad:.4g} rad, past its stops ({stop:.4g} rad) by more than they can yield "
+        f"({bound:.3g} rad)",
+        t_s,
+    )
+
+
+def stop_overshoot_bound_rad(params: Parameters) -> float:
+    """How far past its stops the beam can physically go in the twin: the stops are soft constraints (time
+    constant ``physics.contact_timeconst_s``) that act from the step after the beam reaches them, so at the
+    motor's no-load speed at the rails, rail_v / (N·K_b), it yields at most that speed times one step plus
+    the time constant. Further out is a numerical failure, not a physical state. (Over its stroke the beam
+    reaches about 11 rad/s at the rails; an amplifier gain of 1000 slams it into its stops at up to 7 rad/s
+    and they yield up to 4.2 mrad: the stops' softness, inside this bound of 0.23 rad, and hit_stops says
+    so.)"""
+    omega_max = params.amplifier.rail_v / params.motor.backemf_at_beam_v_s_per_rad
+    return omega_max * (params.physics.timestep_s + params.physics.contact_timeconst_s)
+
 
 # The ball counts as lost once its centre has dropped this far below (or risen above) its seat on the wires.
 # 2 mm is 40x the largest transient lift seen in fast combined rolling and tilting (measured: µm).
@@ -70,7 +160,15 @@ class Plant:
     def __init__(self, params: Parameters | None = None, *, hold_beam_rad: float | None = None) -> None:
         self.params = params or Parameters()
         self.held_angle_rad = hold_beam_rad
-        self.model = mdl.build_model(self.params, hold_beam_rad=hold_beam_rad)
+        try:
+            self.model = mdl.build_model(self.params, hold_beam_rad=hold_beam_rad)
+        except ValueError as exc:  # MuJoCo's compiler refused the model (its message: "Error: …")
+            changed = changed_text(self.params) or "none"
+            reason = str(exc).removeprefix("Error: ").strip().replace("\n", " ")
+            raise ParameterError(
+                f"MuJoCo cannot build the model from these parameters: {reason} (parameters that differ from "
+                f"the defaults: {changed})"
+            ) from None
         self.data = mujoco.MjData(self.model)
         m = self.model
         self._beam = m.body(mdl.BEAM_BODY).id
@@ -105,6 +203,10 @@ class Plant:
         self._seat_height_m = p.ball_centre_height_m
         self._dot_buffers = (np.zeros(3), np.zeros(3), np.zeros(3))  # offset, velocity, beam axis
         self._all_on_cache: dict[int, np.ndarray] = {}
+        # MuJoCo's warning counters (live views into MjData, read once a block) and the beam's furthest
+        # physical angle: past either, the block is a numerical failure (NumericalError).
+        self._warning_stats = [self.data.warning[int(w)] for w in _WARNING_TEXT]
+        self._theta_limit_rad = p.beam.stop_angle_rad + stop_overshoot_bound_rad(p)
         self.reset()
 
     # --- state ------------------------------------------------------------------------------------
@@ -306,7 +408,7 @@ class Plant:
                 chunk_size=None,
             )
         if not _all_finite(rows[-1]):
-            raise FloatingPointError(f"MuJoCo state is not finite at t = {float(rows[-1, 0]):.3f} s")
+            raise numerical_failure(self.params, "the MuJoCo state is not finite", float(rows[-1, 0]))
         return self._block(rows, t0 + buf.step_offsets_s)
 
     def advance_with_law(
@@ -368,7 +470,7 @@ class Plant:
                 elif law_reads and k < n:
                     state = self._state_floats(row, c, s, write, dot)
             if (law_reads or k == n) and not math.isfinite(sum(row)):  # where advance checks, once a period
-                raise FloatingPointError(f"MuJoCo state is not finite at t = {row[0]:.3f} s")
+                raise numerical_failure(self.params, "the MuJoCo state is not finite", row[0])
         # Times as advance makes them: each law period's start time plus whole steps.
         starts = rows[0:n:law_steps, 0]
         times = np.empty(n + 1)
@@ -390,6 +492,7 @@ class Plant:
         along, lateral, height = self.beam_frame(theta, rows[:, q : q + 3])
         al, th, lat, hgt = along.tolist(), theta.tolist(), lateral.tolist(), height.tolist()
         x_range, theta_range = (min(al), max(al)), (min(th), max(th))
+        self._check_numerics(rows, theta_range)
         # ``on_track(...).all()`` from the extremes: |·| below a bound everywhere ⇔ at both extremes, and
         # subtracting the seat height is monotonic in float arithmetic, so the same answer.
         seat, tol, lat_limit = self._seat_height_m, LOST_HEIGHT_TOLERANCE_M, self._lateral_limit_m
@@ -414,6 +517,17 @@ class Plant:
                 self.lost_state = self._row_state(rows[first_off])
                 on[first_off:] = False
         return PhysicsBlock(times, along, theta, on, x_range, theta_range, bool(on.all()), True)
+
+    def _check_numerics(self, rows: np.ndarray, theta_range: tuple[float, float]) -> None:
+        """Raise NumericalError when MuJoCo warned during these rows' steps, or the beam went past its stops
+        further than they can yield (``stop_overshoot_bound_rad``)."""
+        if any(w.number for w in self._warning_stats):
+            counts = {int(w): self._warning_stats[j].number for j, w in enumerate(_WARNING_TEXT)}
+            raise numerical_failure(self.params, warning_text(counts), failure_time_s(rows[:, 0]))
+        if max(-theta_range[0], theta_range[1]) > self._theta_limit_rad:
+            theta = np.abs(rows[:, self._row_theta])
+            k = int(np.flatnonzero(theta > self._theta_limit_rad)[0])
+            raise beyond_stops(self.params, float(theta[k]), float(rows[k, 0]))
 
     def _all_on(self, size: int) -> np.ndarray:
         """A read-only all-True ``on_track`` of this size (shared: the common block's flags)."""

@@ -19,13 +19,14 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
+import re
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, NoReturn
 
 from twin.app.catalogue import WithUserController, construct, one_line, user_controller
+from twin.app.options import MAX_JOB_RUN_S, GridType, NumberType, count, finite_float, seed
 from twin.outputs import JobFiles, check_output_folder, check_outputs, writing
 
 if TYPE_CHECKING:
@@ -42,7 +43,7 @@ CONTROLLER_HELP = (
 # A run keeps every tick of its log in memory (and the log on disk holds them all): one simulated hour is
 # 180 000 ticks at 50 Hz.
 MAX_RUN_S = 3600.0
-MAX_SWEEP_RUN_S = 600.0  # one run of a sweep: its verdict, not its log, is kept
+MAX_WORKERS = 256  # local processes
 # The live view's speed slider (twin.viewer) runs from 0.1 to 4.
 SPEED_MIN, SPEED_MAX = 0.1, 4.0
 LOG_SUFFIXES = (".mat", ".csv")
@@ -161,24 +162,6 @@ def _cmd_params(args: argparse.Namespace) -> int:
     return 0
 
 
-def _check_finite(**values: float) -> None:
-    from twin.parameters import ParameterError
-
-    for name, value in values.items():
-        if not math.isfinite(value):
-            raise ParameterError(f"--{name} = {value!r} is not a finite number")
-
-
-def _check_run_duration(duration_s: float, params: Parameters) -> None:
-    from twin.parameters import ParameterError
-
-    if not 0 < duration_s <= MAX_RUN_S:
-        raise ParameterError(
-            f"--duration = {duration_s!r}: a run lasts more than 0 and at most {MAX_RUN_S:g} s of simulated "
-            f"time (its log keeps every {params.daq.period_s * 1e3:g} ms tick in memory)"
-        )
-
-
 def _log_bytes(text: str | None, duration_s: float, params: Parameters) -> int:
     """A lower bound of a log's size on disk (0 for a path the checks will refuse anyway)."""
     if not text:
@@ -192,7 +175,6 @@ def _apply_setpoint(controller: object, spec: str, setpoint_m: float, params: Pa
     from twin.interface import Setpoint
     from twin.parameters import ParameterError
 
-    _check_finite(setpoint=setpoint_m)
     half_m = params.track.half_length_m
     if abs(setpoint_m) > half_m:
         raise ParameterError(f"--setpoint = {setpoint_m!r} m is off the track (|x| ≤ {half_m:g} m)")
@@ -232,10 +214,9 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from controllers import registry
     from twin.engine import ControllerError, run_closed_loop
     from twin.log import save_csv, save_mat
+    from twin.plant import NumericalError
 
     params = _load_params(args)
-    _check_finite(x0=args.x0, theta0=args.theta0, duration=args.duration)
-    _check_run_duration(args.duration, params)
     user = user_controller(args.controller)
     paths = check_outputs(
         [
@@ -270,6 +251,9 @@ def _cmd_run(args: argparse.Namespace) -> int:
         )
     except ControllerError as exc:
         print(f"ballbeam run: the controller failed: {exc}", file=sys.stderr)
+        return 1
+    except NumericalError as exc:  # the simulation failed: no physical verdict
+        print(f"ballbeam run: {one_line(exc)}", file=sys.stderr)
         return 1
     if args.setpoint is not None:
         result.verdict = _verdict_about(result, params, args.x0, args.setpoint)
@@ -307,17 +291,9 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 def _cmd_view(args: argparse.Namespace) -> int:
     from controllers import registry
-    from twin.parameters import ParameterError
     from twin.viewer import ViewerError, serve
 
     params = _load_params(args)
-    if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
-        raise ParameterError(f"--duration = {args.duration!r} must be a positive number of seconds")
-    if not (math.isfinite(args.speed) and SPEED_MIN <= args.speed <= SPEED_MAX):
-        raise ParameterError(
-            f"--speed = {args.speed!r}: the view runs at {SPEED_MIN:g}…{SPEED_MAX:g} simulated seconds per "
-            "wall second (the range of its speed slider)"
-        )
     user = user_controller(args.controller)
     catalogue: Catalogue = registry
     if user is not None:
@@ -369,20 +345,11 @@ def _inputs(args: argparse.Namespace) -> list[tuple[str, str]]:
 
 
 def _check_job(args: argparse.Namespace, params: Parameters, outputs: JobFiles) -> None:
-    """What every many-run command checks before the work: durations, workers, the controller (built once:
-    a failing constructor is refused here) and the output folder the job writes ``outputs`` into."""
+    """What every many-run command checks before the work (its numbers are checked by their types): the
+    controller (built once: a failing constructor is refused here) and the output folder the job writes
+    ``outputs`` into."""
     from twin.app.catalogue import catalogue_for
-    from twin.parameters import ParameterError
 
-    duration = getattr(args, "duration", None)
-    if duration is not None:
-        _check_finite(duration=duration)
-        if not 0 < duration <= MAX_SWEEP_RUN_S:
-            raise ParameterError(
-                f"--duration = {duration!r}: each run lasts more than 0 and at most {MAX_SWEEP_RUN_S:g} s"
-            )
-    if not 1 <= args.workers <= 256:
-        raise ParameterError(f"--workers = {args.workers!r}: 1 … 256 local processes")
     catalogue_for(args.controller, params)
     if args.out is not None:
         check_output_folder("--out", args.out, outputs, overwrite=args.overwrite, inputs=_inputs(args))
@@ -406,12 +373,14 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     from twin.app.sweep import (
         DEFAULT_THETA0,
         DEFAULT_X0,
+        MAX_POINTS,
         OUTPUT_FILES,
         SweepSettings,
         parse_range,
         run_sweep,
         write_sweep,
     )
+    from twin.parameters import ParameterError
 
     params = _load_params(args)
     settings = SweepSettings(
@@ -424,6 +393,11 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
         ideal_sensors=bool(args.ideal_sensors or args.plant == "reference"),
         seed=args.seed,
     )
+    points = settings.x0.n * settings.theta0.n
+    if points > MAX_POINTS:  # refused before the grid is built (its arrays alone may not fit in memory)
+        raise ParameterError(
+            f"--x0 {settings.x0.n} × --theta0 {settings.theta0.n} = {points} starts: at most {MAX_POINTS}"
+        )
     _check_job(args, params, OUTPUT_FILES)
     result = run_sweep(
         settings, params, workers=args.workers, scheduler=args.scheduler, progress=_progress_bar("sweep")
@@ -460,7 +434,6 @@ def _cmd_montecarlo(args: argparse.Namespace) -> int:
         raise ParameterError(
             "give one of --spread FILE or --calibration DIR (what to perturb, and by how much)"
         )
-    _check_finite(x0=args.x0, theta0=args.theta0)
     base, spread = _params_and_spread(args)
     assert spread is not None
     try:
@@ -521,10 +494,22 @@ def _cmd_montecarlo(args: argparse.Namespace) -> int:
 
 
 def _cmd_validate(args: argparse.Namespace) -> int:
-    from twin.app.validate import OUTPUT_FILES, ValidationCriteria, load_criteria, validate, write_validation
+    from twin.app.validate import (
+        OUTPUT_FILES,
+        ValidationCriteria,
+        check_criteria_for,
+        load_criteria,
+        validate,
+        write_validation,
+    )
+    from twin.parameters import ParameterError
 
     params, spread = _params_and_spread(args)
     criteria = load_criteria(args.criteria) if args.criteria else ValidationCriteria()
+    try:
+        check_criteria_for(criteria, params)
+    except ParameterError as exc:
+        raise ParameterError(f"{args.criteria or 'the default criteria'}: {exc}") from None
     _check_job(args, params, OUTPUT_FILES)
     report = validate(
         args.controller,
@@ -592,6 +577,12 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
     if args.out is not None:
         check_output_folder("--out", args.out, OUTPUT_FILES, overwrite=args.overwrite, inputs=_inputs(args))
     logs = [load_rig_log(path) for path in args.logs]
+    period_s = min(log.period_s for log in logs)
+    if args.window < 2 * period_s:  # a window is fitted from its ticks' differences: at least two
+        raise ParameterError(
+            f"--window = {args.window:g}: at least 2 ticks of the logs' {period_s * 1e3:g} ms period "
+            f"({2 * period_s:g} s)"
+        )
 
     def progress(line: str) -> None:
         if not args.json:
@@ -639,11 +630,6 @@ def _cmd_experiment(args: argparse.Namespace) -> int:
     params = _load_params(args)
     if args.name not in EXPERIMENTS:
         raise ParameterError(f"unknown experiment {args.name!r}; known: {', '.join(EXPERIMENTS)}")
-    if not (math.isfinite(args.duration) and 5.0 <= args.duration <= MAX_RUN_S):
-        raise ParameterError(
-            f"--duration = {args.duration!r}: an experiment lasts 5…{MAX_RUN_S:g} s "
-            "(its log keeps every tick in memory)"
-        )
     out = check_outputs(
         [("--out", args.out, LOG_SUFFIXES, _log_bytes(args.out, args.duration, params))],
         overwrite=args.overwrite,
@@ -677,6 +663,8 @@ class _Parser(argparse.ArgumentParser):
         super().__init__(*args, **kwargs)
 
     def error(self, message: str) -> NoReturn:
+        # "argument --x0: --x0 '…': …" (a type that names its option) → "--x0 '…': …"
+        message = re.sub(r"^argument (--[\w-]+): \1 ", r"\1 ", message)
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
@@ -718,6 +706,25 @@ def _add_plant_options(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def _mc_max_runs() -> float:
+    from twin.app.montecarlo import MAX_RUNS
+
+    return MAX_RUNS
+
+
+def _sweep_max_points() -> float:
+    from twin.app.sweep import MAX_POINTS
+
+    return MAX_POINTS
+
+
+# The numeric options shared by several commands (their types check them when parsed: see twin.app.options).
+_JOB_RUN_S = finite_float(
+    0, MAX_JOB_RUN_S, lo_open=True, unit="s", why="each run of a many-run job; its verdict is kept"
+)
+_WORKERS = count(1, MAX_WORKERS, unit="local processes")
+
+
 def build_parser() -> argparse.ArgumentParser:
     from controllers import registry  # its names only: importing it loads no design code
 
@@ -743,19 +750,23 @@ def build_parser() -> argparse.ArgumentParser:
         help="run a controller in closed loop and report the verdict (exit 0 held, 1 lost or not held)",
     )
     run.add_argument("--controller", required=True, metavar="NAME|MODULE:CLASS", help=controller_help)
-    run.add_argument("--x0", type=float, required=True, metavar="M", help="initial ball position (m)")
-    run.add_argument("--theta0", type=float, required=True, metavar="RAD", help="initial beam angle (rad)")
+    run.add_argument(
+        "--x0", type=finite_float(), required=True, metavar="M", help="initial ball position (m)"
+    )
+    run.add_argument(
+        "--theta0", type=finite_float(), required=True, metavar="RAD", help="initial beam angle (rad)"
+    )
     run.add_argument(
         "--duration",
-        type=float,
+        type=finite_float(0, MAX_RUN_S, lo_open=True, unit="s", why="the log keeps every tick in memory"),
         default=15.0,
         metavar="S",
         help=f"simulated seconds (default 15, at most {MAX_RUN_S:g}: the log keeps every tick in memory)",
     )
-    run.add_argument("--seed", type=int, default=0, help="seed of the sensor noise (default 0)")
+    run.add_argument("--seed", type=seed(), default=0, help="seed of the sensor noise (default 0)")
     run.add_argument(
         "--setpoint",
-        type=float,
+        type=finite_float(unit="m"),
         metavar="M",
         help="ball setpoint (m, on the track) for a controller that has one (twin.interface.Setpoint); the "
         "verdict is then judged about it",
@@ -786,26 +797,28 @@ def build_parser() -> argparse.ArgumentParser:
     sweep.add_argument("--controller", required=True, metavar="NAME|MODULE:CLASS", help=controller_help)
     sweep.add_argument(
         "--x0",
-        type=range_text,
+        type=GridType("--x0", max_n=_sweep_max_points),
         metavar="LO:HI:N",
         help="initial ball positions (default -0.32:0.32:41, the chapter 7 range)",
     )
     sweep.add_argument(
         "--theta0",
-        type=range_text,
+        type=GridType("--theta0", max_n=_sweep_max_points),
         metavar="LO:HI:N",
         help="initial beam angles (default -0.7:0.7:41, the chapter 7 range)",
     )
     sweep.add_argument(
-        "--duration", type=float, default=10.0, metavar="S", help="seconds per run (default 10)"
+        "--duration", type=_JOB_RUN_S, default=10.0, metavar="S", help="seconds per run (default 10)"
     )
     sweep.add_argument(
-        "--seed", type=int, default=0, help="base seed; each start's seed follows from it and its index"
+        "--seed", type=seed(), default=0, help="base seed; each start's seed follows from it and its index"
     )
     sweep.add_argument("--no-noise", action="store_true", help="switch the ball sensor's contact noise off")
     _add_plant_options(sweep)
     _add_params_options(sweep)
-    sweep.add_argument("--workers", type=int, default=1, help="local processes (default 1: this process)")
+    sweep.add_argument(
+        "--workers", type=_WORKERS, default=1, help="local processes (default 1: this process)"
+    )
     sweep.add_argument(
         "--scheduler",
         metavar="ADDRESS",
@@ -822,7 +835,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="robustness: one start over many perturbed rigs and noise seeds; success rate with its interval",
     )
     mc.add_argument("--controller", required=True, metavar="NAME|MODULE:CLASS", help=controller_help)
-    mc.add_argument("--n", type=int, default=200, help="runs (default 200)")
+    mc.add_argument("--n", type=count(1, _mc_max_runs), default=200, help="runs (default 200)")
     what = mc.add_mutually_exclusive_group()
     what.add_argument(
         "--spread", metavar="FILE", help="each parameter's uncertainty (TOML/JSON; see the README)"
@@ -833,17 +846,19 @@ def build_parser() -> argparse.ArgumentParser:
         help="a calibration's values, uncertainties and correlations (calibrate --out)",
     )
     mc.add_argument(
-        "--x0", type=float, default=-0.2, metavar="M", help="initial ball position (default -0.2)"
+        "--x0", type=finite_float(), default=-0.2, metavar="M", help="initial ball position (default -0.2)"
     )
     mc.add_argument(
-        "--theta0", type=float, default=0.3, metavar="RAD", help="initial beam angle (default 0.3)"
+        "--theta0", type=finite_float(), default=0.3, metavar="RAD", help="initial beam angle (default 0.3)"
     )
-    mc.add_argument("--duration", type=float, default=15.0, metavar="S", help="seconds per run (default 15)")
-    mc.add_argument("--seed", type=int, default=0, help="seed of the samples and of every run's noise")
+    mc.add_argument(
+        "--duration", type=_JOB_RUN_S, default=15.0, metavar="S", help="seconds per run (default 15)"
+    )
+    mc.add_argument("--seed", type=seed(), default=0, help="seed of the samples and of every run's noise")
     mc.add_argument("--no-noise", action="store_true", help="switch the ball sensor's contact noise off")
     _add_plant_options(mc)
     _add_params_options(mc)
-    mc.add_argument("--workers", type=int, default=1, help="local processes (default 1: this process)")
+    mc.add_argument("--workers", type=_WORKERS, default=1, help="local processes (default 1: this process)")
     mc.add_argument(
         "--scheduler", metavar="ADDRESS", help="a Dask distributed scheduler to fan the runs out to"
     )
@@ -864,9 +879,9 @@ def build_parser() -> argparse.ArgumentParser:
         "--calibration", metavar="DIR", help="a calibration's uncertainties for the Monte Carlo check"
     )
     val.add_argument("--criteria", metavar="FILE", help="TOML overriding the pass criteria (see the report)")
-    val.add_argument("--seed", type=int, default=0, help="base seed of every run's noise")
+    val.add_argument("--seed", type=seed(), default=0, help="base seed of every run's noise")
     _add_params_options(val)
-    val.add_argument("--workers", type=int, default=1, help="local processes (default 1: this process)")
+    val.add_argument("--workers", type=_WORKERS, default=1, help="local processes (default 1: this process)")
     val.add_argument("--out", metavar="DIR", help="write DIR/report.md, DIR/validation.json, DIR/region.png")
     val.add_argument("--overwrite", action="store_true", help="replace its own files in an existing --out")
     val.add_argument("--json", action="store_true", help="print the report as JSON")
@@ -883,7 +898,9 @@ def build_parser() -> argparse.ArgumentParser:
     view.add_argument(
         "--host", default="127.0.0.1", help="interface to serve on (default 127.0.0.1: this machine only)"
     )
-    view.add_argument("--port", type=int, default=8080, help="port (default 8080); a taken port is an error")
+    view.add_argument(
+        "--port", type=count(1, 65535), default=8080, help="port (default 8080); a taken port is an error"
+    )
     view.add_argument(
         "--controller",
         default="appendix-clp",
@@ -892,13 +909,21 @@ def build_parser() -> argparse.ArgumentParser:
     )
     view.add_argument(
         "--speed",
-        type=float,
+        type=finite_float(
+            SPEED_MIN,
+            SPEED_MAX,
+            unit="simulated seconds per wall second",
+            why="the range of its speed slider",
+        ),
         default=1.0,
         help=f"simulated seconds per wall second, {SPEED_MIN:g}…{SPEED_MAX:g} (default 1.0)",
     )
-    view.add_argument("--seed", type=int, default=0, help="seed of the sensor noise (default 0)")
+    view.add_argument("--seed", type=seed(), default=0, help="seed of the sensor noise (default 0)")
     view.add_argument(
-        "--duration", type=float, metavar="S", help="stop after S wall-clock seconds (headless runs)"
+        "--duration",
+        type=finite_float(0, lo_open=True, unit="s"),
+        metavar="S",
+        help="stop after S wall-clock seconds (headless runs)",
     )
     _add_plant_options(view)
     _add_params_options(view)
@@ -916,7 +941,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     cal.add_argument("--out", metavar="DIR", help="write params.toml, calibration.json and report.md here")
     cal.add_argument("--overwrite", action="store_true", help="replace its own files in an existing --out")
-    cal.add_argument("--window", type=float, default=1.0, metavar="S", help="window length (default 1 s)")
+    cal.add_argument(
+        "--window",
+        type=finite_float(0, unit="s"),  # its minimum, 2 ticks, follows from the logs' period
+        default=1.0,
+        metavar="S",
+        help="window length (default 1 s; at least 2 ticks of the logs)",
+    )
     cal.add_argument("--json", action="store_true", help="print calibration.json")
     _add_params_options(cal)
     cal.set_defaults(func=_cmd_calibrate)
@@ -935,9 +966,13 @@ def build_parser() -> argparse.ArgumentParser:
     exp.add_argument("name", metavar="NAME", help="square (recommended), dither or sweep")
     exp.add_argument("--out", required=True, metavar="LOG.mat", help="the log: .mat (thesis format) or .csv")
     exp.add_argument(
-        "--duration", type=float, default=60.0, metavar="S", help=f"seconds, 5…{MAX_RUN_S:g} (default 60)"
+        "--duration",
+        type=finite_float(5, MAX_RUN_S, unit="s", why="the log keeps every tick in memory"),
+        default=60.0,
+        metavar="S",
+        help=f"seconds, 5…{MAX_RUN_S:g} (default 60)",
     )
-    exp.add_argument("--seed", type=int, default=0, help="seed of the dither and the sensor noise")
+    exp.add_argument("--seed", type=seed(), default=0, help="seed of the dither and the sensor noise")
     exp.add_argument("--overwrite", action="store_true", help="replace an existing --out file")
     _add_params_options(exp)
     exp.set_defaults(func=_cmd_experiment)
@@ -957,7 +992,7 @@ def _option_strings(parser: argparse.ArgumentParser) -> tuple[set[str], set[str]
     while parsers:
         for action in parsers.pop()._actions:
             every.update(action.option_strings)
-            if action.option_strings and action.type in (int, float, range_text):
+            if action.option_strings and isinstance(action.type, (NumberType, GridType)):
                 numeric.update(action.option_strings)
             if isinstance(action, argparse._SubParsersAction):
                 parsers.extend(action.choices.values())
@@ -972,11 +1007,6 @@ def _is_number(text: str) -> bool:
     except ValueError:
         return False
     return True
-
-
-def range_text(text: str) -> str:
-    """The type of a ``LO:HI:N`` option (parsed by the command; marked so that ``-0.3:0.3:7`` is a value)."""
-    return text
 
 
 def join_negative_numbers(argv: Sequence[str], parser: argparse.ArgumentParser) -> list[str]:
@@ -1026,6 +1056,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (ValueError, OSError) as exc:  # bad input, or an output that cannot be written: no traceback
         print(f"ballbeam: error: {one_line(exc)}", file=sys.stderr)
         return 2
+    except FloatingPointError as exc:  # twin.plant.NumericalError: the simulation failed, not the input
+        print(f"ballbeam: {one_line(exc)}", file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":

@@ -60,11 +60,12 @@ def run_chunk(chunk: _Chunk) -> list[dict[str, Any]]:
     run again one run at a time and that run's record says why (``failed``, ``reason``)."""
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # an idle OpenBLAS thread spins after dlqr
     from twin.engine import ControllerError
+    from twin.plant import NumericalError
 
     runs = range(len(chunk.seeds))
     try:
         return _records(chunk, runs)
-    except ControllerError:
+    except (ControllerError, NumericalError):
         pass
     out = []
     for i in runs:
@@ -72,6 +73,8 @@ def run_chunk(chunk: _Chunk) -> list[dict[str, Any]]:
             out += _records(chunk, [i])
         except ControllerError as exc:
             out.append(_failed(chunk, i, str(exc)))
+        except NumericalError as exc:  # the simulation failed, not the controller: no physical verdict
+            out.append({**_failed(chunk, i, ""), "numerical": True, "reason": str(exc)})
     return out
 
 

@@ -35,7 +35,7 @@ import numpy as np
 from twin.app.fanout import Progress, Runs, run_starts
 from twin.app.sweep import point_seeds
 from twin.outputs import JobFiles, atomic_directory
-from twin.parameters import ParameterError, Parameters
+from twin.parameters import DuplicateKeyError, ParameterError, Parameters, load_json
 
 __all__ = [
     "Distribution",
@@ -97,9 +97,11 @@ def load_spread(path: str | Path, params: Parameters) -> Distribution:
     path = Path(path)
     try:
         text = path.read_text(encoding="utf-8-sig")
-        data = json.loads(text) if path.suffix.lower() == ".json" else tomllib.loads(text)
+        data = load_json(text) if path.suffix.lower() == ".json" else tomllib.loads(text)
     except (OSError, UnicodeDecodeError) as exc:
         raise ParameterError(f"{path}: cannot read: {exc}") from None
+    except DuplicateKeyError as exc:
+        raise ParameterError(f"{path}: {exc}") from None
     except (tomllib.TOMLDecodeError, json.JSONDecodeError, RecursionError) as exc:
         raise ParameterError(
             f"{path}: not valid {path.suffix.lstrip('.').upper() or 'TOML'}: {exc}"
@@ -129,6 +131,11 @@ def load_spread(path: str | Path, params: Parameters) -> Distribution:
                 s = float(values["sd"]) if "sd" in keys else float(values["rel_sd"]) * abs(nominal)
                 if s < 0:
                     raise ParameterError(f"{path}: {full}: a standard deviation is ≥ 0")
+                if "rel_sd" in keys and nominal == 0 and values["rel_sd"] != 0:
+                    raise ParameterError(
+                        f"{path}: {full} = {spec!r}: its nominal value is 0, so a relative spread perturbs "
+                        "nothing; give { sd = … } in its unit"
+                    )
                 rows.append((full, nominal, s, math.nan, math.nan))
             elif keys == {"low", "high"}:
                 lo, hi = float(values["low"]), float(values["high"])
