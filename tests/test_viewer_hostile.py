@@ -26,6 +26,7 @@ import viser
 import websockets.exceptions
 import websockets.sync.client
 import zstandard
+from viewer_stubs import StubCatalogue
 
 import twin.viewer as viewer_module
 from controllers import registry
@@ -77,15 +78,14 @@ class _Failing(Controller):
         return self.failure
 
 
-class _Catalogue:
-    NAMES = (*registry.NAMES, "test-nan", "test-raises")
-
-    def make(self, name: str, params: Parameters | None = None) -> Any:
-        if name == "test-nan":
-            return _Failing(name, math.nan)
-        if name == "test-raises":
-            return _Failing(name, RuntimeError("boom"))
-        return registry.make(name, params)
+class _Catalogue(StubCatalogue):
+    def __init__(self) -> None:
+        super().__init__(
+            {
+                "test-nan": lambda params: _Failing("test-nan", math.nan),
+                "test-raises": lambda params: _Failing("test-raises", RuntimeError("boom")),
+            }
+        )
 
 
 CATALOGUE = _Catalogue()
@@ -189,7 +189,7 @@ def test_good_values_are_applied(live: LiveTwin) -> None:
         False,
     )
     assert live.runs == runs + 1 and live.rig.true_state()[0] == -0.2
-    assert live.controller.law.ref_x_m == 0.1  # lqr follows the setpoint
+    assert live.controller.setpoint_m == 0.1  # lqr follows the setpoint
 
 
 def test_the_controls_follow_a_narrowed_track_and_stops() -> None:
