@@ -42,6 +42,7 @@ from twin.viewer import (
     owe,
     serve,
 )
+from twin.viewer.security import control_uuid
 
 PROTOCOL = f"viser-v{viser.__version__}"
 CAMERA = {
@@ -381,7 +382,7 @@ class Server:
         self.live: LiveTwin = self.viewer.live
 
     def uuid(self, control: str) -> str:
-        return self.viewer.controls[control]._impl.uuid
+        return control_uuid(self.viewer.controls[control])
 
     def assert_alive_and_ticking(self) -> None:
         """The server thread runs, and the simulated time advances at 50 Hz ± 1 % (×1): the slope of the
@@ -398,7 +399,7 @@ class Server:
             ]:
                 live.enqueue(action, value)
             _wait(
-                lambda: live.runs > runs and live.actions.empty() and live.running and live.speed == 1.0,
+                lambda: live.runs > runs and live.pending_actions == 0 and live.running and live.speed == 1.0,
                 what="a running twin",
             )
             time.sleep(0.3)  # building the new run's model held the loop; it has caught up since
@@ -710,7 +711,7 @@ def test_a_flood_of_refused_values(server: Server, client: Client) -> None:
     quiet = live.refused
     while True:  # until the flood is over: no refusal for half a second
         time.sleep(0.5)
-        if live.refused == quiet and live.actions.empty():
+        if live.refused == quiet and live.pending_actions == 0:
             break
         quiet = live.refused
     assert live.speed == 1.0 and server.viewer.controls["speed"].value == 1.0

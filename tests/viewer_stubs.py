@@ -50,7 +50,12 @@ TRACKING = ("lqr", "sf", "clp")  # the registry's 50 Hz controllers whose law re
 class StubCatalogue:
     """The registry's controllers (``TRACKING`` ones declaring a setpoint) plus ``extra`` builders."""
 
-    def __init__(self, extra: Mapping[str, Callable[[Parameters | None], Any]] | None = None) -> None:
+    def __init__(
+        self,
+        extra: Mapping[str, Callable[[Parameters | None], Any]] | None = None,
+        setpoint: tuple[str, ...] = (),
+    ) -> None:
+        """``setpoint``: the ``extra`` names whose entry declares a setpoint."""
         self.extra = dict(extra or {})
         self.NAMES = (*registry.NAMES, *self.extra)
         self.ENTRIES = {
@@ -60,7 +65,7 @@ class StubCatalogue:
                 description=name,
                 simulation_only=False,
                 batched=False,
-                setpoint=name in TRACKING,
+                setpoint=name in TRACKING or name in setpoint,
             )
             for name in self.NAMES
         }

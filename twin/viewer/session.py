@@ -51,11 +51,11 @@ NOTICE_S = 10.0  # a refusal stays in the status line this long
 # The run is recorded from its start (Reset) for this long of simulated time (17 columns: about 4 MB).
 RECORD_LIMIT_S = 600.0
 VERDICT_EVERY_S = 1.0  # the live verdict is recomputed at most once a second of wall time
-# Actions whose latest value is all that matters: a burst of them (a slider dragged, Reset clicked 5000
-# times) is kept as its last one while it waits in the queue.
-LATEST_WINS = frozenset(
-    {"reset", "controller", "x0", "theta0", "initial", "speed", "noise", "reference", "run"}
-)
+MAX_ACTIONS_PER_FRAME = 64  # a flood of GUI messages cannot starve the simulation
+# Actions whose latest value is all that matters and whose applying costs (a new run is designed and built;
+# a new start re-places the held rig): a burst of one of them (Reset clicked 5000 times, a slider dragged)
+# waits in the queue as its last one.
+LATEST_WINS = frozenset({"reset", "controller", "x0", "theta0", "initial"})
 # Actions that start a new run: between two ticks only the last of them matters, so they are started once.
 STARTS_A_RUN = frozenset({"reset", "controller"})
 
@@ -340,11 +340,13 @@ class LiveTwin:
         _log(f"refused {action}: {refusal.reason}", key=f"refused {action}", stream=sys.stdout)
 
     def apply_actions(self) -> None:
-        """Apply every queued action (at most ``MAX_PENDING_ACTIONS``, coalesced as they were queued; a new
-        run is started once however many resets and controller changes came in a row); never raises."""
-        with self._actions_lock:
-            actions, self._actions = self._actions, deque()
-        for action, value in actions:
+        """Apply the queued actions (at most ``MAX_ACTIONS_PER_FRAME``, coalesced as they were queued); a new
+        run is started once however many resets and controller changes came in a row. Never raises."""
+        for _ in range(MAX_ACTIONS_PER_FRAME):
+            with self._actions_lock:
+                if not self._actions:
+                    break
+                action, value = self._actions.popleft()
             self._apply(action, value)
         self._start_pending_run()
 
