@@ -42,7 +42,7 @@ from twin.viewer import (
     owe,
     serve,
 )
-from twin.viewer.security import control_uuid
+from twin.viewer.security import control_uuid, download_bytes_queued
 
 PROTOCOL = f"viser-v{viser.__version__}"
 CAMERA = {
@@ -696,6 +696,45 @@ def test_a_client_that_never_reads_does_not_stall_the_twin(server: Server, clien
     stalled = Client(server, read=False)
     try:
         time.sleep(2.0)  # the server's frames pile up for it
+        server.assert_alive_and_ticking()
+    finally:
+        stalled.close()
+
+
+def _rss_mib() -> float:
+    for line in open("/proc/self/status").read().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) / 1024
+    return math.nan
+
+
+@pytest.mark.slow
+def test_250_download_clicks_from_a_browser_that_does_not_read_hold_a_file_or_two(
+    server: Server, client: Client, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Each click used to queue another copy of the record for the browser (250 clicks of a full record:
+    +985 MB): now a click while the last file still waits for that browser sends nothing. The file is a full
+    record's size (3.9 MB: 10 min of 17 columns), so that the socket's own buffers cannot take it."""
+    live, viewer = server.live, server.viewer
+    payload = np.random.default_rng(0).bytes(3_871_496)  # incompressible, as a .mat of noisy data
+    monkeypatch.setattr(live, "recording", lambda kind: ("ballbeam_run.mat", payload))
+    stalled = Client(server, read=False)
+    try:
+        clients = viewer.server.get_clients()
+        handle = clients[max(clients)]  # the stalled client's
+        refused, applied, rss = viewer.panels.downloads_refused, live.actions_applied, _rss_mib()
+        for _ in range(250):
+            stalled.click("download_mat")
+        _wait(lambda: live.pending_actions == 0 and live.actions_applied >= applied + 250, 30.0, "the clicks")
+        time.sleep(0.5)
+        sent = 250 - (viewer.panels.downloads_refused - refused)
+        # The first files go: into the sockets' kernel buffers, into the frame viser is writing; then one waits
+        # in the client's buffer and every later click sends nothing.
+        assert 1 <= sent <= 5
+        assert download_bytes_queued(handle) <= 2 * len(payload)
+        # A file in flight is held about four times (the parts, msgpack's frame, zstd's, the socket's): at most
+        # five of them, where 250 queued copies came to about a gigabyte.
+        assert _rss_mib() - rss < 4 * 5 * len(payload) / 2**20
         server.assert_alive_and_ticking()
     finally:
         stalled.close()

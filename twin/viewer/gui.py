@@ -222,10 +222,13 @@ class Panels:
         self.plot_panel.set_width(PLOT_PANEL_PX)
 
     def _download(self, client: Any, kind: str) -> None:
-        """The loop builds the file (it owns the record); the clicking browser receives it. While the last
-        one is still on its way to that browser, a click is answered with a notification only."""
-        if client is None:
-            return
+        """The loop builds the file (it owns the record) and hands it to the clicking browser's receiver."""
+        if client is not None:
+            self.live.enqueue("download", (kind, functools.partial(self._send_download, client)))
+
+    def _send_download(self, client: Any, name: str, data: bytes) -> None:
+        """On the loop's thread: send the file, unless the last one is still waiting for that browser to
+        take it (then a notification only): clicks never pile copies of the record up in memory."""
         if download_bytes_queued(client):
             self.downloads_refused += 1
             client.add_notification(
@@ -235,11 +238,7 @@ class Panels:
                 color="yellow",
             )
             return
-
-        def send(name: str, data: bytes) -> None:
-            client.send_file_download(name, data, save_immediately=True)
-
-        self.live.enqueue("download", (kind, send))
+        client.send_file_download(name, data, save_immediately=True)
 
     def _parameters_markdown(self) -> str:
         """Where the parameters come from, and every value that differs from the thesis's defaults."""

@@ -178,6 +178,7 @@ class LiveTwin:
         self._actions_lock = threading.Lock()
         self._start_pending: tuple[str, str] | None = None  # (action, controller) of a run to start
         self.runs = 0  # runs started (each reset or controller change starts one)
+        self.actions_applied = 0  # queued actions taken off the queue so far
         self.refusals: deque[Refusal] = deque(maxlen=100)  # refused values, oldest first (the viewer drains)
         self.refused = 0  # values refused so far
         self.failures = 0  # runs failed so far
@@ -348,6 +349,7 @@ class LiveTwin:
                     break
                 action, value = self._actions.popleft()
             self._apply(action, value)
+            self.actions_applied += 1
         self._start_pending_run()
 
     def apply(self, action: str, value: Any = None) -> None:
