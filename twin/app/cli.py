@@ -266,7 +266,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         from twin.plots import plot_run
 
         with writing("--plot", args.plot):
-            plot_run(result, paths["--plot"], overwrite=args.overwrite)
+            plot_run(result, paths["--plot"], overwrite=args.overwrite, software=params.software)
     summary = {
         "controller": args.controller,
         "x0_m": args.x0,
