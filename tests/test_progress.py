@@ -1,16 +1,18 @@
 """Progress moves as runs advance (not only when a 64-run batch ends) and changes no number; a job of stages
 (validate) reports one count over all its stages with the stage named, so that its ETA is the whole job's."""
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
 import pytest
+from test_validate import QUICK
 
 from twin.app.cli import _progress_bar
 from twin.app.fanout import Runs, Stages, run_starts
 from twin.app.montecarlo import MonteCarloSettings, load_spread, run_montecarlo
 from twin.app.sweep import point_seeds
-from twin.app.validate import ValidationCriteria, validate
+from twin.app.validate import validate
 from twin.parameters import Parameters
 
 SPREAD = Path(__file__).resolve().parent.parent / "docs" / "examples" / "spread.toml"
@@ -71,17 +73,7 @@ def test_stages_count_over_the_whole_job() -> None:
 
 
 def test_validate_names_its_stages_and_counts_all_their_runs() -> None:
-    c = ValidationCriteria(
-        nominal_seeds=1,
-        duration_s=1.0,
-        region_x0=(-0.2, 0.2, 2),
-        region_theta0=(-0.3, 0.3, 2),
-        region_duration_s=1.0,
-        zeroing_counts=1,
-        latencies_s=(0.0,),
-        free_runs_s=(0.04,),
-        montecarlo_runs=3,
-    )
+    c = dataclasses.replace(QUICK, duration_s=1.0, region_duration_s=1.0, montecarlo_runs=3)
     calls, progress = _recorder()
     report = validate(
         "appendix-sf", Parameters(), c, spread=load_spread(SPREAD, Parameters()), progress=progress
