@@ -104,9 +104,6 @@ class ClpTerms:
             x2 = math.inf
         return self.alpha_thdd + self.alpha_thdd_x2 * x2
 
-    def beta_value(self, x: np.ndarray) -> float:
-        return self.beta_of(*x)
-
     def beta_of(self, xm: float, th: float, xd: float, thd: float) -> float:
         b1, b2, b3, b4 = self.beta
         try:  # θ̇² as ``alpha_theta`` takes x²

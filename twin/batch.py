@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import math
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
@@ -169,6 +169,7 @@ def run_batch(
     nthread: int | None = None,
     record: bool = False,
     vectorized: bool = True,
+    progress: Callable[[float], None] | None = None,
 ) -> list[RunResult]:
     """Run controller ``name`` from each (x0_m[i], theta0_rad[i]) with noise seed seeds[i]: element i is
     ``run_closed_loop(catalogue.make(name, params_i), x0_m=x0_m[i], …, seed=seeds[i], …)`` bit for bit.
@@ -177,7 +178,9 @@ def run_batch(
     parameters agree share one batch; each run's physics has its own MuJoCo model). ``nthread``: physics
     threads (default: every CPU). ``record``: keep each run's log (17 arrays per run); without it a result's
     ``log`` is not kept (``RunResult.recorded`` is false) and only the verdict is. ``vectorized=False``
-    calls one scalar controller per run even when the catalogue has a batched one (for tests)."""
+    calls one scalar controller per run even when the catalogue has a batched one (for tests). ``progress``
+    is called as the runs advance with how many are done, a float: a group's runs advance together, so k of
+    its T ticks count k/T of each (a job's progress moves before its batch ends; it changes no number)."""
     x0 = np.asarray(x0_m, dtype=float).reshape(-1)
     th0 = np.asarray(theta0_rad, dtype=float).reshape(-1)
     seed_arr = np.asarray(seeds).reshape(-1)
@@ -199,22 +202,26 @@ def run_batch(
     probe = catalogue.make(name, run_params[0])
     if plant != "twin" or (isinstance(probe, StateLaw) and not isinstance(probe, Controller)):
         # The reference plant and the 1 kHz laws on the true state stay on the single-run path.
-        return [
-            run_closed_loop(
-                catalogue.make(name, run_params[i]),
-                x0_m=float(x0[i]),
-                theta0_rad=float(th0[i]),
-                duration_s=duration_s,
-                seed=int(seed_arr[i]),
-                noise=noise,
-                params=run_params[i],
-                plant=plant,
-                ideal_sensors=ideal_sensors,
-                stop_when_lost=stop_when_lost,
-                criteria=criteria,
+        singles = []
+        for i in range(n):
+            singles.append(
+                run_closed_loop(
+                    catalogue.make(name, run_params[i]),
+                    x0_m=float(x0[i]),
+                    theta0_rad=float(th0[i]),
+                    duration_s=duration_s,
+                    seed=int(seed_arr[i]),
+                    noise=noise,
+                    params=run_params[i],
+                    plant=plant,
+                    ideal_sensors=ideal_sensors,
+                    stop_when_lost=stop_when_lost,
+                    criteria=criteria,
+                )
             )
-            for i in range(n)
-        ]
+            if progress is not None:
+                progress(float(i + 1))
+        return singles
     results: list[RunResult | None] = [None] * n
     noisy: dict[int, Parameters] = {}  # the rig's parameters (noise switched as asked), per distinct object
     groups: dict[tuple, list[int]] = {}
@@ -223,6 +230,7 @@ def run_batch(
             noisy[id(p)] = p.with_overrides({"ball_sensor.noise_enabled": bool(noise)})
         groups.setdefault(_io_key(noisy[id(p)]), []).append(i)
     threads = (os.cpu_count() or 1) if nthread is None else int(nthread)
+    runs_before = 0  # the runs of the groups already run (progress)
     for idx in groups.values():
         rows = np.array(idx)
         make_batch = getattr(catalogue, "make_batch", None) if vectorized else None
@@ -243,9 +251,16 @@ def run_batch(
             nthread=threads,
             record=record,
         )
-        for j, result in enumerate(group.run(controller, duration_s, stop_when_lost, criteria)):
+        on_tick = None if progress is None else _group_progress(progress, runs_before, len(idx))
+        for j, result in enumerate(group.run(controller, duration_s, stop_when_lost, criteria, on_tick)):
             results[idx[j]] = result
+        runs_before += len(idx)
     return [r for r in results if r is not None]
+
+
+def _group_progress(progress: Callable[[float], None], before: int, size: int) -> Callable[[int, int], None]:
+    """A group's tick k of T as the batch's runs done: the groups before it, and k/T of its own runs."""
+    return lambda k, ticks: progress(before + size * k / ticks)
 
 
 def _io_key(p: Parameters) -> tuple:
@@ -552,7 +567,12 @@ class _Group:
         cols.peak_theta[k, live] = np.max(np.abs(np.where(self.block_on, self.block_theta, 0.0)), axis=1)
 
     def run(
-        self, controller: BatchController, duration_s: float, stop_when_lost: bool, criteria: Criteria | None
+        self,
+        controller: BatchController,
+        duration_s: float,
+        stop_when_lost: bool,
+        criteria: Criteria | None,
+        on_tick: Callable[[int, int], None] | None = None,
     ) -> list[RunResult]:
         p = self.p
         if abs(controller.period_s - p.daq.period_s) > _PERIOD_TOLERANCE_S:
@@ -593,6 +613,8 @@ class _Group:
             self.write(command)
             self._add(k, cols, samples, controller)
             rows_done[self.live] = k + 1
+            if on_tick is not None:
+                on_tick(k, ticks)
             if stop_when_lost:
                 going = ~self.lost[self.live]
                 if not going.all():

@@ -282,10 +282,6 @@ class Plant:
             spin_rad_s=float((omega_ball - omega_beam) @ axis),
         )
 
-    def state_angle_rad(self) -> float:
-        """θ alone, cheaply (rad)."""
-        return self._theta()
-
     def _theta(self) -> float:
         if self._hinge_qpos is None:
             assert self.held_angle_rad is not None

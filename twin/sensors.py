@@ -370,10 +370,6 @@ class AngleChain:
     def counter_value(self, theta_rad: float | np.ndarray) -> int | np.ndarray:
         return counter_value(theta_rad, self.params)
 
-    def sensor_v(self, theta_rad: float | np.ndarray) -> float | np.ndarray:
-        """The analog output before the ADC."""
-        return angle_sensor_v(theta_rad, self.params)
-
     def read_v(self, times_s: np.ndarray, theta_rad: np.ndarray) -> float:
         """The block-mean ADC volts for one block (see ``angle_block_mean_v``)."""
         self.last_reading_v = angle_block_mean_v(times_s, theta_rad, self.params)

@@ -543,22 +543,29 @@ def _write_out(args: argparse.Namespace, write: Callable[..., Any], result: Any)
             write(result, args.out, overwrite=args.overwrite)
 
 
-def _progress_bar(what: str) -> Callable[[int, int], None]:
-    """A progress bar with ETA on stderr (tqdm), advanced by ``(done, total)`` calls; a job of several
-    stages (validate) gets a bar per stage."""
+def _progress_bar(what: str) -> Callable[..., None]:
+    """A progress bar with ETA on stderr (tqdm), advanced by ``(done, total[, stage])`` calls (a
+    ``fanout.Progress``). A job of stages (validate) reports over all its runs, the stage in the label, so
+    that the ETA is the whole job's; a count that goes back starts a new bar."""
     from tqdm import tqdm
 
     bar: list[Any] = []
 
-    def update(done: int, total: int) -> None:
-        if not bar or bar[0].total != total or done < bar[0].n:
+    def update(done: int, total: int, stage: str = "") -> None:
+        label = f"{what}: {stage}" if stage else what
+        if not bar or done < bar[0].n:
             if bar:
                 bar.pop().close()
-            bar.append(tqdm(total=total, desc=what, unit="run", file=sys.stderr, dynamic_ncols=True))
-        if done > bar[0].n:
-            bar[0].update(done - bar[0].n)
+            bar.append(tqdm(total=total, desc=label, unit="run", file=sys.stderr, dynamic_ncols=True))
+        b = bar[0]
+        if b.total != total:  # a stage's size corrected once it is known
+            b.total = total
+        if b.desc != label:
+            b.set_description_str(label, refresh=False)
+        if done > b.n:
+            b.update(done - b.n)
         if done >= total:
-            bar[0].close()
+            b.close()
 
     return update
 

@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from controllers import thesis_numbers as T
-from twin.app.fanout import Progress, Runs, run_starts
+from twin.app.fanout import Progress, Runs, Stages, run_starts
 from twin.app.montecarlo import MAX_RUNS, Distribution, MonteCarloSettings, run_montecarlo
 from twin.app.options import MAX_JOB_RUN_S
 from twin.app.sweep import MAX_POINTS, Grid, SweepResult, SweepSettings, point_seeds, run_sweep
@@ -272,12 +272,23 @@ def validate(
     started = time.perf_counter()
     runs = Runs(controller, params, c.duration_s, True, "twin", False)
     checks: list[Check] = []
+    starts = [*T.CHAPTER4_STARTS, *T.HARDWARE_STARTS.values()]
+    cases = _sensitivity_cases(c, params)
+    # One progress over the four stages' runs (the region's corner states join its count when it starts).
+    stages = Stages(
+        progress,
+        {
+            "nominal": len(starts) * c.nominal_seeds,
+            "region": c.region_x0[2] * c.region_theta0[2],
+            "sensitivity": len(cases) * len(T.CHAPTER4_STARTS),
+            "monte carlo": c.montecarlo_runs if spread is not None else 0,
+        },
+    )
 
     # Nominal: the thesis's starts, several seeds.
-    starts = [*T.CHAPTER4_STARTS, *T.HARDWARE_STARTS.values()]
     grid = np.array([s for s in starts for _ in range(c.nominal_seeds)], dtype=float)
     seeds = point_seeds(seed, len(grid))
-    records, complete = run_starts(runs, grid, seeds, workers=workers, progress=progress)
+    records, complete = run_starts(runs, grid, seeds, workers=workers, progress=stages.stage("nominal"))
     if not complete:
         return ValidationReport(controller, checks, None, time.perf_counter() - started, c, complete=False)
     held, n = _runs_held(records)
@@ -309,7 +320,7 @@ def validate(
         noise=True,
         seed=seed,
     )
-    region = run_sweep(settings, params, workers=workers, progress=progress)
+    region = run_sweep(settings, params, workers=workers, progress=stages.stage("region"))
     if not region.complete:
         return ValidationReport(controller, checks, None, time.perf_counter() - started, c, complete=False)
     (xlo, xhi), (tlo, thi) = c.required_x0_m, c.required_theta0_rad
@@ -334,13 +345,18 @@ def validate(
     # Sensitivity: one parameter at a time, from the chapter 4 starts, seed-matched.
     per_run: list[Parameters] = []
     labels = []
-    for name, label, p in _sensitivity_cases(c, params):
+    for name, label, p in cases:
         for start in T.CHAPTER4_STARTS:
             per_run.append(p)
             labels.append((name, label, start))
     grid = np.array([start for _, _, start in labels], dtype=float)
     records, complete = run_starts(
-        runs, grid, point_seeds(seed + 1, len(grid)), params=per_run, workers=workers, progress=progress
+        runs,
+        grid,
+        point_seeds(seed + 1, len(grid)),
+        params=per_run,
+        workers=workers,
+        progress=stages.stage("sensitivity"),
     )
     if not complete:
         return ValidationReport(controller, checks, region, time.perf_counter() - started, c, complete=False)
@@ -383,7 +399,7 @@ def validate(
             params,
             spread,
             workers=workers,
-            progress=progress,
+            progress=stages.stage("monte carlo"),
         )
         if not mc.complete:
             return ValidationReport(
