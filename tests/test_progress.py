@@ -73,7 +73,9 @@ def test_stages_count_over_the_whole_job() -> None:
 
 
 def test_validate_names_its_stages_and_counts_all_their_runs() -> None:
-    c = dataclasses.replace(QUICK, duration_s=1.0, region_duration_s=1.0, montecarlo_runs=3, min_success_lower_bound=0.25)
+    c = dataclasses.replace(
+        QUICK, duration_s=1.0, region_duration_s=1.0, montecarlo_runs=3, min_success_lower_bound=0.25
+    )
     calls, progress = _recorder()
     report = validate(
         "appendix-sf", Parameters(), c, spread=load_spread(SPREAD, Parameters()), progress=progress
