@@ -859,8 +859,18 @@ class IdealSensors:
     def __init__(self, params: Parameters) -> None:
         self.params = params
 
-    def read_v(self, x_m: float, theta_rad: float) -> tuple[float, float]:
-        """(ball volts, angle volts) for a ball at ``x_m`` and a beam at ``theta_rad``."""
+    @overload
+    def read_v(self, x_m: float, theta_rad: float) -> tuple[float, float]: ...
+    @overload
+    def read_v(self, x_m: np.ndarray, theta_rad: np.ndarray) -> tuple[np.ndarray, np.ndarray]: ...
+    def read_v(
+        self, x_m: float | np.ndarray, theta_rad: float | np.ndarray
+    ) -> tuple[float, float] | tuple[np.ndarray, np.ndarray]:
+        """(ball volts, angle volts) for a ball at ``x_m`` and a beam at ``theta_rad``: floats, or arrays over
+        the runs of a batch (the same operations element by element)."""
         sw = self.params.software
         angle = theta_rad - self.params.angle_sensor.zeroing_error_rad
-        return float(ball_volts_v(x_m, sw)), float(angle_volts_v(angle, sw))
+        ball_v, angle_v = ball_volts_v(x_m, sw), angle_volts_v(angle, sw)
+        if isinstance(x_m, np.ndarray):
+            return np.asarray(ball_v), np.asarray(angle_v)
+        return float(ball_v), float(angle_v)
