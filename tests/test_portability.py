@@ -46,16 +46,36 @@ for name in ("appendix-sf", "appendix-clp", "thesis-sf", "thesis-clp"):
         for value in vars(run.log).values():
             digest.update(np.ascontiguousarray(value).tobytes())
         digest.update(repr(run.verdict.to_json()).encode())
+# the ball chain's filter voltage (not logged: only its ADC reading is), block after block, with dropouts
+from twin.parameters import Parameters
+from twin.sensors import BallPositionChain
+
+params = Parameters().with_overrides({"ball_sensor.dropout_rate_hz": 120.0})
+chain = BallPositionChain(params, seed=4, x_m=0.05)
+knots = np.arange(21) * 1e-3
+for k in range(300):
+    times = 0.02 * k + knots
+    chain.advance_rig_block(times, 0.05 + 0.1 * np.sin(3 * times), np.ones(21, dtype=bool), True)
+    digest.update(np.float64(chain.filtered_v).tobytes())
 print([i["architecture"] for i in threadpool_info() if i["internal_api"] == "openblas"], digest.hexdigest())
 """
 
 
-def _env(core_type: str | None) -> dict[str, str]:
-    env = dict(os.environ, PYTHONPATH=str(ROOT), OPENBLAS_NUM_THREADS="1")
+def _env(core_type: str | None, **extra: str) -> dict[str, str]:
+    env = dict(os.environ, PYTHONPATH=str(ROOT), OPENBLAS_NUM_THREADS="1", **extra)
     env.pop("OPENBLAS_CORETYPE", None)
     if core_type is not None:
         env["OPENBLAS_CORETYPE"] = core_type
     return env
+
+
+def _batch_digest(env: dict[str, str]) -> str:
+    """The child's output: the OpenBLAS kernel that ran and the digest of the batch's logs."""
+    batch = subprocess.run(
+        [sys.executable, "-c", _BATCH_DIGEST], cwd=ROOT, env=env, capture_output=True, text=True, timeout=600
+    )
+    assert batch.returncode == 0, batch.stderr[-2000:]
+    return batch.stdout
 
 
 def test_fixed_order_products() -> None:
@@ -92,16 +112,26 @@ def test_the_bit_pinning_tests_pass_under_every_openblas_kernel() -> None:
             timeout=900,
         )
         assert tests.returncode == 0, (core_type, tests.stdout[-3000:], tests.stderr[-2000:])
-        batch = subprocess.run(
-            [sys.executable, "-c", _BATCH_DIGEST],
-            cwd=ROOT,
-            env=env,
-            capture_output=True,
-            text=True,
-            timeout=600,
-        )
-        assert batch.returncode == 0, (core_type, batch.stderr[-2000:])
-        digests[core_type] = batch.stdout.split()[-1]
+        printed = _batch_digest(env)
+        digests[core_type] = printed.split()[-1]
         if core_type in ("Haswell", "SkylakeX"):  # the kernel asked for is the one that ran
-            assert core_type in batch.stdout, batch.stdout
+            assert core_type in printed, printed
     assert len(set(digests.values())) == 1, digests
+
+
+@pytest.mark.slow
+def test_numpy_without_avx512_gives_the_same_bits() -> None:
+    """Checked, not promised (README): numpy's AVX-512 code (its X86_V4 target) has other np.exp bits than
+    its AVX2 code; the tick takes its exponentials from libm, so the logs and the ball filter's voltage are
+    the same with that target disabled."""
+    pytest.importorskip("threadpoolctl")
+    from numpy._core._multiarray_umath import __cpu_dispatch__, __cpu_features__
+
+    disable = [
+        f for f in ("AVX512_SPR", "AVX512_ICL", "X86_V4") if f in __cpu_dispatch__ and __cpu_features__.get(f)
+    ]
+    if "X86_V4" not in disable:
+        pytest.skip("numpy's AVX-512 target does not run on this CPU")
+    with_avx512 = _batch_digest(_env(None)).split()[-1]
+    without = _batch_digest(_env(None, NPY_DISABLE_CPU_FEATURES=" ".join(disable))).split()[-1]
+    assert without == with_avx512

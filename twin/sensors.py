@@ -767,19 +767,21 @@ def rc_filter_end_v(
     #   y_k+1 = E·y_k + (1 − E)·v_k + (v_k+1 − v_k)·(1 − (1 − E)/(h/τ)),  E = e^(−h/τ)
     # (the last factor by its series for tiny h/τ, to avoid cancellation). Chained over all pieces:
     #   y_end = e^(−T/τ)·y_0 + Σ_k e^(−(t_end − t_k+1)/τ)·[(1 − E_k)·v_k + (v_k+1 − v_k)·ramp_k].
-    a = (knots[1:] - knots[:-1]) / tau_s
-    one_minus = -np.expm1(-a)
-    tiny = a < 1e-4  # only pieces cut short by an extra knot; whole physics steps are a ≈ 0.3
-    if tiny.any():
-        ramp = np.where(tiny, a / 2.0 - a * a / 6.0 + a**3 / 24.0, 1.0 - one_minus / np.maximum(a, 1e-300))
-    else:
-        ramp = 1.0 - one_minus / a
-    drive = one_minus * v_start + (v_end - v_start) * ramp
-    weight = np.exp((knots[1:] - t_end) / tau_s)
+    # The pieces' exponentials by ``math`` (libm), as ``_uniform_rc_weights`` and ``_dropout_effect_v``
+    # take theirs: numpy's np.exp/np.expm1 have other last bits under AVX-512 than without.
+    a = ((knots[1:] - knots[:-1]) / tau_s).tolist()
+    one_minus = [-math.expm1(-u) for u in a]
+    # the ramp by its series for tiny pieces (only pieces cut short by an extra knot; a step is a ≈ 0.3)
+    ramp = [
+        u / 2.0 - u * u / 6.0 + u**3 / 24.0 if u < 1e-4 else 1.0 - e / u
+        for u, e in zip(a, one_minus, strict=True)
+    ]
+    drive = np.array(one_minus) * v_start + (v_end - v_start) * np.array(ramp)
+    weight = [math.exp(u) for u in ((knots[1:] - t_end) / tau_s).tolist()]
     decay = math.exp((t0 - t_end) / tau_s)
     if len(drive) == 1:  # one run: the float form (the same bits, without a numpy call per piece)
-        return np.array([rc_end_v(float(y0_v[0]), decay, drive[0].tolist(), weight.tolist())])
-    return rc_end_v(y0_v, decay, drive, weight)
+        return np.array([rc_end_v(float(y0_v[0]), decay, drive[0].tolist(), weight)])
+    return rc_end_v(y0_v, decay, drive, np.array(weight))
 
 
 def equally_spaced(times_s: np.ndarray) -> bool:
@@ -798,7 +800,7 @@ def _uniform_rc_weights(n: int, span_s: float, tau_s: float) -> tuple[float, np.
     a = span_s / n / tau_s
     one_minus = -math.expm1(-a)
     ramp = a / 2.0 - a * a / 6.0 + a**3 / 24.0 if a < 1e-4 else 1.0 - one_minus / a
-    decay_per_piece = np.exp(-a * np.arange(n - 1, -1, -1, dtype=np.float64))  # e^(−(n − 1 − k)·a)
+    decay_per_piece = np.array([math.exp(-a * k) for k in range(n - 1, -1, -1)])  # e^(−(n − 1 − k)·a), libm
     weights = np.zeros(n + 1)
     weights[:-1] += decay_per_piece * (one_minus - ramp)
     weights[1:] += decay_per_piece * ramp
