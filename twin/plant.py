@@ -89,7 +89,6 @@ class Plant:
         self.ball_lost_time_s: float | None = None
         mujoco.mj_kinematics(self.model, self.data)
         self._pivot = tuple(float(v) for v in self.data.xpos[self._beam])  # the beam body's origin is P
-        self._pivot_m = np.array(self._pivot)
         self._pivot_0d = tuple(np.array(v) for v in self._pivot)
         self._nstate = mujoco.mj_stateSize(m, _FULL)
         self._warmstart = np.empty((1, m.nv))
