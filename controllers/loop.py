@@ -20,6 +20,7 @@ import numpy as np
 
 from controllers.design import ReducedObserver
 from twin import converters
+from twin import fixedorder as fo
 from twin.dcmotor import volts_for_torque_v
 from twin.interface import Controller, DaqSample, Telemetry
 from twin.parameters import SoftwareCalibration
@@ -56,17 +57,28 @@ class ObserverState:
 
     def __init__(self, observer: ReducedObserver) -> None:
         self.observer = observer
+        # The products in a fixed order (twin.fixedorder), on the design's rows as floats.
+        self._f, self._ga, self._gain = observer.f.tolist(), observer.ga.tolist(), observer.gain.tolist()
+        self._h0 = observer.h[:, 0].tolist()
 
     def start(self, xa: np.ndarray) -> np.ndarray:
-        self._xa = xa
-        self._xb = np.zeros(2)
-        return np.concatenate([self._xa, self._xb])
+        self._xa = np.asarray(xa, dtype=float).tolist()
+        self._xb = [0.0, 0.0]
+        return np.array([*self._xa, *self._xb])
 
     def update(self, xa: np.ndarray, u_prev: float) -> np.ndarray:
-        obs = self.observer
-        self._xb = obs.f @ self._xb + obs.ga @ self._xa + obs.gain @ xa + obs.h[:, 0] * u_prev
-        self._xa = xa
-        return np.concatenate([xa, self._xb])
+        """x̂_b(k) = F·x̂_b(k−1) + G_a·x_a(k−1) + G·x_a(k) + H·u(k−1) (eq 5.2.19), added in that order."""
+        xa_now = np.asarray(xa, dtype=float).tolist()
+        terms = zip(
+            fo.matvec(self._f, self._xb),
+            fo.matvec(self._ga, self._xa),
+            fo.matvec(self._gain, xa_now),
+            self._h0,
+            strict=True,
+        )
+        self._xb = [f + ga + g + h * u_prev for f, ga, g, h in terms]
+        self._xa = xa_now
+        return np.array([*xa_now, *self._xb])
 
 
 @dataclass(frozen=True)

@@ -9,8 +9,9 @@
     controllers       a ``BatchController`` from the catalogue's optional ``make_batch`` (numpy over the
                       batch), otherwise one scalar ``Controller`` per run called in a loop
 
-The tick sequence (start timing, held rig, free run, output latency, lost ball, recording, verdict) is
-``twin.rig.SimRig._read``/``write`` and ``twin.engine.ClosedLoop`` step for step; a test checks every log
+The tick sequence follows the single rig's ``twin.daq.TickSchedule`` (start timing, held rig, free run,
+output latency: the same object type, so the same plan), its ideal converters are ``IdealSensors.read_v``,
+and lost ball, recording and verdict are ``twin.engine.ClosedLoop``'s step for step; a test checks every log
 array and the verdict against single runs. Runs whose lost ball ends them (``stop_when_lost``) leave the
 batch. Laws on the true state (``StateLaw``) and the reference plant run one by one through
 ``run_closed_loop``.
@@ -28,7 +29,6 @@ import mujoco
 import numpy as np
 from mujoco import batch as mjbatch
 
-from twin.converters import angle_volts_v, ball_volts_v
 from twin.daq import block_time_s
 from twin.engine import (
     Catalogue,
@@ -53,8 +53,8 @@ from twin.plant import (
     stop_overshoot_bound_rad,
     warning_text,
 )
-from twin.rig import PlantKind, RigError, whole_steps
-from twin.sensors import BallChainBatch, angle_block_means_v
+from twin.rig import PlantKind, RigError, tick_schedule
+from twin.sensors import BallChainBatch, IdealSensors, angle_block_means_v
 from twin.verdict import Criteria
 
 __all__ = [
@@ -315,11 +315,8 @@ class _Group:
         self.x0 = x0
         dt = p.physics.timestep_s
         self.dt = dt
-        self.steps_per_tick = whole_steps(p.daq.period_s, dt, "daq.period_s")
-        if self.steps_per_tick < 1:
-            raise RigError(f"daq.period_s = {p.daq.period_s!r} s is shorter than one physics step")
-        self.latency_steps = whole_steps(p.daq.output_latency_s, dt, "daq.output_latency_s")
-        free_run_steps = whole_steps(p.start.free_run_s, dt, "start.free_run_s")
+        self.schedule = tick_schedule(p)  # the single rig's schedule (held, free run, release, latency)
+        self.steps_per_tick = self.schedule.steps_per_tick
         # One Plant per distinct physics: its model for the batch, its geometry for the numpy stages.
         plants: dict[Parameters, Plant] = {}
         for q in params:
@@ -348,15 +345,13 @@ class _Group:
         self.ball_col = 1 + plant0._ball_qpos
         # SimRig.reset
         self.held = np.stack([x0, theta0, np.zeros(n), np.zeros(n)], axis=1)
-        self.next_end_step = free_run_steps - self.steps_per_tick
-        self.steps_done = 0
         self.physics_time_s = float(self.last_row[0, 0])
-        chain_start = min(self.next_end_step - self.steps_per_tick, 0)
+        chain_start = self.schedule.chain_start_step
         self.ball = None if ideal_sensors else BallChainBatch(p, seeds, x0, chain_start * dt)
+        self.ideal_sensors = IdealSensors(p)
         self.command_v = np.full(n, p.amplifier.zero_command_v)
         self.applied_v = np.full(n, self._motor_volts_for(self.command_v))
         self.pending_v = self.applied_v.copy()
-        self.switch_in_steps: int | None = None
         self.lost = np.zeros(n, dtype=bool)
         self.lost_time_s: list[float | None] = [None] * n
         self.lost_state = np.full((n, 4), math.nan)
@@ -378,23 +373,16 @@ class _Group:
         self.command_v[live] = command_v
         volts = self._motor_volts_for(command_v)
         self.pending_v[live] = volts
-        if self.latency_steps == 0:
+        if self.schedule.command_written():
             self.applied_v[live] = volts
-            self.switch_in_steps = None
-        else:
-            self.switch_in_steps = self.latency_steps
 
     def _step_volts(self, n: int) -> np.ndarray:
         live = self.live
         volts = np.repeat(self.applied_v[live][:, None], n, axis=1)
-        if self.switch_in_steps is not None:
-            k = self.switch_in_steps
-            if k < n:
-                volts[:, k:] = self.pending_v[live][:, None]
-                self.applied_v[live] = self.pending_v[live]
-                self.switch_in_steps = None
-            else:
-                self.switch_in_steps = k - n
+        k = self.schedule.switch_at(n)
+        if k is not None:
+            volts[:, k:] = self.pending_v[live][:, None]
+            self.applied_v[live] = self.pending_v[live]
         return volts
 
     def _advance(self, volts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -469,15 +457,12 @@ class _Group:
         raise type(error)(run + str(error))
 
     def read(self) -> BatchSamples:
-        """SimRig._read for every live run."""
+        """SimRig._read for every live run: the same ``TickSchedule`` plan, the pieces as arrays over the runs."""
         p, live = self.p, self.live
-        end = self.next_end_step
-        start = end - self.steps_per_tick
-        t_start = start * self.dt if start < 0 else self.physics_time_s
-        n_free = end - max(start, 0) if end > 0 else 0
-        if start > self.steps_done:  # released before this block begins: run free up to it, unobserved
-            pre_t, pre_x, _, pre_on = self._advance(self._step_volts(start - self.steps_done))
-            self.steps_done = start
+        plan = self.schedule.next_block()
+        t_start = plan.start_step * self.dt if plan.start_step < 0 else self.physics_time_s
+        if plan.free_steps:  # released before this block begins: run free up to it, unobserved
+            pre_t, pre_x, _, pre_on = self._advance(self._step_volts(plan.free_steps))
             t_start = self.physics_time_s
             if self.ball is not None:
                 self.ball.advance(live, pre_t, pre_x, pre_on)
@@ -485,39 +470,33 @@ class _Group:
         xs: list[np.ndarray] = []
         thetas: list[np.ndarray] = []
         ons: list[np.ndarray] = []
-        if start < 0:  # the held rig, until release at t = 0 (or the block's end)
-            if self.switch_in_steps is not None:
-                self.switch_in_steps = max(0, self.switch_in_steps - (min(end, 0) - start))
-            times.append(np.array([t_start, min(end, 0) * self.dt]))
+        if plan.held_end_step is not None:  # the held rig, until release at t = 0 (or the block's end)
+            times.append(np.array([t_start, plan.held_end_step * self.dt]))
             xs.append(np.repeat(self.held[live, 0:1], 2, axis=1))
             thetas.append(np.repeat(self.held[live, 1:2], 2, axis=1))
             ons.append(np.ones((len(live), 2), dtype=bool))
-        if n_free:
-            t, x, th, on = self._advance(self._step_volts(n_free))
+        if plan.observed_steps:
+            t, x, th, on = self._advance(self._step_volts(plan.observed_steps))
             skip = 1 if times else 0  # consecutive pieces share their joining entry (rig._join)
             times.append(t[skip:])
             xs.append(x[:, skip:])
             thetas.append(th[:, skip:])
             ons.append(on[:, skip:])
-            self.steps_done += n_free
         block_t = np.concatenate(times)
         block_x = np.concatenate(xs, axis=1)
         block_theta = np.concatenate(thetas, axis=1)
         block_on = np.concatenate(ons, axis=1)
         self.block_theta, self.block_on = block_theta, block_on
         if self.ball is None:
-            sw = p.software
-            ball_v = np.asarray(ball_volts_v(block_x[:, -1], sw))
-            angle_v = np.asarray(angle_volts_v(block_theta[:, -1] - p.angle_sensor.zeroing_error_rad, sw))
+            ball_v, angle_v = self.ideal_sensors.read_v(block_x[:, -1], block_theta[:, -1])
         else:
             angle_v = angle_block_means_v(block_t, block_theta, p)
             ball_v = self.ball.advance(live, block_t, block_x, block_on)
-        self.next_end_step = end + self.steps_per_tick
         return BatchSamples(time_s=block_time_s(t_start, p.daq), ball_v=ball_v, angle_v=angle_v)
 
     @property
     def held_now(self) -> bool:
-        return self.next_end_step - self.steps_per_tick < 0
+        return self.schedule.held
 
     def true_state(self) -> np.ndarray:
         """SimRig.true_state for every live run (n_live, 4)."""
@@ -537,7 +516,7 @@ class _Group:
     @property
     def time_s(self) -> float:
         if self.held_now:
-            return (self.next_end_step - self.steps_per_tick) * self.dt
+            return self.schedule.next_start_step * self.dt
         return self.physics_time_s
 
     # --- the closed loop ----------------------------------------------------------------------------------

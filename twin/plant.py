@@ -19,6 +19,7 @@ import mujoco
 import numpy as np
 from mujoco import rollout
 
+from twin import fixedorder as fo
 from twin import model as mdl
 from twin.parameters import ParameterError, Parameters
 from twin.physics import PhysicsBlock, check_initial_state
@@ -186,7 +187,6 @@ class Plant:
         self.ball_lost_time_s: float | None = None
         mujoco.mj_kinematics(self.model, self.data)
         self._pivot = tuple(float(v) for v in self.data.xpos[self._beam])  # the beam body's origin is P
-        self._pivot_m = np.array(self._pivot)
         self._pivot_0d = tuple(np.array(v) for v in self._pivot)
         self._nstate = mujoco.mj_stateSize(m, _FULL)
         self._warmstart = np.empty((1, m.nv))
@@ -201,7 +201,6 @@ class Plant:
         self._along_limit_m = p.track.half_length_m + p.ball.radius_m
         self._lateral_limit_m = p.track.contact_spacing_m / 2
         self._seat_height_m = p.ball_centre_height_m
-        self._dot_buffers = (np.zeros(3), np.zeros(3), np.zeros(3))  # offset, velocity, beam axis
         self._all_on_cache: dict[int, np.ndarray] = {}
         # MuJoCo's warning counters (live views into MjData, read once a block) and the beam's furthest
         # physical angle: past either, the block is a numerical failure (NumericalError).
@@ -239,17 +238,16 @@ class Plant:
             d.qpos[self._hinge_qpos] = theta_rad
             d.qvel[self._hinge_dof] = thetadot_rad_s
         mujoco.mj_kinematics(m, d)
-        rot = d.xmat[self._beam].reshape(3, 3)
+        rot = d.xmat[self._beam].reshape(3, 3).tolist()  # products in a fixed order (twin.fixedorder)
         pivot = d.xpos[self._beam].copy()
-        axis = rot @ mdl.HINGE_AXIS_BEAM
-        rel = np.array([x_m, 0.0, p.ball_centre_height_m])
+        axis = np.array(fo.matvec(rot, mdl.HINGE_AXIS_BEAM.tolist()))
         omega_beam = thetadot_rad_s * axis
-        offset = rot @ rel
+        offset = np.array(fo.matvec(rot, [x_m, 0.0, p.ball_centre_height_m]))
         q = self._ball_qpos
         d.qpos[q : q + 3] = pivot + offset
         d.qpos[q + 3 : q + 7] = [1.0, 0.0, 0.0, 0.0]
         v = self._ball_dof
-        d.qvel[v : v + 3] = rot @ np.array([xdot_m_s, 0.0, 0.0]) + np.cross(omega_beam, offset)
+        d.qvel[v : v + 3] = np.array(fo.matvec(rot, [xdot_m_s, 0.0, 0.0])) + np.cross(omega_beam, offset)
         # Rolling without slipping (eq 3.1.13): spin relative to the beam about the hinge axis = -ẋ/r*.
         d.qvel[v + 3 : v + 6] = omega_beam + (-xdot_m_s / p.rolling_radius_m) * axis
         d.ctrl[:] = 0.0
@@ -276,10 +274,12 @@ class Plant:
         v_rel = d.qvel[v : v + 3] - np.cross(omega_beam, offset)
         omega_ball = np.zeros(3)
         mujoco.mju_rotVecQuat(omega_ball, d.qvel[v + 3 : v + 6], d.qpos[q + 3 : q + 7])  # body → world
+        o, w = offset.tolist(), v_rel.tolist()
+        axes = [ex.tolist(), ey.tolist(), ez.tolist()]
         return BallKinematics(
-            position_m=np.array([offset @ ex, offset @ ey, offset @ ez]),
-            velocity_m_s=np.array([v_rel @ ex, v_rel @ ey, v_rel @ ez]),
-            spin_rad_s=float((omega_ball - omega_beam) @ axis),
+            position_m=np.array(fo.matvec(axes, o)),
+            velocity_m_s=np.array(fo.matvec(axes, w)),
+            spin_rad_s=fo.dot((omega_ball - omega_beam).tolist(), axis.tolist()),
         )
 
     def _theta(self) -> float:
@@ -302,7 +302,7 @@ class Plant:
             return self._held_state()
         d = self.data
         # A state row (time, qpos, qvel) as Python floats: ``_state_of_row``'s operations are the ones
-        # ``row_states`` and ``ball_kinematics`` take, so the same bits.
+        # ``row_states`` takes, so the same bits.
         return self._state_of_row([0.0, *d.qpos.tolist(), *d.qvel.tolist()])
 
     def state_row(self) -> np.ndarray | None:
@@ -315,34 +315,30 @@ class Plant:
         return row
 
     def _held_state(self) -> np.ndarray:
-        """``state`` of a rig built with the beam held (no hinge joint)."""
+        """``state`` of a rig built with the beam held (no hinge joint): ``_state_floats``'s operations."""
         d = self.data
         theta = self._theta()
         q, v = self._ball_qpos, self._ball_dof
-        offset = d.qpos[q : q + 3] - self._pivot_m
-        ox, oz = float(offset[0]), float(offset[2])
+        ox, oz = float(d.qpos[q]) - self._pivot[0], float(d.qpos[q + 2]) - self._pivot[2]
         thetadot = 0.0  # the velocity relative to the beam, as ``state`` takes it: v − ω×offset
-        v_rel = np.array([d.qvel[v] + thetadot * oz, d.qvel[v + 1], d.qvel[v + 2] - thetadot * ox])
-        ex = np.array([math.cos(theta), 0.0, math.sin(theta)])
-        return np.array([offset @ ex, theta, v_rel @ ex, thetadot])
+        vx, vz = float(d.qvel[v]) + thetadot * oz, float(d.qvel[v + 2]) - thetadot * ox
+        c, s = math.cos(theta), math.sin(theta)
+        return np.array([ox * c + oz * s, theta, vx * c + vz * s, thetadot])
 
     def row_states(self, rows: np.ndarray) -> np.ndarray:
         """(x, θ, ẋ, θ̇) for each full-physics state row (time, qpos, qvel), shape (n, 4): what ``state``
-        computes from MjData, with the same operations (its BLAS dot products are numpy's matmul of one row
-        by one column per run), so a run in a batch (``twin.batch``) logs the same bits as alone."""
+        computes from MjData, with the same elementwise operations in the same order (``_state_floats``),
+        so a run in a batch (``twin.batch``) or a deferred log row has the bits of ``state`` alone."""
         if self._hinge_qpos is None or self._hinge_dof is None:
             raise ValueError("row_states needs the beam's hinge (a rig built with hold_beam_rad has none)")
         nq = self.model.nq
         theta, thetadot = rows[:, 1 + self._hinge_qpos], rows[:, 1 + nq + self._hinge_dof]
         q, v = 1 + self._ball_qpos, 1 + nq + self._ball_dof
-        offset = rows[:, q : q + 3] - self._pivot_m
-        ox, oz = offset[:, 0], offset[:, 2]
-        v_rel = np.stack([rows[:, v] + thetadot * oz, rows[:, v + 1], rows[:, v + 2] - thetadot * ox], axis=1)
-        zero = np.zeros_like(theta)
-        ex = np.stack([np.cos(theta), zero, np.sin(theta)], axis=1)[:, :, None]
-        along = np.matmul(offset[:, None, :], ex)[:, 0, 0]
-        speed = np.matmul(v_rel[:, None, :], ex)[:, 0, 0]
-        return np.stack([along, theta, speed, thetadot], axis=1)
+        px, _, pz = self._pivot_0d
+        ox, oz = rows[:, q] - px, rows[:, q + 2] - pz
+        vx, vz = rows[:, v] + thetadot * oz, rows[:, v + 2] - thetadot * ox
+        c, s = np.cos(theta), np.sin(theta)
+        return np.stack([ox * c + oz * s, theta, vx * c + vz * s, thetadot], axis=1)
 
     # --- stepping ---------------------------------------------------------------------------------
     @property
@@ -431,13 +427,12 @@ class Plant:
         px, py, pz = self._pivot
         along_limit, lateral_limit = self._along_limit_m, self._lateral_limit_m
         seat, tolerance = self._seat_height_m, LOST_HEIGHT_TOLERANCE_M
-        write, dot = self._dot_buffer_views(), np.empty(())
         lost_state = self.lost_state
         state: tuple[float, ...]
         if lost_state is None:
             row = rows[0].tolist()
             theta = row[row_theta]
-            state = self._state_floats(row, cos(theta), sin(theta), write, dot)
+            state = self._state_floats(row, cos(theta), sin(theta))
         else:
             state = tuple(lost_state.tolist())
         volts = math.nan
@@ -464,7 +459,7 @@ class Plant:
                     lost_state = self._row_state(dest)
                     state = tuple(lost_state.tolist())
                 elif law_reads and k < n:
-                    state = self._state_floats(row, c, s, write, dot)
+                    state = self._state_floats(row, c, s)
             if (law_reads or k == n) and not math.isfinite(sum(row)):  # where advance checks, once a period
                 raise numerical_failure(self.params, "the MuJoCo state is not finite", row[0])
         # Times as advance makes them: each law period's start time plus whole steps.
@@ -543,40 +538,21 @@ class Plant:
     def _state_of_row(self, r: list[float]) -> np.ndarray:
         """``state`` from one state row as Python floats (time, qpos, qvel) (see ``_state_floats``)."""
         theta = r[self._row_theta]
-        state = self._state_floats(r, math.cos(theta), math.sin(theta), self._dot_buffers, np.empty(()))
-        return np.array(state)
+        return np.array(self._state_floats(r, math.cos(theta), math.sin(theta)))
 
-    def _dot_buffer_views(self) -> tuple[memoryview[float], memoryview[float], memoryview[float]]:
-        """The dot buffers as memoryviews: item assignment through them costs less than numpy's."""
-        offset, v_rel, ex = (b.data.cast("B").cast("d") for b in self._dot_buffers)
-        return offset, v_rel, ex
+    def _state_floats(self, r: list[float], c: float, s: float) -> tuple[float, float, float, float]:
+        """(x, θ, ẋ, θ̇) of one state row as Python floats (time, qpos, qvel), given c = cos θ and s = sin θ.
 
-    def _state_floats(
-        self,
-        r: list[float],
-        c: float,
-        s: float,
-        write: tuple[np.ndarray, np.ndarray, np.ndarray] | tuple[memoryview[float], ...],
-        dot: np.ndarray,
-    ) -> tuple[float, float, float, float]:
-        """(x, θ, ẋ, θ̇) of one state row as Python floats (time, qpos, qvel), given c = cos θ and s = sin θ,
-        with ``state``'s operations, so the same bits: its two dot products are the same BLAS dot
-        (``ndarray.dot`` of two vectors is what ``@`` calls, with less overhead), here on the reused dot
-        buffers (per step, allocation is the cost), filled through ``write`` (them, or their
-        ``_dot_buffer_views``), each product into the 0-d array ``dot`` (cheaper than the float it returns)."""
+        x and ẋ are the ball's offset from P and its velocity relative to the beam (v − ω×offset, ω = θ̇
+        about (0, −1, 0)) dotted with the beam's axis (cos θ, 0, sin θ): two products added in this order
+        (the zero term adds nothing), the same in ``row_states`` and ``beam_frame`` (no BLAS: its kernel
+        would decide the order and the fused multiply-adds, twin.fixedorder)."""
         thetadot = r[self._row_thetadot]
         q, v = self._row_ball, self._row_ball_v
-        px, py, pz = self._pivot
+        px, _, pz = self._pivot
         ox, oz = r[q] - px, r[q + 2] - pz
-        offset, v_rel, ex = write
-        offset[0], offset[1], offset[2] = ox, r[q + 1] - py, oz
-        v_rel[0], v_rel[1], v_rel[2] = r[v] + thetadot * oz, r[v + 1], r[v + 2] - thetadot * ox
-        ex[0], ex[2] = c, s
-        offset_array, v_rel_array, ex_array = self._dot_buffers
-        offset_array.dot(ex_array, dot)
-        along = dot.item()
-        v_rel_array.dot(ex_array, dot)
-        return along, r[self._row_theta], dot.item(), thetadot
+        vx, vz = r[v] + thetadot * oz, r[v + 2] - thetadot * ox
+        return ox * c + oz * s, r[self._row_theta], vx * c + vz * s, thetadot
 
     def _row_state(self, row: np.ndarray) -> np.ndarray:
         """(x, θ, ẋ, θ̇) from one row of (time, qpos, qvel): the ball relative to the beam, as ``state``."""
@@ -591,7 +567,7 @@ class Plant:
         # Velocity relative to the rotating beam: v − ω×offset with ω = θ̇ about (0, −1, 0).
         vx, vz = row[v] + thetadot * oz, row[v + 2] - thetadot * ox
         c, s = math.cos(theta), math.sin(theta)
-        return np.array([c * ox + s * oz, theta, c * vx + s * vz, thetadot])
+        return np.array([ox * c + oz * s, theta, vx * c + vz * s, thetadot])
 
     def beam_frame(
         self, theta_rad: np.ndarray, ball_xyz: np.ndarray
@@ -602,7 +578,7 @@ class Plant:
         c, s = np.cos(theta_rad), np.sin(theta_rad)
         px, py, pz = self._pivot_0d  # 0-d arrays: numpy converts a Python float operand on every call
         dx, dz = ball_xyz[..., 0] - px, ball_xyz[..., 2] - pz
-        return c * dx + s * dz, ball_xyz[..., 1] - py, c * dz - s * dx
+        return dx * c + dz * s, ball_xyz[..., 1] - py, dz * c - dx * s
 
     def on_track(self, along: np.ndarray, lateral: np.ndarray, height: np.ndarray) -> np.ndarray:
         """Whether the ball sits on both wires within the track, from its beam-frame coordinates."""
