@@ -25,7 +25,7 @@ from controllers import registry
 from controllers.loop import LoopController
 from twin import converters
 from twin.engine import RunResult, run_closed_loop
-from twin.interface import Controller, DaqSample
+from twin.interface import Controller, DaqSample, Setpoint
 from twin.parameters import Parameters
 
 __all__ = [
@@ -83,9 +83,10 @@ class ExcitedController(Controller):
 
     def __init__(self, inner: LoopController, experiment: Experiment, seed: int) -> None:
         super().__init__()
-        if not hasattr(inner.law, "ref_x_m"):
+        if not isinstance(inner, Setpoint):
             raise ValueError(f"{inner.name} has no ball setpoint: an experiment needs one")
         self.inner = inner
+        self._setpoint: Setpoint = inner
         self.experiment = experiment
         self.name = f"{inner.name}+{experiment.name}"
         self.period_s = inner.period_s
@@ -96,13 +97,13 @@ class ExcitedController(Controller):
         self._rng = np.random.default_rng(self.seed)
         self._ticks = 0
         self._level = 0.0
-        self.inner.law.ref_x_m = self.experiment.setpoint_m(0.0)  # type: ignore[attr-defined]
+        self._setpoint.setpoint_m = self.experiment.setpoint_m(0.0)
         self.inner.start(sample)
         self.telemetry = self.inner.telemetry
 
     def update(self, sample: DaqSample) -> float:
         e = self.experiment
-        self.inner.law.ref_x_m = e.setpoint_m(self._ticks * self.period_s)  # type: ignore[attr-defined]
+        self._setpoint.setpoint_m = e.setpoint_m(self._ticks * self.period_s)
         command = self.inner.update(sample)
         if self._ticks % e.dither_hold_ticks == 0:
             self._level = float(self._rng.choice((-1.0, 1.0)))

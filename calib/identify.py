@@ -18,9 +18,10 @@ modelled:
   a bias of up to 0.44 mrad that eq 6.2.10 keeps), modelled as the mean of θ over the 20 ms block
   (trapezoid over the sub-steps) minus the encoder's zeroing error (leaving the block mean out biases the
   pivot damping);
-* ball channel: the sensor's static curve (``ball_sensor.curve_*``) at x delayed by the RC time constant,
-  read through the software's eq 6.3.1, with an optional gain and offset relative to it;
-* command: the amplifier 9.6·(u − 2.5) within ±12 V, switched ``daq.output_latency_s`` after the tick.
+* ball channel: the sensor's static curve (twin.sensors.wiper_static_v) at x delayed by the RC time
+  constant, read through the software's eq 6.3.1, with an optional gain and offset relative to it;
+* command: the amplifier 9.6·(u − 2.5) within ±12 V (twin.output_stage.amplifier_volts), switched
+  ``daq.output_latency_s`` after the tick, into the motor law (twin.dcmotor.torque_nm).
 
 The loss is robust (``soft_l1``: quadratic within 2 σ, linear beyond), so the ball channel's contact-noise
 outliers do not pull the fit. Residuals are in units of the channels' nominal noise. The Jacobian is taken by
@@ -46,9 +47,11 @@ import scipy.stats
 
 from calib.logs import RigLog
 from twin.converters import ball_position_m
+from twin.dcmotor import torque_nm
+from twin.output_stage import amplifier_volts
 from twin.parameters import Parameters
 from twin.reference import EquationCoefficients, rk4_step
-from twin.sensors import angle_count_step_rad, angle_counter_mean
+from twin.sensors import angle_count_step_rad, angle_counter_mean, wiper_static_v
 
 __all__ = [
     "FITTABLE",
@@ -431,12 +434,12 @@ class WindowProblem:
         acc = cst.q.accelerations
         k_tau, k_b = cst.k_tau, cst.k_b
         p, win = self.base, self.windows
-        amp = p.amplifier
         s = zs[:, self.n_global :].reshape(B, nw, 4)
         x, th, xd, thd = (s[:, :, i].copy() for i in range(4))
         h = win.period_s / self.substeps
-        v_new = np.clip(amp.gain_v_per_v * (win.command_v - amp.zero_command_v), -amp.rail_v, amp.rail_v)
-        v_old = np.clip(amp.gain_v_per_v * (win.previous_v - amp.zero_command_v), -amp.rail_v, amp.rail_v)
+        # Ideal DAC (quantization is noise here, see the module's docstring), the twin's amplifier.
+        v_new = np.asarray(amplifier_volts(win.command_v, p.amplifier))
+        v_old = np.asarray(amplifier_volts(win.previous_v, p.amplifier))
         # The new command's share of each sub-step: the part of [k·h, (k+1)·h) after the latency.
         latency = cst.latency[:, None]
         share = np.clip(
@@ -444,11 +447,10 @@ class WindowProblem:
         )  # (B, substeps)
 
         def f(x_: Any, th_: Any, xd_: Any, thd_: Any, v_: Any) -> tuple[Any, Any, Any, Any]:
-            xdd, thdd = acc(x_, th_, xd_, thd_, k_tau * (v_ - k_b * thd_))
+            xdd, thdd = acc(x_, th_, xd_, thd_, torque_nm(v_, thd_, k_tau, k_b))
             return xd_, thd_, xdd, thdd
 
         tau_rc = p.ball_sensor.rc_resistance_ohm * p.ball_sensor.rc_capacitance_f
-        curve_x, curve_v = np.asarray(p.ball_sensor.curve_position_m), np.asarray(p.ball_sensor.curve_volts_v)
         pred_b = np.empty((B, nw, W))
         pred_a = np.empty((B, nw, W))
         for j in range(W):
@@ -459,8 +461,13 @@ class WindowProblem:
                 x, th, xd, thd = rk4_step(f, x, th, xd, thd, v, h)
                 mean_th = mean_th + (th if k < self.substeps - 1 else 0.5 * th)
             pred_a[:, :, j] = mean_th / self.substeps - cst.zero
-            wiper = np.interp(x - tau_rc * xd, curve_x, curve_v)
-            pred_b[:, :, j] = cst.gain * ball_position_m(wiper, p.software) + cst.offset
+            # The sensor's static curve at x delayed by the RC filter. A diverged window (its state not
+            # finite) reads NaN, which residuals_batch scores as a huge residual.
+            delayed = x - tau_rc * xd
+            finite = np.isfinite(delayed)
+            wiper = wiper_static_v(np.where(finite, delayed, 0.0), p.ball_sensor)
+            read = cst.gain * ball_position_m(np.asarray(wiper), p.software) + cst.offset
+            pred_b[:, :, j] = np.where(finite, read, np.nan)
         return pred_b, pred_a, np.stack([x, th, xd, thd], axis=2)
 
     def residuals_batch(self, zs: np.ndarray) -> np.ndarray:

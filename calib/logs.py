@@ -15,6 +15,9 @@ true state (``true_*``) is never read into a ``RigLog``: identification sees onl
 
 Every refusal is a ``twin.log.LogError`` naming the file, the variable (the file's name, with the RigLog
 field's) and the first bad index.
+
+A MATLAB v7.3 ``.mat`` (``save -v7.3``: an HDF5 file behind a 512-byte MATLAB header) is read with h5py and
+checked as a v5 file is.
 """
 
 from __future__ import annotations
@@ -39,6 +42,7 @@ __all__ = [
     "MIN_DURATION_S",
     "RigLog",
     "load_rig_log",
+    "read_mat73",
 ]
 
 # The PCI-1712 as the thesis set it up (Table 6.4, §6.5): 12-bit DAC over 0…5 V, 12-bit ADC over −5…5 V.
@@ -59,6 +63,11 @@ MIN_BALL_SPAN_V = 10 * ADC_STEP_V
 # A tick spacing beyond 1.5 periods is a missed block (the next one is 2 periods away): the samples are no
 # longer one per period, as the zero-order-hold models assume.
 MAX_GAP_PERIODS = 1.5
+
+# A MATLAB v7.3 file: the text header "MATLAB 7.3 MAT-file…" in an HDF5 user block of 512 bytes, then HDF5.
+MAT73_HEADER = b"MATLAB 7.3 MAT-file"
+MAT73_USERBLOCK_BYTES = 512
+HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
 
 # Element 0 of a RigLog array is tick k = 2 of the file (row 1, the start sample, is dropped).
 FIRST_INDEX = 2
@@ -191,13 +200,46 @@ def load_rig_log(path: str | Path) -> RigLog:
     suffix = path.suffix.lower()
     log: RunLog
     if suffix == ".mat":
-        log = load_mat(path)
+        log = load_mat(path, variables=read_mat73(path) if _is_mat73(path) else None)
     elif suffix == ".csv":
         log = load_csv(path)
     else:
         shown = f"suffix '{path.suffix}'" if path.suffix else "no suffix"
         raise LogError(f"{path}: {shown}: a rig log is a .mat (data_file.mat) or a .csv file")
     return rig_log(log, path)
+
+
+def _is_mat73(path: Path) -> bool:
+    try:
+        with path.open("rb") as fh:
+            head = fh.read(MAT73_USERBLOCK_BYTES + len(HDF5_SIGNATURE))
+    except OSError:
+        return False  # load_mat names the problem
+    return head.startswith(MAT73_HEADER) and head[MAT73_USERBLOCK_BYTES:] == HDF5_SIGNATURE
+
+
+def read_mat73(path: str | Path) -> dict[str, np.ndarray]:
+    """The variables of a MATLAB v7.3 file as scipy.io.loadmat gives a v5 file's: 2-D arrays, a column
+    vector n × 1. HDF5 keeps MATLAB's column-major arrays as their transposes (an n × 1 vector is stored
+    1 × n); MATLAB writes an empty array as its dimensions with the attribute MATLAB_empty. Groups (structs,
+    cells) and MATLAB's own ``#refs#`` are skipped: a rig log's variables are numeric arrays."""
+    import h5py
+
+    path = Path(path)
+    out: dict[str, np.ndarray] = {}
+    try:
+        with h5py.File(path, "r") as fh:
+            for name, obj in fh.items():
+                if name.startswith("#") or not isinstance(obj, h5py.Dataset):
+                    continue
+                if int(np.asarray(obj.attrs.get("MATLAB_empty", 0)).ravel()[0]):
+                    out[name] = np.zeros((0, 0))
+                    continue
+                data = np.asarray(obj[()])
+                out[name] = data.T if data.ndim >= 2 else data.reshape(1, -1)
+    except OSError as exc:
+        raise LogError(f"{path}: a MATLAB v7.3 (HDF5) .mat file that cannot be read ({exc})") from None
+    return out
 
 
 def rig_log(log: RunLog, path: str | Path = "<memory>") -> RigLog:

@@ -4,11 +4,12 @@
     DIR/calibration.json   {"params": {name: {value, ci_low, ci_high, initial, unit}}, "rms_residual": …,
                             "converged", "warnings", "correlation", …}
     DIR/report.md          measured against simulated before and after, residuals over time and their
-                           histogram, the intervals and the correlation matrix (PNGs beside it)
+                           histogram, the intervals and the correlation matrix (PNGs beside it;
+                           ``calib.report_render``)
 
-The directory is written complete or not at all: everything goes to a fresh sibling directory first, which
-then takes the name (an existing directory is replaced only when asked, and only after the new one is
-complete).
+The files go to a fresh temporary folder first, then take their places (``twin.outputs.atomic_directory``):
+an existing folder is written into only when asked, and then only these files are replaced; the rig logs,
+parameter files and anything else in it are kept.
 """
 
 from __future__ import annotations
@@ -16,116 +17,25 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-import matplotlib
+from calib.identify import Calibration
+from twin.outputs import JobFiles, atomic_directory
 
-from twin.log import atomic_directory, check_output_directory
+__all__ = ["OUTPUT_FILES", "write_report"]
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from calib.identify import CONFIDENCE, Calibration  # noqa: E402
-
-__all__ = ["write_report", "check_out_dir"]
-
-
-def check_out_dir(out_dir: str | Path, overwrite: bool) -> Path:
-    """Refuse an existing ``out_dir`` unless ``overwrite``, and a parent that does not exist (before a fit)."""
-    return check_output_directory(out_dir, overwrite=overwrite)
+# What write_report puts into its folder (checked before the fit); correlation.png only when the fit has a
+# correlation matrix.
+OUTPUT_FILES = JobFiles(
+    "calibrate",
+    ("params.toml", "calibration.json", "report.md", "fit.png", "residuals.png", "correlation.png"),
+)
 
 
 def write_report(cal: Calibration, out_dir: str | Path, *, overwrite: bool = False) -> Path:
-    with atomic_directory(out_dir, overwrite=overwrite) as tmp:
+    from calib.report_render import render_figures, render_markdown
+
+    with atomic_directory(out_dir, OUTPUT_FILES, overwrite=overwrite) as tmp:
         cal.params.save(tmp / "params.toml")
         (tmp / "calibration.json").write_text(json.dumps(cal.to_json(), indent=2) + "\n")
-        _figures(cal, tmp)
-        (tmp / "report.md").write_text(_markdown(cal))
+        render_figures(cal, tmp)
+        (tmp / "report.md").write_text(render_markdown(cal))
     return Path(out_dir)
-
-
-def _figures(cal: Calibration, out: Path) -> None:
-    tr = cal.traces
-    t = tr["t_s"]
-    fig, axes = plt.subplots(2, 1, figsize=(10, 6), sharex=True)
-    for ax, key, unit, scale in (
-        (axes[0], "ball", "ball x (mm)", 1e3),
-        (axes[1], "angle", "beam θ (mrad)", 1e3),
-    ):
-        suffix = "m" if key == "ball" else "rad"
-        ax.plot(t, scale * tr[f"y_{key}_{suffix}"], ".", ms=2, color="k", label="measured")
-        ax.plot(t, scale * tr[f"before_{key}_{suffix}"], lw=0.8, label="simulated, starting parameters")
-        ax.plot(t, scale * tr[f"after_{key}_{suffix}"], lw=0.8, label="simulated, fitted parameters")
-        ax.set_ylabel(unit)
-    axes[0].legend(loc="upper right", fontsize=8)
-    axes[1].set_xlabel("time over the windows (s)")
-    fig.suptitle("Measured and simulated readings (each window started from its fitted state)")
-    fig.tight_layout()
-    fig.savefig(out / "fit.png", dpi=100)
-    plt.close(fig)
-
-    fig, axes = plt.subplots(2, 2, figsize=(10, 6))
-    for row, (key, suffix, unit) in enumerate((("ball", "m", "mm"), ("angle", "rad", "mrad"))):
-        res = 1e3 * (tr[f"after_{key}_{suffix}"] - tr[f"y_{key}_{suffix}"])
-        axes[row, 0].plot(t, res, lw=0.6)
-        axes[row, 0].set_ylabel(f"{key} residual ({unit})")
-        lim = np.percentile(np.abs(res), 99) if res.size else 1.0
-        axes[row, 1].hist(res[np.abs(res) <= lim], bins=60)
-        axes[row, 1].set_xlabel(f"{key} residual ({unit}), central 99 %")
-    axes[1, 0].set_xlabel("time over the windows (s)")
-    fig.tight_layout()
-    fig.savefig(out / "residuals.png", dpi=100)
-    plt.close(fig)
-
-    names = cal.correlation_names
-    if names:
-        fig, ax = plt.subplots(figsize=(1.2 + 0.9 * len(names), 1.0 + 0.8 * len(names)))
-        im = ax.imshow(cal.correlation, vmin=-1, vmax=1, cmap="RdBu_r")
-        ax.set_xticks(range(len(names)), names, rotation=60, ha="right", fontsize=7)
-        ax.set_yticks(range(len(names)), names, fontsize=7)
-        for i in range(len(names)):
-            for j in range(len(names)):
-                ax.text(j, i, f"{cal.correlation[i, j]:+.2f}", ha="center", va="center", fontsize=7)
-        fig.colorbar(im)
-        fig.tight_layout()
-        fig.savefig(out / "correlation.png", dpi=100)
-        plt.close(fig)
-
-
-def _markdown(cal: Calibration) -> str:
-    lines = [
-        "# Calibration",
-        "",
-        f"{cal.n_windows} windows, {cal.n_ticks} ticks; converged: **{cal.converged}** ({cal.message}); "
-        f"{cal.wall_s:.1f} s.",
-        "",
-        f"| parameter | fitted | {CONFIDENCE:.0%} interval | start | unit |",
-        "| --- | --- | --- | --- | --- |",
-    ]
-    for name, v in cal.values.items():
-        lines.append(
-            f"| {name} | {v.value:.6g} | [{v.ci_low:.6g}, {v.ci_high:.6g}] | {v.initial:.6g} | {v.unit} |"
-        )
-    lines += [
-        "",
-        f"Intervals: cluster-robust covariance (5 s of log per cluster), Student's t; the plain white-noise "
-        f"intervals would be ×{1 / cal.ci_inflation:.2f} as wide."
-        if cal.ci_inflation > 0
-        else "",
-        "",
-        "| residual | before | after |",
-        "| --- | --- | --- |",
-    ]
-    for key in cal.rms_after:
-        lines.append(f"| {key} | {cal.rms_before[key]:.4g} | {cal.rms_after[key]:.4g} |")
-    lines += ["", "## Warnings", ""]
-    lines += [f"- {w}" for w in cal.warnings] or ["- none"]
-    lines += [
-        "",
-        "![measured and simulated](fit.png)",
-        "",
-        "![residuals](residuals.png)",
-        "",
-        "![correlation](correlation.png)",
-        "",
-    ]
-    return "\n".join(lines)

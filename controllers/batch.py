@@ -7,8 +7,8 @@ What keeps the bits:
 * elementwise +, −, ×, /, np.sin, np.cos and np.clip give what Python's float operations and ``math`` give;
 * Python's ``x**2`` is libm's pow, which differs from x·x in the last bit for about 1 value in 1000:
   ``np.float_power(x, 2)`` calls the same pow (numpy's ``x**2`` squares);
-* a matrix times a vector (numpy's ``M @ v``: BLAS gemv, or dot for one row) over the batch is
-  ``np.matmul(M, V[:, :, None])``: numpy runs the same BLAS call for each run's (r, c) @ (c, 1).
+* a matrix times a vector is ``twin.fixedorder``'s: ``matvec`` on floats alone, ``matvecs`` over the batch
+  (the same products added left to right: no BLAS, whose kernel would choose the order).
 
 ``appendix-sf``, ``appendix-clp`` and the ``LoopController``s with a state-feedback law in volts on a
 reduced-order observer or a Kalman filter (``lqr``, ``sf``, ``thesis-sf``) are batched; ``make_batch``
@@ -29,6 +29,7 @@ from controllers.appendix import (
 )
 from controllers.laws import KalmanState, StateFeedbackLaw
 from controllers.loop import LoopController, ObserverState
+from twin import fixedorder as fo
 from twin.batch import BatchSamples, BatchTelemetry
 from twin.converters import (
     ball_position_m,
@@ -44,8 +45,9 @@ __all__ = ["BatchAppendixControlLaw", "BatchAppendixStateFeedback", "BatchLoopCo
 
 
 def _mv(matrix: np.ndarray, vectors: np.ndarray) -> np.ndarray:
-    """``matrix @ v`` for each row v of ``vectors`` (n, c); ``matrix`` (r, c) for all or (n, r, c) per run."""
-    return np.matmul(matrix, vectors[:, :, None])[:, :, 0]
+    """``fo.matvec(matrix, v)`` for each row v of ``vectors`` (n, c); ``matrix`` (r, c) for all or (n, r, c)
+    per run."""
+    return fo.matvecs(matrix, vectors)
 
 
 def _measure(samples: BatchSamples, sw: SoftwareCalibration) -> tuple[np.ndarray, np.ndarray]:

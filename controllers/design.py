@@ -23,6 +23,11 @@ __all__ = [
     "sliding_surface",
     "continuous_poles_to_discrete",
     "check_poles",
+    "LqrDesign",
+    "lqr_design",
+    "LqiDesign",
+    "lqi_design",
+    "steady_state",
 ]
 
 
@@ -171,3 +176,96 @@ def sliding_surface(a: np.ndarray, b: np.ndarray, poles: Poles) -> SlidingSurfac
 def continuous_poles_to_discrete(poles: Poles, period_s: float) -> np.ndarray:
     """z = e^{sT} (§5.2.1)."""
     return np.exp(np.asarray(poles, dtype=complex) * period_s)
+
+
+def _bryson_weights(state_scale: Sequence[float], input_scale_v: float) -> tuple[np.ndarray, np.ndarray]:
+    """Bryson's rule: Q = diag(1/xᵢ²), R = 1/u² for the largest acceptable excursions xᵢ and input u."""
+    return np.diag(1.0 / np.asarray(state_scale, dtype=float) ** 2), np.array([[1.0 / input_scale_v**2]])
+
+
+def _kalman_current_gain(
+    phi: np.ndarray, gamma: np.ndarray, input_noise_v: float, measurement_noise: Sequence[float]
+) -> np.ndarray:
+    """Steady-state Kalman gain (n×2) in current-estimator form for (x, θ) measured:
+    L = P⁻Hᵀ(HP⁻Hᵀ + R)⁻¹, P⁻ the a-priori covariance, the input disturbance entering through Γ."""
+    h = np.eye(2, phi.shape[0])
+    qn = np.array([[input_noise_v**2]])
+    # Each noise squared as given: numpy squares a float64, Python's ** calls pow (1 value in 1000 differs).
+    rn = np.diag([s**2 for s in measurement_noise])
+    _, p_prior, _ = control.dlqe(phi, gamma, h, qn, rn)
+    return p_prior @ h.T @ np.linalg.inv(h @ p_prior @ h.T + rn)
+
+
+@dataclass(frozen=True)
+class LqrDesign:
+    """Discrete LQR on (Φ, Γ), u = −K·(x − x_ref), with a steady-state Kalman filter for the state."""
+
+    gain: np.ndarray  # K (1×4)
+    kalman_gain: np.ndarray  # L (4×2), current-estimator form
+
+
+def lqr_design(
+    phi: np.ndarray,
+    gamma: np.ndarray,
+    *,
+    state_scale: Sequence[float],
+    input_scale_v: float,
+    input_noise_v: float,
+    measurement_noise: Sequence[float],
+) -> LqrDesign:
+    """LQR with Bryson weights (``state_scale`` per state, ``input_scale_v``) and the Kalman gain for an input
+    disturbance of ``input_noise_v`` (SD, V) and measurement noise ``measurement_noise`` (SD of x, θ)."""
+    q, r = _bryson_weights(state_scale, input_scale_v)
+    gain, _, _ = control.dlqr(phi, gamma, q, r)
+    return LqrDesign(np.atleast_2d(gain), _kalman_current_gain(phi, gamma, input_noise_v, measurement_noise))
+
+
+@dataclass(frozen=True)
+class LqiDesign:
+    """LQR with integral action on the ball position (LQI): u = −K·(x − x_ref) − k_i·z with
+    z[k+1] = z[k] + T·(x[k] − x_ref), and the Kalman filter of the plain design for the state."""
+
+    gain: np.ndarray  # K (1×4) on the state error
+    integral_gain: float  # k_i, V per (m·s)
+    kalman_gain: np.ndarray  # L (4×2), current-estimator form
+    period_s: float  # T of the integrator
+
+
+def lqi_design(
+    phi: np.ndarray,
+    gamma: np.ndarray,
+    period_s: float,
+    *,
+    state_scale: Sequence[float],
+    integral_scale_m_s: float,
+    input_scale_v: float,
+    input_noise_v: float,
+    measurement_noise: Sequence[float],
+) -> LqiDesign:
+    """LQR on the model augmented with the integral z of the ball position error (Bryson weights, z's scale
+    ``integral_scale_m_s``): Φₐ = [[Φ, 0], [T·e₁ᵀ, 1]], Γₐ = [Γ; 0]. The Kalman filter is the plain
+    design's: the integrator is computed exactly by the controller, it needs no estimate."""
+    n = phi.shape[0]
+    phi_a = np.zeros((n + 1, n + 1))
+    phi_a[:n, :n] = phi
+    phi_a[n, 0] = period_s
+    phi_a[n, n] = 1.0
+    gamma_a = np.vstack([gamma, np.zeros((1, gamma.shape[1]))])
+    q, r = _bryson_weights((*state_scale, integral_scale_m_s), input_scale_v)
+    gain_a, _, _ = control.dlqr(phi_a, gamma_a, q, r)
+    gain_a = np.atleast_2d(gain_a)
+    return LqiDesign(
+        gain=gain_a[:, :n].copy(),
+        integral_gain=float(gain_a[0, n]),
+        kalman_gain=_kalman_current_gain(phi, gamma, input_noise_v, measurement_noise),
+        period_s=period_s,
+    )
+
+
+def steady_state(phi: np.ndarray, gamma: np.ndarray, gain: np.ndarray, x_ref: np.ndarray) -> np.ndarray:
+    """The equilibrium of the linear loop x[k+1] = Φx + Γu, u = −K·(x − x_ref): x = (I − Φ + ΓK)⁻¹ΓK·x_ref.
+
+    For a pure state feedback its ball position is not x_ref: holding the ball off centre takes a steady
+    motor torque (the ball's weight on the beam), which the law only produces from a steady error."""
+    closed = np.eye(phi.shape[0]) - phi + gamma @ gain
+    return np.linalg.solve(closed, gamma @ gain @ np.asarray(x_ref, dtype=float))

@@ -11,43 +11,43 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from twin import fixedorder as fo
 from twin.parameters import Parameters
 from twin.reference import EquationCoefficients
 
-__all__ = ["StateFeedbackLaw", "ClpTerms", "ClpLaw", "SlidingModeLaw", "KalmanState"]
+__all__ = [
+    "StateFeedbackLaw",
+    "ClpTerms",
+    "ClpLaw",
+    "SlidingModeLaw",
+    "KalmanState",
+    "IntegralStateFeedbackLaw",
+]
 
 # The laws run every physics step on the true state (1 kHz, controllers.loop.TrueStateLaw), where each numpy
-# call counts: ``of_floats`` takes the state as four Python floats and does the elementwise arithmetic in
-# Python (IEEE, so the bits numpy gives). Its matrix and vector products stay numpy's (BLAS fuses their
-# multiply-adds, so written out they would differ in the last bit), on vectors and results each law reuses:
-# scratch, so one law object is not for two threads at once. ``__call__`` on a state vector is ``of_floats``
-# on its four floats.
+# call counts: ``of_floats`` takes the state as four Python floats and does the arithmetic in Python, its
+# sums of products left to right (twin.fixedorder: the bits do not depend on the BLAS kernel, and the batch's
+# elementwise numpy gives the same). ``__call__`` on a state vector is ``of_floats`` on its four floats.
 
 
-class _Vector:
-    """A float64 vector Python writes element by element (``set``, a memoryview: cheaper per element than
-    ndarray item assignment) and numpy reads (``array``, the same memory). Scratch: pickled empty."""
+class _Rows:
+    """A matrix's rows as Python floats for ``twin.fixedorder``, read again when the matrix is replaced."""
 
-    __slots__ = ("set", "array")
+    __slots__ = ("source", "rows")
 
-    def __init__(self, size: int) -> None:
-        memory = bytearray(8 * size)
-        self.set = memoryview(memory).cast("d")
-        self.array = np.frombuffer(memory, dtype=np.float64)
+    def __init__(self) -> None:
+        self.source: np.ndarray | None = None
+        self.rows: list[list[float]] = []
 
-    def __reduce__(self) -> tuple[type[_Vector], tuple[int]]:
-        return _Vector, (len(self.set),)
-
-
-def _buffer(size: int) -> _Vector:
-    return field(default_factory=lambda: _Vector(size), init=False, repr=False, compare=False)
+    def of(self, matrix: np.ndarray) -> list[list[float]]:
+        if matrix is not self.source:
+            self.rows = np.atleast_2d(np.asarray(matrix, dtype=float)).tolist()
+            self.source = matrix
+        return self.rows
 
 
-def _result(*shape: int) -> np.ndarray:
-    """An array for a dot product's result (``a.dot(b, out)`` then ``out.item()``: cheaper than the float
-    ``a.dot(b)`` returns). A (1×n) gain dotted with a vector is a dot of two vectors, as ``@`` takes it,
-    into shape (1,); two vectors into shape ()."""
-    return field(default_factory=lambda: np.empty(shape), init=False, repr=False, compare=False)
+def _rows() -> _Rows:
+    return field(default_factory=_Rows, init=False, repr=False, compare=False)
 
 
 def _floats(x: np.ndarray) -> list[float]:
@@ -60,18 +60,14 @@ class StateFeedbackLaw:
 
     gain: np.ndarray  # (1×4)
     ref_x_m: float = 0.0
-    _err: _Vector = _buffer(4)
-    _u: np.ndarray = _result(1)
+    _gain: _Rows = _rows()
 
     def __call__(self, x: np.ndarray) -> float:
         return self.of_floats(*_floats(x))
 
     def of_floats(self, x_m: float, theta_rad: float, xdot_m_s: float, thetadot_rad_s: float) -> float:
-        err, u = self._err, self._u
-        e = err.set
-        e[0], e[1], e[2], e[3] = x_m - self.ref_x_m, theta_rad, xdot_m_s, thetadot_rad_s
-        self.gain.dot(err.array, u)
-        return -u.item()
+        k = self._gain.of(self.gain)[0]
+        return -fo.dot(k, (x_m - self.ref_x_m, theta_rad, xdot_m_s, thetadot_rad_s))
 
 
 @dataclass(frozen=True)
@@ -96,9 +92,6 @@ class ClpTerms:
         except OverflowError:
             x2 = math.inf
         return self.alpha_thdd + self.alpha_thdd_x2 * x2
-
-    def beta_value(self, x: np.ndarray) -> float:
-        return self.beta_of(*x)
 
     def beta_of(self, xm: float, th: float, xd: float, thd: float) -> float:
         b1, b2, b3, b4 = self.beta
@@ -142,41 +135,23 @@ class ClpLaw:
     kp: np.ndarray  # diag (2×2)
     kv: np.ndarray
     ref_x_m: float = 0.0
-    _minus_zeta_err: _Vector = _buffer(2)
-    _zeta_dot: _Vector = _buffer(2)
-    _tau_bar: _Vector = _buffer(2)
-    _alpha: _Vector = _buffer(2)
-    _alpha_tau_bar: np.ndarray = _result()
+    _kp: _Rows = _rows()
+    _kv: _Rows = _rows()
 
     def __call__(self, x: np.ndarray) -> float:
         return self.of_floats(*_floats(x))
 
     def of_floats(self, x_m: float, theta_rad: float, xdot_m_s: float, thetadot_rad_s: float) -> float:
-        terms, alpha, alpha_tau_bar = self.terms, self._alpha, self._alpha_tau_bar
-        alpha.set[0], alpha.set[1] = terms.alpha_xdd, terms.alpha_theta(x_m)
+        terms = self.terms
         tau_bar = self._tau_bar_of(-(x_m - self.ref_x_m), -theta_rad, xdot_m_s, thetadot_rad_s)
-        alpha.array.dot(tau_bar, alpha_tau_bar)
-        return alpha_tau_bar.item() + terms.beta_of(x_m, theta_rad, xdot_m_s, thetadot_rad_s)
+        alpha = (terms.alpha_xdd, terms.alpha_theta(x_m))
+        return fo.dot(alpha, tau_bar) + terms.beta_of(x_m, theta_rad, xdot_m_s, thetadot_rad_s)
 
-    def _tau_bar_of(self, e0: float, e1: float, v0: float, v1: float) -> np.ndarray:
-        """τ̄ = kp @ (−ζ̃) − kv @ ζ̇ for −ζ̃ = (e0, e1), ζ̇ = (v0, v1): (−kp) @ ζ̃ as kp @ (−ζ̃), the same products.
-
-        With diagonal gains (the thesis's and the designed ones) each row of a gain times a vector is its one
-        nonzero product, whatever the BLAS: the zero products add exactly nothing to it. So when the four
-        products are finite and nonzero they are taken in Python; otherwise (where a zero's sign would depend on
-        the BLAS, or a NaN) numpy's gemv, as before."""
-        (kp00, kp01), (kp10, kp11) = self.kp.tolist()
-        (kv00, kv01), (kv10, kv11) = self.kv.tolist()
-        if kp01 == kp10 == kv01 == kv10 == 0.0:
-            a0, a1, b0, b1 = kp00 * e0, kp11 * e1, kv00 * v0, kv11 * v1
-            if a0 and a1 and b0 and b1 and math.isfinite(a0 + a1 + b0 + b1):
-                tau_bar = self._tau_bar
-                tau_bar.set[0], tau_bar.set[1] = a0 - b0, a1 - b1
-                return tau_bar.array
-        minus_zeta_err, zeta_dot = self._minus_zeta_err, self._zeta_dot
-        minus_zeta_err.set[0], minus_zeta_err.set[1] = e0, e1
-        zeta_dot.set[0], zeta_dot.set[1] = v0, v1
-        return self.kp.dot(minus_zeta_err.array) - self.kv.dot(zeta_dot.array)
+    def _tau_bar_of(self, e0: float, e1: float, v0: float, v1: float) -> list[float]:
+        """τ̄ = kp @ (−ζ̃) − kv @ ζ̇ for −ζ̃ = (e0, e1), ζ̇ = (v0, v1): (−kp) @ ζ̃ as kp @ (−ζ̃), the same products."""
+        a = fo.matvec(self._kp.of(self.kp), (e0, e1))
+        b = fo.matvec(self._kv.of(self.kv), (v0, v1))
+        return [a[0] - b[0], a[1] - b[1]]
 
 
 @dataclass
@@ -189,30 +164,25 @@ class SlidingModeLaw:
     k_minus: float
     k_plus: float
     eta: float
-    _x: _Vector = _buffer(4)
-    _k: _Vector = _buffer(4)
-    _row_dot: np.ndarray = _result(1)
-    _k_dot: np.ndarray = _result()
+    _surface: _Rows = _rows()
+    _equivalent_gain: _Rows = _rows()
 
     def __call__(self, x: np.ndarray) -> float:
         return self.of_floats(*_floats(x))
 
     def of_floats(self, x_m: float, theta_rad: float, xdot_m_s: float, thetadot_rad_s: float) -> float:
-        x, xs, ks, row_dot, k_dot = self._x.array, self._x.set, self._k.set, self._row_dot, self._k_dot
+        x = (x_m, theta_rad, xdot_m_s, thetadot_rad_s)
         k_minus, k_plus = self.k_minus, self.k_plus
-        xs[0], xs[1], xs[2], xs[3] = x_m, theta_rad, xdot_m_s, thetadot_rad_s
-        self.surface.dot(x, row_dot)  # S̄·x; then K_eq·x
-        s = row_dot.item()
-        ks[0], ks[1], ks[2], ks[3] = (
+        s = fo.dot(self._surface.of(self.surface)[0], x)  # S̄·x
+        k = (
             k_minus if s * x_m > 0 else k_plus,
             k_minus if s * theta_rad > 0 else k_plus,
             k_minus if s * xdot_m_s > 0 else k_plus,
             k_minus if s * thetadot_rad_s > 0 else k_plus,
         )
-        self.equivalent_gain.dot(x, row_dot)
-        self._k.array.dot(x, k_dot)
+        equivalent = fo.dot(self._equivalent_gain.of(self.equivalent_gain)[0], x)  # K_eq·x
         sign = 1.0 if s > 0 else -1.0 if s < 0 else s if s != s else 0.0  # np.sign: 0.0 for ±0, NaN for NaN
-        return -row_dot.item() + k_dot.item() - self.eta * sign
+        return -equivalent + fo.dot(k, x) - self.eta * sign
 
 
 class KalmanState:
@@ -221,12 +191,47 @@ class KalmanState:
     def __init__(self, phi: np.ndarray, gamma: np.ndarray, gain: np.ndarray) -> None:
         self.phi, self.gamma, self.gain = phi, gamma, gain
         self.h = np.eye(2, 4)
+        # The products in a fixed order (twin.fixedorder), on the matrices' rows as floats.
+        self._phi, self._gain, self._h = phi.tolist(), gain.tolist(), self.h.tolist()
+        self._gamma0 = gamma[:, 0].tolist()
 
     def start(self, xa: np.ndarray) -> np.ndarray:
-        self._x = np.concatenate([xa, np.zeros(2)])
-        return self._x.copy()
+        self._x = [*np.asarray(xa, dtype=float).tolist(), 0.0, 0.0]
+        return np.array(self._x)
 
     def update(self, xa: np.ndarray, u_prev: float) -> np.ndarray:
-        predicted = self.phi @ self._x + self.gamma[:, 0] * u_prev
-        self._x = predicted + self.gain @ (xa - self.h @ predicted)
-        return self._x.copy()
+        predicted = [p + g * u_prev for p, g in zip(fo.matvec(self._phi, self._x), self._gamma0, strict=True)]
+        innovation = [a - b for a, b in zip(xa.tolist(), fo.matvec(self._h, predicted), strict=True)]
+        correction = fo.matvec(self._gain, innovation)
+        self._x = [p + c for p, c in zip(predicted, correction, strict=True)]
+        return np.array(self._x)
+
+
+@dataclass
+class IntegralStateFeedbackLaw:
+    """LQI: u = −K·(x − x_ref) − k_i·z with z[k+1] = z[k] + T·(x[k] − ref), one call per tick (z is state:
+    ``reset`` before a run). Anti-windup by conditional integration: z is held while u is at or beyond a
+    command limit (``u_min_v``/``u_max_v``, the motor volts the software's limits allow) and this tick's
+    error would push it further out."""
+
+    gain: np.ndarray  # K (1×4)
+    integral_gain: float  # k_i, V per (m·s)
+    period_s: float
+    u_min_v: float
+    u_max_v: float
+    ref_x_m: float = 0.0
+    integral_m_s: float = 0.0
+    _gain: _Rows = _rows()
+
+    def reset(self) -> None:
+        self.integral_m_s = 0.0
+
+    def __call__(self, x: np.ndarray) -> float:
+        x_m, theta_rad, xdot_m_s, thetadot_rad_s = np.asarray(x, dtype=float).tolist()
+        error = [x_m - self.ref_x_m, theta_rad, xdot_m_s, thetadot_rad_s]
+        u = -fo.dot(self._gain.of(self.gain)[0], error) - self.integral_gain * self.integral_m_s
+        step_m_s = self.period_s * error[0]
+        push_v = -self.integral_gain * step_m_s  # what this step of z adds to the next command
+        if not ((u >= self.u_max_v and push_v > 0) or (u <= self.u_min_v and push_v < 0)):
+            self.integral_m_s += step_m_s
+        return u

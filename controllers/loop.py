@@ -14,17 +14,27 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Literal, Protocol
+from typing import Any, Literal, Protocol
 
 import numpy as np
 
 from controllers.design import ReducedObserver
 from twin import converters
+from twin import fixedorder as fo
 from twin.dcmotor import volts_for_torque_v
 from twin.interface import Controller, DaqSample, Telemetry
 from twin.parameters import SoftwareCalibration
 
-__all__ = ["LoopController", "MotorInverse", "ObserverState", "StateSource", "TrueStateLaw", "measured_xa"]
+__all__ = [
+    "LoopController",
+    "MotorInverse",
+    "ObserverState",
+    "SetpointLoopController",
+    "SetpointTrueStateLaw",
+    "StateSource",
+    "TrueStateLaw",
+    "measured_xa",
+]
 
 
 class StateSource(Protocol):
@@ -47,17 +57,28 @@ class ObserverState:
 
     def __init__(self, observer: ReducedObserver) -> None:
         self.observer = observer
+        # The products in a fixed order (twin.fixedorder), on the design's rows as floats.
+        self._f, self._ga, self._gain = observer.f.tolist(), observer.ga.tolist(), observer.gain.tolist()
+        self._h0 = observer.h[:, 0].tolist()
 
     def start(self, xa: np.ndarray) -> np.ndarray:
-        self._xa = xa
-        self._xb = np.zeros(2)
-        return np.concatenate([self._xa, self._xb])
+        self._xa = np.asarray(xa, dtype=float).tolist()
+        self._xb = [0.0, 0.0]
+        return np.array([*self._xa, *self._xb])
 
     def update(self, xa: np.ndarray, u_prev: float) -> np.ndarray:
-        obs = self.observer
-        self._xb = obs.f @ self._xb + obs.ga @ self._xa + obs.gain @ xa + obs.h[:, 0] * u_prev
-        self._xa = xa
-        return np.concatenate([xa, self._xb])
+        """x̂_b(k) = F·x̂_b(k−1) + G_a·x_a(k−1) + G·x_a(k) + H·u(k−1) (eq 5.2.19), added in that order."""
+        xa_now = np.asarray(xa, dtype=float).tolist()
+        terms = zip(
+            fo.matvec(self._f, self._xb),
+            fo.matvec(self._ga, self._xa),
+            fo.matvec(self._gain, xa_now),
+            self._h0,
+            strict=True,
+        )
+        self._xb = [f + ga + g + h * u_prev for f, ga, g, h in terms]
+        self._xa = xa_now
+        return np.array([*xa_now, *self._xb])
 
 
 @dataclass(frozen=True)
@@ -196,3 +217,48 @@ class TrueStateLaw:
         volts = _volts(u, x, self.u_kind, self.motor, self.name)
         self._last = (x, u, volts)
         return volts
+
+
+class _LawSetpoint:
+    """``setpoint_m`` (twin.interface.Setpoint): the ball position the law regulates to, its ``ref_x_m``. A
+    class of its own (not a property of every loop) so that only loops whose law has a setpoint declare one."""
+
+    law: Any
+
+    @property
+    def setpoint_m(self) -> float:
+        return self.law.ref_x_m
+
+    @setpoint_m.setter
+    def setpoint_m(self, value: float) -> None:
+        self.law.ref_x_m = value
+
+
+def _require_setpoint(name: str, law: object) -> None:
+    if not hasattr(law, "ref_x_m"):
+        raise TypeError(f"{name}: its law has no ball setpoint (ref_x_m)")
+
+
+class SetpointLoopController(_LawSetpoint, LoopController):
+    """A ``LoopController`` whose law has a ball setpoint. A law with an integrator (``reset``) starts it
+    from zero at each ``start``, so that a reused controller runs as a fresh one."""
+
+    def __init__(
+        self, name: str, state: StateSource, law: Callable[[np.ndarray], float], **kwargs: Any
+    ) -> None:
+        _require_setpoint(name, law)
+        super().__init__(name, state, law, **kwargs)
+
+    def start(self, sample: DaqSample) -> None:
+        reset = getattr(self.law, "reset", None)
+        if reset is not None:
+            reset()
+        super().start(sample)
+
+
+class SetpointTrueStateLaw(_LawSetpoint, TrueStateLaw):
+    """A ``TrueStateLaw`` whose law has a ball setpoint."""
+
+    def __init__(self, name: str, law: Callable[[np.ndarray], float], **kwargs: Any) -> None:
+        _require_setpoint(name, law)
+        super().__init__(name, law, **kwargs)

@@ -16,6 +16,7 @@ from pathlib import Path
 from controllers import registry
 from controllers import thesis_numbers as T
 from twin.engine import run_closed_loop
+from twin.outputs import write_atomic
 from twin.parameters import Parameters
 from twin.verdict import Criteria
 
@@ -58,7 +59,7 @@ def main() -> None:
                 }
             )
             print(f"{name:22s} ({x0:+.2f}, {theta0:+.2f}): {result.verdict.reason}")
-    (args.out / "controllers.json").write_text(json.dumps(rows, indent=1) + "\n")
+    write_atomic(args.out / "controllers.json", json.dumps(rows, indent=1) + "\n", overwrite=True)
 
     c, free_run_ms = Criteria(), 1e3 * Parameters().start.free_run_s
     lines = [
@@ -84,7 +85,7 @@ def main() -> None:
             f"{_fmt(r['settling_time_s'], 2)} | {steady} | {pp} | {r['peak_motor_voltage_v']:.1f} | "
             f"{100 * r['saturated_fraction']:.0f} % | {r['peak_theta_rad']:.2f} |"
         )
-    (args.out / "controllers.md").write_text("\n".join(lines) + "\n")
+    write_atomic(args.out / "controllers.md", "\n".join(lines) + "\n", overwrite=True)
     print(f"wrote {args.out / 'controllers.md'} and controllers.json")
 
 

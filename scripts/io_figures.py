@@ -1,6 +1,6 @@
 """Print the I/O chain's acceptance figures: angle staircase and eq 6.2.4, Table 6.3 readings, RC time
 constant, dropout rate, output stage, seeds, log round trip — measured on the twin's own code by
-twin.app.measurements (the tests assert on the same functions).
+twin.measurements (the tests assert on the same functions).
 
     python scripts/io_figures.py
 """
@@ -12,7 +12,7 @@ import math
 import numpy as np
 
 from controllers.appendix import AppendixControlLaw
-from twin.app import measurements as M
+from twin import measurements as M
 from twin.engine import run_closed_loop
 from twin.parameters import Parameters
 

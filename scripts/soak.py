@@ -23,6 +23,7 @@ import websockets.sync.client
 
 from controllers import registry
 from twin.viewer import FRAME_S, Viewer, serve
+from twin.viewer.security import control_uuid
 
 CAMERA = {
     "type": "ViewerCameraMessage",
@@ -94,7 +95,7 @@ def main() -> None:
     ws.send(msgspec.msgpack.encode(CAMERA))
 
     def click(control: str) -> None:
-        uuid = viewer.controls[control]._impl.uuid
+        uuid = control_uuid(viewer.controls[control])
         message = {"type": "GuiUpdateMessage", "uuid": uuid, "updates": {"value": True}}
         try:
             ws.send(msgspec.msgpack.encode(message))

@@ -15,7 +15,8 @@ import json
 import sys
 from pathlib import Path
 
-from twin.app.sweep import SweepSettings, run_sweep, summarize, write_sweep
+from twin.app.sweep import OUTPUT_FILES, SweepSettings, run_sweep, summarize, write_sweep
+from twin.outputs import write_atomic
 from twin.parameters import Parameters
 
 PAIR = ("appendix-sf", "appendix-clp")
@@ -32,6 +33,8 @@ def main() -> None:
     for name in PAIR:
         settings = SweepSettings(controller=name, duration_s=args.duration, noise=False)
         result = run_sweep(settings, Parameters(), workers=args.workers)
+        for old in OUTPUT_FILES.files:  # the script's own generated docs (under git): the earlier maps go
+            (args.out / name / old).unlink(missing_ok=True)
         write_sweep(result, args.out / name, overwrite=True)
         results[name] = result
         print(f"{name}: {summarize(result.points)} in {result.wall_s:.0f} s", file=sys.stderr)
@@ -82,9 +85,9 @@ def main() -> None:
         f"by {sf}.",
         "",
     ]
-    (args.out / "claims.md").write_text("\n".join(lines))
+    write_atomic(args.out / "claims.md", "\n".join(lines), overwrite=True)
     summary = {"kept": kept, "held": held, "only_clp": only_clp, "only_sf": only_sf, "clp_larger": larger}
-    (args.out / "claims.json").write_text(json.dumps(summary, indent=1) + "\n")
+    write_atomic(args.out / "claims.json", json.dumps(summary, indent=1) + "\n", overwrite=True)
     print(json.dumps(summary))
 
 

@@ -198,3 +198,27 @@ def test_long_runs_as_single_runs(name: str) -> None:
     """10 s runs: limit cycles, dropouts and table points crossed many times."""
     x0, theta0, seeds = _grid(SEEDS)
     _check(registry, name, x0, theta0, seeds, duration_s=10.0)
+
+
+def test_the_single_rig_and_the_batch_follow_one_tick_schedule() -> None:
+    """``twin.daq.TickSchedule`` is the one home of the start timing and the output latency, which SimRig
+    and the batch's groups both build with ``twin.rig.tick_schedule``: a 50 ms free run (longer than a
+    period) with 5 ms latency, and the default 10 ms, in 1 ms steps."""
+    from twin.daq import BlockPlan, TickSchedule
+    from twin.rig import tick_schedule
+
+    params = Parameters().with_overrides({"start.free_run_s": 0.05, "daq.output_latency_s": 0.005})
+    schedule = tick_schedule(params)
+    assert (schedule.steps_per_tick, schedule.latency_steps, schedule.free_run_steps) == (20, 5, 50)
+    # The start block ends 20 ms before the first command: released at 0, the chain starts there.
+    assert schedule.held is False and schedule.chain_start_step == 0 and schedule.next_end_step == 30
+    assert schedule.next_block() == BlockPlan(10, 30, 10, None, 20)  # 10 steps unobserved, then the block
+    assert schedule.command_written() is False  # the command acts 5 steps later...
+    assert schedule.next_block() == BlockPlan(30, 50, 0, None, 20)
+    assert schedule.switch_at(20) == 5 and schedule.switch_at(20) is None  # ...5 steps into the next block
+    assert schedule.next_is_plain()
+    held = TickSchedule(20, 0, 10)  # the default 10 ms: the start block is half held
+    assert held.held and held.chain_start_step == -30
+    assert held.next_block() == BlockPlan(-30, -10, 0, -10, 0)
+    assert held.next_block() == BlockPlan(-10, 10, 0, 0, 10)
+    assert held.command_written() is True and held.next_is_plain()

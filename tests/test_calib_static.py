@@ -16,9 +16,8 @@ from calib.static import (
     calibrate_ball,
     calibrate_dac,
     load_table,
-    render_lines,
-    render_toml,
 )
+from calib.static_render import render_lines, render_toml
 from twin.parameters import Parameters
 
 X, V = TABLE_6_3_POSITION_M, TABLE_6_3_VOLTAGE_V

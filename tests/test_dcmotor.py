@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from twin.app import measurements
+from twin import measurements
 from twin.dcmotor import beam_torque_nm
 from twin.parameters import Parameters
 

@@ -3,6 +3,7 @@ follow from its model."""
 
 import numpy as np
 import pytest
+import scipy.linalg
 
 from controllers import thesis_numbers as T
 from controllers.design import (
@@ -10,9 +11,12 @@ from controllers.design import (
     ReducedObserver,
     check_poles,
     clp_gains,
+    lqi_design,
+    lqr_design,
     reduced_order_observer,
     sliding_surface,
     state_feedback_gain,
+    steady_state,
 )
 from controllers.laws import ClpTerms
 from twin.parameters import Parameters
@@ -126,3 +130,79 @@ def test_appendix_observer_is_the_voltage_model_observer_with_g_4_8() -> None:
     np.testing.assert_allclose(appendix.f, [[0.9207, -0.1601], [0.2927, 0.7494]], atol=2e-3)
     np.testing.assert_allclose(appendix.ga, [[-3.9409, -8.0826], [14.257, -11.945]], rtol=0.01)
     np.testing.assert_allclose(appendix.h[:, 0], [-0.0055, 0.0717], atol=5e-4)
+
+
+# --- LQR and LQI (controllers.design.lqr_design, lqi_design, steady_state) ------------------------------
+SCALE = np.array([0.1, 0.2, 0.5, 2.0])
+NOISE = (2e-3, 1e-3)
+
+
+def _voltage_model(params: Parameters) -> tuple[np.ndarray, np.ndarray]:
+    return ReferenceModel(params).discretize("voltage", params.daq.period_s)
+
+
+def test_lqr_design_solves_the_two_riccati_equations() -> None:
+    """K and the Kalman gain against scipy's Riccati solver (python-control's dlqr/dlqe are the design's)."""
+    phi, gamma = _voltage_model(Parameters())
+    d = lqr_design(
+        phi, gamma, state_scale=SCALE, input_scale_v=12.0, input_noise_v=0.5, measurement_noise=NOISE
+    )
+    q, r = np.diag(1.0 / SCALE**2), np.array([[1.0 / 12.0**2]])
+    p = scipy.linalg.solve_discrete_are(phi, gamma, q, r)
+    assert np.allclose(d.gain, np.linalg.solve(r + gamma.T @ p @ gamma, gamma.T @ p @ phi), rtol=1e-8)
+    h, rn = np.eye(2, 4), np.diag(np.square(NOISE))
+    p_prior = scipy.linalg.solve_discrete_are(phi.T, h.T, gamma @ gamma.T * 0.5**2, rn)
+    assert np.allclose(d.kalman_gain, p_prior @ h.T @ np.linalg.inv(h @ p_prior @ h.T + rn), rtol=1e-8)
+    assert max(abs(np.linalg.eigvals(phi - gamma @ d.gain))) < 1.0
+    assert max(abs(np.linalg.eigvals((np.eye(4) - d.kalman_gain @ h) @ phi))) < 1.0
+
+
+@pytest.mark.parametrize("setpoint_m", [0.1, -0.05])
+def test_a_pure_state_feedback_holds_the_balls_weight_with_a_steady_error(setpoint_m: float) -> None:
+    """lqr's linear steady state off centre: θ = 0, at rest, and the motor volts −K·(x − x_ref) are those
+    whose torque k_τ·V holds the ball's weight m·g·x on the beam: only a steady error gives them."""
+    params = Parameters()
+    phi, gamma = _voltage_model(params)
+    d = lqr_design(
+        phi, gamma, state_scale=SCALE, input_scale_v=12.0, input_noise_v=0.5, measurement_noise=NOISE
+    )
+    x_ref = np.array([setpoint_m, 0.0, 0.0, 0.0])
+    x = steady_state(phi, gamma, d.gain, x_ref)
+    assert np.allclose(x[1:], 0.0, atol=1e-12)
+    volts = -(d.gain @ (x - x_ref)).item()
+    weight_nm = params.ball.mass_kg * params.physics.gravity_m_s2 * x[0]
+    assert volts * params.motor.torque_per_volt_nm_per_v == pytest.approx(weight_nm, rel=1e-9)
+    assert abs(x[0] - setpoint_m) > 0.05 * abs(setpoint_m)  # a real error, not rounding
+
+
+def test_lqi_reaches_the_setpoint_in_the_linear_model() -> None:
+    """The augmented loop is stable and its equilibrium has the ball exactly at the setpoint, at rest, the
+    integrator supplying the volts that hold the ball's weight there."""
+    params = Parameters()
+    period_s = params.daq.period_s
+    phi, gamma = _voltage_model(params)
+    d = lqi_design(
+        phi,
+        gamma,
+        period_s,
+        state_scale=SCALE,
+        integral_scale_m_s=0.1,
+        input_scale_v=12.0,
+        input_noise_v=0.5,
+        measurement_noise=NOISE,
+    )
+    plain = lqr_design(
+        phi, gamma, state_scale=SCALE, input_scale_v=12.0, input_noise_v=0.5, measurement_noise=NOISE
+    )
+    assert np.array_equal(d.kalman_gain, plain.kalman_gain)
+    # ξ = (x, z): x⁺ = Φx + Γ(−K(x − x_ref) − k_i z), z⁺ = z + T(x₀ − r)
+    r = 0.1
+    e1 = np.eye(4)[:, :1]
+    a_cl = np.block([[phi - gamma @ d.gain, -gamma * d.integral_gain], [period_s * e1.T, np.ones((1, 1))]])
+    assert max(abs(np.linalg.eigvals(a_cl))) < 1.0
+    b_r = np.concatenate([(gamma @ d.gain @ e1)[:, 0] * r, [-period_s * r]])
+    xi = np.linalg.solve(np.eye(5) - a_cl, b_r)
+    assert xi[0] == pytest.approx(r, abs=1e-12) and np.allclose(xi[1:4], 0.0, atol=1e-12)
+    volts = -d.integral_gain * xi[4]
+    weight_nm = params.ball.mass_kg * params.physics.gravity_m_s2 * r
+    assert volts * params.motor.torque_per_volt_nm_per_v == pytest.approx(weight_nm, rel=1e-9)

@@ -3,7 +3,8 @@
     twin (core: physics, I/O chain, engine, verdict, viewer)  <  controllers  <  calib  <  twin.app
 
 Read from the source text (``ast``), so a lazy import inside a function counts too. Design code in
-``controllers.design`` imports no runtime code at all.
+``controllers.design`` imports no runtime code at all. The core's tests import nothing of ``twin.app`` but
+its command line.
 """
 
 import ast
@@ -61,6 +62,45 @@ def test_design_code_imports_no_runtime_code() -> None:
 def test_the_hardware_contract_carries_no_simulation_truth() -> None:
     text = (ROOT / "twin" / "interface.py").read_text(encoding="utf-8")
     assert "true_state" not in text and "mujoco" not in text
+
+
+# Core tests not named after one core module: the plant's rolling and its trajectory against the reference.
+CORE_PHYSICS_TESTS = ("test_rolling.py", "test_trajectory.py")
+# What a core test may use of the application layer: the command line, for its end-to-end command checks.
+CORE_TEST_MAY_USE = ("twin.app.cli",)
+
+
+def _core_tests() -> list[Path]:
+    """tests/test_<m>.py for every core module twin/<m>.py, and the core's physics tests."""
+    core = {p.stem for p in (ROOT / "twin").glob("*.py")}
+    return sorted(
+        p
+        for p in (ROOT / "tests").glob("test_*.py")
+        if p.stem.removeprefix("test_") in core or p.name in CORE_PHYSICS_TESTS
+    )
+
+
+def _app_imports(path: Path) -> list[str]:
+    return [
+        f"line {line}: {name}"
+        for line, name in _imports(path)
+        if _layer(name) == "twin.app" and name not in CORE_TEST_MAY_USE
+    ]
+
+
+@pytest.mark.parametrize("path", _core_tests(), ids=lambda p: p.name)
+def test_core_tests_use_no_application_layer(path: Path) -> None:
+    """The core is tested with the core: its tests' measurements live in twin.measurements."""
+    assert not _app_imports(path), f"{path.name} imports the application layer: {_app_imports(path)}"
+
+
+def test_the_core_tests_are_found_and_the_rule_bites(tmp_path: Path) -> None:
+    names = {p.name for p in _core_tests()}
+    assert {"test_sensors.py", "test_rig.py", "test_log.py", "test_rolling.py"} <= names
+    assert "test_cli.py" not in names and "test_sweep.py" not in names
+    bad = tmp_path / "test_sensors.py"
+    bad.write_text("from twin.app import measurements\nfrom twin.app.cli import main\n")
+    assert _app_imports(bad) == ["line 1: twin.app"]
 
 
 def test_the_check_sees_an_upward_import(tmp_path: Path) -> None:

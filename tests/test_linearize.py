@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from twin.app import measurements
+from twin import measurements
 from twin.app.cli import main
 from twin.reference import InputKind
 

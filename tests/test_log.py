@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import scipy.io
 
-from twin.app import measurements
+from twin import measurements
 from twin.log import THESIS_FIELDS, TRUTH_FIELDS, LogError, RunLog, load_csv, load_mat, save_csv, save_mat
 
 

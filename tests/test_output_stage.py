@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from twin.app import measurements
+from twin import measurements
 from twin.output_stage import amplifier_volts, motor_volts, motor_volts_of
 from twin.parameters import Parameters
 

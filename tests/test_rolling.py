@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from twin.app import measurements
+from twin import measurements
 from twin.parameters import Parameters
 from twin.plant import Plant
 

@@ -11,8 +11,8 @@ from thesis_data import TABLE_6_3_POSITION_M, TABLE_6_3_VOLTAGE_V
 
 from twin import converters as C
 from twin import daq as D
+from twin import measurements
 from twin import sensors as S
-from twin.app import measurements
 from twin.parameters import Parameters
 
 P = Parameters()

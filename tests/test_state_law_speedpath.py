@@ -1,5 +1,6 @@
 """The 1 kHz path of the laws on the true state: the state handed on as Python floats, the laws' ``of_floats``
-with numpy only for the BLAS products. The same bits as the laws' numpy formulas, the same errors."""
+in Python. The same bits as the laws' formulas with every sum of products written out left to right (no
+BLAS, whose kernel would choose the order: twin.fixedorder), the same errors."""
 
 import copy
 import math
@@ -19,14 +20,24 @@ from twin.rig import TwinRig
 TERMS = ClpTerms(T.CLP_ALPHA_XDD, T.CLP_ALPHA_THDD, T.CLP_ALPHA_THDD_X2, T.CLP_BETA)
 
 
-# The laws as numpy formulas on a state vector (what the laws computed before ``of_floats``).
+def _ltr(a, b) -> np.float64:
+    """a·b with numpy float64 scalars, products rounded and added left to right (written out here, not
+    twin.fixedorder's, so the laws' order is checked, not assumed)."""
+    acc = np.float64(a[0]) * np.float64(b[0])
+    for ai, bi in zip(a[1:], b[1:], strict=True):
+        acc = acc + np.float64(ai) * np.float64(bi)
+    return acc
+
+
+# The laws' formulas on a state vector (what ``of_floats`` must compute, bit for bit).
 def _sf(law: StateFeedbackLaw, x: np.ndarray) -> float:
-    return float(-(law.gain @ (x - np.array([law.ref_x_m, 0.0, 0.0, 0.0])))[0])
+    return float(-_ltr(law.gain[0], x - np.array([law.ref_x_m, 0.0, 0.0, 0.0])))
 
 
 def _clp(law: ClpLaw, x: np.ndarray) -> float:
     t = law.terms
-    tau_bar = -law.kp @ np.array([x[0] - law.ref_x_m, x[1]]) - law.kv @ x[2:]
+    minus_err = -np.array([x[0] - law.ref_x_m, x[1]])
+    tau_bar = [_ltr(law.kp[i], minus_err) - _ltr(law.kv[i], x[2:]) for i in range(2)]
     alpha = np.array([t.alpha_xdd, t.alpha_thdd + t.alpha_thdd_x2 * x[0] ** 2])
     b1, b2, b3, b4 = t.beta
     xm, th, xd, thd = x
@@ -37,13 +48,13 @@ def _clp(law: ClpLaw, x: np.ndarray) -> float:
         + b4 * xm * thd**2
         + t.beta_thetadot * thd
     )
-    return float(alpha @ tau_bar + beta)
+    return float(_ltr(alpha, tau_bar) + beta)
 
 
 def _smc(law: SlidingModeLaw, x: np.ndarray) -> float:
-    s = float((law.surface @ x)[0])
+    s = float(_ltr(law.surface[0], x))
     k = np.where(s * x > 0, law.k_minus, law.k_plus)
-    return float(-(law.equivalent_gain @ x)[0] + k @ x - law.eta * np.sign(s))
+    return float(-_ltr(law.equivalent_gain[0], x) + _ltr(k, x) - law.eta * np.sign(s))
 
 
 def _states(n: int) -> np.ndarray:

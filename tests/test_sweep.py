@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import twin.app.fanout as fanout
-import twin.app.sweep as sweep_module
+import twin.app.sweep_render as sweep_render_module
 from controllers import registry
 from twin.app.cli import main
 from twin.app.sweep import (
@@ -20,10 +20,10 @@ from twin.app.sweep import (
     SweepSettings,
     parse_range,
     point_seeds,
-    render_map,
     run_sweep,
     write_sweep,
 )
+from twin.app.sweep_render import render_map
 from twin.engine import run_closed_loop
 from twin.parameters import ParameterError
 
@@ -148,13 +148,13 @@ def test_the_map_and_json_are_written_atomically(tmp_path: Path) -> None:
     def broken(result, path):
         raise RuntimeError("disk full")
 
-    sweep_module_render = sweep_module.render_map
+    sweep_module_render = sweep_render_module.render_map
     try:
-        sweep_module.render_map = broken  # type: ignore[assignment]
+        sweep_render_module.render_map = broken  # type: ignore[assignment]
         with pytest.raises(RuntimeError):
             write_sweep(result, out, overwrite=True)
     finally:
-        sweep_module.render_map = sweep_module_render
+        sweep_render_module.render_map = sweep_module_render
     assert (out / "mine.txt").read_text() == "kept"  # a failed write leaves the old directory
     assert render_map is sweep_module_render
 

@@ -2,7 +2,7 @@
 
 import pytest
 
-from twin.app import measurements
+from twin import measurements
 
 
 @pytest.mark.parametrize("x0", [(0.15, 0.1, 0.0, 0.0), (-0.2, 0.3, 0.0, 0.0)])

@@ -26,6 +26,7 @@ import viser
 import websockets.exceptions
 import websockets.sync.client
 import zstandard
+from viewer_stubs import StubCatalogue
 
 import twin.viewer as viewer_module
 from controllers import registry
@@ -41,6 +42,7 @@ from twin.viewer import (
     owe,
     serve,
 )
+from twin.viewer.security import control_uuid, download_bytes_queued
 
 PROTOCOL = f"viser-v{viser.__version__}"
 CAMERA = {
@@ -77,15 +79,14 @@ class _Failing(Controller):
         return self.failure
 
 
-class _Catalogue:
-    NAMES = (*registry.NAMES, "test-nan", "test-raises")
-
-    def make(self, name: str, params: Parameters | None = None) -> Any:
-        if name == "test-nan":
-            return _Failing(name, math.nan)
-        if name == "test-raises":
-            return _Failing(name, RuntimeError("boom"))
-        return registry.make(name, params)
+class _Catalogue(StubCatalogue):
+    def __init__(self) -> None:
+        super().__init__(
+            {
+                "test-nan": lambda params: _Failing("test-nan", math.nan),
+                "test-raises": lambda params: _Failing("test-raises", RuntimeError("boom")),
+            }
+        )
 
 
 CATALOGUE = _Catalogue()
@@ -189,7 +190,7 @@ def test_good_values_are_applied(live: LiveTwin) -> None:
         False,
     )
     assert live.runs == runs + 1 and live.rig.true_state()[0] == -0.2
-    assert live.controller.law.ref_x_m == 0.1  # lqr follows the setpoint
+    assert live.controller.setpoint_m == 0.1  # lqr follows the setpoint
 
 
 def test_the_controls_follow_a_narrowed_track_and_stops() -> None:
@@ -381,7 +382,7 @@ class Server:
         self.live: LiveTwin = self.viewer.live
 
     def uuid(self, control: str) -> str:
-        return self.viewer.controls[control]._impl.uuid
+        return control_uuid(self.viewer.controls[control])
 
     def assert_alive_and_ticking(self) -> None:
         """The server thread runs, and the simulated time advances at 50 Hz ± 1 % (×1): the slope of the
@@ -398,7 +399,7 @@ class Server:
             ]:
                 live.enqueue(action, value)
             _wait(
-                lambda: live.runs > runs and live.actions.empty() and live.running and live.speed == 1.0,
+                lambda: live.runs > runs and live.pending_actions == 0 and live.running and live.speed == 1.0,
                 what="a running twin",
             )
             time.sleep(0.3)  # building the new run's model held the loop; it has caught up since
@@ -700,6 +701,45 @@ def test_a_client_that_never_reads_does_not_stall_the_twin(server: Server, clien
         stalled.close()
 
 
+def _rss_mib() -> float:
+    for line in open("/proc/self/status").read().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) / 1024
+    return math.nan
+
+
+@pytest.mark.slow
+def test_250_download_clicks_from_a_browser_that_does_not_read_hold_a_file_or_two(
+    server: Server, client: Client, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Each click used to queue another copy of the record for the browser (250 clicks of a full record:
+    +985 MB): now a click while the last file still waits for that browser sends nothing. The file is a full
+    record's size (3.9 MB: 10 min of 17 columns), so that the socket's own buffers cannot take it."""
+    live, viewer = server.live, server.viewer
+    payload = np.random.default_rng(0).bytes(3_871_496)  # incompressible, as a .mat of noisy data
+    monkeypatch.setattr(live, "recording", lambda kind: ("ballbeam_run.mat", payload))
+    stalled = Client(server, read=False)
+    try:
+        clients = viewer.server.get_clients()
+        handle = clients[max(clients)]  # the stalled client's
+        refused, applied, rss = viewer.panels.downloads_refused, live.actions_applied, _rss_mib()
+        for _ in range(250):
+            stalled.click("download_mat")
+        _wait(lambda: live.pending_actions == 0 and live.actions_applied >= applied + 250, 30.0, "the clicks")
+        time.sleep(0.5)
+        sent = 250 - (viewer.panels.downloads_refused - refused)
+        # The first files go: into the sockets' kernel buffers, into the frame viser is writing; then one waits
+        # in the client's buffer and every later click sends nothing.
+        assert 1 <= sent <= 5
+        assert download_bytes_queued(handle) <= 2 * len(payload)
+        # A file in flight is held about four times (the parts, msgpack's frame, zstd's, the socket's): at most
+        # five of them, where 250 queued copies came to about a gigabyte.
+        assert _rss_mib() - rss < 4 * 5 * len(payload) / 2**20
+        server.assert_alive_and_ticking()
+    finally:
+        stalled.close()
+
+
 @pytest.mark.slow
 def test_a_flood_of_refused_values(server: Server, client: Client) -> None:
     live = server.live
@@ -710,7 +750,7 @@ def test_a_flood_of_refused_values(server: Server, client: Client) -> None:
     quiet = live.refused
     while True:  # until the flood is over: no refusal for half a second
         time.sleep(0.5)
-        if live.refused == quiet and live.actions.empty():
+        if live.refused == quiet and live.pending_actions == 0:
             break
         quiet = live.refused
     assert live.speed == 1.0 and server.viewer.controls["speed"].value == 1.0

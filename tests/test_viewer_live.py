@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from viewer_stubs import StubCatalogue
 
 from controllers import registry
 from twin.engine import run_closed_loop, update_ticks
@@ -14,7 +15,7 @@ from twin.viewer import LiveTwin, parameter_changes, verdict_text
 
 
 def _live(controller: str = "appendix-clp", **kwargs: object) -> LiveTwin:
-    return LiveTwin(Parameters(), registry, controller, seed=0, speed=1.0, **kwargs)  # type: ignore[arg-type]
+    return LiveTwin(Parameters(), StubCatalogue(), controller, seed=0, speed=1.0, **kwargs)  # type: ignore[arg-type]
 
 
 def _run(live: LiveTwin, seconds: float) -> None:
@@ -97,7 +98,7 @@ def test_the_record_is_the_runs_log(kind: str, tmp_path) -> None:
 
 
 def test_the_record_is_bounded(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr("twin.viewer.RECORD_LIMIT_S", 0.1)
+    monkeypatch.setattr("twin.viewer.session.RECORD_LIMIT_S", 0.1)
     live = _live()
     _run(live, 0.5)
     assert live.loop.log().k == 6  # 0.1 s / 20 ms + 1: the first ticks; the run goes on

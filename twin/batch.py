@@ -9,8 +9,9 @@
     controllers       a ``BatchController`` from the catalogue's optional ``make_batch`` (numpy over the
                       batch), otherwise one scalar ``Controller`` per run called in a loop
 
-The tick sequence (start timing, held rig, free run, output latency, lost ball, recording, verdict) is
-``twin.rig.SimRig._read``/``write`` and ``twin.engine.ClosedLoop`` step for step; a test checks every log
+The tick sequence follows the single rig's ``twin.daq.TickSchedule`` (start timing, held rig, free run,
+output latency: the same object type, so the same plan), its ideal converters are ``IdealSensors.read_v``,
+and lost ball, recording and verdict are ``twin.engine.ClosedLoop``'s step for step; a test checks every log
 array and the verdict against single runs. Runs whose lost ball ends them (``stop_when_lost``) leave the
 batch. Laws on the true state (``StateLaw``) and the reference plant run one by one through
 ``run_closed_loop``.
@@ -20,7 +21,7 @@ from __future__ import annotations
 
 import math
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
@@ -28,7 +29,6 @@ import mujoco
 import numpy as np
 from mujoco import batch as mjbatch
 
-from twin.converters import angle_volts_v, ball_volts_v
 from twin.daq import block_time_s
 from twin.engine import (
     Catalogue,
@@ -47,9 +47,16 @@ from twin.interface import Controller, DaqSample
 from twin.log import THESIS_FIELDS, TRUTH_FIELDS, RunLog
 from twin.output_stage import amplifier_volts, motor_volts
 from twin.parameters import Daq, Parameters
-from twin.plant import Plant
-from twin.rig import PlantKind, RigError, whole_steps
-from twin.sensors import BallChainBatch, angle_block_means_v
+from twin.plant import (
+    Plant,
+    beyond_stops,
+    failure_time_s,
+    numerical_failure,
+    stop_overshoot_bound_rad,
+    warning_text,
+)
+from twin.rig import PlantKind, RigError, tick_schedule
+from twin.sensors import BallChainBatch, IdealSensors, angle_block_means_v
 from twin.verdict import Criteria
 
 __all__ = [
@@ -178,6 +185,7 @@ def run_batch(
     record: bool = False,
     vectorized: bool = True,
     controller_timeout_s: float | None = None,
+    progress: Callable[[float], None] | None = None,
 ) -> list[RunResult]:
     """Run controller ``name`` from each (x0_m[i], theta0_rad[i]) with noise seed seeds[i]: element i is
     ``run_closed_loop(catalogue.make(name, params_i), x0_m=x0_m[i], …, seed=seeds[i], …)`` bit for bit.
@@ -187,7 +195,9 @@ def run_batch(
     threads (default: every CPU). ``record``: keep each run's log (17 arrays per run); without it a result's
     ``log`` is not kept (``RunResult.recorded`` is false) and only the verdict is. ``vectorized=False``
     calls one scalar controller per run even when the catalogue has a batched one (for tests).
-    ``controller_timeout_s``: the watchdog's budget per call of a scalar controller (``twin.guard``)."""
+    ``controller_timeout_s``: the watchdog's budget per call of a scalar controller (``twin.guard``). ``progress``
+    is called as the runs advance with how many are done, a float: a group's runs advance together, so k of
+    its T ticks count k/T of each (a job's progress moves before its batch ends; it changes no number)."""
     x0 = np.asarray(x0_m, dtype=float).reshape(-1)
     th0 = np.asarray(theta0_rad, dtype=float).reshape(-1)
     seed_arr = np.asarray(seeds).reshape(-1)
@@ -209,23 +219,27 @@ def run_batch(
     probe = catalogue.make(name, run_params[0])
     if plant != "twin" or (not isinstance(probe, Controller) and isinstance(probe, StateLaw)):
         # The reference plant and the 1 kHz laws on the true state stay on the single-run path.
-        return [
-            run_closed_loop(
-                catalogue.make(name, run_params[i]),
-                x0_m=float(x0[i]),
-                theta0_rad=float(th0[i]),
-                duration_s=duration_s,
-                seed=int(seed_arr[i]),
-                noise=noise,
-                params=run_params[i],
-                plant=plant,
-                ideal_sensors=ideal_sensors,
-                stop_when_lost=stop_when_lost,
-                criteria=criteria,
-                controller_timeout_s=controller_timeout_s,
+        singles = []
+        for i in range(n):
+            singles.append(
+                run_closed_loop(
+                    catalogue.make(name, run_params[i]),
+                    x0_m=float(x0[i]),
+                    theta0_rad=float(th0[i]),
+                    duration_s=duration_s,
+                    seed=int(seed_arr[i]),
+                    noise=noise,
+                    params=run_params[i],
+                    plant=plant,
+                    ideal_sensors=ideal_sensors,
+                    stop_when_lost=stop_when_lost,
+                    criteria=criteria,
+                    controller_timeout_s=controller_timeout_s,
+                )
             )
-            for i in range(n)
-        ]
+            if progress is not None:
+                progress(float(i + 1))
+        return singles
     results: list[RunResult | None] = [None] * n
     noisy: dict[int, Parameters] = {}  # the rig's parameters (noise switched as asked), per distinct object
     groups: dict[tuple, list[int]] = {}
@@ -234,6 +248,7 @@ def run_batch(
             noisy[id(p)] = p.with_overrides({"ball_sensor.noise_enabled": bool(noise)})
         groups.setdefault(_io_key(noisy[id(p)]), []).append(i)
     threads = (os.cpu_count() or 1) if nthread is None else int(nthread)
+    runs_before = 0  # the runs of the groups already run (progress)
     for idx in groups.values():
         rows = np.array(idx)
         make_batch = getattr(catalogue, "make_batch", None) if vectorized else None
@@ -254,9 +269,16 @@ def run_batch(
             nthread=threads,
             record=record,
         )
-        for j, result in enumerate(group.run(controller, duration_s, stop_when_lost, criteria)):
+        on_tick = None if progress is None else _group_progress(progress, runs_before, len(idx))
+        for j, result in enumerate(group.run(controller, duration_s, stop_when_lost, criteria, on_tick)):
             results[idx[j]] = result
+        runs_before += len(idx)
     return [r for r in results if r is not None]
+
+
+def _group_progress(progress: Callable[[float], None], before: int, size: int) -> Callable[[int, int], None]:
+    """A group's tick k of T as the batch's runs done: the groups before it, and k/T of its own runs."""
+    return lambda k, ticks: progress(before + size * k / ticks)
 
 
 def _io_key(p: Parameters) -> tuple:
@@ -311,11 +333,8 @@ class _Group:
         self.x0 = x0
         dt = p.physics.timestep_s
         self.dt = dt
-        self.steps_per_tick = whole_steps(p.daq.period_s, dt, "daq.period_s")
-        if self.steps_per_tick < 1:
-            raise RigError(f"daq.period_s = {p.daq.period_s!r} s is shorter than one physics step")
-        self.latency_steps = whole_steps(p.daq.output_latency_s, dt, "daq.output_latency_s")
-        free_run_steps = whole_steps(p.start.free_run_s, dt, "start.free_run_s")
+        self.schedule = tick_schedule(p)  # the single rig's schedule (held, free run, release, latency)
+        self.steps_per_tick = self.schedule.steps_per_tick
         # One Plant per distinct physics: its model for the batch, its geometry for the numpy stages.
         plants: dict[Parameters, Plant] = {}
         for q in params:
@@ -336,21 +355,21 @@ class _Group:
         if len(self.distinct) > 1:
             self.batch.set_models([plant.model for plant in self.plants])
         self.batch.state[:] = states
+        # Each run's furthest physical beam angle (Plant._check_numerics): past it, a numerical failure.
+        self.theta_limit_rad = np.array([q.beam.stop_angle_rad + stop_overshoot_bound_rad(q) for q in params])
         plant0 = self.distinct[0]
         assert plant0._hinge_qpos is not None
         self.theta_col = 1 + plant0._hinge_qpos
         self.ball_col = 1 + plant0._ball_qpos
         # SimRig.reset
         self.held = np.stack([x0, theta0, np.zeros(n), np.zeros(n)], axis=1)
-        self.next_end_step = free_run_steps - self.steps_per_tick
-        self.steps_done = 0
         self.physics_time_s = float(self.last_row[0, 0])
-        chain_start = min(self.next_end_step - self.steps_per_tick, 0)
+        chain_start = self.schedule.chain_start_step
         self.ball = None if ideal_sensors else BallChainBatch(p, seeds, x0, chain_start * dt)
+        self.ideal_sensors = IdealSensors(p)
         self.command_v = np.full(n, p.amplifier.zero_command_v)
         self.applied_v = np.full(n, self._motor_volts_for(self.command_v))
         self.pending_v = self.applied_v.copy()
-        self.switch_in_steps: int | None = None
         self.lost = np.zeros(n, dtype=bool)
         self.lost_time_s: list[float | None] = [None] * n
         self.lost_state = np.full((n, 4), math.nan)
@@ -372,23 +391,16 @@ class _Group:
         self.command_v[live] = command_v
         volts = self._motor_volts_for(command_v)
         self.pending_v[live] = volts
-        if self.latency_steps == 0:
+        if self.schedule.command_written():
             self.applied_v[live] = volts
-            self.switch_in_steps = None
-        else:
-            self.switch_in_steps = self.latency_steps
 
     def _step_volts(self, n: int) -> np.ndarray:
         live = self.live
         volts = np.repeat(self.applied_v[live][:, None], n, axis=1)
-        if self.switch_in_steps is not None:
-            k = self.switch_in_steps
-            if k < n:
-                volts[:, k:] = self.pending_v[live][:, None]
-                self.applied_v[live] = self.pending_v[live]
-                self.switch_in_steps = None
-            else:
-                self.switch_in_steps = k - n
+        k = self.schedule.switch_at(n)
+        if k is not None:
+            volts[:, k:] = self.pending_v[live][:, None]
+            self.applied_v[live] = self.pending_v[live]
         return volts
 
     def _advance(self, volts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -396,10 +408,13 @@ class _Group:
         live, m = self.live, volts.shape[1]
         t0 = self.physics_time_s
         out = self.batch.rollout(m, control=volts[:, :, None], record=(_FULL,), ids=live)[_FULL]
+        self._check_numerics(t0, out)
         last = out[:, -1]
         if not np.isfinite(last).all():
             i = int(live[np.flatnonzero(~np.isfinite(last).all(axis=1))[0]])
-            raise FloatingPointError(f"run {i}: MuJoCo state is not finite at t = {float(last[0, 0]):.3f} s")
+            raise numerical_failure(
+                self.plants[i].params, f"run {i}: the MuJoCo state is not finite", float(last[0, 0])
+            )
         if not (last[:, 0] == last[0, 0]).all():
             raise RuntimeError("the runs of a batch fell out of step")
         theta = np.concatenate(
@@ -434,16 +449,38 @@ class _Group:
         times = t0 + np.arange(m + 1) * self.dt  # as Plant.advance: its clock plus the step offsets
         return times, along, theta, on
 
+    def _check_numerics(self, t0: float, out: np.ndarray) -> None:
+        """Plant._check_numerics for every live run: a NumericalError for the first run MuJoCo warned in
+        (a simulation that warns stops stepping: its clock stops) or whose beam went past its stops further
+        than they can yield."""
+        live = self.live
+        warned = np.flatnonzero(self.batch.warning[live, :, 1].any(axis=1))  # (lastinfo, number) per warning
+        theta = np.abs(out[:, :, self.theta_col])
+        past = np.flatnonzero((theta > self.theta_limit_rad[live, None]).any(axis=1))
+        if not (warned.size or past.size):
+            return
+        run = f"run {int(live[(warned if warned.size else past)[0]])}: " if self.n > 1 else ""
+        if warned.size:
+            j = int(warned[0])
+            i = int(live[j])
+            counts = dict(enumerate(self.batch.warning[i, :, 1].tolist()))
+            error = numerical_failure(
+                self.plants[i].params, warning_text(counts), failure_time_s(np.r_[t0, out[j, :, 0]])
+            )
+        else:
+            j = int(past[0])
+            i = int(live[j])
+            k = int(np.flatnonzero(theta[j] > self.theta_limit_rad[i])[0])
+            error = beyond_stops(self.plants[i].params, float(theta[j, k]), float(out[j, k, 0]))
+        raise type(error)(run + str(error))
+
     def read(self) -> BatchSamples:
-        """SimRig._read for every live run."""
+        """SimRig._read for every live run: the same ``TickSchedule`` plan, the pieces as arrays over the runs."""
         p, live = self.p, self.live
-        end = self.next_end_step
-        start = end - self.steps_per_tick
-        t_start = start * self.dt if start < 0 else self.physics_time_s
-        n_free = end - max(start, 0) if end > 0 else 0
-        if start > self.steps_done:  # released before this block begins: run free up to it, unobserved
-            pre_t, pre_x, _, pre_on = self._advance(self._step_volts(start - self.steps_done))
-            self.steps_done = start
+        plan = self.schedule.next_block()
+        t_start = plan.start_step * self.dt if plan.start_step < 0 else self.physics_time_s
+        if plan.free_steps:  # released before this block begins: run free up to it, unobserved
+            pre_t, pre_x, _, pre_on = self._advance(self._step_volts(plan.free_steps))
             t_start = self.physics_time_s
             if self.ball is not None:
                 self.ball.advance(live, pre_t, pre_x, pre_on)
@@ -451,39 +488,33 @@ class _Group:
         xs: list[np.ndarray] = []
         thetas: list[np.ndarray] = []
         ons: list[np.ndarray] = []
-        if start < 0:  # the held rig, until release at t = 0 (or the block's end)
-            if self.switch_in_steps is not None:
-                self.switch_in_steps = max(0, self.switch_in_steps - (min(end, 0) - start))
-            times.append(np.array([t_start, min(end, 0) * self.dt]))
+        if plan.held_end_step is not None:  # the held rig, until release at t = 0 (or the block's end)
+            times.append(np.array([t_start, plan.held_end_step * self.dt]))
             xs.append(np.repeat(self.held[live, 0:1], 2, axis=1))
             thetas.append(np.repeat(self.held[live, 1:2], 2, axis=1))
             ons.append(np.ones((len(live), 2), dtype=bool))
-        if n_free:
-            t, x, th, on = self._advance(self._step_volts(n_free))
+        if plan.observed_steps:
+            t, x, th, on = self._advance(self._step_volts(plan.observed_steps))
             skip = 1 if times else 0  # consecutive pieces share their joining entry (rig._join)
             times.append(t[skip:])
             xs.append(x[:, skip:])
             thetas.append(th[:, skip:])
             ons.append(on[:, skip:])
-            self.steps_done += n_free
         block_t = np.concatenate(times)
         block_x = np.concatenate(xs, axis=1)
         block_theta = np.concatenate(thetas, axis=1)
         block_on = np.concatenate(ons, axis=1)
         self.block_theta, self.block_on = block_theta, block_on
         if self.ball is None:
-            sw = p.software
-            ball_v = np.asarray(ball_volts_v(block_x[:, -1], sw))
-            angle_v = np.asarray(angle_volts_v(block_theta[:, -1] - p.angle_sensor.zeroing_error_rad, sw))
+            ball_v, angle_v = self.ideal_sensors.read_v(block_x[:, -1], block_theta[:, -1])
         else:
             angle_v = angle_block_means_v(block_t, block_theta, p)
             ball_v = self.ball.advance(live, block_t, block_x, block_on)
-        self.next_end_step = end + self.steps_per_tick
         return BatchSamples(time_s=block_time_s(t_start, p.daq), ball_v=ball_v, angle_v=angle_v)
 
     @property
     def held_now(self) -> bool:
-        return self.next_end_step - self.steps_per_tick < 0
+        return self.schedule.held
 
     def true_state(self) -> np.ndarray:
         """SimRig.true_state for every live run (n_live, 4)."""
@@ -503,7 +534,7 @@ class _Group:
     @property
     def time_s(self) -> float:
         if self.held_now:
-            return (self.next_end_step - self.steps_per_tick) * self.dt
+            return self.schedule.next_start_step * self.dt
         return self.physics_time_s
 
     # --- the closed loop ----------------------------------------------------------------------------------
@@ -533,7 +564,12 @@ class _Group:
         cols.peak_theta[k, live] = np.max(np.abs(np.where(self.block_on, self.block_theta, 0.0)), axis=1)
 
     def run(
-        self, controller: BatchController, duration_s: float, stop_when_lost: bool, criteria: Criteria | None
+        self,
+        controller: BatchController,
+        duration_s: float,
+        stop_when_lost: bool,
+        criteria: Criteria | None,
+        on_tick: Callable[[int, int], None] | None = None,
     ) -> list[RunResult]:
         p = self.p
         if abs(controller.period_s - p.daq.period_s) > _PERIOD_TOLERANCE_S:
@@ -574,6 +610,8 @@ class _Group:
             self.write(command)
             self._add(k, cols, samples, controller)
             rows_done[self.live] = k + 1
+            if on_tick is not None:
+                on_tick(k, ticks)
             if stop_when_lost:
                 going = ~self.lost[self.live]
                 if not going.all():

@@ -24,6 +24,7 @@ from __future__ import annotations
 import functools
 import math
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -33,6 +34,8 @@ from twin.parameters import Daq
 __all__ = [
     "ANGLE_CHANNEL",
     "BALL_CHANNEL",
+    "BlockPlan",
+    "TickSchedule",
     "adc_code",
     "adc_lsb_v",
     "adc_quantize_v",
@@ -144,3 +147,97 @@ def software_block_reading_v(data_v: np.ndarray, daq: Daq) -> tuple[float, float
             f"data_v has shape {data.shape}: a block is ({daq.block_size}, 2) (samples, channels)"
         )
     return float(data[-1, BALL_CHANNEL]), float(np.mean(data[:, ANGLE_CHANNEL]))
+
+
+@dataclass(frozen=True)
+class BlockPlan:
+    """One block's physics, in this order: ``free_steps`` unobserved steps (the rig released before the
+    block begins), the held rig from ``start_step`` to ``held_end_step`` (a block that begins before release),
+    then ``observed_steps`` physics steps up to the block's end. Steps count from release (t = 0)."""
+
+    start_step: int
+    end_step: int
+    free_steps: int
+    held_end_step: int | None
+    observed_steps: int
+
+
+class TickSchedule:
+    """When the DAQ's blocks end and when a command reaches the motor, in physics steps from release: the one
+    home of the start timing (held rig, free run, release) and the output latency, which the single rig
+    (``twin.rig.SimRig``) and the batch (``twin.batch``) both follow.
+
+    After ``reset`` the rig is held; block k = −1 (the one ``Controller.start`` reads) ends at
+    free_run − T, block k at free_run + k·T; the rig is released at step 0. A command written takes effect
+    ``latency_steps`` physics steps later (at once without latency); the latency runs on while the rig is
+    held."""
+
+    def __init__(self, steps_per_tick: int, latency_steps: int, free_run_steps: int) -> None:
+        self.steps_per_tick = steps_per_tick
+        self.latency_steps = latency_steps
+        self.free_run_steps = free_run_steps
+        self.reset()
+
+    def reset(self) -> None:
+        # The next block (the one Controller.start reads) ends one period before the first command.
+        self.next_end_step = self.free_run_steps - self.steps_per_tick
+        # The ball chain starts at the start block's beginning, or at release if the rig runs free before it
+        # (a free run longer than one period).
+        self.chain_start_step = min(self.next_end_step - self.steps_per_tick, 0)
+        self.steps_done = 0  # physics steps since release
+        self.switch_in_steps: int | None = None  # steps until the pending command takes effect
+
+    @property
+    def next_start_step(self) -> int:
+        return self.next_end_step - self.steps_per_tick
+
+    @property
+    def held(self) -> bool:
+        """Whether the rig is still held (the blocks read so far end before release)."""
+        return self.next_end_step - self.steps_per_tick < 0
+
+    def next_is_plain(self) -> bool:
+        """Whether the next block is one control period from where the physics stands, after release, with no
+        command on its way (the common tick: ``plain_block`` then, not ``next_block``)."""
+        return (
+            self.next_end_step - self.steps_per_tick == self.steps_done >= 0 and self.switch_in_steps is None
+        )
+
+    def plain_block(self) -> None:
+        """Move past a plain block (see ``next_is_plain``)."""
+        self.steps_done = self.next_end_step
+        self.next_end_step += self.steps_per_tick
+
+    def next_block(self) -> BlockPlan:
+        """The next block's plan; the schedule moves past it (the latency's countdown over a held stretch
+        included: run the plan's free and observed steps with ``switch_at``)."""
+        end = self.next_end_step
+        start = end - self.steps_per_tick
+        free = start - self.steps_done if start > self.steps_done else 0
+        held_end = min(end, 0) if start < 0 else None
+        if held_end is not None and self.switch_in_steps is not None:  # the latency runs on while held
+            self.switch_in_steps = max(0, self.switch_in_steps - (held_end - start))
+        observed = end - max(start, 0) if end > 0 else 0
+        self.steps_done = max(self.steps_done, start) + observed
+        self.next_end_step = end + self.steps_per_tick
+        return BlockPlan(start, end, free, held_end, observed)
+
+    def command_written(self) -> bool:
+        """A command was written: whether it acts at once (no latency; else after ``latency_steps``)."""
+        if self.latency_steps == 0:
+            self.switch_in_steps = None
+            return True
+        self.switch_in_steps = self.latency_steps
+        return False
+
+    def switch_at(self, n: int) -> int | None:
+        """For the next ``n`` physics steps: the step (0 … n − 1) from which the pending command acts, or
+        None (no command pending, or it acts later)."""
+        k = self.switch_in_steps
+        if k is None:
+            return None
+        if k < n:
+            self.switch_in_steps = None
+            return k
+        self.switch_in_steps = k - n
+        return None

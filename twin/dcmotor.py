@@ -19,10 +19,11 @@ __all__ = ["beam_torque_nm", "torque_nm", "volts_for_torque_v"]
 def torque_nm(
     volts: float | np.ndarray,
     rate_rad_s: float | np.ndarray,
-    torque_per_volt: float,
-    backemf_v_s_per_rad: float,
+    torque_per_volt: float | np.ndarray,
+    backemf_v_s_per_rad: float | np.ndarray,
 ) -> float | np.ndarray:
-    """τ = k_τ·(V − k_b·θ̇) (eq 3.3.1) with the constants given."""
+    """τ = k_τ·(V − k_b·θ̇) (eq 3.3.1) with the constants given (arrays broadcast: the fit's batch of
+    parameter values)."""
     return torque_per_volt * (volts - backemf_v_s_per_rad * rate_rad_s)
 
 

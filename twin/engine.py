@@ -243,7 +243,6 @@ class RunResult:
 
 
 _COLUMNS = tuple(name for name in THESIS_FIELDS + TRUTH_FIELDS if name != "ball_lost")
-_ESTIMATE = slice(_COLUMNS.index("x1"), _COLUMNS.index("x4") + 1)
 _TRUE_TIME = _COLUMNS.index("true_time_s")
 _TRUE_STATE = slice(_COLUMNS.index("true_x_m"), _COLUMNS.index("true_thetadot_rad_s") + 1)
 

@@ -32,18 +32,14 @@ from __future__ import annotations
 
 import csv
 import io
-import os
-import shutil
-import stat
-import tempfile
-from collections.abc import Iterator
-from contextlib import contextmanager
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import BinaryIO
 
 import numpy as np
 import scipy.io
+
+from twin.outputs import atomic_output
 
 __all__ = [
     "OPTIONAL_FIELDS",
@@ -52,9 +48,6 @@ __all__ = [
     "TRUTH_FIELDS",
     "LogError",
     "RunLog",
-    "atomic_directory",
-    "atomic_output",
-    "check_output_directory",
     "load_csv",
     "load_mat",
     "save_csv",
@@ -140,106 +133,6 @@ class RunLog:
         return int(self.timem.size)
 
 
-def _exists_error(path: Path) -> FileExistsError:
-    return FileExistsError(f"{path}: exists; not overwritten (pass overwrite=True)")
-
-
-def _umask() -> int:
-    umask = os.umask(0)
-    os.umask(umask)
-    return umask
-
-
-def _file_mode(path: Path) -> int:
-    """The mode of the file being replaced, or a new file's (0o666 less the umask)."""
-    try:
-        return stat.S_IMODE(os.stat(path).st_mode)
-    except OSError:
-        return 0o666 & ~_umask()
-
-
-@contextmanager
-def atomic_output(path: str | Path, *, overwrite: bool = False) -> Iterator[BinaryIO]:
-    """A binary file to write ``path`` through, atomically: the data goes to a temporary file in the same
-    directory, which replaces ``path`` in one step (``os.replace``) when the block ends without error. On
-    an error the temporary file is removed and whatever was at ``path`` is left as it was. Without
-    ``overwrite`` an existing ``path`` is refused (``FileExistsError``), also one that appears meanwhile
-    (the file is linked into place, which fails on an existing name)."""
-    path = Path(path)
-    if not overwrite and os.path.lexists(path):
-        raise _exists_error(path)
-    try:
-        fd, tmp_name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    except OSError as exc:  # name the file asked for, not the temporary one
-        raise type(exc)(exc.errno, exc.strerror, str(path)) from None
-    tmp = Path(tmp_name)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            yield fh
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.chmod(tmp, _file_mode(path))
-        if overwrite:
-            os.replace(tmp, path)
-            return
-        try:
-            os.link(tmp, path)  # fails if path exists: a file created since the check is not replaced
-        except FileExistsError:
-            raise _exists_error(path) from None
-        except OSError:  # no hard links on this file system
-            if os.path.lexists(path):
-                raise _exists_error(path) from None
-            os.replace(tmp, path)
-            return
-    except BaseException:
-        try:
-            tmp.unlink()
-        except OSError:
-            pass
-        raise
-    try:  # linked into place: the temporary name goes
-        tmp.unlink()
-    except OSError:
-        pass
-
-
-def check_output_directory(path: str | Path, *, overwrite: bool = False) -> Path:
-    """Refuse an existing ``path`` unless ``overwrite`` (and then only a directory), and a parent folder
-    that does not exist. Call it before a long job: nothing is computed for an output that cannot be
-    written."""
-    out = Path(path)
-    if os.path.lexists(out) and not overwrite:
-        raise FileExistsError(f"{out}: exists; not overwritten (pass --overwrite)")
-    if os.path.lexists(out) and not out.is_dir():
-        raise FileExistsError(f"{out}: exists and is not a directory")
-    parent = out.resolve().parent
-    if not parent.is_dir():
-        raise FileNotFoundError(f"{out}: its folder {parent} does not exist")
-    return out
-
-
-@contextmanager
-def atomic_directory(path: str | Path, *, overwrite: bool = False) -> Iterator[Path]:
-    """A new directory to write ``path``'s files into, which replaces ``path`` when the block ends without
-    error (renames in the same folder). On an error it is removed and ``path`` is left as it was."""
-    out = check_output_directory(path, overwrite=overwrite)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.resolve().parent))
-    try:
-        os.chmod(tmp, _file_mode(out) | 0o111 if out.exists() else 0o777 & ~_umask())  # mkdtemp makes it 0700
-        yield tmp
-        if out.exists():
-            old = Path(tempfile.mkdtemp(prefix=f".{out.name}.old.", dir=out.resolve().parent))
-            old.rmdir()
-            out.rename(old)
-            tmp.rename(out)
-            shutil.rmtree(old, ignore_errors=True)
-        else:
-            tmp.rename(out)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
-
-
 def write_mat(log: RunLog, fh: BinaryIO) -> None:
     """Write ``log`` to an open binary file as MATLAB 5 with the thesis's variable names (1×N rows, ``k`` a
     scalar double)."""
@@ -309,17 +202,27 @@ def _check_values(path: Path, kind: str, values: dict[str, np.ndarray], hint: st
         )
 
 
-def load_mat(path: str | Path) -> RunLog:
+def load_mat(path: str | Path, *, variables: dict[str, np.ndarray] | None = None) -> RunLog:
     """Read a log written by ``save_mat`` or by the rig's Plot button (``data_file.mat``).
 
-    Only timem, datam1, datam2 and aout are required (see the module docstring); the file is only read."""
+    Only timem, datam1, datam2 and aout are required (see the module docstring); the file is only read.
+    ``variables``: the file's variables already read as scipy.io.loadmat gives them (a MATLAB v7.3 file,
+    which calib.logs reads with h5py); ``path`` then only names the file in messages."""
     path = Path(path)
-    if not path.is_file():
+    if variables is not None:
+        raw = dict(variables)
+    elif not path.is_file():
         raise LogError(f"{path}: no such file")
-    try:
-        raw = scipy.io.loadmat(path, appendmat=False)
-    except Exception as exc:  # noqa: BLE001 - for bytes that are not MAT, scipy raises many types (IndexError…)
-        raise LogError(f"{path}: not a MATLAB .mat file ({exc})") from None
+    else:
+        try:
+            raw = scipy.io.loadmat(path, appendmat=False)
+        except NotImplementedError:  # scipy's answer to a v7.3 (HDF5) file
+            raise LogError(
+                f"{path}: a MATLAB v7.3 (HDF5) .mat file: ballbeam calibrate reads it; for other readers save "
+                "it with save(..., '-v7') in MATLAB"
+            ) from None
+        except Exception as exc:  # noqa: BLE001 - for bytes that are not MAT, scipy raises many types (IndexError…)
+            raise LogError(f"{path}: not a MATLAB .mat file ({exc})") from None
     k: int | None = None
     if "k" in raw:
         k_values = _vector(path, "k", raw["k"])

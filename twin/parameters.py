@@ -40,6 +40,29 @@ class ParameterError(ValueError):
     """An impossible or unknown parameter; the message names the parameter, the value and the source."""
 
 
+class DuplicateKeyError(ParameterError):
+    """A JSON object names a key twice (json.loads would keep the last value silently)."""
+
+
+def _refuse_duplicate_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for key, value in pairs:
+        if key in out:
+            others = ", ".join(repr(k) for k in out if k != key)
+            within = f" (beside {_clip(others, 60)})" if others else ""
+            raise DuplicateKeyError(
+                f"duplicate key {_clip(repr(key), 60)}{within}: a JSON object names it twice; keep one"
+            )
+        out[key] = value
+    return out
+
+
+def load_json(text: str) -> Any:
+    """``json.loads`` that refuses an object naming a key twice (DuplicateKeyError naming the key), as TOML
+    does: a parameter, criterion or spread given twice is a mistake, not an override."""
+    return json.loads(text, object_pairs_hook=_refuse_duplicate_keys)
+
+
 # A parameter file with every value and its comments is about 10 kB; anything past 1 MiB is not one, and is
 # refused before it is parsed rather than read whole.
 MAX_FILE_BYTES = 1 << 20
@@ -703,6 +726,14 @@ class BallSensor:
                     f"ball_sensor.curve_position_m[{i}] = {pos[i]!r} m is impossible: positions must increase "
                     f"strictly (previous {pos[i - 1]!r} m)"
                 )
+        # A wiper's volts rise with its position, and the calibration reads a position back from the volts
+        # by inverting the curve (calib.identify): volts that do not increase strictly have no inverse.
+        for i in range(1, len(volts)):
+            if not volts[i] > volts[i - 1]:
+                raise ParameterError(
+                    f"ball_sensor.curve_volts_v[{i}] = {volts[i]!r} V is impossible: the volts must increase "
+                    f"strictly with the position (previous {volts[i - 1]!r} V), or the reading has no inverse"
+                )
 
 
 @dataclass(frozen=True)
@@ -1051,14 +1082,17 @@ class Parameters:
         )
         deep_line: int | None = None
         try:
+            # utf-8-sig: a leading byte-order mark (an editor's "UTF-8 with BOM") is dropped, none is needed
+            decoded = text.decode("utf-8-sig")
             if kind == "JSON":
-                data = json.loads(text)
+                data = load_json(decoded)
             else:
-                toml_text = text.decode("utf-8")
-                deep_line = _toml_deep_key(toml_text)
-                data = {} if deep_line is not None else tomllib.loads(toml_text)
+                deep_line = _toml_deep_key(decoded)
+                data = {} if deep_line is not None else tomllib.loads(decoded)
         except RecursionError:
             raise ParameterError(nested) from None
+        except DuplicateKeyError as exc:
+            raise ParameterError(f"{path}: {exc}") from None
         except ValueError as exc:  # JSONDecodeError, TOMLDecodeError, UnicodeDecodeError, over-long integers
             raise ParameterError(f"{path}: not a valid {kind} file: {_clip(str(exc), 200)}") from None
         if deep_line is not None:
@@ -1074,6 +1108,18 @@ class Parameters:
 
     def to_dict(self) -> dict[str, dict[str, Any]]:
         return {group: dataclasses.asdict(getattr(self, group)) for group in _GROUPS}
+
+    def changed(self) -> dict[str, Any]:
+        """The values that differ from the defaults, by dotted name (``{"motor.resistance_ohm": 1e-09}``)."""
+        default = Parameters()
+        out: dict[str, Any] = {}
+        for group in _GROUPS:
+            mine, theirs = getattr(self, group), getattr(default, group)
+            for f in fields(mine):
+                value = getattr(mine, f.name)
+                if value != getattr(theirs, f.name):
+                    out[f"{group}.{f.name}"] = value
+        return out
 
     def save(self, path: str | Path, *, overwrite: bool = False) -> None:
         """Write all values as TOML (or JSON for a .json path). Refuses to overwrite unless asked."""

@@ -12,21 +12,112 @@ trajectory is bit-identical to stepping ``mj_step`` one step at a time.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
 import mujoco
 import numpy as np
 from mujoco import rollout
 
+from twin import fixedorder as fo
 from twin import model as mdl
-from twin.parameters import Parameters
+from twin.parameters import ParameterError, Parameters
 from twin.physics import PhysicsBlock, check_initial_state
 
-__all__ = ["Plant", "BallKinematics"]
+__all__ = [
+    "BallKinematics",
+    "NumericalError",
+    "Plant",
+    "beyond_stops",
+    "failure_time_s",
+    "numerical_failure",
+    "stop_overshoot_bound_rad",
+    "warning_text",
+]
 
 _FULL = mujoco.mjtState.mjSTATE_FULLPHYSICS
 _CTRL = mujoco.mjtState.mjSTATE_CTRL
+
+# MuJoCo's warnings, each a sign that the simulation (not the rig) failed: its step reset the state (BADQ*),
+# its buffers overflowed (contacts, constraints) or the model is not physical. They are counted in MjData
+# and reported per run as a NumericalError; MuJoCo's default handler would also print each one to stderr.
+_WARNING_TEXT = {
+    mujoco.mjtWarning.mjWARN_INERTIA: "a body inertia that is not physical (INERTIA)",
+    mujoco.mjtWarning.mjWARN_CONTACTFULL: "a full contact buffer (CONTACTFULL)",
+    mujoco.mjtWarning.mjWARN_CNSTRFULL: "a full constraint buffer (CNSTRFULL)",
+    mujoco.mjtWarning.mjWARN_BADQPOS: "an unstable simulation (BADQPOS: a NaN, infinite or huge position)",
+    mujoco.mjtWarning.mjWARN_BADQVEL: "an unstable simulation (BADQVEL: a NaN, infinite or huge velocity)",
+    mujoco.mjtWarning.mjWARN_BADQACC: "an unstable simulation (BADQACC: a NaN, infinite or huge acceleration)",
+    mujoco.mjtWarning.mjWARN_BADCTRL: "a bad actuator input (BADCTRL)",
+}
+mujoco.set_mju_user_warning(lambda message: None)
+
+
+class NumericalError(FloatingPointError):
+    """The simulation failed, not the rig: MuJoCo warned (an unstable step, a full buffer, …), its state is
+    not finite, or the beam went past its stops by more than they can yield. A run that raises it has no
+    physical verdict; the message names the time, what happened and the parameters that differ from the
+    defaults."""
+
+
+def numerical_failure(params: Parameters, what: str, t_s: float) -> NumericalError:
+    """``numerical failure: {what} at t = … s — the parameters differ from the defaults in …; the physics
+    step is … ms``."""
+    changed = changed_text(params)
+    which = (
+        f"the parameters differ from the defaults in {changed}"
+        if changed
+        else "the parameters are the defaults"
+    )
+    return NumericalError(
+        f"numerical failure: {what} at t = {t_s:.3f} s — {which}; the physics step is "
+        f"{params.physics.timestep_s * 1e3:g} ms"
+    )
+
+
+def changed_text(params: Parameters, most: int = 6) -> str:
+    """The parameters that differ from the defaults, ``motor.resistance_ohm = 1e-09, …`` ('' for none)."""
+    changed = params.changed()
+    shown = ", ".join(f"{name} = {value!r}" for name, value in list(changed.items())[:most])
+    return shown + (f" and {len(changed) - most} more" if len(changed) > most else "")
+
+
+def warning_text(counts: Mapping[int, int]) -> str:
+    """What MuJoCo reported, from its warning counters (mjtWarning index → count)."""
+    return "MuJoCo reported " + " and ".join(
+        _WARNING_TEXT[mujoco.mjtWarning(i)] for i, n in counts.items() if n
+    )
+
+
+def failure_time_s(times_s: np.ndarray) -> float:
+    """When a block that MuJoCo warned in went wrong: its clock stops advancing there (a BADQ* warning resets
+    the state and the time; a batch's simulation stops stepping), else its end."""
+    bad = np.flatnonzero(~(np.diff(times_s) > 0))
+    return float(times_s[bad[0]]) if bad.size else float(times_s[-1])
+
+
+def beyond_stops(params: Parameters, theta_abs_rad: float, t_s: float) -> NumericalError:
+    """The failure of a beam at |θ| = ``theta_abs_rad``, past its stops further than they can yield."""
+    stop, bound = params.beam.stop_angle_rad, stop_overshoot_bound_rad(params)
+    return numerical_failure(
+        params,
+        f"the beam at {theta_abs_rad:.4g} rad, past its stops ({stop:.4g} rad) by more than they can yield "
+        f"({bound:.3g} rad)",
+        t_s,
+    )
+
+
+def stop_overshoot_bound_rad(params: Parameters) -> float:
+    """How far past its stops the beam can physically go in the twin: the stops are soft constraints (time
+    constant ``physics.contact_timeconst_s``) that act from the step after the beam reaches them, so at the
+    motor's no-load speed at the rails, rail_v / (N·K_b), it yields at most that speed times one step plus
+    the time constant. Further out is a numerical failure, not a physical state. (Over its stroke the beam
+    reaches about 11 rad/s at the rails; an amplifier gain of 1000 slams it into its stops at up to 7 rad/s
+    and they yield up to 4.2 mrad: the stops' softness, inside this bound of 0.23 rad, and hit_stops says
+    so.)"""
+    omega_max = params.amplifier.rail_v / params.motor.backemf_at_beam_v_s_per_rad
+    return omega_max * (params.physics.timestep_s + params.physics.contact_timeconst_s)
+
 
 # The ball counts as lost once its centre has dropped this far below (or risen above) its seat on the wires.
 # 2 mm is 40x the largest transient lift seen in fast combined rolling and tilting (measured: µm).
@@ -70,7 +161,15 @@ class Plant:
     def __init__(self, params: Parameters | None = None, *, hold_beam_rad: float | None = None) -> None:
         self.params = params or Parameters()
         self.held_angle_rad = hold_beam_rad
-        self.model = mdl.build_model(self.params, hold_beam_rad=hold_beam_rad)
+        try:
+            self.model = mdl.build_model(self.params, hold_beam_rad=hold_beam_rad)
+        except ValueError as exc:  # MuJoCo's compiler refused the model (its message: "Error: …")
+            changed = changed_text(self.params) or "none"
+            reason = str(exc).removeprefix("Error: ").strip().replace("\n", " ")
+            raise ParameterError(
+                f"MuJoCo cannot build the model from these parameters: {reason} (parameters that differ from "
+                f"the defaults: {changed})"
+            ) from None
         self.data = mujoco.MjData(self.model)
         m = self.model
         self._beam = m.body(mdl.BEAM_BODY).id
@@ -88,7 +187,6 @@ class Plant:
         self.ball_lost_time_s: float | None = None
         mujoco.mj_kinematics(self.model, self.data)
         self._pivot = tuple(float(v) for v in self.data.xpos[self._beam])  # the beam body's origin is P
-        self._pivot_m = np.array(self._pivot)
         self._pivot_0d = tuple(np.array(v) for v in self._pivot)
         self._nstate = mujoco.mj_stateSize(m, _FULL)
         self._warmstart = np.empty((1, m.nv))
@@ -103,8 +201,11 @@ class Plant:
         self._along_limit_m = p.track.half_length_m + p.ball.radius_m
         self._lateral_limit_m = p.track.contact_spacing_m / 2
         self._seat_height_m = p.ball_centre_height_m
-        self._dot_buffers = (np.zeros(3), np.zeros(3), np.zeros(3))  # offset, velocity, beam axis
         self._all_on_cache: dict[int, np.ndarray] = {}
+        # MuJoCo's warning counters (live views into MjData, read once a block) and the beam's furthest
+        # physical angle: past either, the block is a numerical failure (NumericalError).
+        self._warning_stats = [self.data.warning[int(w)] for w in _WARNING_TEXT]
+        self._theta_limit_rad = p.beam.stop_angle_rad + stop_overshoot_bound_rad(p)
         self.reset()
 
     # --- state ------------------------------------------------------------------------------------
@@ -137,17 +238,16 @@ class Plant:
             d.qpos[self._hinge_qpos] = theta_rad
             d.qvel[self._hinge_dof] = thetadot_rad_s
         mujoco.mj_kinematics(m, d)
-        rot = d.xmat[self._beam].reshape(3, 3)
+        rot = d.xmat[self._beam].reshape(3, 3).tolist()  # products in a fixed order (twin.fixedorder)
         pivot = d.xpos[self._beam].copy()
-        axis = rot @ mdl.HINGE_AXIS_BEAM
-        rel = np.array([x_m, 0.0, p.ball_centre_height_m])
+        axis = np.array(fo.matvec(rot, mdl.HINGE_AXIS_BEAM.tolist()))
         omega_beam = thetadot_rad_s * axis
-        offset = rot @ rel
+        offset = np.array(fo.matvec(rot, [x_m, 0.0, p.ball_centre_height_m]))
         q = self._ball_qpos
         d.qpos[q : q + 3] = pivot + offset
         d.qpos[q + 3 : q + 7] = [1.0, 0.0, 0.0, 0.0]
         v = self._ball_dof
-        d.qvel[v : v + 3] = rot @ np.array([xdot_m_s, 0.0, 0.0]) + np.cross(omega_beam, offset)
+        d.qvel[v : v + 3] = np.array(fo.matvec(rot, [xdot_m_s, 0.0, 0.0])) + np.cross(omega_beam, offset)
         # Rolling without slipping (eq 3.1.13): spin relative to the beam about the hinge axis = -ẋ/r*.
         d.qvel[v + 3 : v + 6] = omega_beam + (-xdot_m_s / p.rolling_radius_m) * axis
         d.ctrl[:] = 0.0
@@ -174,15 +274,13 @@ class Plant:
         v_rel = d.qvel[v : v + 3] - np.cross(omega_beam, offset)
         omega_ball = np.zeros(3)
         mujoco.mju_rotVecQuat(omega_ball, d.qvel[v + 3 : v + 6], d.qpos[q + 3 : q + 7])  # body → world
+        o, w = offset.tolist(), v_rel.tolist()
+        axes = [ex.tolist(), ey.tolist(), ez.tolist()]
         return BallKinematics(
-            position_m=np.array([offset @ ex, offset @ ey, offset @ ez]),
-            velocity_m_s=np.array([v_rel @ ex, v_rel @ ey, v_rel @ ez]),
-            spin_rad_s=float((omega_ball - omega_beam) @ axis),
+            position_m=np.array(fo.matvec(axes, o)),
+            velocity_m_s=np.array(fo.matvec(axes, w)),
+            spin_rad_s=fo.dot((omega_ball - omega_beam).tolist(), axis.tolist()),
         )
-
-    def state_angle_rad(self) -> float:
-        """θ alone, cheaply (rad)."""
-        return self._theta()
 
     def _theta(self) -> float:
         if self._hinge_qpos is None:
@@ -204,7 +302,7 @@ class Plant:
             return self._held_state()
         d = self.data
         # A state row (time, qpos, qvel) as Python floats: ``_state_of_row``'s operations are the ones
-        # ``row_states`` and ``ball_kinematics`` take, so the same bits.
+        # ``row_states`` takes, so the same bits.
         return self._state_of_row([0.0, *d.qpos.tolist(), *d.qvel.tolist()])
 
     def state_row(self) -> np.ndarray | None:
@@ -217,34 +315,30 @@ class Plant:
         return row
 
     def _held_state(self) -> np.ndarray:
-        """``state`` of a rig built with the beam held (no hinge joint)."""
+        """``state`` of a rig built with the beam held (no hinge joint): ``_state_floats``'s operations."""
         d = self.data
         theta = self._theta()
         q, v = self._ball_qpos, self._ball_dof
-        offset = d.qpos[q : q + 3] - self._pivot_m
-        ox, oz = float(offset[0]), float(offset[2])
+        ox, oz = float(d.qpos[q]) - self._pivot[0], float(d.qpos[q + 2]) - self._pivot[2]
         thetadot = 0.0  # the velocity relative to the beam, as ``state`` takes it: v − ω×offset
-        v_rel = np.array([d.qvel[v] + thetadot * oz, d.qvel[v + 1], d.qvel[v + 2] - thetadot * ox])
-        ex = np.array([math.cos(theta), 0.0, math.sin(theta)])
-        return np.array([offset @ ex, theta, v_rel @ ex, thetadot])
+        vx, vz = float(d.qvel[v]) + thetadot * oz, float(d.qvel[v + 2]) - thetadot * ox
+        c, s = math.cos(theta), math.sin(theta)
+        return np.array([ox * c + oz * s, theta, vx * c + vz * s, thetadot])
 
     def row_states(self, rows: np.ndarray) -> np.ndarray:
         """(x, θ, ẋ, θ̇) for each full-physics state row (time, qpos, qvel), shape (n, 4): what ``state``
-        computes from MjData, with the same operations (its BLAS dot products are numpy's matmul of one row
-        by one column per run), so a run in a batch (``twin.batch``) logs the same bits as alone."""
+        computes from MjData, with the same elementwise operations in the same order (``_state_floats``),
+        so a run in a batch (``twin.batch``) or a deferred log row has the bits of ``state`` alone."""
         if self._hinge_qpos is None or self._hinge_dof is None:
             raise ValueError("row_states needs the beam's hinge (a rig built with hold_beam_rad has none)")
         nq = self.model.nq
         theta, thetadot = rows[:, 1 + self._hinge_qpos], rows[:, 1 + nq + self._hinge_dof]
         q, v = 1 + self._ball_qpos, 1 + nq + self._ball_dof
-        offset = rows[:, q : q + 3] - self._pivot_m
-        ox, oz = offset[:, 0], offset[:, 2]
-        v_rel = np.stack([rows[:, v] + thetadot * oz, rows[:, v + 1], rows[:, v + 2] - thetadot * ox], axis=1)
-        zero = np.zeros_like(theta)
-        ex = np.stack([np.cos(theta), zero, np.sin(theta)], axis=1)[:, :, None]
-        along = np.matmul(offset[:, None, :], ex)[:, 0, 0]
-        speed = np.matmul(v_rel[:, None, :], ex)[:, 0, 0]
-        return np.stack([along, theta, speed, thetadot], axis=1)
+        px, _, pz = self._pivot_0d
+        ox, oz = rows[:, q] - px, rows[:, q + 2] - pz
+        vx, vz = rows[:, v] + thetadot * oz, rows[:, v + 2] - thetadot * ox
+        c, s = np.cos(theta), np.sin(theta)
+        return np.stack([ox * c + oz * s, theta, vx * c + vz * s, thetadot], axis=1)
 
     # --- stepping ---------------------------------------------------------------------------------
     @property
@@ -306,7 +400,7 @@ class Plant:
                 chunk_size=None,
             )
         if not _all_finite(rows[-1]):
-            raise FloatingPointError(f"MuJoCo state is not finite at t = {float(rows[-1, 0]):.3f} s")
+            raise numerical_failure(self.params, "the MuJoCo state is not finite", float(rows[-1, 0]))
         return self._block(rows, t0 + buf.step_offsets_s)
 
     def advance_with_law(
@@ -333,13 +427,12 @@ class Plant:
         px, py, pz = self._pivot
         along_limit, lateral_limit = self._along_limit_m, self._lateral_limit_m
         seat, tolerance = self._seat_height_m, LOST_HEIGHT_TOLERANCE_M
-        write, dot = self._dot_buffer_views(), np.empty(())
         lost_state = self.lost_state
         state: tuple[float, ...]
         if lost_state is None:
             row = rows[0].tolist()
             theta = row[row_theta]
-            state = self._state_floats(row, cos(theta), sin(theta), write, dot)
+            state = self._state_floats(row, cos(theta), sin(theta))
         else:
             state = tuple(lost_state.tolist())
         volts = math.nan
@@ -366,9 +459,9 @@ class Plant:
                     lost_state = self._row_state(dest)
                     state = tuple(lost_state.tolist())
                 elif law_reads and k < n:
-                    state = self._state_floats(row, c, s, write, dot)
+                    state = self._state_floats(row, c, s)
             if (law_reads or k == n) and not math.isfinite(sum(row)):  # where advance checks, once a period
-                raise FloatingPointError(f"MuJoCo state is not finite at t = {row[0]:.3f} s")
+                raise numerical_failure(self.params, "the MuJoCo state is not finite", row[0])
         # Times as advance makes them: each law period's start time plus whole steps.
         starts = rows[0:n:law_steps, 0]
         times = np.empty(n + 1)
@@ -390,6 +483,7 @@ class Plant:
         along, lateral, height = self.beam_frame(theta, rows[:, q : q + 3])
         al, th, lat, hgt = along.tolist(), theta.tolist(), lateral.tolist(), height.tolist()
         x_range, theta_range = (min(al), max(al)), (min(th), max(th))
+        self._check_numerics(rows, theta_range)
         # ``on_track(...).all()`` from the extremes: |·| below a bound everywhere ⇔ at both extremes, and
         # subtracting the seat height is monotonic in float arithmetic, so the same answer.
         seat, tol, lat_limit = self._seat_height_m, LOST_HEIGHT_TOLERANCE_M, self._lateral_limit_m
@@ -415,6 +509,17 @@ class Plant:
                 on[first_off:] = False
         return PhysicsBlock(times, along, theta, on, x_range, theta_range, bool(on.all()), True)
 
+    def _check_numerics(self, rows: np.ndarray, theta_range: tuple[float, float]) -> None:
+        """Raise NumericalError when MuJoCo warned during these rows' steps, or the beam went past its stops
+        further than they can yield (``stop_overshoot_bound_rad``)."""
+        if any(w.number for w in self._warning_stats):
+            counts = {int(w): self._warning_stats[j].number for j, w in enumerate(_WARNING_TEXT)}
+            raise numerical_failure(self.params, warning_text(counts), failure_time_s(rows[:, 0]))
+        if max(-theta_range[0], theta_range[1]) > self._theta_limit_rad:
+            theta = np.abs(rows[:, self._row_theta])
+            k = int(np.flatnonzero(theta > self._theta_limit_rad)[0])
+            raise beyond_stops(self.params, float(theta[k]), float(rows[k, 0]))
+
     def _all_on(self, size: int) -> np.ndarray:
         """A read-only all-True ``on_track`` of this size (shared: the common block's flags)."""
         on = self._all_on_cache.get(size)
@@ -433,40 +538,21 @@ class Plant:
     def _state_of_row(self, r: list[float]) -> np.ndarray:
         """``state`` from one state row as Python floats (time, qpos, qvel) (see ``_state_floats``)."""
         theta = r[self._row_theta]
-        state = self._state_floats(r, math.cos(theta), math.sin(theta), self._dot_buffers, np.empty(()))
-        return np.array(state)
+        return np.array(self._state_floats(r, math.cos(theta), math.sin(theta)))
 
-    def _dot_buffer_views(self) -> tuple[memoryview[float], memoryview[float], memoryview[float]]:
-        """The dot buffers as memoryviews: item assignment through them costs less than numpy's."""
-        offset, v_rel, ex = (b.data.cast("B").cast("d") for b in self._dot_buffers)
-        return offset, v_rel, ex
+    def _state_floats(self, r: list[float], c: float, s: float) -> tuple[float, float, float, float]:
+        """(x, θ, ẋ, θ̇) of one state row as Python floats (time, qpos, qvel), given c = cos θ and s = sin θ.
 
-    def _state_floats(
-        self,
-        r: list[float],
-        c: float,
-        s: float,
-        write: tuple[np.ndarray, np.ndarray, np.ndarray] | tuple[memoryview[float], ...],
-        dot: np.ndarray,
-    ) -> tuple[float, float, float, float]:
-        """(x, θ, ẋ, θ̇) of one state row as Python floats (time, qpos, qvel), given c = cos θ and s = sin θ,
-        with ``state``'s operations, so the same bits: its two dot products are the same BLAS dot
-        (``ndarray.dot`` of two vectors is what ``@`` calls, with less overhead), here on the reused dot
-        buffers (per step, allocation is the cost), filled through ``write`` (them, or their
-        ``_dot_buffer_views``), each product into the 0-d array ``dot`` (cheaper than the float it returns)."""
+        x and ẋ are the ball's offset from P and its velocity relative to the beam (v − ω×offset, ω = θ̇
+        about (0, −1, 0)) dotted with the beam's axis (cos θ, 0, sin θ): two products added in this order
+        (the zero term adds nothing), the same in ``row_states`` and ``beam_frame`` (no BLAS: its kernel
+        would decide the order and the fused multiply-adds, twin.fixedorder)."""
         thetadot = r[self._row_thetadot]
         q, v = self._row_ball, self._row_ball_v
-        px, py, pz = self._pivot
+        px, _, pz = self._pivot
         ox, oz = r[q] - px, r[q + 2] - pz
-        offset, v_rel, ex = write
-        offset[0], offset[1], offset[2] = ox, r[q + 1] - py, oz
-        v_rel[0], v_rel[1], v_rel[2] = r[v] + thetadot * oz, r[v + 1], r[v + 2] - thetadot * ox
-        ex[0], ex[2] = c, s
-        offset_array, v_rel_array, ex_array = self._dot_buffers
-        offset_array.dot(ex_array, dot)
-        along = dot.item()
-        v_rel_array.dot(ex_array, dot)
-        return along, r[self._row_theta], dot.item(), thetadot
+        vx, vz = r[v] + thetadot * oz, r[v + 2] - thetadot * ox
+        return ox * c + oz * s, r[self._row_theta], vx * c + vz * s, thetadot
 
     def _row_state(self, row: np.ndarray) -> np.ndarray:
         """(x, θ, ẋ, θ̇) from one row of (time, qpos, qvel): the ball relative to the beam, as ``state``."""
@@ -481,7 +567,7 @@ class Plant:
         # Velocity relative to the rotating beam: v − ω×offset with ω = θ̇ about (0, −1, 0).
         vx, vz = row[v] + thetadot * oz, row[v + 2] - thetadot * ox
         c, s = math.cos(theta), math.sin(theta)
-        return np.array([c * ox + s * oz, theta, c * vx + s * vz, thetadot])
+        return np.array([ox * c + oz * s, theta, vx * c + vz * s, thetadot])
 
     def beam_frame(
         self, theta_rad: np.ndarray, ball_xyz: np.ndarray
@@ -492,7 +578,7 @@ class Plant:
         c, s = np.cos(theta_rad), np.sin(theta_rad)
         px, py, pz = self._pivot_0d  # 0-d arrays: numpy converts a Python float operand on every call
         dx, dz = ball_xyz[..., 0] - px, ball_xyz[..., 2] - pz
-        return c * dx + s * dz, ball_xyz[..., 1] - py, c * dz - s * dx
+        return dx * c + dz * s, ball_xyz[..., 1] - py, dz * c - dx * s
 
     def on_track(self, along: np.ndarray, lateral: np.ndarray, height: np.ndarray) -> np.ndarray:
         """Whether the ball sits on both wires within the track, from its beam-frame coordinates."""

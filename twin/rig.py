@@ -16,7 +16,8 @@ Start timing (``params.start``, appendix A's button sequence): after ``reset`` t
 initial state while the software reads it; it is released at t = 0 and runs at 0 V until the first command
 reaches the amplifier at t = ``start.free_run_s``. The DAQ's blocks end at t = free_run + k·T: block k = −1
 is the one ``Controller.start`` reads, block 0 the first ``update`` (its command acts from t = free_run).
-Blocks, or parts of blocks, before t = 0 see the held rig.
+Blocks, or parts of blocks, before t = 0 see the held rig. The schedule (when blocks end, when a command
+takes effect) is ``twin.daq.TickSchedule``, which the batch (``twin.batch``) follows too.
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ from typing import Literal
 
 import numpy as np
 
-from twin.daq import block_span_s
+from twin.daq import TickSchedule, block_span_s
 from twin.interface import DaqSample, Rig
 from twin.output_stage import amplifier_volts, motor_volts_of
 from twin.parameters import Parameters
@@ -59,6 +60,17 @@ def whole_steps(duration_s: float, step_s: float, name: str) -> int:
     return steps
 
 
+def tick_schedule(params: Parameters) -> TickSchedule:
+    """The rig's ``TickSchedule`` from ``daq.period_s``, ``daq.output_latency_s`` and ``start.free_run_s``,
+    each a whole number of physics steps (else ``RigError`` naming it)."""
+    dt = params.physics.timestep_s
+    steps_per_tick = whole_steps(params.daq.period_s, dt, "daq.period_s")
+    if steps_per_tick < 1:
+        raise RigError(f"daq.period_s = {params.daq.period_s!r} s is shorter than one physics step")
+    latency = whole_steps(params.daq.output_latency_s, dt, "daq.output_latency_s")
+    return TickSchedule(steps_per_tick, latency, whole_steps(params.start.free_run_s, dt, "start.free_run_s"))
+
+
 class SimRig(Rig):
     """A simulated rig: a physics backend + output stage + sensors + DAQ block semantics + start timing.
 
@@ -84,12 +96,8 @@ class SimRig(Rig):
         self.seed = seed
         self.plant_kind: PlantKind = plant
         self.ideal_sensors = bool(ideal_sensors)
-        dt = p.physics.timestep_s
-        self._steps_per_tick = whole_steps(p.daq.period_s, dt, "daq.period_s")
-        if self._steps_per_tick < 1:
-            raise RigError(f"daq.period_s = {p.daq.period_s!r} s is shorter than one physics step")
-        self._latency_steps = whole_steps(p.daq.output_latency_s, dt, "daq.output_latency_s")
-        self._free_run_steps = whole_steps(p.start.free_run_s, dt, "start.free_run_s")
+        self._schedule = tick_schedule(p)
+        self._steps_per_tick = self._schedule.steps_per_tick
         self.physics: Physics = Plant(p) if plant == "twin" else ReferencePlant(p)
         self._chains = not self.ideal_sensors  # the sensor chains read each block (else ideal converters)
         self._motor_volts = motor_volts_of(p)
@@ -136,17 +144,11 @@ class SimRig(Rig):
         if seed is not None:
             self.seed = seed
         self._held = np.array([x_m, theta_rad, xdot_m_s, thetadot_rad_s], dtype=float)
-        # The next block (the one Controller.start reads) ends one period before the first command.
-        self._next_end_step = self._free_run_steps - self._steps_per_tick
-        # The ball chain starts at the start block's beginning, or at release if the rig runs free before it
-        # (a free run longer than one period).
-        chain_start = min(self._next_end_step - self._steps_per_tick, 0)
-        self._ball.reset(x_m, self._step_time(chain_start), seed=self.seed)
-        self._steps_done = 0  # physics steps since release
+        self._schedule.reset()
+        self._ball.reset(x_m, self._step_time(self._schedule.chain_start_step), seed=self.seed)
         self._ticks = 0
         self.command_v = self.params.amplifier.zero_command_v
         self._pending_motor_v = self._applied_motor_v = self._motor_volts_for(self.command_v)
-        self._switch_in_steps: int | None = None
         self.last_block = None
 
     def true_state(self) -> np.ndarray:
@@ -169,13 +171,13 @@ class SimRig(Rig):
     @property
     def held(self) -> bool:
         """Whether the rig is still held at its initial state (the blocks read so far end before release)."""
-        return self._next_end_step - self._steps_per_tick < 0
+        return self._schedule.held
 
     @property
     def time_s(self) -> float:
         """Simulated time since release (negative while the rig is held)."""
         if self.held:
-            return self._step_time(self._next_end_step - self._steps_per_tick)
+            return self._step_time(self._schedule.next_start_step)
         return self.physics.time_s
 
     @property
@@ -234,23 +236,16 @@ class SimRig(Rig):
 
     def _set_motor_volts(self, volts: float) -> None:
         self._pending_motor_v = volts
-        if self._latency_steps == 0:
+        if self._schedule.command_written():
             self._applied_motor_v = volts
-            self._switch_in_steps = None
-        else:
-            self._switch_in_steps = self._latency_steps
 
     def _step_volts(self, n: int) -> np.ndarray:
         """Terminal volts for the next ``n`` physics steps (the output latency switches within them)."""
         volts = np.full(n, self._applied_motor_v)
-        if self._switch_in_steps is not None:
-            k = self._switch_in_steps
-            if k < n:
-                volts[k:] = self._pending_motor_v
-                self._applied_motor_v = self._pending_motor_v
-                self._switch_in_steps = None
-            else:
-                self._switch_in_steps = k - n
+        k = self._schedule.switch_at(n)
+        if k is not None:
+            volts[k:] = self._pending_motor_v
+            self._applied_motor_v = self._pending_motor_v
         return volts
 
     def _advance_with_law(self, n: int, law, law_steps: int) -> PhysicsBlock:
@@ -286,31 +281,26 @@ class SimRig(Rig):
         return _join(parts)
 
     def _read(self, law) -> DaqSample:
-        end = self._next_end_step
-        start = end - self._steps_per_tick
-        if law is None and start == self._steps_done >= 0 and self._switch_in_steps is None and self._chains:
+        schedule = self._schedule
+        if law is None and self._chains and schedule.next_is_plain():
             # The common tick: one control period of physics at the volts the motor has, the full chains.
             t_start = self.physics.time_s
             block = self.last_block = self.physics.advance_held(self._applied_motor_v, self._steps_per_tick)
-            self._steps_done = end
-            self._next_end_step = end + self._steps_per_tick
+            schedule.plain_block()
             self._ticks += 1
             angle_v = self._angle.read_block_v(block)
             return DaqSample(t_start + self._block_span_s, self._ball.advance_block(block), angle_v)
-        t_start = self._step_time(start) if start < 0 else self.physics.time_s
-        n_free = end - max(start, 0) if end > 0 else 0
-        if start > self._steps_done:  # released before this block begins: run free up to it, unobserved
-            pre = self.physics.advance(self._step_volts(start - self._steps_done))
-            self._steps_done = start
+        plan = schedule.next_block()
+        t_start = self._step_time(plan.start_step) if plan.start_step < 0 else self.physics.time_s
+        if plan.free_steps:  # released before this block begins: run free up to it, unobserved
+            pre = self.physics.advance(self._step_volts(plan.free_steps))
             t_start = self.physics.time_s
             if not self.ideal_sensors:
                 self._ball.advance(pre.time_s, pre.x_m, pre.on_track)
         pieces: list[PhysicsBlock] = []
-        if start < 0:  # the held rig, until release at t = 0 (or the block's end)
-            if self._switch_in_steps is not None:  # a command's latency runs on while the rig is held
-                self._switch_in_steps = max(0, self._switch_in_steps - (min(end, 0) - start))
+        if plan.held_end_step is not None:  # the held rig, until release at t = 0 (or the block's end)
             x, th = float(self._held[0]), float(self._held[1])
-            held_end = self._step_time(min(end, 0))
+            held_end = self._step_time(plan.held_end_step)
             pieces.append(
                 PhysicsBlock(
                     time_s=np.array([t_start, held_end]),
@@ -319,12 +309,11 @@ class SimRig(Rig):
                     on_track=np.array([True, True]),
                 )
             )
-        if n_free:
+        if plan.observed_steps:
             if law is None:
-                pieces.append(self.physics.advance(self._step_volts(n_free)))
+                pieces.append(self.physics.advance(self._step_volts(plan.observed_steps)))
             else:
-                pieces.append(self._advance_with_law(n_free, *law))
-            self._steps_done += n_free
+                pieces.append(self._advance_with_law(plan.observed_steps, *law))
         block = _join(pieces)
         self.last_block = block
         if self.ideal_sensors:
@@ -332,7 +321,6 @@ class SimRig(Rig):
         else:
             angle_v = self._angle.read_block_v(block)
             ball_v = self._ball.advance_block(block)
-        self._next_end_step = end + self._steps_per_tick
         self._ticks += 1
         return DaqSample(time_s=t_start + self._block_span_s, ball_v=ball_v, angle_v=angle_v)
 

@@ -32,9 +32,12 @@ import bisect
 import functools
 import math
 import operator
+from collections.abc import Sequence
+from typing import overload
 
 import numpy as np
 
+from twin import fixedorder as fo
 from twin.converters import angle_volts_v, ball_volts_v, finite_values
 from twin.daq import adc_quantize_v, adc_quantizer
 from twin.parameters import AngleSensor, BallSensor, Daq, Parameters
@@ -55,7 +58,9 @@ __all__ = [
     "angle_sensor_v",
     "counter_dac_v",
     "counter_value",
+    "rc_end_v",
     "wiper_static_v",
+    "wiper_v",
 ]
 
 # Finished dropouts kept in the history (a long live session would otherwise grow it without bound).
@@ -370,10 +375,6 @@ class AngleChain:
     def counter_value(self, theta_rad: float | np.ndarray) -> int | np.ndarray:
         return counter_value(theta_rad, self.params)
 
-    def sensor_v(self, theta_rad: float | np.ndarray) -> float | np.ndarray:
-        """The analog output before the ADC."""
-        return angle_sensor_v(theta_rad, self.params)
-
     def read_v(self, times_s: np.ndarray, theta_rad: np.ndarray) -> float:
         """The block-mean ADC volts for one block (see ``angle_block_mean_v``)."""
         self.last_reading_v = angle_block_mean_v(times_s, theta_rad, self.params)
@@ -453,11 +454,14 @@ class BallPositionChain:
         s = self.params.ball_sensor
         return bool(s.noise_enabled) and s.dropout_rate_hz > 0.0
 
+    def _wiper_v(self, x_m: np.ndarray, connected: bool | np.ndarray = True) -> np.ndarray:
+        """``wiper_v`` with this chain's curve and open-contact volts."""
+        return wiper_v(x_m, connected, self._curve_x, self._curve_v, self._dropout_v)
+
     def _connected_v(self, x: float, in_contact: bool) -> float:
         """Wiper volts with no dropout: the static curve on the track, else the open-wiper voltage."""
-        if in_contact and abs(x) <= self.params.track.half_length_m:
-            return float(np.interp(x, self._curve_x, self._curve_v))
-        return self.params.ball_sensor.dropout_voltage_v
+        connected = in_contact and abs(x) <= self.params.track.half_length_m
+        return float(self._wiper_v(np.array([x]), np.array([connected]))[0])
 
     def reset(
         self,
@@ -565,9 +569,9 @@ class BallPositionChain:
                 self._schedule_until(t_end)
                 if self._first_open < len(self._dropouts):
                     self._forget_finished(t0)
-                vk = np.interp(x_m, self._curve_x, self._curve_v)
-                decay, weights, _ = _uniform_rc_weights(len(vk) - 1, t_end - t0, self.tau_s)
-                y = decay * self.filtered_v + float(vk.dot(weights))
+                vk = self._wiper_v(x_m)
+                decay, _, weights, _ = _uniform_rc_weights(len(vk) - 1, t_end - t0, self.tau_s)
+                y = rc_end_v(self.filtered_v, decay, vk.tolist(), weights)
                 if self._busy_until_s > t0:  # a dropout reaches into the block
                     y += self._dropout_effect_v(times_s.tolist(), vk.tolist())
                 self.filtered_v = y
@@ -579,8 +583,8 @@ class BallPositionChain:
             # Out of contact throughout (the ball off the track): the wiper sits at the open-contact volts.
             self._schedule_until(t_end)  # the noise process draws as it would
             self._forget_finished(t0)
-            decay, _, gain = _uniform_rc_weights(len(times_s) - 1, t_end - t0, self.tau_s)
-            y = decay * self.filtered_v + self._dropout_v * gain
+            decay, _, _, gain = _uniform_rc_weights(len(times_s) - 1, t_end - t0, self.tau_s)
+            y = rc_end_v(self.filtered_v, decay, (self._dropout_v,), (gain,))  # one knot: the constant wiper
             self.filtered_v, self.wiper_v, self.time_s = y, self._dropout_v, t_end
             self.reading_v = self._adc(y)
             return self.reading_v
@@ -668,13 +672,12 @@ class BallPositionChain:
             mid = 0.5 * (knots[:-1] + knots[1:])
             d = np.array(drops)
             connected &= ~((d[None, :, 0] < mid[:, None]) & (mid[:, None] < d[None, :, 1])).any(axis=1)
-        vk = np.interp(xk, self._curve_x, self._curve_v)
+        vk = self._wiper_v(xk)
         if connected.all():  # the common case: the wiper on the curve throughout
             v_start, v_end = vk[:-1], vk[1:]
         else:
-            v_drop = self.params.ball_sensor.dropout_voltage_v
-            v_start = np.where(connected, vk[:-1], v_drop)
-            v_end = np.where(connected, vk[1:], v_drop)
+            v_start = self._wiper_v(xk[:-1], connected)
+            v_end = self._wiper_v(xk[1:], connected)
 
         end = rc_filter_end_v(
             knots, v_start[None, :], v_end[None, :], np.array([self.filtered_v]), self.tau_s
@@ -728,7 +731,7 @@ class BallChainBatch:
         )
         y = np.empty(len(runs))
         if common.any():
-            vk = np.interp(x_m[common], chain0._curve_x, chain0._curve_v)
+            vk = chain0._wiper_v(x_m[common])
             y[common] = rc_filter_uniform_end_v(vk, self.filtered_v[runs[common]], t_end - t0, chain0.tau_s)
         readings = np.empty(len(runs))
         if common.any():
@@ -752,25 +755,29 @@ def rc_filter_end_v(
 ) -> np.ndarray:
     """The RC filter's output at ``knots_s[-1]`` for each row: wiper volts linear on each piece from
     ``v_start[:, k]`` at ``knots_s[k]`` to ``v_end[:, k]`` at ``knots_s[k + 1]``, the capacitor at ``y0_v`` at
-    ``knots_s[0]``. Rows share the knots (a batch of runs in step); one run is a batch of one, so a run gives
-    the same bits alone or in a batch (the sum over pieces is one BLAS dot per row either way)."""
+    ``knots_s[0]``. Rows share the knots (a batch of runs in step); each row's sum over the pieces is
+    ``rc_end_v``'s, so a run gives the same bits alone or in a batch."""
     knots = knots_s
     t0, t_end = float(knots[0]), float(knots[-1])
     # τ·y' = v − y with v linear on a piece of length h from v_k to v_k+1 gives exactly
     #   y_k+1 = E·y_k + (1 − E)·v_k + (v_k+1 − v_k)·(1 − (1 − E)/(h/τ)),  E = e^(−h/τ)
     # (the last factor by its series for tiny h/τ, to avoid cancellation). Chained over all pieces:
     #   y_end = e^(−T/τ)·y_0 + Σ_k e^(−(t_end − t_k+1)/τ)·[(1 − E_k)·v_k + (v_k+1 − v_k)·ramp_k].
-    a = (knots[1:] - knots[:-1]) / tau_s
-    one_minus = -np.expm1(-a)
-    tiny = a < 1e-4  # only pieces cut short by an extra knot; whole physics steps are a ≈ 0.3
-    if tiny.any():
-        ramp = np.where(tiny, a / 2.0 - a * a / 6.0 + a**3 / 24.0, 1.0 - one_minus / np.maximum(a, 1e-300))
-    else:
-        ramp = 1.0 - one_minus / a
-    drive = one_minus * v_start + (v_end - v_start) * ramp
-    weight = np.exp((knots[1:] - t_end) / tau_s)
-    # (1, K) @ (K, 1) per row: numpy's matmul takes the same BLAS dot as np.dot of two vectors.
-    return math.exp((t0 - t_end) / tau_s) * y0_v + np.matmul(drive[:, None, :], weight[:, None])[:, 0, 0]
+    # The pieces' exponentials by ``math`` (libm), as ``_uniform_rc_weights`` and ``_dropout_effect_v``
+    # take theirs: numpy's np.exp/np.expm1 have other last bits under AVX-512 than without.
+    a = ((knots[1:] - knots[:-1]) / tau_s).tolist()
+    one_minus = [-math.expm1(-u) for u in a]
+    # the ramp by its series for tiny pieces (only pieces cut short by an extra knot; a step is a ≈ 0.3)
+    ramp = [
+        u / 2.0 - u * u / 6.0 + u**3 / 24.0 if u < 1e-4 else 1.0 - e / u
+        for u, e in zip(a, one_minus, strict=True)
+    ]
+    drive = np.array(one_minus) * v_start + (v_end - v_start) * np.array(ramp)
+    weight = [math.exp(u) for u in ((knots[1:] - t_end) / tau_s).tolist()]
+    decay = math.exp((t0 - t_end) / tau_s)
+    if len(drive) == 1:  # one run: the float form (the same bits, without a numpy call per piece)
+        return np.array([rc_end_v(float(y0_v[0]), decay, drive[0].tolist(), weight)])
+    return rc_end_v(y0_v, decay, drive, np.array(weight))
 
 
 def equally_spaced(times_s: np.ndarray) -> bool:
@@ -780,29 +787,62 @@ def equally_spaced(times_s: np.ndarray) -> bool:
 
 
 @functools.lru_cache(maxsize=256)
-def _uniform_rc_weights(n: int, span_s: float, tau_s: float) -> tuple[float, np.ndarray, float]:
-    """(decay, P, ΣP) such that y_end = decay·y_0 + P·v for the RC filter driven by a wiper linear between
-    n + 1 equally spaced knots over ``span_s`` (volts v_0 … v_n): ``rc_filter_end_v``'s sum with every piece
-    the same length, its terms gathered per knot (ΣP: the gain for a constant wiper). Cached: a run's blocks
-    have a handful of distinct spans (the clock's rounding), and the weights are the filter's whole cost."""
+def _uniform_rc_weights(n: int, span_s: float, tau_s: float) -> tuple[float, np.ndarray, list[float], float]:
+    """(decay, P, P as floats, ΣP) such that y_end = decay·y_0 + P·v for the RC filter driven by a wiper
+    linear between n + 1 equally spaced knots over ``span_s`` (volts v_0 … v_n): ``rc_filter_end_v``'s sum
+    with every piece the same length, its terms gathered per knot (ΣP: the gain for a constant wiper).
+    Cached: a run's blocks have a handful of distinct spans (the clock's rounding), and the weights are the
+    filter's whole cost."""
     a = span_s / n / tau_s
     one_minus = -math.expm1(-a)
     ramp = a / 2.0 - a * a / 6.0 + a**3 / 24.0 if a < 1e-4 else 1.0 - one_minus / a
-    decay_per_piece = np.exp(-a * np.arange(n - 1, -1, -1, dtype=np.float64))  # e^(−(n − 1 − k)·a)
+    decay_per_piece = np.array([math.exp(-a * k) for k in range(n - 1, -1, -1)])  # e^(−(n − 1 − k)·a), libm
     weights = np.zeros(n + 1)
     weights[:-1] += decay_per_piece * (one_minus - ramp)
     weights[1:] += decay_per_piece * ramp
     weights.flags.writeable = False
-    return math.exp(-span_s / tau_s), weights, float(weights.sum())
+    return math.exp(-span_s / tau_s), weights, weights.tolist(), fo.total(weights.tolist())
 
 
 def rc_filter_uniform_end_v(v: np.ndarray, y0_v: np.ndarray, span_s: float, tau_s: float) -> np.ndarray:
     """The RC filter's output at the end of ``span_s`` for each row of ``v`` (B, n + 1): the wiper volts at
     n + 1 equally spaced knots, linear in between, the capacitor at ``y0_v`` at the first. Equal to
-    ``rc_filter_end_v`` on those knots up to float rounding (~1e-16 V); one run is a batch of one (its
-    dot product is numpy's matmul of one row by one column, the same BLAS dot as ``ndarray.dot``)."""
-    decay, weights, _ = _uniform_rc_weights(v.shape[1] - 1, span_s, tau_s)
-    return decay * y0_v + np.matmul(v[:, None, :], weights[:, None])[:, 0, 0]
+    ``rc_filter_end_v`` on those knots up to float rounding (~1e-16 V); each row is ``rc_end_v``'s, the bits
+    a run alone gets."""
+    decay, weights, _, _ = _uniform_rc_weights(v.shape[1] - 1, span_s, tau_s)
+    return rc_end_v(y0_v, decay, v, weights)
+
+
+def wiper_v(
+    x_m: np.ndarray, connected: bool | np.ndarray, curve_x: np.ndarray, curve_v: np.ndarray, open_v: float
+) -> np.ndarray:
+    """The ball wiper's volts at positions ``x_m``: the measured static curve (linear between its points,
+    clamped at its ends) where ``connected`` (in contact, on the track, no dropout), ``open_v`` elsewhere.
+    The one home of the wiper for every path of the ball chain, alone and in a batch."""
+    v = np.interp(x_m, curve_x, curve_v)
+    if connected is True:
+        return v
+    return np.where(connected, v, open_v)
+
+
+@overload
+def rc_end_v(y0_v: float, decay: float, drive_v: Sequence[float], weights: Sequence[float]) -> float: ...
+@overload
+def rc_end_v(y0_v: np.ndarray, decay: float, drive_v: np.ndarray, weights: np.ndarray) -> np.ndarray: ...
+def rc_end_v(
+    y0_v: float | np.ndarray,
+    decay: float,
+    drive_v: Sequence[float] | np.ndarray,
+    weights: Sequence[float] | np.ndarray,
+) -> float | np.ndarray:
+    """The RC filter's output at a block's end: decay·y₀ + Σ_k drive_k·weight_k, the sum left to right
+    (``twin.fixedorder``): the one home of the ball chain's filter arithmetic (the piecewise filter's pieces,
+    a rig block's knots, a constant wiper's gain). A float ``y0_v`` with sequences of floats gives a float;
+    ``y0_v`` (n,) with ``drive_v`` (n, K) gives (n,), each row the float form's bits."""
+    if isinstance(y0_v, np.ndarray):
+        return decay * y0_v + fo.dots(np.asarray(drive_v), np.asarray(weights))
+    assert not isinstance(drive_v, np.ndarray) and not isinstance(weights, np.ndarray), "floats: sequences"
+    return decay * y0_v + fo.dot(drive_v, weights)
 
 
 class IdealSensors:
@@ -817,8 +857,18 @@ class IdealSensors:
     def __init__(self, params: Parameters) -> None:
         self.params = params
 
-    def read_v(self, x_m: float, theta_rad: float) -> tuple[float, float]:
-        """(ball volts, angle volts) for a ball at ``x_m`` and a beam at ``theta_rad``."""
+    @overload
+    def read_v(self, x_m: float, theta_rad: float) -> tuple[float, float]: ...
+    @overload
+    def read_v(self, x_m: np.ndarray, theta_rad: np.ndarray) -> tuple[np.ndarray, np.ndarray]: ...
+    def read_v(
+        self, x_m: float | np.ndarray, theta_rad: float | np.ndarray
+    ) -> tuple[float, float] | tuple[np.ndarray, np.ndarray]:
+        """(ball volts, angle volts) for a ball at ``x_m`` and a beam at ``theta_rad``: floats, or arrays over
+        the runs of a batch (the same operations element by element)."""
         sw = self.params.software
         angle = theta_rad - self.params.angle_sensor.zeroing_error_rad
-        return float(ball_volts_v(x_m, sw)), float(angle_volts_v(angle, sw))
+        ball_v, angle_v = ball_volts_v(x_m, sw), angle_volts_v(angle, sw)
+        if isinstance(x_m, np.ndarray):
+            return np.asarray(ball_v), np.asarray(angle_v)
+        return float(ball_v), float(angle_v)

@@ -16,7 +16,9 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from twin.engine import Catalogue, StateLaw
+    from collections.abc import Mapping
+
+    from twin.engine import Catalogue, CatalogueEntry, StateLaw
     from twin.guard import Fault, Guard
     from twin.interface import Controller
     from twin.parameters import Parameters
@@ -125,11 +127,38 @@ def construct(
 class WithUserController:
     """The registry plus the user's ``MODULE:CLASS`` controller, as a catalogue for the live view."""
 
+    # The base's entries and the user's, built when first read (as the registry's: reading them costs the
+    # designs, building the parser or a worker must not).
+    ENTRIES: Mapping[str, CatalogueEntry]
+
     def __init__(
         self, base: Catalogue, spec: str, cls: type[Controller], timeout_s: float | None = None
     ) -> None:
         self.base, self.spec, self.cls, self.timeout_s = base, spec, cls, timeout_s
         self.NAMES: tuple[str, ...] = (*base.NAMES, spec)
+
+    def __getattr__(self, name: str) -> Any:
+        if name != "ENTRIES":
+            raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+        self.ENTRIES = {**self.base.ENTRIES, self.spec: self._user_entry()}
+        return self.ENTRIES
+
+    def _user_entry(self) -> CatalogueEntry:
+        """The user's controller as one entry; its setpoint flag read from a built one (what it declares)."""
+        from twin.engine import CatalogueEntry
+        from twin.interface import Setpoint
+        from twin.parameters import Parameters
+
+        spec, cls = self.spec, self.cls
+        doc = (cls.__doc__ or "").strip().splitlines()
+        return CatalogueEntry(
+            name=spec,
+            build=lambda params: construct(cls, spec, params),
+            description=f"your controller {spec}" + (f": {doc[0]}" if doc else ""),
+            simulation_only=False,
+            batched=False,
+            setpoint=isinstance(construct(cls, spec, Parameters()), Setpoint),
+        )
 
     def make(self, name: str, params: Parameters | None = None) -> Controller | StateLaw:
         from twin.parameters import Parameters

@@ -4,47 +4,37 @@ Exit codes: 0 success (for ``run``: the ball was held), 1 a run whose ball was l
 controller failed, 2 bad input (arguments, parameter files, output paths), each with a one-line message
 and no traceback.
 
-Outputs (``--log``, ``--plot``, ``--out``) are checked before any work (twin.app.paths): a known extension,
-not an existing file unless ``--overwrite``, two options never naming the same file, a directory that exists
-and can be written. They are written atomically: a failed write leaves an existing file as it was.
+Outputs (``--log``, ``--plot``, ``--out``) are checked before any work (twin.outputs): a known extension of
+the file written (a link's target), not an existing file unless ``--overwrite``, never an input of the
+command, two options never naming the same file, a directory that exists and can be written; an ``--out``
+folder never ``.``, ``..``, ``/`` or the home folder, and with ``--overwrite`` only the command's own files in
+it are replaced. They are written atomically: a failed write leaves an existing file as it was.
 
-``--help`` imports nothing heavy: the controller registry (python-control), MuJoCo's runs and the plots are
-imported by the commands that use them.
+``--help`` imports nothing heavy: it lists the registry's names (``controllers.registry`` loads no design code
+until a controller is built); python-control, MuJoCo's runs and the plots are imported by the commands that
+use them.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-import math
+import re
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, NoReturn
 
 from twin.app.catalogue import WithUserController, construct, one_line, user_controller
-from twin.app.paths import check_output_dir, check_outputs, writing
+from twin.app.options import MAX_JOB_RUN_S, GridType, NumberType, count, finite_float, seed
+from twin.outputs import JobFiles, check_output_folder, check_outputs, writing
 
 if TYPE_CHECKING:
     from twin.app.montecarlo import Distribution
-    from twin.engine import Catalogue
+    from twin.engine import Catalogue, RunResult
     from twin.parameters import Parameters
+    from twin.verdict import Verdict
 
-# controllers.registry.NAMES, kept here as text so that --help need not import the registry (and python-control);
-# tests/test_cli.py checks that the two agree. A name is validated against the registry itself.
-CONTROLLER_NAMES = (
-    "thesis-sf-continuous",
-    "thesis-clp-continuous",
-    "thesis-smc-continuous",
-    "thesis-sf",
-    "thesis-clp",
-    "appendix-sf",
-    "appendix-clp",
-    "sf",
-    "clp",
-    "smc",
-    "lqr",
-)
 CONTROLLER_HELP = (
     "a named controller ({names}) or MODULE:CLASS, your own twin.interface.Controller subclass imported from "
     "MODULE (the current directory is searched first); it is built as CLASS(software=params.software), with "
@@ -53,7 +43,7 @@ CONTROLLER_HELP = (
 # A run keeps every tick of its log in memory (and the log on disk holds them all): one simulated hour is
 # 180 000 ticks at 50 Hz.
 MAX_RUN_S = 3600.0
-MAX_SWEEP_RUN_S = 600.0  # one run of a sweep: its verdict, not its log, is kept
+MAX_WORKERS = 256  # local processes
 # The live view's speed slider (twin.viewer) runs from 0.1 to 4.
 SPEED_MIN, SPEED_MAX = 0.1, 4.0
 LOG_SUFFIXES = (".mat", ".csv")
@@ -172,24 +162,6 @@ def _cmd_params(args: argparse.Namespace) -> int:
     return 0
 
 
-def _check_finite(**values: float) -> None:
-    from twin.parameters import ParameterError
-
-    for name, value in values.items():
-        if not math.isfinite(value):
-            raise ParameterError(f"--{name} = {value!r} is not a finite number")
-
-
-def _check_run_duration(duration_s: float, params: Parameters) -> None:
-    from twin.parameters import ParameterError
-
-    if not 0 < duration_s <= MAX_RUN_S:
-        raise ParameterError(
-            f"--duration = {duration_s!r}: a run lasts more than 0 and at most {MAX_RUN_S:g} s of simulated "
-            f"time (its log keeps every {params.daq.period_s * 1e3:g} ms tick in memory)"
-        )
-
-
 def _log_bytes(text: str | None, duration_s: float, params: Parameters) -> int:
     """A lower bound of a log's size on disk (0 for a path the checks will refuse anyway)."""
     if not text:
@@ -198,14 +170,53 @@ def _log_bytes(text: str | None, duration_s: float, params: Parameters) -> int:
     return ticks * _LOG_BYTES_PER_TICK.get(Path(text).suffix.lower(), 0)
 
 
+def _apply_setpoint(controller: object, spec: str, setpoint_m: float, params: Parameters) -> None:
+    """``--setpoint``: on the track, and only for a controller that declares one (twin.interface.Setpoint)."""
+    from twin.interface import Setpoint
+    from twin.parameters import ParameterError
+
+    half_m = params.track.half_length_m
+    if abs(setpoint_m) > half_m:
+        raise ParameterError(f"--setpoint = {setpoint_m!r} m is off the track (|x| ≤ {half_m:g} m)")
+    if not isinstance(controller, Setpoint):
+        from controllers import registry
+
+        named = ", ".join(name for name, entry in registry.ENTRIES.items() if entry.setpoint)
+        raise ParameterError(
+            f"--setpoint: {spec} has no ball setpoint (it regulates the ball to its own fixed point); "
+            f"named controllers with one: {named} (your own: implement twin.interface.Setpoint)"
+        )
+    controller.setpoint_m = setpoint_m
+
+
+def _verdict_about(result: RunResult, params: Parameters, x0_m: float, setpoint_m: float) -> Verdict:
+    """The run's verdict judged about the setpoint: ``twin.engine.judge`` on the logged true state. The
+    per-tick peak |θ| is not logged; only its maximum enters the verdict, and the run's verdict holds it."""
+    import numpy as np
+
+    from twin.engine import judge
+
+    log, first = result.log, result.verdict
+    return judge(
+        params,
+        log.true_time_s,
+        log.true_x_m,
+        log.true_theta_rad,
+        log.motor_volts_v,
+        np.array([first.peak_theta_rad]),
+        x0_m=x0_m,
+        ball_lost_time_s=first.ball_lost_time_s,
+        x_ref_m=setpoint_m,
+    )
+
+
 def _cmd_run(args: argparse.Namespace) -> int:
     from controllers import registry
     from twin.engine import ControllerError, run_closed_loop
     from twin.log import save_csv, save_mat
+    from twin.plant import NumericalError
 
     params = _load_params(args)
-    _check_finite(x0=args.x0, theta0=args.theta0, duration=args.duration)
-    _check_run_duration(args.duration, params)
     user = user_controller(args.controller)
     paths = check_outputs(
         [
@@ -213,10 +224,13 @@ def _cmd_run(args: argparse.Namespace) -> int:
             ("--plot", args.plot, PLOT_SUFFIXES, _PLOT_BYTES),
         ],
         overwrite=args.overwrite,
+        inputs=_inputs(args),
     )
     controller = (
         registry.make(args.controller, params) if user is None else construct(user, args.controller, params)
     )
+    if args.setpoint is not None:
+        _apply_setpoint(controller, args.controller, args.setpoint, params)
     pacer = None
     if args.realtime:
         from twin.realtime import WallClockPacer
@@ -238,6 +252,11 @@ def _cmd_run(args: argparse.Namespace) -> int:
     except ControllerError as exc:
         print(f"ballbeam run: the controller failed: {exc}", file=sys.stderr)
         return 1
+    except NumericalError as exc:  # the simulation failed: no physical verdict
+        print(f"ballbeam run: {one_line(exc)}", file=sys.stderr)
+        return 1
+    if args.setpoint is not None:
+        result.verdict = _verdict_about(result, params, args.x0, args.setpoint)
     if "--log" in paths:
         log_path = paths["--log"]
         save = save_csv if log_path.suffix.lower() == ".csv" else save_mat
@@ -247,7 +266,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         from twin.plots import plot_run
 
         with writing("--plot", args.plot):
-            plot_run(result, paths["--plot"], overwrite=args.overwrite)
+            plot_run(result, paths["--plot"], overwrite=args.overwrite, software=params.software)
     summary = {
         "controller": args.controller,
         "x0_m": args.x0,
@@ -257,6 +276,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         "plant": args.plant,
         "ideal_sensors": bool(args.ideal_sensors or args.plant == "reference"),
         "free_run_s": params.start.free_run_s,
+        **({} if args.setpoint is None else {"setpoint_m": args.setpoint}),
         **result.verdict.to_json(),
     }
     if pacer is not None:
@@ -271,17 +291,9 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 def _cmd_view(args: argparse.Namespace) -> int:
     from controllers import registry
-    from twin.parameters import ParameterError
     from twin.viewer import ViewerError, serve
 
     params = _load_params(args)
-    if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
-        raise ParameterError(f"--duration = {args.duration!r} must be a positive number of seconds")
-    if not (math.isfinite(args.speed) and SPEED_MIN <= args.speed <= SPEED_MAX):
-        raise ParameterError(
-            f"--speed = {args.speed!r}: the view runs at {SPEED_MIN:g}…{SPEED_MAX:g} simulated seconds per "
-            "wall second (the range of its speed slider)"
-        )
     user = user_controller(args.controller)
     catalogue: Catalogue = registry
     if user is not None:
@@ -310,26 +322,37 @@ def _cmd_view(args: argparse.Namespace) -> int:
     return 0
 
 
-def _check_job(args: argparse.Namespace, params: Parameters) -> None:
-    """What every many-run command checks before the work: durations, workers, the controller (built once:
-    a failing constructor is refused here) and the output directory."""
-    from twin.app.catalogue import catalogue_for
-    from twin.log import check_output_directory
-    from twin.parameters import ParameterError
+def _inputs(args: argparse.Namespace) -> list[tuple[str, str]]:
+    """The files a command reads, as (option, path): no output may replace one. A calibration folder brings
+    its two files; a user controller its module's file (imported by then)."""
+    found: list[tuple[str, str]] = []
+    for option in ("params", "spread", "criteria", "table"):
+        value = getattr(args, option, None)
+        if value:
+            found.append((f"--{option}" if option != "table" else "TABLE", value))
+    for log in getattr(args, "logs", None) or ():
+        found.append(("LOG", log))
+    calibration = getattr(args, "calibration", None)
+    if calibration:
+        found += [
+            ("--calibration", str(Path(calibration) / name)) for name in ("params.toml", "calibration.json")
+        ]
+    module_name, colon, _ = str(getattr(args, "controller", "")).partition(":")
+    module_file = getattr(sys.modules.get(module_name), "__file__", None) if colon else None
+    if module_file:
+        found.append(("--controller", module_file))
+    return found
 
-    duration = getattr(args, "duration", None)
-    if duration is not None:
-        _check_finite(duration=duration)
-        if not 0 < duration <= MAX_SWEEP_RUN_S:
-            raise ParameterError(
-                f"--duration = {duration!r}: each run lasts more than 0 and at most {MAX_SWEEP_RUN_S:g} s"
-            )
-    if not 1 <= args.workers <= 256:
-        raise ParameterError(f"--workers = {args.workers!r}: 1 … 256 local processes")
+
+def _check_job(args: argparse.Namespace, params: Parameters, outputs: JobFiles) -> None:
+    """What every many-run command checks before the work (its numbers are checked by their types): the
+    controller (built once: a failing constructor is refused here) and the output folder the job writes
+    ``outputs`` into."""
+    from twin.app.catalogue import catalogue_for
+
     catalogue_for(args.controller, params)
     if args.out is not None:
-        check_output_dir("--out", args.out)
-        check_output_directory(args.out, overwrite=args.overwrite)
+        check_output_folder("--out", args.out, outputs, overwrite=args.overwrite, inputs=_inputs(args))
 
 
 def _params_and_spread(args: argparse.Namespace) -> tuple[Parameters, Distribution | None]:
@@ -347,7 +370,17 @@ def _params_and_spread(args: argparse.Namespace) -> tuple[Parameters, Distributi
 
 
 def _cmd_sweep(args: argparse.Namespace) -> int:
-    from twin.app.sweep import DEFAULT_THETA0, DEFAULT_X0, SweepSettings, parse_range, run_sweep, write_sweep
+    from twin.app.sweep import (
+        DEFAULT_THETA0,
+        DEFAULT_X0,
+        MAX_POINTS,
+        OUTPUT_FILES,
+        SweepSettings,
+        parse_range,
+        run_sweep,
+        write_sweep,
+    )
+    from twin.parameters import ParameterError
 
     params = _load_params(args)
     settings = SweepSettings(
@@ -360,7 +393,12 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
         ideal_sensors=bool(args.ideal_sensors or args.plant == "reference"),
         seed=args.seed,
     )
-    _check_job(args, params)
+    points = settings.x0.n * settings.theta0.n
+    if points > MAX_POINTS:  # refused before the grid is built (its arrays alone may not fit in memory)
+        raise ParameterError(
+            f"--x0 {settings.x0.n} × --theta0 {settings.theta0.n} = {points} starts: at most {MAX_POINTS}"
+        )
+    _check_job(args, params, OUTPUT_FILES)
     result = run_sweep(
         settings, params, workers=args.workers, scheduler=args.scheduler, progress=_progress_bar("sweep")
     )
@@ -388,7 +426,7 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
 
 
 def _cmd_montecarlo(args: argparse.Namespace) -> int:
-    from twin.app.montecarlo import MonteCarloSettings, run_montecarlo, write_montecarlo
+    from twin.app.montecarlo import OUTPUT_FILES, MonteCarloSettings, run_montecarlo, write_montecarlo
     from twin.parameters import ParameterError
     from twin.physics import check_initial_state
 
@@ -396,14 +434,13 @@ def _cmd_montecarlo(args: argparse.Namespace) -> int:
         raise ParameterError(
             "give one of --spread FILE or --calibration DIR (what to perturb, and by how much)"
         )
-    _check_finite(x0=args.x0, theta0=args.theta0)
     base, spread = _params_and_spread(args)
     assert spread is not None
     try:
         check_initial_state(base, args.x0, args.theta0, 0.0, 0.0)
     except ValueError as exc:
         raise ParameterError(f"--x0/--theta0: {exc}") from None
-    _check_job(args, base)
+    _check_job(args, base, OUTPUT_FILES)
     settings = MonteCarloSettings(
         controller=args.controller,
         n=args.n,
@@ -457,11 +494,23 @@ def _cmd_montecarlo(args: argparse.Namespace) -> int:
 
 
 def _cmd_validate(args: argparse.Namespace) -> int:
-    from twin.app.validate import ValidationCriteria, load_criteria, validate, write_validation
+    from twin.app.validate import (
+        OUTPUT_FILES,
+        ValidationCriteria,
+        check_criteria_for,
+        load_criteria,
+        validate,
+        write_validation,
+    )
+    from twin.parameters import ParameterError
 
     params, spread = _params_and_spread(args)
     criteria = load_criteria(args.criteria) if args.criteria else ValidationCriteria()
-    _check_job(args, params)
+    try:
+        check_criteria_for(criteria, params)
+    except ParameterError as exc:
+        raise ParameterError(f"{args.criteria or 'the default criteria'}: {exc}") from None
+    _check_job(args, params, OUTPUT_FILES)
     report = validate(
         args.controller,
         params,
@@ -494,22 +543,29 @@ def _write_out(args: argparse.Namespace, write: Callable[..., Any], result: Any)
             write(result, args.out, overwrite=args.overwrite)
 
 
-def _progress_bar(what: str) -> Callable[[int, int], None]:
-    """A progress bar with ETA on stderr (tqdm), advanced by ``(done, total)`` calls; a job of several
-    stages (validate) gets a bar per stage."""
+def _progress_bar(what: str) -> Callable[..., None]:
+    """A progress bar with ETA on stderr (tqdm), advanced by ``(done, total[, stage])`` calls (a
+    ``fanout.Progress``). A job of stages (validate) reports over all its runs, the stage in the label, so
+    that the ETA is the whole job's; a count that goes back starts a new bar."""
     from tqdm import tqdm
 
     bar: list[Any] = []
 
-    def update(done: int, total: int) -> None:
-        if not bar or bar[0].total != total or done < bar[0].n:
+    def update(done: int, total: int, stage: str = "") -> None:
+        label = f"{what}: {stage}" if stage else what
+        if not bar or done < bar[0].n:
             if bar:
                 bar.pop().close()
-            bar.append(tqdm(total=total, desc=what, unit="run", file=sys.stderr, dynamic_ncols=True))
-        if done > bar[0].n:
-            bar[0].update(done - bar[0].n)
+            bar.append(tqdm(total=total, desc=label, unit="run", file=sys.stderr, dynamic_ncols=True))
+        b = bar[0]
+        if b.total != total:  # a stage's size corrected once it is known
+            b.total = total
+        if b.desc != label:
+            b.set_description_str(label, refresh=False)
+        if done > b.n:
+            b.update(done - b.n)
         if done >= total:
-            bar[0].close()
+            b.close()
 
     return update
 
@@ -517,7 +573,7 @@ def _progress_bar(what: str) -> Callable[[int, int], None]:
 def _cmd_calibrate(args: argparse.Namespace) -> int:
     from calib.identify import FITTABLE, calibrate
     from calib.logs import load_rig_log
-    from calib.report import check_out_dir, write_report
+    from calib.report import OUTPUT_FILES, write_report
     from twin.parameters import ParameterError
 
     start = _load_params(args)
@@ -526,9 +582,14 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
     if not fit or unknown:
         raise ParameterError(f"--fit {args.fit!r}: choose from {', '.join(FITTABLE)}")
     if args.out is not None:
-        check_output_dir("--out", args.out)
-        check_out_dir(args.out, args.overwrite)
+        check_output_folder("--out", args.out, OUTPUT_FILES, overwrite=args.overwrite, inputs=_inputs(args))
     logs = [load_rig_log(path) for path in args.logs]
+    period_s = min(log.period_s for log in logs)
+    if args.window < 2 * period_s:  # a window is fitted from its ticks' differences: at least two
+        raise ParameterError(
+            f"--window = {args.window:g}: at least 2 ticks of the logs' {period_s * 1e3:g} ms period "
+            f"({2 * period_s:g} s)"
+        )
 
     def progress(line: str) -> None:
         if not args.json:
@@ -552,11 +613,14 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
 
 
 def _cmd_calibrate_static(args: argparse.Namespace) -> int:
-    from calib.static import calibrate, load_table, render_lines, render_toml
-    from twin.log import atomic_output
+    from calib.static import calibrate, load_table
+    from calib.static_render import render_lines, render_toml
+    from twin.outputs import atomic_output
 
     params = _load_params(args)
-    paths = check_outputs([("--out", args.out, PARAMS_OUT_SUFFIXES, 0)], overwrite=args.overwrite)
+    paths = check_outputs(
+        [("--out", args.out, PARAMS_OUT_SUFFIXES, 0)], overwrite=args.overwrite, inputs=_inputs(args)
+    )
     result = calibrate(load_table(args.table), params)
     print(json.dumps(result.to_json(), indent=2) if args.json else "\n".join(render_lines(result)))
     if "--out" in paths:
@@ -573,14 +637,10 @@ def _cmd_experiment(args: argparse.Namespace) -> int:
     params = _load_params(args)
     if args.name not in EXPERIMENTS:
         raise ParameterError(f"unknown experiment {args.name!r}; known: {', '.join(EXPERIMENTS)}")
-    if not (math.isfinite(args.duration) and 5.0 <= args.duration <= MAX_RUN_S):
-        raise ParameterError(
-            f"--duration = {args.duration!r}: an experiment lasts 5…{MAX_RUN_S:g} s "
-            "(its log keeps every tick in memory)"
-        )
     out = check_outputs(
         [("--out", args.out, LOG_SUFFIXES, _log_bytes(args.out, args.duration, params))],
         overwrite=args.overwrite,
+        inputs=_inputs(args),
     )["--out"]
     result = run_experiment(args.name, params, duration_s=args.duration, seed=args.seed)
     save = save_csv if out.suffix.lower() == ".csv" else save_mat
@@ -610,6 +670,8 @@ class _Parser(argparse.ArgumentParser):
         super().__init__(*args, **kwargs)
 
     def error(self, message: str) -> NoReturn:
+        # "argument --x0: --x0 '…': …" (a type that names its option) → "--x0 '…': …"
+        message = re.sub(r"^argument (--[\w-]+): \1 ", r"\1 ", message)
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
@@ -651,8 +713,29 @@ def _add_plant_options(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def _mc_max_runs() -> float:
+    from twin.app.montecarlo import MAX_RUNS
+
+    return MAX_RUNS
+
+
+def _sweep_max_points() -> float:
+    from twin.app.sweep import MAX_POINTS
+
+    return MAX_POINTS
+
+
+# The numeric options shared by several commands (their types check them when parsed: see twin.app.options).
+_JOB_RUN_S = finite_float(
+    0, MAX_JOB_RUN_S, lo_open=True, unit="s", why="each run of a many-run job; its verdict is kept"
+)
+_WORKERS = count(1, MAX_WORKERS, unit="local processes")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    controller_help = CONTROLLER_HELP.format(names=", ".join(CONTROLLER_NAMES))
+    from controllers import registry  # its names only: importing it loads no design code
+
+    controller_help = CONTROLLER_HELP.format(names=", ".join(registry.NAMES))
     parser = _Parser(prog="ballbeam", description="Digital twin of the two-wire ball-and-beam rig.")
     parser.add_argument("--version", action=_VersionAction, help="print the version and exit")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -674,16 +757,27 @@ def build_parser() -> argparse.ArgumentParser:
         help="run a controller in closed loop and report the verdict (exit 0 held, 1 lost or not held)",
     )
     run.add_argument("--controller", required=True, metavar="NAME|MODULE:CLASS", help=controller_help)
-    run.add_argument("--x0", type=float, required=True, metavar="M", help="initial ball position (m)")
-    run.add_argument("--theta0", type=float, required=True, metavar="RAD", help="initial beam angle (rad)")
+    run.add_argument(
+        "--x0", type=finite_float(), required=True, metavar="M", help="initial ball position (m)"
+    )
+    run.add_argument(
+        "--theta0", type=finite_float(), required=True, metavar="RAD", help="initial beam angle (rad)"
+    )
     run.add_argument(
         "--duration",
-        type=float,
+        type=finite_float(0, MAX_RUN_S, lo_open=True, unit="s", why="the log keeps every tick in memory"),
         default=15.0,
         metavar="S",
         help=f"simulated seconds (default 15, at most {MAX_RUN_S:g}: the log keeps every tick in memory)",
     )
-    run.add_argument("--seed", type=int, default=0, help="seed of the sensor noise (default 0)")
+    run.add_argument("--seed", type=seed(), default=0, help="seed of the sensor noise (default 0)")
+    run.add_argument(
+        "--setpoint",
+        type=finite_float(unit="m"),
+        metavar="M",
+        help="ball setpoint (m, on the track) for a controller that has one (twin.interface.Setpoint); the "
+        "verdict is then judged about it",
+    )
     run.add_argument("--no-noise", action="store_true", help="switch the ball sensor's contact noise off")
     run.add_argument(
         "--realtime",
@@ -710,26 +804,28 @@ def build_parser() -> argparse.ArgumentParser:
     sweep.add_argument("--controller", required=True, metavar="NAME|MODULE:CLASS", help=controller_help)
     sweep.add_argument(
         "--x0",
-        type=range_text,
+        type=GridType("--x0", max_n=_sweep_max_points),
         metavar="LO:HI:N",
         help="initial ball positions (default -0.32:0.32:41, the chapter 7 range)",
     )
     sweep.add_argument(
         "--theta0",
-        type=range_text,
+        type=GridType("--theta0", max_n=_sweep_max_points),
         metavar="LO:HI:N",
         help="initial beam angles (default -0.7:0.7:41, the chapter 7 range)",
     )
     sweep.add_argument(
-        "--duration", type=float, default=10.0, metavar="S", help="seconds per run (default 10)"
+        "--duration", type=_JOB_RUN_S, default=10.0, metavar="S", help="seconds per run (default 10)"
     )
     sweep.add_argument(
-        "--seed", type=int, default=0, help="base seed; each start's seed follows from it and its index"
+        "--seed", type=seed(), default=0, help="base seed; each start's seed follows from it and its index"
     )
     sweep.add_argument("--no-noise", action="store_true", help="switch the ball sensor's contact noise off")
     _add_plant_options(sweep)
     _add_params_options(sweep)
-    sweep.add_argument("--workers", type=int, default=1, help="local processes (default 1: this process)")
+    sweep.add_argument(
+        "--workers", type=_WORKERS, default=1, help="local processes (default 1: this process)"
+    )
     sweep.add_argument(
         "--scheduler",
         metavar="ADDRESS",
@@ -737,7 +833,7 @@ def build_parser() -> argparse.ArgumentParser:
         "(pip install 'ballbeam-twin[distributed]'); results equal the local run's",
     )
     sweep.add_argument("--out", metavar="DIR", help="write DIR/sweep.json and DIR/map.png")
-    sweep.add_argument("--overwrite", action="store_true", help="replace an existing --out directory")
+    sweep.add_argument("--overwrite", action="store_true", help="replace its own files in an existing --out")
     sweep.add_argument("--json", action="store_true", help="print the whole result as JSON")
     sweep.set_defaults(func=_cmd_sweep)
 
@@ -746,7 +842,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="robustness: one start over many perturbed rigs and noise seeds; success rate with its interval",
     )
     mc.add_argument("--controller", required=True, metavar="NAME|MODULE:CLASS", help=controller_help)
-    mc.add_argument("--n", type=int, default=200, help="runs (default 200)")
+    mc.add_argument("--n", type=count(1, _mc_max_runs), default=200, help="runs (default 200)")
     what = mc.add_mutually_exclusive_group()
     what.add_argument(
         "--spread", metavar="FILE", help="each parameter's uncertainty (TOML/JSON; see the README)"
@@ -757,22 +853,24 @@ def build_parser() -> argparse.ArgumentParser:
         help="a calibration's values, uncertainties and correlations (calibrate --out)",
     )
     mc.add_argument(
-        "--x0", type=float, default=-0.2, metavar="M", help="initial ball position (default -0.2)"
+        "--x0", type=finite_float(), default=-0.2, metavar="M", help="initial ball position (default -0.2)"
     )
     mc.add_argument(
-        "--theta0", type=float, default=0.3, metavar="RAD", help="initial beam angle (default 0.3)"
+        "--theta0", type=finite_float(), default=0.3, metavar="RAD", help="initial beam angle (default 0.3)"
     )
-    mc.add_argument("--duration", type=float, default=15.0, metavar="S", help="seconds per run (default 15)")
-    mc.add_argument("--seed", type=int, default=0, help="seed of the samples and of every run's noise")
+    mc.add_argument(
+        "--duration", type=_JOB_RUN_S, default=15.0, metavar="S", help="seconds per run (default 15)"
+    )
+    mc.add_argument("--seed", type=seed(), default=0, help="seed of the samples and of every run's noise")
     mc.add_argument("--no-noise", action="store_true", help="switch the ball sensor's contact noise off")
     _add_plant_options(mc)
     _add_params_options(mc)
-    mc.add_argument("--workers", type=int, default=1, help="local processes (default 1: this process)")
+    mc.add_argument("--workers", type=_WORKERS, default=1, help="local processes (default 1: this process)")
     mc.add_argument(
         "--scheduler", metavar="ADDRESS", help="a Dask distributed scheduler to fan the runs out to"
     )
     mc.add_argument("--out", metavar="DIR", help="write DIR/montecarlo.json and DIR/distributions.png")
-    mc.add_argument("--overwrite", action="store_true", help="replace an existing --out directory")
+    mc.add_argument("--overwrite", action="store_true", help="replace its own files in an existing --out")
     mc.add_argument("--json", action="store_true", help="print the whole result as JSON")
     mc.set_defaults(func=_cmd_montecarlo)
 
@@ -788,11 +886,11 @@ def build_parser() -> argparse.ArgumentParser:
         "--calibration", metavar="DIR", help="a calibration's uncertainties for the Monte Carlo check"
     )
     val.add_argument("--criteria", metavar="FILE", help="TOML overriding the pass criteria (see the report)")
-    val.add_argument("--seed", type=int, default=0, help="base seed of every run's noise")
+    val.add_argument("--seed", type=seed(), default=0, help="base seed of every run's noise")
     _add_params_options(val)
-    val.add_argument("--workers", type=int, default=1, help="local processes (default 1: this process)")
+    val.add_argument("--workers", type=_WORKERS, default=1, help="local processes (default 1: this process)")
     val.add_argument("--out", metavar="DIR", help="write DIR/report.md, DIR/validation.json, DIR/region.png")
-    val.add_argument("--overwrite", action="store_true", help="replace an existing --out directory")
+    val.add_argument("--overwrite", action="store_true", help="replace its own files in an existing --out")
     val.add_argument("--json", action="store_true", help="print the report as JSON")
     val.set_defaults(func=_cmd_validate)
 
@@ -807,7 +905,9 @@ def build_parser() -> argparse.ArgumentParser:
     view.add_argument(
         "--host", default="127.0.0.1", help="interface to serve on (default 127.0.0.1: this machine only)"
     )
-    view.add_argument("--port", type=int, default=8080, help="port (default 8080); a taken port is an error")
+    view.add_argument(
+        "--port", type=count(1, 65535), default=8080, help="port (default 8080); a taken port is an error"
+    )
     view.add_argument(
         "--controller",
         default="appendix-clp",
@@ -816,13 +916,21 @@ def build_parser() -> argparse.ArgumentParser:
     )
     view.add_argument(
         "--speed",
-        type=float,
+        type=finite_float(
+            SPEED_MIN,
+            SPEED_MAX,
+            unit="simulated seconds per wall second",
+            why="the range of its speed slider",
+        ),
         default=1.0,
         help=f"simulated seconds per wall second, {SPEED_MIN:g}…{SPEED_MAX:g} (default 1.0)",
     )
-    view.add_argument("--seed", type=int, default=0, help="seed of the sensor noise (default 0)")
+    view.add_argument("--seed", type=seed(), default=0, help="seed of the sensor noise (default 0)")
     view.add_argument(
-        "--duration", type=float, metavar="S", help="stop after S wall-clock seconds (headless runs)"
+        "--duration",
+        type=finite_float(0, lo_open=True, unit="s"),
+        metavar="S",
+        help="stop after S wall-clock seconds (headless runs)",
     )
     _add_plant_options(view)
     _add_params_options(view)
@@ -839,8 +947,14 @@ def build_parser() -> argparse.ArgumentParser:
         help="parameters to fit, e.g. motor.resistance_ohm,beam.inertia_pivot_kgm2 (see README)",
     )
     cal.add_argument("--out", metavar="DIR", help="write params.toml, calibration.json and report.md here")
-    cal.add_argument("--overwrite", action="store_true", help="replace an existing --out directory")
-    cal.add_argument("--window", type=float, default=1.0, metavar="S", help="window length (default 1 s)")
+    cal.add_argument("--overwrite", action="store_true", help="replace its own files in an existing --out")
+    cal.add_argument(
+        "--window",
+        type=finite_float(0, unit="s"),  # its minimum, 2 ticks, follows from the logs' period
+        default=1.0,
+        metavar="S",
+        help="window length (default 1 s; at least 2 ticks of the logs)",
+    )
     cal.add_argument("--json", action="store_true", help="print calibration.json")
     _add_params_options(cal)
     cal.set_defaults(func=_cmd_calibrate)
@@ -859,9 +973,13 @@ def build_parser() -> argparse.ArgumentParser:
     exp.add_argument("name", metavar="NAME", help="square (recommended), dither or sweep")
     exp.add_argument("--out", required=True, metavar="LOG.mat", help="the log: .mat (thesis format) or .csv")
     exp.add_argument(
-        "--duration", type=float, default=60.0, metavar="S", help=f"seconds, 5…{MAX_RUN_S:g} (default 60)"
+        "--duration",
+        type=finite_float(5, MAX_RUN_S, unit="s", why="the log keeps every tick in memory"),
+        default=60.0,
+        metavar="S",
+        help=f"seconds, 5…{MAX_RUN_S:g} (default 60)",
     )
-    exp.add_argument("--seed", type=int, default=0, help="seed of the dither and the sensor noise")
+    exp.add_argument("--seed", type=seed(), default=0, help="seed of the dither and the sensor noise")
     exp.add_argument("--overwrite", action="store_true", help="replace an existing --out file")
     _add_params_options(exp)
     exp.set_defaults(func=_cmd_experiment)
@@ -910,7 +1028,7 @@ def _option_strings(parser: argparse.ArgumentParser) -> tuple[set[str], set[str]
     while parsers:
         for action in parsers.pop()._actions:
             every.update(action.option_strings)
-            if action.option_strings and action.type in (int, float, range_text):
+            if action.option_strings and isinstance(action.type, (NumberType, GridType)):
                 numeric.update(action.option_strings)
             if isinstance(action, argparse._SubParsersAction):
                 parsers.extend(action.choices.values())
@@ -925,11 +1043,6 @@ def _is_number(text: str) -> bool:
     except ValueError:
         return False
     return True
-
-
-def range_text(text: str) -> str:
-    """The type of a ``LO:HI:N`` option (parsed by the command; marked so that ``-0.3:0.3:7`` is a value)."""
-    return text
 
 
 def join_negative_numbers(argv: Sequence[str], parser: argparse.ArgumentParser) -> list[str]:
@@ -994,6 +1107,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (ValueError, OSError) as exc:  # bad input, or an output that cannot be written: no traceback
         print(f"ballbeam: error: {one_line(exc)}", file=sys.stderr)
         return 2
+    except FloatingPointError as exc:  # twin.plant.NumericalError: the simulation failed, not the input
+        print(f"ballbeam: {one_line(exc)}", file=sys.stderr)
+        return 1
     finally:
         set_default_timeout_s(previous_timeout_s)  # the caller's own default (main called in-process)
 

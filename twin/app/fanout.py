@@ -17,17 +17,46 @@ import signal
 from collections.abc import Callable, Generator, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from dataclasses import dataclass, fields
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
 from twin.parameters import ParameterError, Parameters
 
-__all__ = ["CHUNK_RUNS", "Progress", "Runs", "run_chunk", "run_starts"]
+__all__ = ["CHUNK_RUNS", "Progress", "Runs", "Stages", "run_chunk", "run_starts"]
 
-CHUNK_RUNS = 64  # runs per batch: enough to keep rollout's threads busy, small enough for progress
+CHUNK_RUNS = 64  # runs per batch: enough to keep rollout's threads busy (progress moves within a batch)
 
-Progress = Callable[[int, int], None]
+
+class Progress(Protocol):
+    """Told ``(runs done, runs in the job)`` as a job advances, and the stage it is in (a job of stages)."""
+
+    def __call__(self, done: int, total: int, stage: str = "") -> None: ...
+
+
+class Stages:
+    """One progress over every run of every stage of a job (validate), so that its ETA is the whole job's.
+
+    ``planned``: each stage's runs, in order. ``stage(name)`` is that stage's ``Progress``: its (done, n)
+    calls are counted after the runs of the stages before it; a stage whose first call reports another size
+    than planned (a grid's corner states, known once it is built) corrects the job's total."""
+
+    def __init__(self, progress: Progress | None, planned: dict[str, int]) -> None:
+        self.progress = progress
+        self.sizes = dict(planned)
+
+    def stage(self, name: str) -> Progress | None:
+        if self.progress is None:
+            return None
+        progress, names = self.progress, list(self.sizes)
+        before = sum(self.sizes[n] for n in names[: names.index(name)])
+        label = f"{name} (stage {names.index(name) + 1} of {len(names)})"
+
+        def update(done: int, total: int, stage: str = "") -> None:
+            self.sizes[name] = total
+            progress(before + done, sum(self.sizes.values()), label)
+
+        return update
 
 
 @dataclass(frozen=True)
@@ -53,6 +82,9 @@ class _Chunk:
     params: tuple[Parameters, ...] | None  # one per run, or None: ``runs.params`` for all
     nthread: int
     controller_timeout_s: float | None = None  # the watchdog's budget per controller call (twin.guard)
+    # In this process only (None in worker processes and on Dask): told the chunk's runs done so far (a
+    # float) as its batch advances, so that progress moves before the chunk ends.
+    report: Callable[[float], None] | None = None
 
 
 def run_chunk(chunk: _Chunk) -> list[dict[str, Any]]:
@@ -62,22 +94,32 @@ def run_chunk(chunk: _Chunk) -> list[dict[str, Any]]:
     time and that run's record says why (``failed``, ``reason``)."""
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # an idle OpenBLAS thread spins after dlqr
     from twin.engine import ControllerError
+    from twin.plant import NumericalError
 
     runs = range(len(chunk.seeds))
     try:
-        return _records(chunk, runs)
-    except ControllerError:
+        return _records(chunk, runs, chunk.report)
+    except (ControllerError, NumericalError):
         pass
     out = []
     for i in runs:
         try:
-            out += _records(chunk, [i])
+            out += _records(chunk, [i], _after(chunk.report, i))
         except ControllerError as exc:
             out.append(_failed(chunk, i, str(exc)))
+        except NumericalError as exc:  # the simulation failed, not the controller: no physical verdict
+            out.append({**_failed(chunk, i, ""), "numerical": True, "reason": str(exc)})
     return out
 
 
-def _records(chunk: _Chunk, runs: Sequence[int]) -> list[dict[str, Any]]:
+def _after(report: Callable[[float], None] | None, before: int) -> Callable[[float], None] | None:
+    """``report`` for a batch that starts after ``before`` runs of its chunk."""
+    return None if report is None else lambda done: report(before + done)
+
+
+def _records(
+    chunk: _Chunk, runs: Sequence[int], report: Callable[[float], None] | None = None
+) -> list[dict[str, Any]]:
     from twin.app.catalogue import catalogue_for
     from twin.batch import run_batch
 
@@ -96,6 +138,7 @@ def _records(chunk: _Chunk, runs: Sequence[int]) -> list[dict[str, Any]]:
         ideal_sensors=r.ideal_sensors,
         nthread=chunk.nthread,
         controller_timeout_s=chunk.controller_timeout_s,
+        progress=report,
     )
     return [
         {
@@ -194,6 +237,17 @@ def run_starts(
     timeout_s = default_timeout_s()
     n = len(starts)
     threads = nthread or max(1, (os.cpu_count() or 1) // max(workers, 1))
+    done = 0
+    shown = [0]  # the runs the progress was last told
+
+    def within(runs_in_chunk: float) -> None:
+        # Runs of the chunk being run here, in this process: the whole runs done so far.
+        now = done + int(runs_in_chunk)
+        if progress is not None and now > shown[0]:
+            shown[0] = now
+            progress(now, n)
+
+    here = progress is not None and scheduler is None and workers <= 1
     chunks = [
         (
             lo,
@@ -205,13 +259,13 @@ def run_starts(
                 params=tuple(params[lo : lo + CHUNK_RUNS]) if params is not None else None,
                 nthread=threads,
                 controller_timeout_s=timeout_s,
+                report=within if here else None,
             ),
         )
         for lo in range(0, n, CHUNK_RUNS)
     ]
     results: list[dict[str, Any] | None] = [None] * n
     source = _dask(chunks, scheduler) if scheduler else _local(chunks, workers)
-    done = 0
     if progress is not None:
         progress(0, n)  # the bar (and its clock for the ETA) starts with the job
     try:
@@ -219,6 +273,7 @@ def run_starts(
             results[lo : lo + len(records)] = records
             done += len(records)
             if progress is not None:
+                shown[0] = done
                 progress(done, n)
     except KeyboardInterrupt:
         source.close()  # stop the workers' queue (a running chunk finishes)

@@ -34,10 +34,12 @@ import numpy as np
 
 from twin.app.fanout import Progress, Runs, run_starts
 from twin.app.sweep import point_seeds
-from twin.parameters import ParameterError, Parameters
+from twin.outputs import JobFiles, atomic_directory
+from twin.parameters import DuplicateKeyError, ParameterError, Parameters, load_json
 
 __all__ = [
     "Distribution",
+    "OUTPUT_FILES",
     "MonteCarloResult",
     "MonteCarloSettings",
     "load_calibration_spread",
@@ -48,6 +50,8 @@ __all__ = [
 ]
 
 MAX_RUNS = 100_000
+# What write_montecarlo puts into its folder (checked before the runs).
+OUTPUT_FILES = JobFiles("montecarlo", ("montecarlo.json", "distributions.png"))
 MAX_REDRAWS = 100  # a spread that puts a parameter outside its bounds this often is refused
 WORST_SHOWN = 10
 _READING = ("ball_reading.gain", "ball_reading.offset_m")  # calibration's reading model (not twin fields)
@@ -93,9 +97,11 @@ def load_spread(path: str | Path, params: Parameters) -> Distribution:
     path = Path(path)
     try:
         text = path.read_text(encoding="utf-8-sig")
-        data = json.loads(text) if path.suffix.lower() == ".json" else tomllib.loads(text)
+        data = load_json(text) if path.suffix.lower() == ".json" else tomllib.loads(text)
     except (OSError, UnicodeDecodeError) as exc:
         raise ParameterError(f"{path}: cannot read: {exc}") from None
+    except DuplicateKeyError as exc:
+        raise ParameterError(f"{path}: {exc}") from None
     except (tomllib.TOMLDecodeError, json.JSONDecodeError, RecursionError) as exc:
         raise ParameterError(
             f"{path}: not valid {path.suffix.lstrip('.').upper() or 'TOML'}: {exc}"
@@ -125,6 +131,11 @@ def load_spread(path: str | Path, params: Parameters) -> Distribution:
                 s = float(values["sd"]) if "sd" in keys else float(values["rel_sd"]) * abs(nominal)
                 if s < 0:
                     raise ParameterError(f"{path}: {full}: a standard deviation is ≥ 0")
+                if "rel_sd" in keys and nominal == 0 and values["rel_sd"] != 0:
+                    raise ParameterError(
+                        f"{path}: {full} = {spec!r}: its nominal value is 0, so a relative spread perturbs "
+                        "nothing; give { sd = … } in its unit"
+                    )
                 rows.append((full, nominal, s, math.nan, math.nan))
             elif keys == {"low", "high"}:
                 lo, hi = float(values["low"]), float(values["high"])
@@ -323,40 +334,11 @@ def run_montecarlo(
 
 
 def write_montecarlo(result: MonteCarloResult, out_dir: str | Path, *, overwrite: bool = False) -> Path:
-    """``montecarlo.json`` and ``distributions.png`` into ``out_dir``, atomically."""
-    from twin.log import atomic_directory
+    """``montecarlo.json`` and ``distributions.png`` (``twin.app.montecarlo_render``) into ``out_dir``,
+    atomically (``twin.outputs.atomic_directory``: the folder's other files are kept)."""
+    from twin.app.montecarlo_render import render_distributions
 
-    with atomic_directory(out_dir, overwrite=overwrite) as tmp:
+    with atomic_directory(out_dir, OUTPUT_FILES, overwrite=overwrite) as tmp:
         (tmp / "montecarlo.json").write_text(json.dumps(result.to_json(), indent=1) + "\n")
-        _render(result, tmp / "distributions.png")
+        render_distributions(result, tmp / "distributions.png")
     return Path(out_dir)
-
-
-def _render(result: MonteCarloResult, path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    done = [r for r in result.runs if r]
-    s = result.summary
-    fig, axes = plt.subplots(1, 2, figsize=(10, 3.8), dpi=110)
-    settle = [r["settling_time_s"] for r in done if r["held"] and r["settling_time_s"] is not None]
-    offset = [1e3 * r["steady_x_m"] for r in done if r["steady_x_m"] is not None]
-    axes[0].hist(settle, bins=30, color="#1f77b4")
-    axes[0].set_xlabel("settling time (s), held runs")
-    axes[1].hist(offset, bins=30, color="#2ca02c")
-    axes[1].set_xlabel("steady ball offset (mm)")
-    for ax in axes:
-        ax.set_ylabel("runs")
-    rate = "–" if s.get("success_rate") is None else f"{100 * s['success_rate']:.1f} %"
-    ci = s.get("success_ci")
-    fig.suptitle(
-        f"{result.settings.controller}: held {s.get('held')} of {s.get('runs')} ({rate}"
-        + (f", 95 % CI {100 * ci[0]:.1f}–{100 * ci[1]:.1f} %" if ci else "")
-        + f"), lost {s.get('lost')}",
-        fontsize=10,
-    )
-    fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)

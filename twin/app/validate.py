@@ -28,13 +28,20 @@ from typing import Any
 import numpy as np
 
 from controllers import thesis_numbers as T
-from twin.app.fanout import Progress, Runs, run_starts
-from twin.app.montecarlo import Distribution, MonteCarloSettings, run_montecarlo
-from twin.app.sweep import Grid, SweepResult, SweepSettings, point_seeds, render_map, run_sweep
+from twin.app.fanout import Progress, Runs, Stages, run_starts
+from twin.app.montecarlo import MAX_RUNS, Distribution, MonteCarloSettings, run_montecarlo
+from twin.app.options import MAX_JOB_RUN_S
+from twin.app.sweep import MAX_POINTS, Grid, SweepResult, SweepSettings, point_seeds, run_sweep
+from twin.outputs import JobFiles, atomic_directory
 from twin.parameters import ParameterError, Parameters
+from twin.physics import check_initial_state
 from twin.sensors import angle_count_step_rad
 
 __all__ = ["ValidationCriteria", "ValidationReport", "load_criteria", "validate", "write_validation"]
+
+
+# A validation runs 6 starts × nominal_seeds nominal runs; past 1000 seeds it is a typing error, not a study.
+MAX_NOMINAL_SEEDS = 1000
 
 
 @dataclass(frozen=True)
@@ -66,9 +73,123 @@ class ValidationCriteria:
     montecarlo_runs: int = 100
     min_success_lower_bound: float = 0.9
 
+    def __post_init__(self) -> None:
+        """Refuse criteria without meaning (ParameterError naming the field and the value): a validation of
+        no runs, negative counts, inverted or impossible bounds, a run too long to be kept."""
+
+        def refuse(name: str, why: str) -> None:
+            raise ParameterError(f"{name} = {_shown(getattr(self, name))}: {why}")
+
+        if not 1 <= self.nominal_seeds <= MAX_NOMINAL_SEEDS:
+            refuse(
+                "nominal_seeds", f"1 … {MAX_NOMINAL_SEEDS} noise seeds per start (0 would validate no run)"
+            )
+        for name in ("duration_s", "region_duration_s"):
+            if not 0 < getattr(self, name) <= MAX_JOB_RUN_S:
+                refuse(name, f"a run lasts more than 0 and at most {MAX_JOB_RUN_S:g} s")
+        for name in ("required_x0_m", "required_theta0_rad"):
+            box = getattr(self, name)
+            if len(box) != 2 or box[0] > box[1]:
+                refuse(name, "[LO, HI] with LO ≤ HI")
+        points = 1
+        for name in ("region_x0", "region_theta0"):
+            grid = getattr(self, name)
+            if len(grid) != 3 or grid[0] > grid[1]:
+                refuse(name, "[LO, HI, N]: a grid of N starts from LO to HI, LO ≤ HI")
+            if not (float(grid[2]).is_integer() and 1 <= grid[2] <= MAX_POINTS):
+                refuse(name, f"N (the third entry) is a whole number of starts, 1 … {MAX_POINTS}")
+            object.__setattr__(self, name, (grid[0], grid[1], int(grid[2])))  # N = 17.0 from a file → 17
+            points *= int(grid[2])
+        if points > MAX_POINTS:
+            refuse(
+                "region_theta0", f"the region grid has {points} starts with region_x0; at most {MAX_POINTS}"
+            )
+        for name, region in (("required_x0_m", "region_x0"), ("required_theta0_rad", "region_theta0")):
+            (lo, hi), (glo, ghi) = getattr(self, name), getattr(self, region)[:2]
+            if lo < glo or hi > ghi:
+                refuse(name, f"reaches outside {region} [{glo:g}, {ghi:g}]: those starts would never be run")
+        if self.zeroing_counts < 0:
+            refuse("zeroing_counts", "a number of encoder counts ≥ 0 (0: no zeroing error tried)")
+        for name in ("latencies_s", "free_runs_s"):
+            if any(v < 0 for v in getattr(self, name)):
+                refuse(name, "times ≥ 0 s")
+        if not 0 <= self.max_saturated_fraction <= 1:
+            refuse("max_saturated_fraction", "a share of the ticks, 0 … 1")
+        if not 1 <= self.montecarlo_runs <= MAX_RUNS:
+            refuse("montecarlo_runs", f"1 … {MAX_RUNS} runs")
+        if not 0 <= self.min_success_lower_bound <= 1:
+            refuse("min_success_lower_bound", "a success rate, 0 … 1")
+        best = best_success_lower_bound(self.montecarlo_runs)
+        if self.min_success_lower_bound > best:
+            refuse(
+                "min_success_lower_bound",
+                f"unreachable: with montecarlo_runs = {self.montecarlo_runs} even all runs held give a 95 % "
+                f"lower bound of {best:.6g}",
+            )
+
+
+def best_success_lower_bound(runs: int) -> float:
+    """The 95 % lower bound of the success rate when all ``runs`` hold, as the Monte Carlo check computes
+    and rounds it (twin.app.montecarlo: the exact binomial interval)."""
+    import scipy.stats
+
+    return round(float(scipy.stats.binomtest(runs, runs).proportion_ci(0.95, method="exact").low), 6)
+
+
+def _shown(value: Any) -> str:
+    text = repr(list(value) if isinstance(value, tuple) else value)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def check_criteria_for(criteria: ValidationCriteria, params: Parameters) -> None:
+    """Refuse criteria that these parameters make impossible, before any run: a region or a required box
+    off the track or past the stops, a sensitivity value the rig cannot take (ParameterError naming it)."""
+    c = criteria
+    for name, (lo, hi) in (
+        ("region_x0", c.region_x0[:2]),
+        ("required_x0_m", c.required_x0_m),
+        ("region_theta0", c.region_theta0[:2]),
+        ("required_theta0_rad", c.required_theta0_rad),
+    ):
+        for v in (lo, hi):
+            x, th = (v, 0.0) if "x0" in name else (0.0, v)
+            try:
+                check_initial_state(params, float(x), float(th), 0.0, 0.0)
+            except ValueError as exc:
+                raise ParameterError(f"{name} = {_shown(getattr(c, name))}: {exc}") from None
+    _sensitivity_cases(c, params)
+
+
+def _sensitivity_cases(c: ValidationCriteria, params: Parameters) -> list[tuple[str, str, Parameters]]:
+    """Each sensitivity case: (parameter, label, the parameters with that value); a value the rig cannot
+    take is refused naming the criterion (the largest zeroing error first: its count may be huge)."""
+    count = angle_count_step_rad(params)
+    values: list[tuple[str, str, str, float]] = []
+    if c.zeroing_counts:
+        k = c.zeroing_counts
+        try:
+            params.with_overrides({"angle_sensor.zeroing_error_rad": k * count}, origin="validate")
+        except ParameterError as exc:
+            raise ParameterError(f"zeroing_counts = {k}: {exc}") from None
+        values += [
+            ("zeroing_counts", "angle_sensor.zeroing_error_rad", f"{k:+d} counts", k * count)
+            for k in range(-c.zeroing_counts, c.zeroing_counts + 1)
+            if k
+        ]
+    values += [("latencies_s", "daq.output_latency_s", f"{1e3 * v:g} ms", v) for v in c.latencies_s]
+    values += [("free_runs_s", "start.free_run_s", f"{1e3 * v:g} ms", v) for v in c.free_runs_s]
+    cases = []
+    for criterion, name, label, value in values:
+        try:
+            p = params.with_overrides({name: value}, origin="validate")
+        except ParameterError as exc:
+            raise ParameterError(f"{criterion}: sensitivity {name} = {value!r}: {exc}") from None
+        cases.append((name, label, p))
+    return cases
+
 
 def load_criteria(path: str | Path) -> ValidationCriteria:
-    """Criteria from a TOML file (any subset of ``ValidationCriteria``'s fields)."""
+    """Criteria from a TOML file (any subset of ``ValidationCriteria``'s fields), checked for meaning."""
     path = Path(path)
     try:
         data = tomllib.loads(path.read_text(encoding="utf-8-sig"))
@@ -88,7 +209,10 @@ def load_criteria(path: str | Path) -> ValidationCriteria:
         elif not _is_number(value) or (isinstance(current, int) and not float(value).is_integer()):
             raise ParameterError(f"{path}: {name} = {value!r} must be a {type(current).__name__}")
         values[name] = type(current)(value) if not isinstance(current, tuple) else value
-    return replace(default, **values)
+    try:
+        return replace(default, **values)
+    except ParameterError as exc:
+        raise ParameterError(f"{path}: {exc}") from None
 
 
 def _is_number(v: Any) -> bool:
@@ -144,15 +268,27 @@ def validate(
     progress: Progress | None = None,
 ) -> ValidationReport:
     c = criteria or ValidationCriteria()
+    check_criteria_for(c, params)  # before any run
     started = time.perf_counter()
     runs = Runs(controller, params, c.duration_s, True, "twin", False)
     checks: list[Check] = []
+    starts = [*T.CHAPTER4_STARTS, *T.HARDWARE_STARTS.values()]
+    cases = _sensitivity_cases(c, params)
+    # One progress over the four stages' runs (the region's corner states join its count when it starts).
+    stages = Stages(
+        progress,
+        {
+            "nominal": len(starts) * c.nominal_seeds,
+            "region": c.region_x0[2] * c.region_theta0[2],
+            "sensitivity": len(cases) * len(T.CHAPTER4_STARTS),
+            "monte carlo": c.montecarlo_runs if spread is not None else 0,
+        },
+    )
 
     # Nominal: the thesis's starts, several seeds.
-    starts = [*T.CHAPTER4_STARTS, *T.HARDWARE_STARTS.values()]
     grid = np.array([s for s in starts for _ in range(c.nominal_seeds)], dtype=float)
     seeds = point_seeds(seed, len(grid))
-    records, complete = run_starts(runs, grid, seeds, workers=workers, progress=progress)
+    records, complete = run_starts(runs, grid, seeds, workers=workers, progress=stages.stage("nominal"))
     if not complete:
         return ValidationReport(controller, checks, None, time.perf_counter() - started, c, complete=False)
     held, n = _runs_held(records)
@@ -185,7 +321,7 @@ def validate(
         noise=True,
         seed=seed,
     )
-    region = run_sweep(settings, params, workers=workers, progress=progress)
+    region = run_sweep(settings, params, workers=workers, progress=stages.stage("region"))
     if not region.complete:
         return ValidationReport(controller, checks, None, time.perf_counter() - started, c, complete=False)
     (xlo, xhi), (tlo, thi) = c.required_x0_m, c.required_theta0_rad
@@ -208,27 +344,20 @@ def validate(
     )
 
     # Sensitivity: one parameter at a time, from the chapter 4 starts, seed-matched.
-    count = angle_count_step_rad(params)
-    cases: list[tuple[str, str, float]] = [
-        ("angle_sensor.zeroing_error_rad", f"{k:+d} counts", k * count)
-        for k in range(-c.zeroing_counts, c.zeroing_counts + 1)
-        if k
-    ]
-    cases += [("daq.output_latency_s", f"{1e3 * v:g} ms", v) for v in c.latencies_s]
-    cases += [("start.free_run_s", f"{1e3 * v:g} ms", v) for v in c.free_runs_s]
     per_run: list[Parameters] = []
     labels = []
-    for name, label, value in cases:
-        try:
-            p = params.with_overrides({name: value}, origin="validate")
-        except ParameterError as exc:
-            raise ParameterError(f"sensitivity {name} = {value!r}: {exc}") from None
+    for name, label, p in cases:
         for start in T.CHAPTER4_STARTS:
             per_run.append(p)
             labels.append((name, label, start))
     grid = np.array([start for _, _, start in labels], dtype=float)
     records, complete = run_starts(
-        runs, grid, point_seeds(seed + 1, len(grid)), params=per_run, workers=workers, progress=progress
+        runs,
+        grid,
+        point_seeds(seed + 1, len(grid)),
+        params=per_run,
+        workers=workers,
+        progress=stages.stage("sensitivity"),
     )
     if not complete:
         return ValidationReport(controller, checks, region, time.perf_counter() - started, c, complete=False)
@@ -271,7 +400,7 @@ def validate(
             params,
             spread,
             workers=workers,
-            progress=progress,
+            progress=stages.stage("monte carlo"),
         )
         if not mc.complete:
             return ValidationReport(
@@ -291,54 +420,20 @@ def validate(
     return ValidationReport(controller, checks, region, time.perf_counter() - started, c)
 
 
-def write_validation(report: ValidationReport, out_dir: str | Path, *, overwrite: bool = False) -> Path:
-    """``report.md``, ``validation.json`` and ``region.png`` into ``out_dir``, atomically."""
-    from twin.log import atomic_directory
+# What write_validation puts into its folder (checked before the battery runs).
+OUTPUT_FILES = JobFiles("validate", ("validation.json", "region.png", "report.md"))
 
-    with atomic_directory(out_dir, overwrite=overwrite) as tmp:
+
+def write_validation(report: ValidationReport, out_dir: str | Path, *, overwrite: bool = False) -> Path:
+    """``report.md``, ``validation.json`` and ``region.png`` (``twin.app.validate_render``,
+    ``twin.app.sweep_render``) into ``out_dir``, atomically (``twin.outputs.atomic_directory``: the folder's
+    other files are kept)."""
+    from twin.app.sweep_render import render_map
+    from twin.app.validate_render import render_markdown
+
+    with atomic_directory(out_dir, OUTPUT_FILES, overwrite=overwrite) as tmp:
         (tmp / "validation.json").write_text(json.dumps(report.to_json(), indent=1) + "\n")
         if report.region is not None:
             render_map(report.region, tmp / "region.png")
         (tmp / "report.md").write_text(render_markdown(report))
     return Path(out_dir)
-
-
-def render_markdown(report: ValidationReport) -> str:
-    mark = {True: "pass", False: "**FAIL**", None: "not run"}
-    lines = [
-        f"# Validation of `{report.controller}`",
-        "",
-        f"**Verdict: {'PASS' if report.passed else 'FAIL'}** ({report.wall_s:.0f} s of computing)"
-        + ("" if report.complete else " — **interrupted**: only the checks below were run"),
-        "",
-        "| check | result | criterion | measured |",
-        "| --- | --- | --- | --- |",
-    ]
-    for c in report.checks:
-        lines.append(f"| {c.name} | {mark[c.passed]} | {c.criterion} | {c.measured} |")
-    if report.region is not None:
-        lines += ["", "![region of attraction](region.png)", ""]
-    nominal = next((c for c in report.checks if c.name == "nominal"), None)
-    if nominal is None:
-        return "\n".join(lines) + "\n"
-    lines += [
-        "## Nominal runs",
-        "",
-        "| x0 (m) | θ0 (rad) | seed | held | settling (s) | steady x (mm) | cycle (mm p-p) | peak V | rails |",
-        "| --- | --- | --- | --- | --- | --- | --- | --- | --- |",
-    ]
-    for r in nominal.rows:
-        settle = "—" if r["settling_time_s"] is None else f"{r['settling_time_s']:.2f}"
-        steady = "—" if r["steady_x_m"] is None else f"{1e3 * r['steady_x_m']:+.1f}"
-        cycle = "—" if r["limit_cycle_x_pp_m"] is None else f"{1e3 * r['limit_cycle_x_pp_m']:.1f}"
-        if r.get("failed"):  # the controller failed: no figures
-            peak, rails = "—", "—"
-        else:
-            peak, rails = f"{r['peak_motor_voltage_v']:.1f}", f"{100 * r['saturated_fraction']:.0f} %"
-        lines.append(
-            f"| {r['x0_m']:+.2f} | {r['theta0_rad']:+.2f} | {r['seed']} | {'yes' if r['held'] else r['reason']} | "
-            f"{settle} | {steady} | {cycle} | {peak} | {rails} |"
-        )
-    lines += ["", "Criteria (override with `--criteria FILE`):", ""]
-    lines += [f"- `{k}` = {v}" for k, v in asdict(report.criteria).items()]
-    return "\n".join(lines) + "\n"

@@ -5,8 +5,9 @@ Each function runs one experiment and returns the numbers it measured; it judges
 thesis, physics or an independent computation. The expected values (theory, thesis tables, tolerances) are
 not here: they belong to whoever compares.
 
-Analysis code, not runtime: it lives in the application layer because it drives controllers, rigs and the
-engine alike (docs/design.md, "Layers").
+Analysis code, not runtime. It drives only the core (plant, reference model, rig, sensor chain, log), so it
+lives in the core layer and the core's tests use it without the application layer (docs/design.md,
+"Layers"); a measurement that needs a controller belongs in ``twin.app``.
 """
 
 from __future__ import annotations

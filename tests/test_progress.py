@@ -1,0 +1,112 @@
+"""Progress moves as runs advance (not only when a 64-run batch ends) and changes no number; a job of stages
+(validate) reports one count over all its stages with the stage named, so that its ETA is the whole job's."""
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+import pytest
+from test_validate import QUICK
+
+from twin.app.cli import _progress_bar
+from twin.app.fanout import Runs, Stages, run_starts
+from twin.app.montecarlo import MonteCarloSettings, load_spread, run_montecarlo
+from twin.app.sweep import point_seeds
+from twin.app.validate import validate
+from twin.parameters import Parameters
+
+SPREAD = Path(__file__).resolve().parent.parent / "docs" / "examples" / "spread.toml"
+# Two seconds of each run: the number of ticks (100) is what progress is counted in within a batch.
+RUNS = Runs("appendix-sf", Parameters(), 2.0, True, "twin", False)
+
+
+def _recorder() -> tuple[list[tuple[int, int, str]], object]:
+    calls: list[tuple[int, int, str]] = []
+
+    def progress(done: int, total: int, stage: str = "") -> None:
+        calls.append((done, total, stage))
+
+    return calls, progress
+
+
+def test_one_batch_reports_every_run_as_it_advances() -> None:
+    """Six runs in one batch (one chunk): the count passes 1, 2, … 6 before the batch ends, never goes back,
+    and the records equal those of the same job without progress."""
+    starts = np.column_stack([np.linspace(-0.2, 0.2, 6), np.zeros(6)])
+    seeds = point_seeds(3, 6)
+    calls, progress = _recorder()
+    records, complete = run_starts(RUNS, starts, seeds, progress=progress)  # type: ignore[arg-type]
+    plain, _ = run_starts(RUNS, starts, seeds)
+    assert complete and records == plain
+    done = [d for d, _, _ in calls]
+    assert done == sorted(done) and done[0] == 0 and done[-1] == 6
+    assert set(done) == set(range(7))  # every whole run reported once the batch has advanced that far
+    assert all(total == 6 for _, total, _ in calls)
+
+
+def test_a_monte_carlo_of_twenty_moves_before_it_ends() -> None:
+    """The issue's case: ``montecarlo --n 20`` (one 64-run chunk) sat at 0 % until done."""
+    calls, progress = _recorder()
+    settings = MonteCarloSettings("appendix-sf", 20, -0.2, 0.3, duration_s=1.0, seed=0)
+    result = run_montecarlo(settings, Parameters(), load_spread(SPREAD, Parameters()), progress=progress)  # type: ignore[arg-type]
+    assert result.complete
+    done = [d for d, _, _ in calls]
+    assert len([d for d in done if 0 < d < 20]) >= 10 and done[-1] == 20
+
+
+def test_stages_count_over_the_whole_job() -> None:
+    calls, progress = _recorder()
+    stages = Stages(progress, {"nominal": 4, "region": 9, "monte carlo": 0})  # type: ignore[arg-type]
+    first, second = stages.stage("nominal"), stages.stage("region")
+    assert first is not None and second is not None
+    first(0, 4)
+    first(4, 4)
+    second(0, 11)  # the region's corner states: 11 runs, not the 9 planned
+    second(11, 11)
+    assert calls == [
+        (0, 13, "nominal (stage 1 of 3)"),
+        (4, 13, "nominal (stage 1 of 3)"),
+        (4, 15, "region (stage 2 of 3)"),
+        (15, 15, "region (stage 2 of 3)"),
+    ]
+    assert Stages(None, {"nominal": 1}).stage("nominal") is None
+
+
+def test_validate_names_its_stages_and_counts_all_their_runs() -> None:
+    c = dataclasses.replace(
+        QUICK, duration_s=1.0, region_duration_s=1.0, montecarlo_runs=3, min_success_lower_bound=0.25
+    )
+    calls, progress = _recorder()
+    report = validate(
+        "appendix-sf", Parameters(), c, spread=load_spread(SPREAD, Parameters()), progress=progress
+    )  # type: ignore[arg-type]
+    assert report.complete
+    labels = list(dict.fromkeys(stage for _, _, stage in calls))
+    assert labels == [
+        "nominal (stage 1 of 4)",
+        "region (stage 2 of 4)",
+        "sensitivity (stage 3 of 4)",
+        "monte carlo (stage 4 of 4)",
+    ]
+    done = [d for d, _, _ in calls]
+    assert done == sorted(done)
+    assert report.region is not None
+    rows = {check.name: len(check.rows) for check in report.checks}
+    sensitivity = sum(n for name, n in rows.items() if name.startswith("sensitivity"))
+    runs = rows["nominal"] + len(report.region.points) + len(report.region.corners) + sensitivity + 3
+    assert all(total == runs for _, total, stage in calls if not stage.startswith(("nominal", "region")))
+    assert done[-1] == runs  # the count ends at every run of every stage
+
+
+def test_the_bar_shows_the_stage_and_one_total(capsys: pytest.CaptureFixture[str]) -> None:
+    update = _progress_bar("validate")
+    for done, total, stage in [
+        (0, 10, "nominal (stage 1 of 2)"),
+        (4, 10, "nominal (stage 1 of 2)"),
+        (4, 12, "region (stage 2 of 2)"),
+        (12, 12, "region (stage 2 of 2)"),
+    ]:
+        update(done, total, stage)
+    err = capsys.readouterr().err
+    assert "validate: nominal (stage 1 of 2)" in err and "validate: region (stage 2 of 2)" in err
+    assert "12/12" in err and err.count(" 0/") == 1  # one bar for the whole job, drawn full at its end

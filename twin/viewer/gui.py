@@ -1,0 +1,328 @@
+"""The live view's panels: controls (their callbacks only enqueue actions for the session), status,
+notifications and the live plots. A value the session refused puts its control back."""
+
+from __future__ import annotations
+
+import functools
+import math
+import time
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+import viser
+import viser.uplot
+
+from twin.parameters import Parameters
+from twin.viewer.common import FLICK, SETPOINT, SPEED, THETA0, X0, _markdown_text, _show
+from twin.viewer.scene import CAMERAS, on_camera
+from twin.viewer.security import download_bytes_queued, send_uplot_data
+from twin.viewer.session import RECORD_LIMIT_S, LiveTwin, Refusal
+
+NOTIFY_EVERY_S = 0.5  # at most two refusal notifications a second (a flood shows as a count)
+# Live plots: title, then (legend label, history key, colour) per trace. Estimated = the controller's own
+# estimate (its observer or differentiator); measured = the raw readings through the software's converters.
+PLOTS = (
+    (
+        "x (m)",
+        (
+            ("x true", "x_true", "#1f77b4"),
+            ("measured", "x_meas", "#ff7f0e"),
+            ("estimated", "x_est", "#2ca02c"),
+            ("setpoint", "x_ref", "#000000"),
+        ),
+    ),
+    (
+        "θ (rad)",
+        (
+            ("θ true", "th_true", "#1f77b4"),
+            ("measured", "th_meas", "#ff7f0e"),
+            ("estimated", "th_est", "#2ca02c"),
+        ),
+    ),
+    ("θ̇ (rad/s)", (("θ̇ true", "thdot_true", "#1f77b4"), ("estimated", "thdot_est", "#2ca02c"))),
+    (
+        "I/O card (V)",
+        (
+            ("ball ADC", "ball_v", "#ff7f0e"),
+            ("angle ADC", "angle_v", "#8c564b"),
+            ("DAC out", "dac_v", "#9467bd"),
+        ),
+    ),
+    ("motor (V)", (("motor volts", "volts", "#d62728"),)),
+)
+PLOT_AXIS_PX = 58  # room for a y value such as "−0.005" with its minus sign (uPlot's default clips it)
+PLOT_ASPECT = 3.4  # wide and low: all the plots fit the height of a 900 px window
+PLOT_PANEL_PX = 460
+
+
+def uplot_data(t: np.ndarray, series: Sequence[np.ndarray]) -> tuple[np.ndarray | list[float | None], ...]:
+    """A chart's columns as uPlot draws them: a series without a gap as a typed array (viser sends numpy
+    arrays as binary); one with NaN (a controller without an estimate, a diverged observer) as a list with
+    None there, which uPlot draws as a gap: a NaN in a typed array would empty the whole chart's scale."""
+    columns: list[np.ndarray | list[float | None]] = [t]
+    for values in series:
+        finite = np.isfinite(values)
+        if finite.all():
+            columns.append(values)
+        else:
+            columns.append(
+                [float(v) if ok else None for v, ok in zip(values.tolist(), finite.tolist(), strict=True)]
+            )
+    return tuple(columns)
+
+
+def parameter_changes(params: Parameters) -> list[str]:
+    """``group.name = value`` for every parameter that differs from the defaults."""
+    ours, defaults = params.to_dict(), Parameters().to_dict()
+    changes = []
+    for group, values in ours.items():
+        for name, value in values.items():
+            if defaults.get(group, {}).get(name) != value:
+                changes.append(f"{group}.{name} = {_show(value, 80)}")
+    return changes
+
+
+class Panels:
+    """The controls, status and plots of one viser server around a ``LiveTwin``."""
+
+    def __init__(self, server: viser.ViserServer, live: LiveTwin, params_source: str = "") -> None:
+        self.server, self.live, self.params_source = server, live, params_source
+        self.downloads_refused = 0  # clicks answered while the previous download was still on its way
+        self._pending: list[Refusal] = []  # refusals not yet notified
+        self._last_notify = -math.inf
+        self._notified_error: str | None = None
+        self._lost_run: int | None = None  # the run whose lost ball is notified
+        self._lost_notices: list[Any] = []
+        self._build()
+
+    def _build(self) -> None:
+        gui, live, p = self.server.gui, self.live, self.live.params
+        # The sliders stay inside the track and the stops of these parameters.
+        x_max = min(X0.high, p.track.half_length_m)
+        th_max = min(THETA0.high, p.beam.stop_angle_rad)
+        ref_max = min(SETPOINT.high, p.track.half_length_m)
+        self.banner = gui.add_html("", visible=False)
+        self.status = gui.add_markdown(live.status_markdown())
+        with gui.add_folder("Run"):
+            controller = gui.add_dropdown(
+                "Controller", options=live.catalogue.NAMES, initial_value=live.controller_name
+            )
+            run = gui.add_button("Pause")
+            step = gui.add_button("Step 20 ms")
+            reset = gui.add_button("Reset", hint="Start a new run from x0, θ0 (and re-place a lost ball)")
+            speed = gui.add_slider(
+                "Speed", min=SPEED.low, max=SPEED.high, step=SPEED.step, initial_value=live.speed
+            )
+            noise = gui.add_checkbox("Sensor noise", initial_value=live.noise)
+        with gui.add_folder("Initial state (applies on Reset)"):
+            x0 = gui.add_slider(
+                "x0 (m)",
+                min=-x_max,
+                max=x_max,
+                step=X0.step,
+                initial_value=live.x0_m,
+                hint="Where the ball is held before release; press Reset to apply",
+            )
+            th0 = gui.add_slider(
+                "θ0 (rad)",
+                min=-th_max,
+                max=th_max,
+                step=THETA0.step,
+                initial_value=live.theta0_rad,
+                hint="Where the beam is held before release; press Reset to apply",
+            )
+        with gui.add_folder("Disturb"):
+            kick = gui.add_slider(
+                "Flick (m/s)", min=FLICK.low, max=FLICK.high, step=FLICK.step, initial_value=live.flick_m_s
+            )
+            flick_left = gui.add_button("Flick ◀")
+            flick_right = gui.add_button("Flick ▶")
+            reference = gui.add_slider(
+                "Setpoint x (m)",
+                min=-ref_max,
+                max=ref_max,
+                step=SETPOINT.step,
+                initial_value=live.reference_x_m,
+                disabled=not live.supports_reference,
+                hint=live.setpoint_reason,
+            )
+            self.setpoint_note = gui.add_markdown(
+                "" if live.supports_reference else f"*{_markdown_text(live.setpoint_reason)}*"
+            )
+        with gui.add_folder("Record"):
+            gui.add_markdown(
+                f"Each run is recorded from its start (Reset) for up to {RECORD_LIMIT_S / 60:g} min of "
+                "simulated time: the thesis software's `data_file.mat` variables and the twin's true state."
+            )
+            download_mat = gui.add_button("Download .mat")
+            download_csv = gui.add_button("Download CSV")
+        with gui.add_folder("Camera"):
+            cameras = {name: gui.add_button(name) for name in CAMERAS}
+        with gui.add_folder("Parameters", expand_by_default=False):
+            gui.add_markdown(self._parameters_markdown())
+        self.reference_slider = reference
+        self.run_button = run
+        self.controls: dict[str, Any] = {
+            "controller": controller,
+            "run": run,
+            "step": step,
+            "reset": reset,
+            "speed": speed,
+            "noise": noise,
+            "x0": x0,
+            "theta0": th0,
+            "flick": kick,
+            "flick_left": flick_left,
+            "flick_right": flick_right,
+            "setpoint": reference,
+            "download_mat": download_mat,
+            "download_csv": download_csv,
+            **{f"camera_{name}": button for name, button in cameras.items()},
+        }
+
+        controller.on_update(lambda _: live.enqueue("controller", controller.value))
+        run.on_click(lambda _: live.enqueue("run", not live.running))
+        step.on_click(lambda _: live.enqueue("step"))
+        reset.on_click(lambda _: live.enqueue("reset"))
+        speed.on_update(lambda _: live.enqueue("speed", speed.value))
+        noise.on_update(lambda _: live.enqueue("noise", noise.value))
+        x0.on_update(lambda _: live.enqueue("x0", x0.value))
+        th0.on_update(lambda _: live.enqueue("theta0", th0.value))
+        flick_left.on_click(lambda _: live.enqueue("flick_left", kick.value))
+        flick_right.on_click(lambda _: live.enqueue("flick_right", kick.value))
+        reference.on_update(lambda _: live.enqueue("reference", reference.value))
+        download_mat.on_click(lambda event: self._download(event.client, "mat"))
+        download_csv.on_click(lambda event: self._download(event.client, "csv"))
+        for name, button in cameras.items():
+            button.on_click(functools.partial(on_camera, name))
+
+        # The plots in their own panel, docked left of the view: all of them visible at 1400 × 900.
+        # Compact: the quantity as the y-axis label (no title), a static legend, a low time axis.
+        scales: dict[str, viser.uplot.Scale] = {"x": {"time": False, "auto": True}}
+        legend: viser.uplot.Legend = {"live": False}
+        self.plots = []
+        self.plot_panel = gui.add_panel()
+        with self.plot_panel.add_tab("Plots (last 10 s, time in s)"):
+            for label, traces in PLOTS:
+                series = [viser.uplot.Series(label="t (s)")] + [
+                    viser.uplot.Series(label=name, stroke=colour, width=1.5) for name, _, colour in traces
+                ]
+                axes: tuple[viser.uplot.Axis, ...] = (
+                    {"size": 26},
+                    {"size": PLOT_AXIS_PX, "label": label, "labelSize": 18},
+                )
+                data = tuple(np.zeros(2) for _ in series)
+                handle = gui.add_uplot(
+                    data, tuple(series), aspect=PLOT_ASPECT, scales=scales, axes=axes, legend=legend
+                )
+                self.plots.append((handle, [key for _, key, _ in traces]))
+        self.plot_panel.dock_left()
+        gui.main_panel.dock_right()  # the view between the two: nothing covers the rig
+        self.plot_panel.set_width(PLOT_PANEL_PX)
+
+    def _download(self, client: Any, kind: str) -> None:
+        """The loop builds the file (it owns the record) and hands it to the clicking browser's receiver."""
+        if client is not None:
+            self.live.enqueue("download", (kind, functools.partial(self._send_download, client)))
+
+    def _send_download(self, client: Any, name: str, data: bytes) -> None:
+        """On the loop's thread: send the file, unless the last one is still waiting for that browser to
+        take it (then a notification only): clicks never pile copies of the record up in memory."""
+        if download_bytes_queued(client):
+            self.downloads_refused += 1
+            client.add_notification(
+                "Download",
+                "the previous download is still being sent",
+                auto_close_seconds=4.0,
+                color="yellow",
+            )
+            return
+        client.send_file_download(name, data, save_immediately=True)
+
+    def _parameters_markdown(self) -> str:
+        """Where the parameters come from, and every value that differs from the thesis's defaults."""
+        source = self.params_source or "the thesis's values (no --params, no --set)"
+        changed = parameter_changes(self.live.params)
+        lines = [f"parameters: **{_markdown_text(source)}**"]
+        if changed:
+            lines.append("changed from the defaults:")
+            lines += [f"- `{_markdown_text(item)}`" for item in changed[:40]]
+            if len(changed) > 40:
+                lines.append(f"- … and {len(changed) - 40} more")
+        else:
+            lines.append("every value is the default (see `ballbeam params`)")
+        return "  \n".join(lines[:2]) + ("\n\n" + "\n".join(lines[2:]) if len(lines) > 2 else "")
+
+    def _resync(self, action: str) -> None:
+        """Put a control whose value was refused back to the state the twin runs with."""
+        live, c = self.live, self.controls
+        values: dict[str, tuple[tuple[str, Any], ...]] = {
+            "controller": (("controller", live.controller_name),),
+            "speed": (("speed", live.speed),),
+            "noise": (("noise", live.noise),),
+            "x0": (("x0", live.x0_m),),
+            "theta0": (("theta0", live.theta0_rad),),
+            "initial": (("x0", live.x0_m), ("theta0", live.theta0_rad)),
+            "reference": (("setpoint", live.reference_x_m),),
+            "flick_left": (("flick", live.flick_m_s),),
+            "flick_right": (("flick", live.flick_m_s),),
+        }
+        for name, value in values.get(action, ()):
+            c[name].value = value
+
+    def report(self) -> None:
+        """Refusals and failures to the browsers: controls put back, a notification (at most two a second)."""
+        live = self.live
+        while live.refusals:
+            refusal = live.refusals.popleft()
+            self._pending.append(refusal)
+            self._resync(refusal.action)
+        now = time.monotonic()
+        if self._pending and now - self._last_notify >= NOTIFY_EVERY_S:
+            last, more = self._pending[-1], len(self._pending) - 1
+            body = last.reason + (f" (and {more} more refused)" if more else "")
+            self._notify("Refused", body, "red")
+            self._pending.clear()
+            self._last_notify = now
+        if live.error is not None and live.error != self._notified_error:
+            self._notify("Run failed", live.error, "orange")
+        self._notified_error = live.error
+        # A lost ball stays on screen (the banner may be scrolled away) until the run it belongs to ends.
+        lost = live.runs if live.rig.ball_lost else None
+        if lost != self._lost_run:
+            for handle in self._lost_notices:
+                handle.remove()
+            self._lost_notices = []
+            if lost is not None:
+                self._lost_notices = self._notify("Ball lost", live.lost_text(), "red", seconds=None)
+            self._lost_run = lost
+
+    def _notify(self, title: str, body: str, color: Any, seconds: float | None = 8.0) -> list[Any]:
+        return [
+            client.add_notification(title, body, auto_close_seconds=seconds, color=color)
+            for client in self.server.get_clients().values()
+        ]
+
+    def update(self) -> None:
+        """The plots, the status and the controls that follow the run (inside the caller's atomic batch)."""
+        live = self.live
+        h = live.history
+        t = h.array("t")
+        if t.size >= 2:
+            for handle, keys in self.plots:
+                send_uplot_data(handle, uplot_data(t, [h.array(key) for key in keys]))
+        self.status.content = live.status_markdown()
+        # Only send what changed: re-sending a button's props re-renders it under the user's click.
+        label = "Pause" if live.running else "Start"
+        if self.run_button.label != label:
+            self.run_button.label = label
+        if self.reference_slider.disabled == live.supports_reference:
+            self.reference_slider.disabled = not live.supports_reference
+            self.reference_slider.hint = live.setpoint_reason
+            note = "" if live.supports_reference else f"*{_markdown_text(live.setpoint_reason)}*"
+            self.setpoint_note.content = note
+        banner = live.lost_banner_html()
+        if self.banner.content != banner:
+            self.banner.content = banner
+            self.banner.visible = bool(banner)

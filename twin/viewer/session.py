@@ -1,0 +1,632 @@
+"""The session: the simulation side of the live view. It owns the twin and the controller; GUI callbacks only
+enqueue actions (as mjlab's viewer does), which the loop applies between ticks, a burst coalesced to its
+latest value. Every value is checked against the controls' ranges and the current parameters, and a bad one
+is refused with the state unchanged. A controller or rig that fails marks the run failed (``_fail``: the one
+place the view handles a failing controller)."""
+
+from __future__ import annotations
+
+import html
+import io
+import math
+import sys
+import threading
+import time
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from twin import converters
+from twin import log as log_io
+from twin.engine import Catalogue, ClosedLoop, ControllerError
+from twin.interface import DaqSample, Setpoint
+from twin.parameters import Parameters
+from twin.physics import check_initial_state
+from twin.rig import PlantKind, make_rig
+from twin.verdict import Criteria, Verdict
+from twin.viewer.common import (
+    FLICK,
+    FLICK_DEFAULT_M_S,
+    FRAME_S,
+    MAX_OWED_S,
+    SETPOINT,
+    SPEED,
+    SPEED_MAX,
+    THETA0,
+    X0,
+    Slider,
+    ViewerError,
+    _log,
+    _markdown_text,
+    _printable,
+    _show,
+)
+
+HISTORY_S = 10.0  # live plots show the last 10 s
+MAX_PENDING_ACTIONS = 1024  # beyond this, actions are dropped (a flood, not a user)
+NOTICE_S = 10.0  # a refusal stays in the status line this long
+# The run is recorded from its start (Reset) for this long of simulated time (17 columns: about 4 MB).
+RECORD_LIMIT_S = 600.0
+VERDICT_EVERY_S = 1.0  # the live verdict is recomputed at most once a second of wall time
+MAX_ACTIONS_PER_FRAME = 64  # a flood of GUI messages cannot starve the simulation
+# Actions whose latest value is all that matters and whose applying costs (a new run is designed and built;
+# a new start re-places the held rig): a burst of one of them (Reset clicked 5000 times, a slider dragged)
+# waits in the queue as its last one.
+LATEST_WINS = frozenset({"reset", "controller", "x0", "theta0", "initial"})
+# Actions that start a new run: between two ticks only the last of them matters, so they are started once.
+STARTS_A_RUN = frozenset({"reset", "controller"})
+
+
+@dataclass
+class History:
+    """Bounded histories for the live plots (the last ``HISTORY_S`` seconds at 50 Hz)."""
+
+    size: int = int(HISTORY_S / FRAME_S)
+    columns: dict[str, deque] = field(default_factory=dict)
+
+    def append(self, **values: float) -> None:
+        for key, value in values.items():
+            self.columns.setdefault(key, deque(maxlen=self.size)).append(value)
+
+    def array(self, key: str) -> np.ndarray:
+        # float32: plenty for a plot, half the bytes on the wire. A diverged observer's 1e307 is a gap.
+        with np.errstate(over="ignore", invalid="ignore"):
+            values = np.asarray(self.columns.get(key, ()), dtype=np.float32)
+        return np.where(np.isfinite(values), values, np.float32(np.nan))
+
+    def clear(self) -> None:
+        self.columns.clear()
+
+
+@dataclass(frozen=True)
+class Refusal:
+    """A GUI value the loop refused: the action, the value (as shown) and why."""
+
+    action: str
+    value: str
+    reason: str
+
+
+class _Refused(Exception):
+    """An action's value is refused; the state is unchanged."""
+
+
+def _number(name: str, value: Any, limit: float, unit: str, *, low: float | None = None) -> float:
+    """A finite real number within [low, limit] (low = −limit by default), or refused naming the control."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise _Refused(f"{name} = {_show(value)} is not a number")
+    try:
+        number = float(value)
+    except (OverflowError, ValueError):
+        raise _Refused(f"{name} = {_show(value)} is not a finite number") from None
+    if not math.isfinite(number):
+        raise _Refused(f"{name} = {number!r} is not a finite number")
+    low = -limit if low is None else low
+    if not low <= number <= limit:
+        unit = f" {unit}" if unit else ""
+        raise _Refused(f"{name} = {number:g}{unit} is outside {low:g} … {limit:g}{unit}")
+    return number
+
+
+def _on_slider(name: str, value: Any, slider: Slider, within: float = math.inf) -> float:
+    """A value of a slider's control: inside the slider's range and, where the parameters narrow it (the
+    track, the stops), inside ±``within`` too; refused otherwise."""
+    return _number(name, value, min(slider.high, within), slider.unit, low=max(slider.low, -within))
+
+
+def _boolean(name: str, value: Any) -> bool:
+    if not isinstance(value, (bool, np.bool_)):
+        raise _Refused(f"{name} = {_show(value)} is not a boolean")
+    return bool(value)
+
+
+class LiveTwin:
+    """The simulation side of the viewer: a closed loop (twin.engine), and the actions the GUI asks for.
+
+    Everything here runs on the loop's thread; ``enqueue`` is the only method other threads call. The
+    controllers come from the catalogue the application hands in (the core never imports them).
+
+    Actions and their values (each checked against the controls' ranges, twin.viewer.common, and the current
+    parameters; a bad one is refused with the state unchanged and recorded in ``refusals``): ``controller``
+    (a catalogue name), ``reset``, ``run`` (bool), ``step``, ``x0`` (m, within the x0 slider and the
+    track), ``theta0`` (rad, within the θ0 slider and the stops), ``initial`` ((x0, θ0)), ``flick_left`` and
+    ``flick_right`` (the flick slider's speed, m/s), ``flick`` (m/s, signed, its size within the flick
+    slider), ``noise`` (bool), ``speed`` (the speed slider), ``reference`` (the setpoint, m, within the
+    setpoint slider and the track). A controller or rig that fails (raises, a non-finite command, a diverged
+    state, a stall) marks the run failed: ``error`` names the reason and the tick, the run pauses, and a
+    reset or another controller starts a new one. A lost ball pauses the run where it left the track; the
+    next run (Reset, another controller) then runs."""
+
+    def __init__(
+        self,
+        params: Parameters,
+        catalogue: Catalogue,
+        controller: str,
+        seed: int,
+        speed: float,
+        *,
+        plant: PlantKind = "twin",
+        ideal_sensors: bool = False,
+        wait_for_client: bool = False,
+        criteria: Criteria | None = None,
+    ) -> None:
+        self.params = params
+        self.catalogue = catalogue
+        self.seed = seed
+        self.speed = speed
+        self.criteria = criteria or Criteria()
+        self.achieved_speed: float | None = None  # measured by the pacing loop (simulated s per wall s)
+        self.plant: PlantKind = plant
+        self.ideal_sensors = ideal_sensors
+        # The default start, inside a track or stops that a parameter file narrowed.
+        self.x0_m = min(0.15, 0.5 * params.track.half_length_m)
+        self.theta0_rad = min(0.1, 0.5 * params.beam.stop_angle_rad)
+        self.noise = params.ball_sensor.noise_enabled
+        self.reference_x_m = 0.0
+        self.flick_m_s = FLICK_DEFAULT_M_S  # the last flick speed accepted (the slider is put back to it)
+        # A first visitor sees the run from its start: the twin waits (paused) until a browser connects.
+        self.awaiting_client = wait_for_client
+        self.running = not wait_for_client
+        self.error: str | None = None
+        self.lost_paused = False  # the run paused itself when the ball left the track
+        self.history = History()
+        # Queued actions, oldest first. A lock, not queue.Queue: a burst of one kind is coalesced in place.
+        self._actions: deque[tuple[str, Any]] = deque()
+        self._actions_lock = threading.Lock()
+        self._start_pending: tuple[str, str] | None = None  # (action, controller) of a run to start
+        self.runs = 0  # runs started (each reset or controller change starts one)
+        self.actions_applied = 0  # queued actions taken off the queue so far
+        self.refusals: deque[Refusal] = deque(maxlen=100)  # refused values, oldest first (the viewer drains)
+        self.refused = 0  # values refused so far
+        self.failures = 0  # runs failed so far
+        self.notice: tuple[float, str] | None = None  # (monotonic time, text) of the last refusal
+        self.downloads_built = 0  # files built for Download (a click on an unchanged record builds none)
+        self._download: tuple[tuple[str, int, int], str, bytes] | None = None  # (key, name, contents)
+        self.controller_name = controller
+        try:
+            self._start_run(controller)
+        except _Refused as exc:
+            raise ViewerError(str(exc)) from None
+
+    # --- called from any thread ---------------------------------------------------------------------
+    def enqueue(self, action: str, value: Any = None) -> None:
+        """Queue an action for the loop. Of a burst of one kind whose latest value is all that matters (a
+        dragged slider, Reset clicked thousands of times) only the latest waits."""
+        with self._actions_lock:
+            if self._actions and action in LATEST_WINS and self._actions[-1][0] == action:
+                self._actions[-1] = (action, value)
+                return
+            if len(self._actions) < MAX_PENDING_ACTIONS:
+                self._actions.append((action, value))
+                return
+        _log(f"{MAX_PENDING_ACTIONS} actions pending: dropped {action} {_show(value)}", key="flood")
+
+    @property
+    def pending_actions(self) -> int:
+        with self._actions_lock:
+            return len(self._actions)
+
+    # --- loop thread --------------------------------------------------------------------------------
+    def _start_run(self, name: str) -> None:
+        """A fresh run of ``name`` from the set initial state: new controller, rig held at (x0, θ0), then
+        released. Built completely before anything is replaced: a failure leaves the current run as it was."""
+        try:
+            controller = self.catalogue.make(name, self.params)
+            params = self.params.with_overrides({"ball_sensor.noise_enabled": self.noise})
+            rig = make_rig(params, plant=self.plant, ideal_sensors=self.ideal_sensors, seed=self.seed)
+            rig.reset(self.x0_m, self.theta0_rad)
+            limit = int(RECORD_LIMIT_S / rig.period_s) + 1
+            loop = ClosedLoop(rig, controller, record=True, record_limit=limit)
+        except Exception as exc:  # noqa: BLE001 - a controller or rig that cannot start is refused
+            raise _Refused(f"cannot start {_show(name)}: {type(exc).__name__}: {exc}") from exc
+        self.runs += 1
+        self.error = None
+        if self.lost_paused:  # the pause was the lost ball's, not the user's: the new run goes
+            self.running = True
+        self.lost_paused = False
+        self.controller_name = name
+        self.rig, self.loop = rig, loop
+        self.run_x0_m, self.run_theta0_rad = self.x0_m, self.theta0_rad  # this run's start
+        # (tick, wall time, verdict, setpoint) of the last verdict
+        self._verdict: tuple[int, float, Verdict, float] | None = None
+        self.history.clear()
+        try:
+            self._apply_reference()
+            self.loop.start()
+            self._record()
+        except Exception as exc:  # noqa: BLE001 - the run failed; the server goes on
+            self._fail(exc)
+
+    @property
+    def controller(self) -> Any:
+        return self.loop.controller
+
+    @property
+    def last_sample(self) -> DaqSample | None:
+        return self.loop.last_sample
+
+    @property
+    def supports_reference(self) -> bool:
+        """Whether the running controller regulates to a settable setpoint: the catalogue's entry says so
+        (``CatalogueEntry.setpoint``); a catalogue without entries is answered by the built controller."""
+        entries = getattr(self.catalogue, "ENTRIES", None)
+        entry = entries.get(self.controller_name) if entries is not None else None
+        if entry is not None:
+            return bool(entry.setpoint) and isinstance(self.controller, Setpoint)
+        return isinstance(self.controller, Setpoint)
+
+    @property
+    def setpoint_reason(self) -> str:
+        """Why the setpoint control does (or does not) act on this controller."""
+        if self.supports_reference:
+            return "The ball position the controller regulates to."
+        return (
+            f"{self.controller_name} regulates the ball to the centre: it declares no setpoint "
+            "(twin.interface.Setpoint; the appendix programs and the sliding-mode law are written for x = 0)."
+        )
+
+    @property
+    def setpoint_m(self) -> float:
+        """The position the running controller regulates the ball to."""
+        return self.reference_x_m if self.supports_reference else 0.0
+
+    @property
+    def initial_pending(self) -> bool:
+        """x0/θ0 were changed since this run started: they apply on Reset."""
+        return (self.x0_m, self.theta0_rad) != (self.run_x0_m, self.run_theta0_rad)
+
+    def verdict(self) -> Verdict | None:
+        """The verdict of the run so far (recomputed at most once a second while it runs), None before the
+        first tick."""
+        ticks = self.rig.ticks
+        cached = self._verdict
+        if cached is not None and (
+            (cached[0] == ticks and cached[3] == self.setpoint_m)
+            or (self.running and time.monotonic() - cached[1] < VERDICT_EVERY_S)
+        ):
+            return cached[2]
+        recorder = self.loop.recorder
+        if recorder is None or recorder.n < 2:
+            return None
+        verdict = self.loop.verdict(self.run_x0_m, self.criteria, x_ref_m=self.setpoint_m)
+        self._verdict = (ticks, time.monotonic(), verdict, self.setpoint_m)
+        return verdict
+
+    def recording(self, kind: str) -> tuple[str, bytes]:
+        """This run's record so far as a file: (file name, contents); ``kind`` is "mat" or "csv". Built once
+        per record state (run, rows recorded) and format: a full record is the same file at every click."""
+        writers = {"mat": log_io.write_mat, "csv": log_io.write_csv}
+        if kind not in writers:
+            raise _Refused(f"download = {_show(kind)}: the formats are mat and csv")
+        recorder = self.loop.recorder
+        key = (kind, self.runs, recorder.n if recorder is not None else 0)
+        if self._download is None or self._download[0] != key:
+            self._download = None  # the previous file goes before the next is built (one held at a time)
+            buffer = io.BytesIO()
+            writers[kind](self.loop.log(), buffer)
+            name = f"ballbeam_run{self.runs}_{self.controller_name}.{kind}"
+            self._download = (key, name, buffer.getvalue())
+            self.downloads_built += 1
+        return self._download[1], self._download[2]
+
+    def _apply_reference(self) -> None:
+        if self.supports_reference:
+            self.controller.setpoint_m = self.reference_x_m
+
+    def _fail(self, exc: BaseException) -> None:
+        """Mark the run failed with the reason and the tick, and pause it: the one place the view handles a
+        failing controller or rig (a ControllerError from the engine, a stall included, names the
+        controller and the tick itself)."""
+        if isinstance(exc, ControllerError):
+            reason = f"the controller failed: {exc}"
+        else:
+            try:
+                where = f"at tick k = {self.rig.ticks} (t = {self.rig.time_s:.3f} s)"
+            except Exception:  # noqa: BLE001 - a broken rig still gets its failure reported
+                where = ""
+            reason = f"the run failed {where}: {type(exc).__name__}: {exc}"
+        self.error = _printable(reason, 500)
+        self.running = False
+        self.failures += 1
+        _log(self.error, stream=sys.stdout)
+
+    def _refuse(self, action: str, value: Any, reason: str) -> None:
+        refusal = Refusal(action, _show(value), _printable(reason))
+        self.refusals.append(refusal)
+        self.refused += 1
+        self.notice = (time.monotonic(), refusal.reason)
+        _log(f"refused {action}: {refusal.reason}", key=f"refused {action}", stream=sys.stdout)
+
+    def apply_actions(self) -> None:
+        """Apply the queued actions (at most ``MAX_ACTIONS_PER_FRAME``, coalesced as they were queued); a new
+        run is started once however many resets and controller changes came in a row. Never raises."""
+        for _ in range(MAX_ACTIONS_PER_FRAME):
+            with self._actions_lock:
+                if not self._actions:
+                    break
+                action, value = self._actions.popleft()
+            self._apply(action, value)
+            self.actions_applied += 1
+        self._start_pending_run()
+
+    def apply(self, action: str, value: Any = None) -> None:
+        """Apply one action now: a bad value is refused (state unchanged), a failure marks the run failed."""
+        self._apply(action, value)
+        self._start_pending_run()
+
+    def _apply(self, action: str, value: Any) -> None:
+        handler = self._HANDLERS.get(action) if isinstance(action, str) else None
+        if action not in STARTS_A_RUN:
+            self._start_pending_run()  # what follows a reset acts on the new run
+        try:
+            if handler is None:
+                raise _Refused(f"unknown action {_show(action)}")
+            handler(self, value)
+        except _Refused as exc:
+            self._refuse(str(action), value, str(exc))
+        except Exception as exc:  # noqa: BLE001 - an action that breaks the rig fails the run, not the server
+            self._fail(exc)
+        else:
+            shown = "" if value is None else f" {_show(value)}"
+            _log(f"t = {self.rig.time_s:.2f} s: {action}{shown}", key=f"action {action}", stream=sys.stdout)
+
+    def _start_pending_run(self) -> None:
+        """Start the run that the last reset or controller change asked for, if any."""
+        if self._start_pending is None:
+            return
+        action, name = self._start_pending
+        self._start_pending = None
+        try:
+            self._start_run(name)
+        except _Refused as exc:
+            self._refuse(action, name if action == "controller" else None, str(exc))
+
+    def _do_connected(self, value: Any) -> None:
+        if self.awaiting_client:  # the first browser: a fresh run from t = 0, running
+            self.awaiting_client = False
+            self.runs = 0  # nobody saw the run built while waiting: the first one watched is run 1
+            self._start_run(self.controller_name)
+            self.running = self.error is None
+
+    def _do_download(self, value: Any) -> None:
+        if not isinstance(value, tuple) or len(value) != 2 or not callable(value[1]):
+            raise _Refused(f"download = {_show(value)} is not (format, receiver)")
+        kind, send = value
+        name, data = self.recording(kind)
+        send(name, data)
+
+    def _do_controller(self, value: Any) -> None:
+        if not isinstance(value, str) or value not in self.catalogue.NAMES:
+            raise _Refused(f"unknown controller {_show(value)}; known: {', '.join(self.catalogue.NAMES)}")
+        pending = self._start_pending[1] if self._start_pending is not None else self.controller_name
+        if value != pending:
+            self._start_pending = ("controller", value)
+
+    def _do_reset(self, value: Any) -> None:
+        pending = self._start_pending[1] if self._start_pending is not None else self.controller_name
+        self._start_pending = ("reset", pending)
+
+    def _do_run(self, value: Any) -> None:
+        self.running = _boolean("run", value) and self.error is None
+
+    def _do_step(self, value: Any) -> None:
+        self.running = False
+        self.tick()
+
+    def _check_initial(self, x0: Any, theta0: Any) -> tuple[float, float]:
+        p = self.params
+        x = _on_slider("x0", x0, X0, p.track.half_length_m)
+        th = _on_slider("θ0", theta0, THETA0, p.beam.stop_angle_rad)
+        try:
+            check_initial_state(p, x, th, 0.0, 0.0)  # the rig's own rule, should it ever be stricter
+        except ValueError as exc:
+            raise _Refused(str(exc)) from None
+        return x, th
+
+    def _do_x0(self, value: Any) -> None:
+        self.x0_m, self.theta0_rad = self._check_initial(value, self.theta0_rad)
+
+    def _do_theta0(self, value: Any) -> None:
+        self.x0_m, self.theta0_rad = self._check_initial(self.x0_m, value)
+
+    def _do_initial(self, value: Any) -> None:
+        if not isinstance(value, (tuple, list)) or len(value) != 2:
+            raise _Refused(f"initial = {_show(value)} is not a pair (x0, θ0)")
+        self.x0_m, self.theta0_rad = self._check_initial(value[0], value[1])
+
+    def _do_flick(self, value: Any) -> None:
+        """A signed flick (m/s): its size within the flick slider's range, its sign the direction."""
+        speed = _number("flick", value, FLICK.high, FLICK.unit)
+        _on_slider("flick", abs(speed), FLICK)
+        self.rig.kick_ball(speed)
+
+    def _flick(self, direction: float, value: Any) -> None:
+        # The slider's value is a speed: a negative one is refused, never a flick the other way.
+        self.flick_m_s = _on_slider("flick", value, FLICK)
+        self.rig.kick_ball(direction * self.flick_m_s)
+
+    def _do_flick_left(self, value: Any) -> None:
+        self._flick(-1.0, value)
+
+    def _do_flick_right(self, value: Any) -> None:
+        self._flick(1.0, value)
+
+    def _do_noise(self, value: Any) -> None:
+        noise = _boolean("noise", value)
+        if noise != self.noise:
+            self.rig.set_noise(noise)
+            self.noise = noise
+
+    def _do_speed(self, value: Any) -> None:
+        self.speed = _on_slider("speed", value, SPEED)
+
+    def _do_reference(self, value: Any) -> None:
+        self.reference_x_m = _on_slider("setpoint", value, SETPOINT, self.params.track.half_length_m)
+        self._apply_reference()
+
+    _HANDLERS: dict[str, Callable[[LiveTwin, Any], None]] = {
+        "controller": _do_controller,
+        "reset": _do_reset,
+        "run": _do_run,
+        "step": _do_step,
+        "x0": _do_x0,
+        "theta0": _do_theta0,
+        "initial": _do_initial,
+        "flick": _do_flick,
+        "flick_left": _do_flick_left,
+        "flick_right": _do_flick_right,
+        "noise": _do_noise,
+        "speed": _do_speed,
+        "reference": _do_reference,
+        "connected": _do_connected,
+        "download": _do_download,
+    }
+
+    def tick(self) -> None:
+        """One 20 ms frame of simulated time: as many control periods as fit in it. Never raises: a failure
+        marks the run failed."""
+        if self.error is not None:
+            return
+        try:
+            n = max(1, int(round(FRAME_S / self.rig.period_s)))
+            for _ in range(n):
+                self.loop.tick()
+            self._record()
+        except Exception as exc:  # noqa: BLE001 - a failing controller or rig fails the run, not the server
+            self._fail(exc)
+            return
+        if self.rig.ball_lost and not self.lost_paused:  # an event: pause on the state it left with
+            self.lost_paused = True
+            self.running = False
+            _log(
+                f"ball lost at t = {self.rig.ball_lost_time_s:.2f} s: paused (Reset starts again)",
+                stream=sys.stdout,
+            )
+
+    def _record(self) -> None:
+        x, theta, xdot, thetadot = self.rig.true_state()
+        est = self.controller.telemetry.estimate
+        s = self.last_sample
+        sw = self.rig.params.software
+        nan = float("nan")
+        self.history.append(
+            t=self.rig.time_s,
+            x_true=x,
+            x_meas=converters.ball_position_m(s.ball_v, sw) if s is not None else nan,
+            x_est=est[0],
+            x_ref=self.setpoint_m,
+            th_true=theta,
+            th_meas=converters.beam_angle_rad(s.angle_v, sw) if s is not None else nan,
+            th_est=est[1],
+            xdot_true=xdot,
+            xdot_est=est[2],
+            thdot_true=thetadot,
+            thdot_est=est[3],
+            ball_v=s.ball_v if s is not None else nan,
+            angle_v=s.angle_v if s is not None else nan,
+            dac_v=self.loop.command_v,
+            volts=self.rig.motor_volts_v,
+        )
+
+    def status_markdown(self) -> str:
+        if self.awaiting_client:
+            state = "waiting for a browser"
+        else:
+            state = "running" if self.running else "paused"
+        ball = (
+            f"**ball lost** at {self.rig.ball_lost_time_s:.2f} s — paused; Reset starts again"
+            if self.rig.ball_lost
+            else "ball on the beam"
+        )
+        verdict = self.verdict()
+        judged = (
+            f"  \n{_markdown_text(verdict_text(verdict, self.setpoint_m, self.criteria))}"
+            if verdict is not None
+            else ""
+        )
+        pending = ""
+        if self.initial_pending:
+            pending = (
+                f"  \n*x0 = {self.x0_m:+.2f} m, θ0 = {self.theta0_rad:+.2f} rad apply on Reset* "
+                f"(this run started at {self.run_x0_m:+.2f} m, {self.run_theta0_rad:+.2f} rad)"
+            )
+        error = f"  \n**run failed**: {_markdown_text(self.error)}" if self.error else ""
+        notice = ""
+        if self.notice is not None and time.monotonic() - self.notice[0] < NOTICE_S:
+            notice = f"  \n**refused**: {_markdown_text(self.notice[1])}"
+        return (
+            f"run {self.runs} · **t = {self.rig.time_s:.2f} s** · {state} · controller: "
+            f"**{_markdown_text(self.controller_name)}** · {ball}  \n"
+            f"noise {'on' if self.noise else 'off'} · speed ×{self.speed:g}{self._speed_note()} · "
+            f"motor {self.rig.motor_volts_v:+.2f} V{judged}{pending}{error}{notice}"
+        )
+
+    def _speed_note(self) -> str:
+        """The speed actually achieved, when the computer cannot keep up with the one asked for."""
+        achieved = self.achieved_speed
+        if not self.running or achieved is None or achieved >= 0.98 * self.speed:
+            return ""
+        return f" (achieved ×{achieved:.2f}: this computer cannot keep up)"
+
+    def lost_text(self) -> str:
+        """What a person must know while the ball is off the track (empty otherwise)."""
+        if not self.rig.ball_lost:
+            return ""
+        verdict = self.verdict()
+        x = float(self.rig.true_state()[0])
+        where = f" at x = {x:+.3f} m" if math.isfinite(x) else ""
+        return (
+            f"Ball lost at t = {self.rig.ball_lost_time_s:.2f} s: it left the track{where}. The run is paused "
+            f"({verdict_text(verdict, self.setpoint_m, self.criteria) if verdict is not None else 'no verdict'}). "
+            "Press Reset to start again."
+        )
+
+    def lost_banner_html(self) -> str:
+        """The banner shown while the ball is off the track (empty otherwise)."""
+        text = self.lost_text()
+        if not text:
+            return ""
+        return (
+            '<div role="alert" style="box-sizing:border-box;background:#c92a2a;color:#fff;padding:8px 10px;'
+            "border-radius:6px;"
+            f'font-weight:600;font-size:0.9em">{html.escape(text)}</div>'
+        )
+
+
+def verdict_text(v: Verdict, setpoint_m: float = 0.0, criteria: Criteria | None = None) -> str:
+    """One line for a person watching: the verdict of the run so far. Until the final window
+    (``Criteria.window_s``) lies after a first window of the run, or the ball settled before it, that window
+    still holds the release's transient: it is called the transient, not a limit cycle or an offset."""
+    c = criteria or Criteria()
+    if v.ball_lost:
+        return f"verdict: lost (ball off the track at {v.ball_lost_time_s:.2f} s)"
+    if v.steady_x_m is None:
+        return f"verdict so far: too early to tell ({v.reason})"
+    judged_from_s = 2.0 * c.window_s
+    if v.settling_time_s is None and v.duration_s < judged_from_s:
+        return (
+            f"verdict so far: transient (the final {c.window_s:g} s window is judged once the ball settles, "
+            f"at the latest from t = {judged_from_s:g} s)"
+        )
+    parts = ["held" if v.held else f"not held: {v.reason}"]
+    if v.settling_time_s is not None:
+        parts.append(f"settled in {v.settling_time_s:.2f} s")
+    parts.append(f"steady x {v.steady_x_m * 1e3:+.1f} mm" + (" from the setpoint" if setpoint_m else ""))
+    if v.limit_cycle_x_pp_m is not None:
+        parts.append(f"cycle {v.limit_cycle_x_pp_m * 1e3:.1f} mm p-p")
+    parts.append(f"peak {v.peak_motor_voltage_v:.1f} V ({100 * v.saturated_fraction:.0f} % at the rails)")
+    judged = " · ".join(parts)
+    about = f" (about the setpoint x = {setpoint_m:+.2f} m)" if setpoint_m else ""
+    return f"verdict so far{about}: {judged}"
+
+
+def owe(owed_s: float, speed: float) -> float:
+    """The pacing's debt after one more wall frame at ``speed``: never negative, never more than
+    ``MAX_OWED_S`` (a few frames), whatever ``speed`` holds."""
+    rate = float(speed) if isinstance(speed, (int, float)) and math.isfinite(speed) else 0.0
+    rate = min(max(rate, 0.0), SPEED_MAX)
+    owed = owed_s if math.isfinite(owed_s) else 0.0
+    return min(max(owed, 0.0) + FRAME_S * rate, MAX_OWED_S)
