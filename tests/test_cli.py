@@ -17,6 +17,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+from cli_checks import refused as _refused
 
 import twin.engine
 from twin import outputs
@@ -25,19 +26,6 @@ from twin.app.cli import main
 
 ROOT = Path(__file__).resolve().parent.parent
 RUN = ["run", "--controller", "appendix-clp", "--x0", "0.1", "--theta0", "0.1", "--duration", "0.2"]
-
-
-def _refused(capsys: pytest.CaptureFixture[str], argv: list[str], *needles: str) -> str:
-    """Exit 2, one line on stderr containing every needle, no traceback; returns the line."""
-    rc = main(argv)
-    err = capsys.readouterr().err
-    assert rc == 2, err
-    assert "Traceback" not in err
-    lines = err.strip().splitlines()
-    assert len(lines) == 1, err
-    for needle in needles:
-        assert needle in lines[0], lines[0]
-    return lines[0]
 
 
 @pytest.fixture

@@ -11,6 +11,7 @@ import h5py
 import numpy as np
 import pytest
 import scipy.io
+from cli_checks import refused as _refused
 
 from calib.logs import ADC_STEP_V, DAC_STEP_V, load_rig_log, read_mat73
 from twin.app import options
@@ -21,19 +22,6 @@ from twin.log import LogError, load_mat
 from twin.parameters import ParameterError, Parameters
 
 PERIOD_S = 0.02
-
-
-def _refused(capsys: pytest.CaptureFixture[str], argv: list[str], *needles: str) -> str:
-    """Exit 2, one line on stderr containing every needle, no traceback; returns the line."""
-    rc = main(argv)
-    err = capsys.readouterr().err
-    assert rc == 2, err
-    assert "Traceback" not in err
-    lines = err.strip().splitlines()
-    assert len(lines) == 1, err
-    for needle in needles:
-        assert needle in lines[0], lines[0]
-    return lines[0]
 
 
 @pytest.fixture
