@@ -109,3 +109,13 @@ def test_the_check_sees_an_upward_import(tmp_path: Path) -> None:
     bad.write_text("from controllers import registry\n")
     assert [(1, "controllers")] == _imports(bad)
     assert LAYERS[_layer("controllers") or ""] > LAYERS["twin"]
+
+
+def test_the_design_records_diagram_is_these_layers() -> None:
+    """docs/design.md's diagram lists the layers top down, as LAYERS ranks them (the core as "twin (core)")."""
+    text = (ROOT / "docs" / "design.md").read_text(encoding="utf-8")
+    block = text.split("## Layers", 1)[1].split("```", 2)[1]
+    drawn = [
+        line.split()[0] for line in block.splitlines() if line[:1].isalpha() and not line.startswith("models")
+    ]
+    assert drawn == sorted(LAYERS, key=LAYERS.__getitem__, reverse=True), drawn
