@@ -21,7 +21,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=Path("docs/view.png"))
     parser.add_argument("--wait", type=float, default=8.0, help="seconds of running before the shot")
-    parser.add_argument("--controller", default="lqr")
+    parser.add_argument("--controller", default="lqi")
     parser.add_argument(
         "--setpoint-steps", type=int, default=8, help="setpoint slider steps (0.01 m each) to the right"
     )
