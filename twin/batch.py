@@ -45,7 +45,7 @@ from twin.engine import (
 from twin.guard import Guard, install_interrupt_handler, safe_name
 from twin.interface import Controller, DaqSample
 from twin.log import THESIS_FIELDS, TRUTH_FIELDS, RunLog
-from twin.output_stage import amplifier_volts, motor_volts
+from twin.output_stage import ideal_motor_volts, motor_volts
 from twin.parameters import Daq, Parameters
 from twin.plant import (
     Plant,
@@ -379,11 +379,8 @@ class _Group:
 
     # --- the rig, over the live runs --------------------------------------------------------------------
     def _motor_volts_for(self, command_v: np.ndarray) -> np.ndarray:
-        if self.ideal:  # an exact DAC: the card's range, then the amplifier
-            daq = self.p.daq
-            return np.asarray(
-                amplifier_volts(np.clip(command_v, daq.dac_min_v, daq.dac_max_v), self.p.amplifier)
-            )
+        if self.ideal:
+            return np.asarray(ideal_motor_volts(command_v, self.p))
         return np.asarray(motor_volts(command_v, self.p))
 
     def write(self, command_v: np.ndarray) -> None:

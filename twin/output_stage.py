@@ -46,6 +46,17 @@ def motor_volts(command_v: float | np.ndarray, params: Parameters) -> float | np
     return float(out) if np.ndim(command_v) == 0 else out
 
 
+def ideal_motor_volts(command_v: float | np.ndarray, params: Parameters) -> float | np.ndarray:
+    """Motor volts for an exact DAC (the ideal converters): the card's range, no quantization, then the
+    amplifier; a float for a number, an array for an array (the batch)."""
+    daq = params.daq
+    if isinstance(command_v, (int, float)):
+        return float(
+            amplifier_volts(float(min(max(command_v, daq.dac_min_v), daq.dac_max_v)), params.amplifier)
+        )
+    return np.asarray(amplifier_volts(np.clip(command_v, daq.dac_min_v, daq.dac_max_v), params.amplifier))
+
+
 def motor_volts_of(params: Parameters) -> Callable[[float], float]:
     """``motor_volts`` of one finite Python float with the DAC's constants bound once (the rig's per-tick
     write): the same two steps (``tests/test_output_stage.py`` checks it against ``motor_volts``)."""

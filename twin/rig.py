@@ -29,7 +29,7 @@ import numpy as np
 
 from twin.daq import TickSchedule, block_span_s
 from twin.interface import DaqSample, Rig
-from twin.output_stage import amplifier_volts, motor_volts_of
+from twin.output_stage import ideal_motor_volts, motor_volts_of
 from twin.parameters import Parameters
 from twin.physics import Physics, PhysicsBlock
 from twin.plant import Plant
@@ -227,11 +227,8 @@ class SimRig(Rig):
         return step * self.params.physics.timestep_s
 
     def _motor_volts_for(self, command_v: float) -> float:
-        if self.ideal_sensors:  # an exact DAC: the card's range, then the amplifier
-            daq = self.params.daq
-            return float(
-                amplifier_volts(min(max(command_v, daq.dac_min_v), daq.dac_max_v), self.params.amplifier)
-            )
+        if self.ideal_sensors:
+            return float(ideal_motor_volts(command_v, self.params))
         return self._motor_volts(command_v)
 
     def _set_motor_volts(self, volts: float) -> None:

@@ -608,7 +608,7 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
         for warning in cal.warnings:
             print(f"warning: {warning}")
         if args.out is not None:
-            print(f"wrote {args.out}/params.toml, calibration.json, report.md")
+            print(f"wrote {Path(args.out) / 'params.toml'}, calibration.json, report.md")
     return 0 if cal.converged else 1
 
 
