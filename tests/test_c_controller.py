@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 import re
 import shutil
+import socket
 import struct
 import subprocess
 import zlib
@@ -217,9 +218,9 @@ def test_c_rejects_each_malformed_frame_and_finds_the_next_good_one(bb_sf: Path)
 class PipeClient:
     """The C program in ``pipe`` mode: frames to its stdin, from its stdout; its trace line per sample."""
 
-    def __init__(self, bb_sf: Path, trace: Path, *extra: str) -> None:
+    def __init__(self, bb_sf: Path, trace: Path, *transport: str) -> None:
         self.proc = subprocess.Popen(
-            [bb_sf, "pipe", "--trace", str(trace), "--timeout", "5", *extra],
+            [bb_sf, *(transport or ("pipe",)), "--trace", str(trace), "--timeout", "5"],
             stdin=subprocess.PIPE,
             stdout=subprocess.PIPE,
             stderr=subprocess.PIPE,
@@ -232,12 +233,14 @@ class PipeClient:
         self.proc.stdin.write(data)
         self.proc.stdin.flush()
 
-    def receive(self, kind: int) -> tuple[int, int, tuple]:
+    def read_frame(self) -> bytes:
         assert self.proc.stdout is not None
         header = self.proc.stdout.read(16)
         assert len(header) == 16, f"bb_sf sent no frame: {self.finish()[1]}"
-        data = header + self.proc.stdout.read(HEADER.unpack(header)[3] - 16)
-        got, seq, session, values = unframe(data)
+        return header + self.proc.stdout.read(HEADER.unpack(header)[3] - 16)
+
+    def receive(self, kind: int) -> tuple[int, int, tuple]:
+        got, seq, session, values = unframe(self.read_frame())
         assert got == kind
         return seq, session, values
 
@@ -256,6 +259,34 @@ class PipeClient:
             if self.trace is not None:
                 self.trace.close()
         return self.proc.returncode, err.decode()
+
+
+class UdpClient(PipeClient):
+    """The C program in ``udp`` mode against a socket of this test on loopback: one frame per datagram."""
+
+    def __init__(self, bb_sf: Path, trace: Path) -> None:
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind(("127.0.0.1", 0))
+        self.sock.settimeout(5.0)  # a client that never answers fails the test instead of hanging it
+        self.peer: tuple[str, int] | None = None
+        super().__init__(bb_sf, trace, "udp", "127.0.0.1", str(self.sock.getsockname()[1]))
+
+    def send(self, data: bytes) -> None:
+        assert self.peer is not None
+        self.sock.sendto(data, self.peer)
+
+    def read_frame(self) -> bytes:
+        while True:
+            first = self.peer is None
+            data, self.peer = self.sock.recvfrom(1024)
+            if first or data[5] != HELLO:  # HELLO repeats until CONFIG arrives: one may cross it
+                return data
+
+    def finish(self) -> tuple[int, str]:
+        try:
+            return super().finish()
+        finally:
+            self.sock.close()
 
 
 def handshake(client: PipeClient, params: Parameters, session: int, **config: object) -> None:
@@ -299,10 +330,18 @@ class CController(Controller):
 
 
 def run_c_closed_loop(
-    bb_sf: Path, tmp_path: Path, params: Parameters, x0_m: float, theta0_rad: float, seed: int
+    bb_sf: Path,
+    tmp_path: Path,
+    params: Parameters,
+    x0_m: float,
+    theta0_rad: float,
+    seed: int,
+    udp: bool = False,
 ) -> tuple[ClosedLoop, CController, int, str]:
-    """The sequence of ``run_closed_loop`` (10 s, noise on) with the C controller; ends with STOP."""
-    client = PipeClient(bb_sf, tmp_path / f"trace_{x0_m}_{theta0_rad}.txt")
+    """The sequence of ``run_closed_loop`` (10 s, noise on) with the C controller over pipes (or loopback
+    UDP); ends with STOP."""
+    trace = tmp_path / f"trace_{x0_m}_{theta0_rad}.txt"
+    client = UdpClient(bb_sf, trace) if udp else PipeClient(bb_sf, trace)
     session = 0x5EED_0000 + seed
     handshake(client, params, session)
     rig = make_rig(params, seed=seed, noise=True)
@@ -428,3 +467,13 @@ def test_a_silent_server_ends_the_session_within_the_timeout(bb_sf: Path) -> Non
 def test_usage_errors_exit_2_with_one_line(bb_sf: Path, args: list[str], message: str) -> None:
     proc = subprocess.run([bb_sf, *args], capture_output=True, timeout=10)
     assert proc.returncode == 2 and proc.stderr.decode().splitlines()[0] == message
+
+
+def test_over_udp_the_c_controller_runs_the_same_session(
+    bb_sf: Path, tmp_path: Path, params: Parameters
+) -> None:
+    x0, theta0 = HARDWARE_STARTS["Fig 6.17 (state feedback)"]
+    loop, controller, code, err = run_c_closed_loop(bb_sf, tmp_path, params, x0, theta0, seed=0, udp=True)
+    assert code == 0, err
+    py = run_closed_loop(AppendixStateFeedback(params.software), x0_m=x0, theta0_rad=theta0, seed=0)
+    assert controller.answers == py.log.aout.tolist() and loop.verdict(x0) == py.verdict
