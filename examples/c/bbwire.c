@@ -3,6 +3,9 @@
 
 #include <string.h>
 
+/* f64 fields are IEEE 754 binary64: refuse to build where double is narrower (e.g. avr-gcc's default). */
+typedef char bb_double_is_binary64[(sizeof(double) == 8 && sizeof(uint64_t) == 8) ? 1 : -1];
+
 static uint32_t crc_table[256];
 static int crc_table_ready = 0;
 
@@ -101,10 +104,9 @@ size_t bb_encode(const bb_frame *f, uint8_t *buf, size_t cap)
     put_u16(buf + 6, (uint16_t)len);
     put_u32(buf + 8, f->seq);
     put_u32(buf + 12, f->session);
-    uint8_t *p = buf + BB_HEADER_LEN;
     switch (f->type) {
     case BB_HELLO:
-        p[0] = f->u.hello.role;
+        buf[16] = f->u.hello.role;
         put_text(buf + 20, f->u.hello.client, 32);
         break;
     case BB_CONFIG: {
