@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 import re
 import shutil
+import signal
 import socket
 import struct
 import subprocess
@@ -477,3 +478,17 @@ def test_over_udp_the_c_controller_runs_the_same_session(
     assert code == 0, err
     py = run_closed_loop(AppendixStateFeedback(params.software), x0_m=x0, theta0_rad=theta0, seed=0)
     assert controller.answers == py.log.aout.tolist() and loop.verdict(x0) == py.verdict
+
+
+def test_ctrl_c_ends_the_session_with_a_stop_not_a_silent_controller(
+    bb_sf: Path, tmp_path: Path, params: Parameters, sample_frames: list[DaqSample]
+) -> None:
+    client = PipeClient(bb_sf, tmp_path / "trace.txt")
+    handshake(client, params, 12)
+    s0 = sample_frames[0]
+    client.send(frame(SAMPLE, 0, 12, s0.time_s, s0.ball_v, s0.angle_v, HELD, 0))
+    client.receive(COMMAND)
+    client.proc.send_signal(signal.SIGINT)
+    assert client.receive(STOP)[1:] == (12, (1,))  # reason 1: client quit
+    code, err = client.finish()
+    assert code == 130 and err == "bb_sf: interrupted (signal 2) after sample 0: sent STOP 1 (client quit)\n"

@@ -9,7 +9,7 @@
  *
  * Exit status: 0 the session ended as the server said it would (STOP done, or the last sample answered);
  * 1 the session failed (refused, a server that went silent, a ball lost, a bad CONFIG, a non-finite
- * value); 2 a usage error.
+ * value); 2 a usage error; 128 + the signal after SIGINT/SIGTERM (having sent STOP 1, client quit).
  */
 #define _POSIX_C_SOURCE 200809L
 
@@ -17,6 +17,7 @@
 #include <math.h>
 #include <netdb.h>
 #include <poll.h>
+#include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -34,7 +35,12 @@
 
 /* --- transports: one frame per datagram, or a byte stream of frames ------------------------------ */
 
-enum { RX_FRAME = 1, RX_TIMEOUT = 0, RX_EOF = 2 }; /* negative: a rejected frame (enum bb_status) */
+enum { RX_FRAME = 1, RX_TIMEOUT = 0, RX_EOF = 2, RX_QUIT = 3 }; /* negative: a rejected frame */
+
+/* SIGINT/SIGTERM: the session ends with STOP 1 (client quit) rather than a silent controller. */
+static volatile sig_atomic_t quit_signal = 0;
+
+static void on_quit_signal(int signo) { quit_signal = signo; }
 
 typedef struct {
     int udp;        /* 1: a connected UDP socket; 0: the stdin/stdout stream */
@@ -74,7 +80,7 @@ static int wait_readable(int fd, int timeout_ms)
     struct pollfd p = {fd, POLLIN, 0};
     for (;;) {
         int r = poll(&p, 1, timeout_ms);
-        if (r < 0 && errno == EINTR) continue;
+        if (r < 0 && errno == EINTR && !quit_signal) continue;
         return r > 0;
     }
 }
@@ -85,6 +91,7 @@ static int stream_next(transport *t, uint8_t *frame, size_t *len, int timeout_ms
 {
     double deadline = now_s() + timeout_ms / 1000.0;
     for (;;) {
+        if (quit_signal) return RX_QUIT;
         /* drop bytes until the buffer starts with (a prefix of) the magic */
         size_t i = 0;
         while (i < t->have) {
@@ -119,7 +126,7 @@ static int stream_next(transport *t, uint8_t *frame, size_t *len, int timeout_ms
         }
         if (t->eof) return RX_EOF;
         int left_ms = (int)((deadline - now_s()) * 1000.0);
-        if (left_ms < 0 || !wait_readable(t->fd_in, left_ms)) return RX_TIMEOUT;
+        if (left_ms < 0 || !wait_readable(t->fd_in, left_ms)) return quit_signal ? RX_QUIT : RX_TIMEOUT;
         ssize_t n = read(t->fd_in, t->buf + t->have, sizeof t->buf - t->have);
         if (n < 0 && errno == EINTR) continue;
         if (n <= 0) t->eof = 1;
@@ -132,8 +139,9 @@ static int receive(transport *t, uint8_t *frame, size_t *len, int timeout_ms)
     if (!t->udp) return stream_next(t, frame, len, timeout_ms);
     double deadline = now_s() + timeout_ms / 1000.0;
     for (;;) {
+        if (quit_signal) return RX_QUIT;
         int left_ms = (int)((deadline - now_s()) * 1000.0);
-        if (left_ms < 0 || !wait_readable(t->fd_in, left_ms)) return RX_TIMEOUT;
+        if (left_ms < 0 || !wait_readable(t->fd_in, left_ms)) return quit_signal ? RX_QUIT : RX_TIMEOUT;
         uint8_t big[BB_MAX_FRAME_LEN + 1]; /* one byte more: an oversized datagram is seen as such */
         ssize_t n = recv(t->fd_in, big, sizeof big, 0);
         if (n < 0) continue; /* EINTR, or ECONNREFUSED from a server not (yet) listening */
@@ -300,6 +308,10 @@ static int run_session(transport *t, const options *o)
         for (;;) {
             double left = (t->udp ? repeat_at : give_up) - now_s();
             int r = receive(t, buf, &len, left > 0 ? (int)(left * 1000.0) : 0);
+            if (r == RX_QUIT) {
+                fprintf(stderr, "bb_sf: interrupted (signal %d) before CONFIG\n", (int)quit_signal);
+                return 128 + quit_signal;
+            }
             if (r == RX_EOF) {
                 fprintf(stderr, "bb_sf: the server closed the stream before CONFIG\n");
                 return 1;
@@ -347,6 +359,12 @@ static int run_session(transport *t, const options *o)
     cmd.session = session;
     for (;;) {
         int r = receive(t, buf, &len, timeout_ms);
+        if (r == RX_QUIT) {
+            send_stop(t, session, BB_STOP_CLIENT_QUIT);
+            fprintf(stderr, "bb_sf: interrupted (signal %d) after sample %lu: sent STOP 1 (client quit)\n",
+                    (int)quit_signal, (unsigned long)last_seq);
+            return 128 + quit_signal;
+        }
         if (r == RX_TIMEOUT || r == RX_EOF) {
             if (last_seen) { /* the last sample was answered: a STOP lost on the way ends it as well */
                 fprintf(stderr, "bb_sf: session %lu ended after the last sample (seq %lu) without a STOP; "
@@ -552,6 +570,13 @@ int main(int argc, char **argv)
         }
         i++;
     }
+    struct sigaction quit;
+    memset(&quit, 0, sizeof quit);
+    quit.sa_handler = on_quit_signal; /* no SA_RESTART: a blocking wait returns to see the flag */
+    sigemptyset(&quit.sa_mask);
+    sigaction(SIGINT, &quit, NULL);
+    sigaction(SIGTERM, &quit, NULL);
+    signal(SIGPIPE, SIG_IGN); /* a closed pipe is a failed write (reported), not a silent death */
     transport t;
     memset(&t, 0, sizeof t);
     if (strcmp(mode, "udp") == 0) {
