@@ -236,6 +236,17 @@ def _measured_loss(
     return None, ""
 
 
+def _without_glitches(x: np.ndarray) -> np.ndarray:
+    """The median of each reading and its two neighbours (the ends kept): a contact dropout reads the open
+    wiper for one tick, a spike of centimetres that no ball makes, which would pass for a limit cycle and
+    restart the settling clock; a ball's motion over three ticks (40 ms) is nearly straight and passes."""
+    if x.size < 3:
+        return x
+    out = x.copy()
+    out[1:-1] = np.median(np.stack([x[:-2], x[1:-1], x[2:]]), axis=0)
+    return out
+
+
 def evaluate_measured(
     log: RunLog,
     params: Parameters,
@@ -254,7 +265,8 @@ def evaluate_measured(
       Start). Row 1 of a rig log, never written (timem, datam1, datam2, aout all 0), is dropped.
     * x: ``datam1`` (last sample of the block) through eq 6.3.1. Eq 6.3.1 is a line through Table 6.3's
       curve: it reads a ball at the centre 1.9 mm off and elsewhere up to 4.6 mm off; it carries the
-      contact noise and the ADC's 2.4 mV steps (0.17 mm). ``x0_m`` defaults to the first row's reading.
+      ADC's 2.4 mV steps (0.17 mm) and the contact noise, whose one-tick dropouts a median of three ticks
+      removes (``_without_glitches``). ``x0_m`` defaults to the first row's reading.
     * θ: ``datam2`` (block mean) through eq 6.2.10: one encoder count (3.5 mrad) of quantization, and the
       zeroing error of the counter, which the rig cannot see.
     * ball lost: no wiper reports that it lost the ball (an open wiper reads its resting volts, near the
@@ -282,6 +294,7 @@ def evaluate_measured(
     theta = np.asarray(beam_angle_rad(angle_v, sw), dtype=float)
     volts = np.asarray(motor_volts(aout, params), dtype=float)
     lost_s, why = _measured_loss(t, ball_v, x, params, c)
+    x = _without_glitches(x)
     released = t >= 0.0
     kept = released if lost_s is None else released & (t < lost_s)
     peak = np.abs(theta[kept])
