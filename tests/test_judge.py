@@ -62,7 +62,7 @@ def _check_agreement(runs: list[tuple[str, RunResult]]) -> dict[str, float]:
     # Steady x of a held ball: the true one read through eq 6.3.1, within the ADC and noise (0.5 mm). (A ball
     # cycling over centimetres averages the curve's bends instead.)
     residual = [
-        m.steady_x_m - t.steady_x_m - _converter_offset_m(t.steady_x_m)  # type: ignore[operator]
+        m.steady_x_m - t.steady_x_m - _converter_offset_m(t.steady_x_m)  # type: ignore[operator, arg-type]
         for _, t, m in kept
         if t.held
     ]
@@ -77,10 +77,12 @@ def _check_agreement(runs: list[tuple[str, RunResult]]) -> dict[str, float]:
     assert np.all(np.abs(dth) < 3.5e-3)
     # Settling: same answer whether it settled; the 1 mm floor of the band is of the converter's size, so
     # most runs agree within a few ticks and a few settle seconds later in the measured signals.
-    assert [t.settling_time_s is None for _, t, _ in pairs] == [m.settling_time_s is None for _, _, m in pairs]
+    assert [t.settling_time_s is None for _, t, _ in pairs] == [
+        m.settling_time_s is None for _, _, m in pairs
+    ]
     dts = np.array(
         [
-            m.settling_time_s - t.settling_time_s  # type: ignore[operator]
+            m.settling_time_s - t.settling_time_s
             for _, t, m in pairs
             if t.settling_time_s is not None and m.settling_time_s is not None
         ]
