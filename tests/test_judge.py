@@ -57,6 +57,7 @@ def _check_agreement(runs: list[tuple[str, RunResult]]) -> dict[str, float]:
     # Held and lost: the same answer in every run.
     assert [t.held for _, t, _ in pairs] == [m.held for _, _, m in pairs]
     assert [t.ball_lost for _, t, _ in pairs] == [m.ball_lost for _, _, m in pairs]
+    assert [t.hit_stops for _, t, _ in pairs] == [m.hit_stops for _, _, m in pairs]
     kept = [(n, t, m) for n, t, m in pairs if t.steady_x_m is not None and m.steady_x_m is not None]
     assert len(kept) == sum(not t.ball_lost and t.duration_s >= 3.0 for _, t, _ in pairs)
     # Steady x of a held ball: the true one read through eq 6.3.1, within the ADC and noise (0.5 mm). (A ball
