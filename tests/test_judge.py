@@ -23,7 +23,7 @@ from twin.app.cli import main
 from twin.batch import run_batch
 from twin.converters import angle_volts_v, ball_position_m, ball_volts_v
 from twin.engine import RunResult, run_closed_loop
-from twin.log import RunLog, load_mat, save_csv, save_mat
+from twin.log import THESIS_FIELDS, RunLog, load_mat, save_csv, save_mat
 from twin.parameters import Parameters
 from twin.sensors import wiper_static_v
 from twin.verdict import Verdict, ball_step_bound_m, evaluate_measured
@@ -133,10 +133,15 @@ def test_measured_and_true_verdicts_agree_over_the_registry() -> None:
 # --- the lost ball from the signals --------------------------------------------------------------------
 
 
+def _tick_s(i: int | np.ndarray) -> np.ndarray:
+    """The time of tick i of a rig log from release: the first command at start.free_run_s, then a period."""
+    return np.asarray(P.start.free_run_s + P.daq.period_s * np.asarray(i))
+
+
 def _rig_log(x_m: np.ndarray, *, unwritten_row: bool = True) -> RunLog:
     """A rig-style log (thesis fields only) of a ball at x_m and a level beam, the command at zero volts."""
     n = x_m.size
-    t = 0.02 * np.arange(1, n + 1)
+    t = _tick_s(np.arange(n))
     ball = np.asarray(ball_volts_v(x_m, P.software))
     angle = np.full(n, float(angle_volts_v(0.0, P.software)))
     aout = np.full(n, 2.5)
@@ -153,26 +158,26 @@ def test_a_ball_resting_off_centre_is_held_and_a_dropout_glitch_does_not_lose_it
     assert v.held and not v.ball_lost
     assert v.steady_x_m == pytest.approx(0.004, abs=2e-4)
     assert v.limit_cycle_x_pp_m is not None and v.limit_cycle_x_pp_m < 2e-4  # the glitch is not a cycle
-    assert v.duration_s == pytest.approx(10.0)
+    assert v.duration_s == pytest.approx(_tick_s(499))
 
 
 def test_the_ball_is_lost_at_the_track_end_at_a_stuck_reading_and_at_the_adc_rail() -> None:
     x = np.concatenate([np.linspace(0.1, 0.315, 50), np.full(200, 0.315)])
     v = evaluate_measured(_rig_log(x), P)
     first = int(np.argmax(x >= P.track.half_length_m - 0.010))
-    assert v.ball_lost and v.ball_lost_time_s == pytest.approx(0.02 * (first + 1))
+    assert v.ball_lost and v.ball_lost_time_s == pytest.approx(_tick_s(first))
     assert "track's end" in v.reason and not v.held
     # Rolling off between two ticks: from 0.29 m to the open wiper's reading, and it stays there.
     step = ball_step_bound_m(P)
     assert 0.05 < step < 0.07  # √(2·g·sin 43.4°·0.646 m)·20 ms ≈ 60 mm
     x = np.concatenate([np.full(100, 0.29), np.full(300, float(ball_position_m(0.0, P.software)))])
     v = evaluate_measured(_rig_log(x), P)
-    assert v.ball_lost and v.ball_lost_time_s == pytest.approx(0.02 * 101) and "jumped" in v.reason
+    assert v.ball_lost and v.ball_lost_time_s == pytest.approx(_tick_s(100)) and "jumped" in v.reason
     # The channel at the ADC's top code.
     log = _rig_log(np.full(400, 0.01))
     log.datam1[200] = 5.0 - 10.0 / 4096
     v = evaluate_measured(log, P)
-    assert v.ball_lost and v.ball_lost_time_s == pytest.approx(0.02 * 200) and "rail" in v.reason
+    assert v.ball_lost and v.ball_lost_time_s == pytest.approx(_tick_s(199)) and "rail" in v.reason
 
 
 # --- ballbeam judge ----------------------------------------------------------------------------------------
@@ -208,6 +213,14 @@ def test_judge_a_saved_twin_log_and_the_same_log_without_its_true_state(
     rc, out = _judge_json(capsys, [str(tmp_path / "rig.mat")])
     assert rc == 0 and out["held"] is True
     assert out["steady_x_m"] == expected["steady_x_m"]  # the first tick's held block only sets x0
+    # A rig's clock starts anywhere: its first tick is taken as the first command after release.
+    late = RunLog(
+        bare.timem + np.where(bare.timem > 0, 100.0, 0.0), *(getattr(bare, f) for f in THESIS_FIELDS[1:])
+    )
+    later = evaluate_measured(late, P).to_json()
+    assert later["duration_s"] == expected["duration_s"] and later["held"] is True
+    for key in ("steady_x_m", "limit_cycle_x_pp_m", "settling_time_s"):
+        assert later[key] == pytest.approx(expected[key], abs=1e-3), key
     # The same rig log saved by MATLAB as v7.3 (HDF5) gives the same verdict.
     raw = {k: v for k, v in scipy.io.loadmat(tmp_path / "rig.mat").items() if not k.startswith("__")}
     write_mat73(tmp_path / "rig73.mat", raw)

@@ -259,10 +259,18 @@ def evaluate_measured(
     its true state, the controller's estimates and ``u`` are not read), judged about ``x_ref_m`` with the
     bands of ``criteria`` and the software calibration ``params.software``: one call of ``evaluate``.
 
+    Of ``params`` it reads the rig's description, not its physics: ``software`` (the conversions), ``daq``
+    (the ADC's rails, the DAC, the period), ``amplifier``, ``start.free_run_s``, ``track.half_length_m``,
+    ``beam.stop_angle_rad``, the encoder's count (``angle_sensor``, ``motor.gear_ratio``) and gravity. A
+    remote rig's caller passes its parameters with what the rig's CONFIG announced put in
+    (``Parameters.with_overrides``).
+
     Each field's source and its limits:
 
-    * time: ``timem`` as recorded (the twin's is from release, its held start row before 0; a rig's from
-      Start). Row 1 of a rig log, never written (timem, datam1, datam2, aout all 0), is dropped.
+    * time: from release. The twin's ``timem`` is (its held start row before 0). A rig's clock starts
+      anywhere: without a row before 0 the first tick is put at ``start.free_run_s``, as the twin's first
+      command (the rig is released when Drive Motor is pressed, its first command follows at the next
+      timer tick). Row 1 of a rig log, never written (timem, datam1, datam2, aout all 0), is dropped.
     * x: ``datam1`` (last sample of the block) through eq 6.3.1. Eq 6.3.1 is a line through Table 6.3's
       curve: it reads a ball at the centre 1.9 mm off and elsewhere up to 4.6 mm off; it carries the
       ADC's 2.4 mV steps (0.17 mm) and the contact noise, whose one-tick dropouts a median of three ticks
@@ -289,6 +297,8 @@ def evaluate_measured(
     t, ball_v, angle_v, aout = log.timem, log.datam1, log.datam2, log.aout
     if t.size > 1 and t[0] == 0.0 and ball_v[0] == 0.0 and angle_v[0] == 0.0 and aout[0] == 0.0:
         t, ball_v, angle_v, aout = t[1:], ball_v[1:], angle_v[1:], aout[1:]
+    if not np.any(t < 0.0):  # no held row: the rig's clock, whose first tick is the first command's
+        t = t - t[0] + params.start.free_run_s
     sw = params.software
     x = np.asarray(ball_position_m(ball_v, sw), dtype=float)
     theta = np.asarray(beam_angle_rad(angle_v, sw), dtype=float)
