@@ -14,16 +14,26 @@ settling metric.
     peak_motor_voltage_v, saturated_fraction (share of ticks at the ±12 V rails), peak_theta_rad, hit_stops
 
 A lost ball has no steady state: the window fields and the settling time are None and ``held`` is False.
+
+``evaluate_measured`` is the same verdict (through ``evaluate``) from what a rig records, for a rig that has no
+true state (a recorded hardware log, a remote rig): the ball channel through eq 6.3.1, the angle channel through
+eq 6.2.10, the motor volts from the DAC command through the output stage; what it cannot know it decides from
+those signals (its docstring lists each field's source and limits).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-__all__ = ["Criteria", "Verdict", "evaluate", "settling_time_s"]
+if TYPE_CHECKING:
+    from twin.log import RunLog
+    from twin.parameters import Parameters
+
+__all__ = ["Criteria", "Verdict", "ball_step_bound_m", "evaluate", "evaluate_measured", "settling_time_s"]
 
 
 @dataclass(frozen=True)
@@ -46,6 +56,10 @@ class Criteria:
     settling_floor_m: float = 1e-3
     # The beam counts as on its stops within 1 mrad of them (MuJoCo's stop is a soft constraint).
     stop_tolerance_rad: float = 1e-3
+    # Measured verdict only: a reading this close to the track's end counts as the ball at the end, lost. Eq 6.3.1
+    # reads Table 6.3's end points 4.6 mm (−) and 2.3 mm (+) inside the 0.323 m end and the ±0.30 m points
+    # 3–4 mm outside them: 10 mm trips within 9 mm of the end, never at 0.30 m.
+    track_end_margin_m: float = 0.010
 
     def __post_init__(self) -> None:
         for name, value in asdict(self).items():
@@ -185,3 +199,128 @@ def evaluate(
         settling_time_s=settling_time_s(t[released], x[released], steady_x, x0_m, c),
         **common,  # type: ignore[arg-type]
     )
+
+
+def ball_step_bound_m(params: Parameters) -> float:
+    """The farthest a ball can move in one period: from rest at one end, the whole track downhill at the
+    steepest beam (the stops) without rolling inertia or friction (a bound for any ball and contact)."""
+    a = params.physics.gravity_m_s2 * math.sin(params.beam.stop_angle_rad)
+    t = params.daq.period_s
+    v = math.sqrt(2.0 * a * 2.0 * params.track.half_length_m)
+    return min(v * t + 0.5 * a * t * t, 2.0 * params.track.half_length_m)
+
+
+def _measured_loss(
+    t: np.ndarray, ball_v: np.ndarray, x: np.ndarray, params: Parameters, c: Criteria
+) -> tuple[float | None, str]:
+    """The time of the first released tick at which the signals say the ball is gone, and why."""
+    from twin.daq import adc_lsb_v
+
+    daq = params.daq
+    lsb = adc_lsb_v(daq)
+    end_m = params.track.half_length_m - c.track_end_margin_m
+    step_m = ball_step_bound_m(params)
+    n = len(t)
+    for i in np.flatnonzero(t >= 0.0).tolist():
+        if ball_v[i] <= daq.adc_min_v + 0.5 * lsb or ball_v[i] >= daq.adc_max_v - 1.5 * lsb:
+            return float(t[i]), f"the ball channel at the ADC's rail ({ball_v[i]:+.4f} V)"
+        if abs(x[i]) >= end_m:
+            return float(t[i]), f"the ball read at {x[i] * 1e3:+.1f} mm, at the track's end"
+        # A jump no ball can make in one period that does not come back the next tick: the wiper lost the
+        # ball (a contact dropout is one tick's glitch). A jump on the last tick has nothing after it.
+        if i > 0 and abs(x[i] - x[i - 1]) > step_m and (i + 1 >= n or abs(x[i + 1] - x[i - 1]) > 2 * step_m):
+            return float(t[i]), (
+                f"the ball reading jumped {(x[i] - x[i - 1]) * 1e3:+.0f} mm in one tick "
+                f"(a ball moves at most {step_m * 1e3:.0f} mm) and stayed: the wiper lost the ball"
+            )
+    return None, ""
+
+
+def _without_glitches(x: np.ndarray) -> np.ndarray:
+    """The median of each reading and its two neighbours (the ends kept): a contact dropout reads the open
+    wiper for one tick, a spike of centimetres that no ball makes, which would pass for a limit cycle and
+    restart the settling clock; a ball's motion over three ticks (40 ms) is nearly straight and passes."""
+    if x.size < 3:
+        return x
+    out = x.copy()
+    out[1:-1] = np.median(np.stack([x[:-2], x[1:-1], x[2:]]), axis=0)
+    return out
+
+
+def evaluate_measured(
+    log: RunLog,
+    params: Parameters,
+    *,
+    x0_m: float | None = None,
+    x_ref_m: float = 0.0,
+    criteria: Criteria | None = None,
+) -> Verdict:
+    """The verdict of a run from the rig's recorded signals only (timem, datam1, datam2, aout of a ``RunLog``;
+    its true state, the controller's estimates and ``u`` are not read), judged about ``x_ref_m`` with the
+    bands of ``criteria`` and the software calibration ``params.software``: one call of ``evaluate``.
+
+    Of ``params`` it reads the rig's description, not its physics: ``software`` (the conversions), ``daq``
+    (the ADC's rails, the DAC, the period), ``amplifier``, ``start.free_run_s``, ``track.half_length_m``,
+    ``beam.stop_angle_rad``, the encoder's count (``angle_sensor``, ``motor.gear_ratio``) and gravity. A
+    remote rig's caller passes its parameters with what the rig's CONFIG announced put in
+    (``Parameters.with_overrides``).
+
+    Each field's source and its limits:
+
+    * time: from release. The twin's ``timem`` is (its held start row before 0). A rig's clock starts
+      anywhere: without a row before 0 the first tick is put at ``start.free_run_s``, as the twin's first
+      command (the rig is released when Drive Motor is pressed, its first command follows at the next
+      timer tick). Row 1 of a rig log, never written (timem, datam1, datam2, aout all 0), is dropped.
+    * x: ``datam1`` (last sample of the block) through eq 6.3.1. Eq 6.3.1 is a line through Table 6.3's
+      curve: it reads a ball at the centre 1.9 mm off and elsewhere up to 4.6 mm off; it carries the
+      ADC's 2.4 mV steps (0.17 mm) and the contact noise, whose one-tick dropouts a median of three ticks
+      removes (``_without_glitches``). ``x0_m`` defaults to the first row's reading.
+    * θ: ``datam2`` (block mean) through eq 6.2.10: one encoder count (3.5 mrad) of quantization, and the
+      zeroing error of the counter, which the rig cannot see.
+    * ball lost: no wiper reports that it lost the ball (an open wiper reads its resting volts, near the
+      centre). The first released tick at which the ball channel sits at an ADC rail, or x reads within
+      ``criteria.track_end_margin_m`` of the track's end, or the reading jumps farther than a ball can move
+      in one period (``ball_step_bound_m``) and does not come back the next tick. Its time is the tick's,
+      at most a period or two before or after the true one; a ball that leaves the track slowly without
+      reading at its end would be missed.
+    * motor volts: ``aout`` through the DAC and the amplifier (twin.output_stage.motor_volts): the volts the
+      output stage gives, not measured ones (an amplifier fault is invisible).
+    * peak θ, hit stops: the largest |θ| of the block means; the stops count within one count more than
+      ``stop_tolerance_rad`` (a block mean on the stops reads up to a count inside). A touch shorter than a
+      block is averaged away.
+    """
+    from twin.converters import ball_position_m, beam_angle_rad
+    from twin.output_stage import motor_volts
+    from twin.sensors import angle_count_step_rad
+
+    c = criteria or Criteria()
+    t, ball_v, angle_v, aout = log.timem, log.datam1, log.datam2, log.aout
+    if t.size > 1 and t[0] == 0.0 and ball_v[0] == 0.0 and angle_v[0] == 0.0 and aout[0] == 0.0:
+        t, ball_v, angle_v, aout = t[1:], ball_v[1:], angle_v[1:], aout[1:]
+    if not np.any(t < 0.0):  # no held row: the rig's clock, whose first tick is the first command's
+        t = t - t[0] + params.start.free_run_s
+    sw = params.software
+    x = np.asarray(ball_position_m(ball_v, sw), dtype=float)
+    theta = np.asarray(beam_angle_rad(angle_v, sw), dtype=float)
+    volts = np.asarray(motor_volts(aout, params), dtype=float)
+    lost_s, why = _measured_loss(t, ball_v, x, params, c)
+    x = _without_glitches(x)
+    released = t >= 0.0
+    kept = released if lost_s is None else released & (t < lost_s)
+    peak = np.abs(theta[kept])
+    count_rad = angle_count_step_rad(params)
+    verdict = evaluate(
+        t,
+        x - x_ref_m,
+        theta,
+        volts,
+        peak,
+        x0_m=(float(x[0]) if x0_m is None else x0_m) - x_ref_m,
+        ball_lost_time_s=lost_s,
+        rail_v=params.amplifier.rail_v,
+        stop_angle_rad=params.beam.stop_angle_rad - count_rad,
+        criteria=c,
+    )
+    if lost_s is not None:
+        return replace(verdict, reason=f"{verdict.reason} ({why})")
+    return verdict

@@ -289,6 +289,45 @@ def _cmd_run(args: argparse.Namespace) -> int:
     return 0 if result.verdict.held else 1
 
 
+def _read_log(path_text: str) -> Any:
+    """A recorded log (.mat, also MATLAB v7.3, or .csv) as a ``twin.log.RunLog``; a LogError names the file."""
+    from calib.logs import HDF5_SIGNATURE, MAT73_HEADER, MAT73_USERBLOCK_BYTES, read_mat73
+    from twin.log import LogError, load_csv, load_mat
+
+    path = Path(path_text)
+    suffix = path.suffix.lower()
+    if suffix == ".csv":
+        return load_csv(path)
+    if suffix != ".mat":
+        shown = f"suffix '{path.suffix}'" if path.suffix else "no suffix"
+        raise LogError(f"{path}: {shown}: a log is a .mat (data_file.mat) or a .csv file")
+    with path.open("rb") as fh:  # a missing or unreadable file is an OSError naming it
+        head = fh.read(MAT73_USERBLOCK_BYTES + len(HDF5_SIGNATURE))
+    mat73 = head.startswith(MAT73_HEADER) and head[MAT73_USERBLOCK_BYTES:] == HDF5_SIGNATURE
+    return load_mat(path, variables=read_mat73(path) if mat73 else None)
+
+
+def _cmd_judge(args: argparse.Namespace) -> int:
+    from twin.verdict import evaluate_measured
+
+    params = _load_params(args)
+    log = _read_log(args.log)
+    verdict = evaluate_measured(log, params, x_ref_m=args.setpoint or 0.0)
+    summary = {
+        "log": args.log,
+        "source": "measured",
+        "ticks": log.k,
+        **({} if args.setpoint is None else {"setpoint_m": args.setpoint}),
+        **verdict.to_json(),
+    }
+    if args.json:
+        print(json.dumps(summary))
+    else:
+        for key, value in summary.items():
+            print(f"{key:<26} {value}")
+    return 0 if verdict.held else 1
+
+
 def _cmd_view(args: argparse.Namespace) -> int:
     from controllers import registry
     from twin.viewer import ViewerError, serve
@@ -796,6 +835,19 @@ def build_parser() -> argparse.ArgumentParser:
     _add_params_options(run)
     run.add_argument("--json", action="store_true", help="print the verdict as JSON")
     run.set_defaults(func=_cmd_run)
+
+    jdg = sub.add_parser(
+        "judge",
+        help="the verdict of a recorded log (a rig's data_file.mat or CSV) from its measured signals only "
+        "(exit 0 held, 1 lost or not held, 2 bad input)",
+    )
+    jdg.add_argument("log", metavar="LOG.mat|LOG.csv", help="the log: timem, datam1, datam2, aout are read")
+    jdg.add_argument(
+        "--setpoint", type=finite_float(unit="m"), metavar="M", help="judge the ball about this position (m)"
+    )
+    _add_params_options(jdg)
+    jdg.add_argument("--json", action="store_true", help="print the verdict as JSON")
+    jdg.set_defaults(func=_cmd_judge)
 
     sweep = sub.add_parser(
         "sweep",
