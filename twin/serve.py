@@ -89,7 +89,7 @@ class SessionCounts:
     wrong_session: int = 0  # a valid frame of another session
     stale_commands: int = 0  # a replayed or out-of-order command (seq not the latest sample's)
     unauthorised_commands: int = 0  # a command from an observer or an unknown peer
-    refused_commands: int = 0  # a non-finite or out-of-range dac_v: the DAC kept its last value
+    refused_commands: int = 0  # a non-finite or out-of-range dac_v: not an answer, the DAC keeps its value
     unexpected: int = 0  # a valid frame the server does not take (a SAMPLE or CONFIG sent to it)
     refused_clients: int = 0  # HELLOs answered with role 0
     observers: int = 0
@@ -274,6 +274,8 @@ class Server:
             self._stop_all(p.STOP_SHUTDOWN)
             raise
         self._stop_all(reason)
+        if not loop.started:  # nothing was logged: no session to report
+            raise ServeError(f"the session ended before the client acknowledged the held sample: {detail}")
         result = RunResult(controller=adapter.name, log=loop.log(), verdict=loop.verdict(s.x0_m))
         timing = pacer.timing() if pacer is not None else None
         return SessionResult(result, reason, detail, self.counts, self.client_name, timing)
@@ -295,12 +297,13 @@ class Server:
     def _receive(self, wait_s: float) -> p.Command | p.Stop | None:
         """Handle one datagram (waiting at most ``wait_s``): HELLOs answered, refusals counted; the
         controller's valid COMMAND for the latest sample or its STOP returned, else ``None``."""
-        self.sock.settimeout(max(wait_s, 1e-6))
         try:
+            self.sock.settimeout(max(wait_s, 1e-6))
             data, addr = self.sock.recvfrom(_RECV_BYTES)
         except TimeoutError:
             return None
-        except OSError:  # e.g. ICMP port unreachable from a vanished client (reported on Windows)
+        except OSError:  # ICMP port unreachable from a vanished client, or our socket closed under us
+            time.sleep(min(wait_s, 0.01))
             return None
         c = self.counts
         c.frames += 1
@@ -332,6 +335,10 @@ class Server:
                 c.late_commands += 1  # the answer to the previous sample, after its boundary
             else:
                 c.stale_commands += 1
+            return None
+        daq = self.settings.params.daq
+        if not (math.isfinite(msg.dac_v) and daq.dac_min_v <= msg.dac_v <= daq.dac_max_v):
+            c.refused_commands += 1  # not an answer: the DAC keeps its last value, the wait goes on
             return None
         return msg
 
@@ -387,7 +394,7 @@ class Server:
                 self._end = (p.STOP_CLIENT_QUIT, f"the client sent STOP {got.reason}")
                 raise _SessionOver(self._end[1])
             if isinstance(got, p.Command):
-                return self._accept(got, rig)
+                return self._accept(got)
         if not realtime:
             self._end = (p.STOP_ERROR, f"no COMMAND {seq} within {s.timeout_s:g} s")
             raise _SessionOver(self._end[1])
@@ -402,13 +409,9 @@ class Server:
             return s.params.amplifier.zero_command_v
         return rig.command_v
 
-    def _accept(self, cmd: p.Command, rig: SimRig) -> float:
-        daq = self.settings.params.daq
+    def _accept(self, cmd: p.Command) -> float:
         self._late_flag = False
         self._missing_streak = 0
         self._watchdog = False
-        if not (math.isfinite(cmd.dac_v) and daq.dac_min_v <= cmd.dac_v <= daq.dac_max_v):
-            self.counts.refused_commands += 1
-            return rig.command_v  # refused: the DAC keeps its last value
         self._applied_seq = cmd.seq
         return cmd.dac_v
