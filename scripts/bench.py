@@ -1,7 +1,7 @@
 """Benchmarks (measured here, never asserted in tests): the twin's costs as ratios to the physical floor.
 
     python scripts/bench.py [--json] [--repeats 15] [--batch-side 41] [--skip-batch] [--skip-peers]
-                            [--skip-calibration] [--skip-view] [--view-seconds 60]
+                            [--skip-calibration] [--skip-view] [--view-seconds 60] [--skip-wire] [--only-wire]
 
 One run measures, on the same work (a 10 s episode from x0 = 0.2 m, θ0 = 0.3 rad, noise on, seed 0):
 
@@ -22,6 +22,8 @@ One run measures, on the same work (a 10 s episode from x0 = 0.2 m, θ0 = 0.3 ra
   ``control.nlsys``) and ``scipy.integrate.solve_ivp`` (both with their default method and tolerances);
 - (e) calibration: wall time of a 5-parameter fit to a 60 s log;
 - physics: µs per MuJoCo step, ms per 20 ms tick of the TwinRig;
+- wire: a lock-step session over loopback UDP (``ballbeam serve`` in a thread, ``RemoteRig`` here) per tick
+  against the same appendix-sf episode in process (target ≤ 2×);
 - view: the live view's tick rate at speed 1.0 over the given wall time (target 50 Hz ± 1 %) and its CPU
   time per tick, headless.
 
@@ -370,6 +372,45 @@ def bench_view(seconds: float) -> dict[str, float]:
     return stats
 
 
+def bench_wire(repeats: int) -> dict[str, float]:
+    """Lock-step over loopback UDP (``twin.serve`` in a thread, ``twin.remote.run_remote`` here) per tick
+    against the same episode in process (appendix-sf; target ≤ 2×), best of ``repeats``."""
+    import threading
+
+    from twin.remote import RemoteRig, run_remote
+    from twin.serve import Server, SessionSettings
+
+    settings = SessionSettings(
+        x0_m=X0_M,
+        theta0_rad=THETA0_RAD,
+        duration_s=DURATION_S,
+        seed=0,
+        stop_when_lost=False,
+        wait_client_s=30,
+    )
+
+    def wire() -> int:
+        with Server(settings, log=lambda _: None) as server:
+            thread = threading.Thread(target=server.serve, daemon=True)
+            thread.start()
+            with RemoteRig("127.0.0.1", server.port) as rig:
+                ticks = run_remote(registry.make("appendix-sf", rig.parameters()), rig).log.timem.size
+            thread.join()
+        return int(ticks)
+
+    ticks = _episode("appendix-sf").log.timem.size
+    best_in, best_wire = np.inf, np.inf
+    for _ in range(repeats):
+        best_in = min(best_in, _timed(lambda: _episode("appendix-sf"))[0])
+        best_wire = min(best_wire, _timed(wire)[0])
+    return {
+        "ticks": float(ticks),
+        "in_process_ms_per_tick": 1e3 * best_in / ticks,
+        "lockstep_udp_ms_per_tick": 1e3 * best_wire / ticks,
+        "lockstep_over_in_process": best_wire / best_in,
+    }
+
+
 def ratios(results: dict[str, Any]) -> dict[str, float]:
     """(b)/(a), (c)/(a, 2 threads), (d)/(b) and (d)/(c per episode), wall time (CPU time where noted)."""
     episode = results["episodes"]["appendix-sf"]
@@ -389,6 +430,9 @@ def ratios(results: dict[str, Any]) -> dict[str, float]:
                 out[f"d_{key}_over_c_per_episode"] = (
                     peers[f"{key}_s"] / batch["batch_all_to_end_per_episode_s"]
                 )
+    wire = results.get("wire")
+    if wire is not None:
+        out["wire_lockstep_over_in_process"] = wire["lockstep_over_in_process"]
     return out
 
 
@@ -401,8 +445,18 @@ def main() -> None:
     parser.add_argument("--skip-calibration", action="store_true")
     parser.add_argument("--skip-batch", action="store_true")
     parser.add_argument("--skip-peers", action="store_true")
+    parser.add_argument("--skip-wire", action="store_true")
+    parser.add_argument("--only-wire", action="store_true", help="measure the lock-step UDP session only")
     parser.add_argument("--batch-side", type=int, default=41, help="the batch grid's points per side")
     args = parser.parse_args()
+    if args.only_wire:
+        only = {"wire": bench_wire(max(1, args.repeats))}
+        print(
+            json.dumps(only)
+            if args.json
+            else "\n".join(f"{k:40s} {v:12.4f}" for k, v in only["wire"].items())
+        )
+        return
     episodes = {name: bench_episode(name, max(1, args.repeats)) for name in EPISODES}
     results: dict[str, Any] = {"physics": bench_physics(), "episodes": episodes}
     if not args.skip_batch:
@@ -413,6 +467,8 @@ def main() -> None:
         results["calibration"] = bench_calibration()
     if not args.skip_view:
         results["view"] = bench_view(args.view_seconds)
+    if not args.skip_wire:
+        results["wire"] = bench_wire(max(1, args.repeats))
     results["ratios"] = ratios(results)
     if args.json:
         print(json.dumps(results))
