@@ -395,3 +395,27 @@ def test_serve_and_run_rig_on_the_command_line(tmp_path: Path) -> None:
     assert serve.returncode == (0 if ref.verdict.held else 1), err
     assert json.loads(run.stdout)["ticks"] == ref.log.timem.size
     assert log.exists()
+
+
+def test_a_reconnect_gets_a_new_session_and_the_old_ones_datagrams_are_dropped() -> None:
+    settings = SessionSettings(x0_m=0.1, theta0_rad=0.0, duration_s=0.3, wait_client_s=10.0)
+    server = Server(settings, log=lambda _: None)
+    sessions: list[SessionResult] = []
+    thread = threading.Thread(target=lambda: sessions.extend([server.serve(), server.serve()]), daemon=True)
+    thread.start()
+    ids = []
+    for _ in range(2):
+        with RemoteRig("127.0.0.1", server.port) as rig:
+            ids.append(rig.session)
+            if len(ids) == 2:
+                rig.sock.send(p.encode(p.Command(1, 2.5), ids[0]))  # a late datagram of the first session
+            run = run_remote(_build("appendix-sf", rig.parameters()), rig)
+            assert run.ended == "last sample"
+    thread.join(10.0)
+    server.close()
+    assert ids[0] != ids[1]
+    assert [s.stop_reason for s in sessions] == [p.STOP_DONE, p.STOP_DONE]
+    assert sessions[1].counts.wrong_session == 1
+    assert _same(
+        sessions[0].result.log.true_x_m, sessions[1].result.log.true_x_m
+    )  # the same seed, the same run

@@ -196,7 +196,9 @@ class Server:
             self.sock.close()
             raise ServeError(f"cannot bind udp://{host}:{port}: {exc.strerror or exc}") from None
         self.port: int = self.sock.getsockname()[1]
+        # The session id only tells sessions apart (never a result): not seeded, as a restarted server's must differ.
         self.session = session_id if session_id is not None else (secrets.randbits(32) or 1)
+        self._sessions = 0
         self._reset_session()
 
     @property
@@ -243,6 +245,9 @@ class Server:
     def serve(self) -> SessionResult:
         """Wait for a controlling client, run one session, send STOP; the result of the session."""
         s = self.settings
+        if self._sessions:  # a new session id: the previous session's late datagrams are dropped
+            self.session = (self.session + 1) & 0xFFFFFFFF or 1
+        self._sessions += 1
         self._reset_session()
         self._await_controller()
         rig = make_rig(s.params, plant=s.plant, ideal_sensors=s.ideal_sensors, seed=s.seed, noise=s.noise)
