@@ -419,3 +419,26 @@ def test_a_reconnect_gets_a_new_session_and_the_old_ones_datagrams_are_dropped()
     assert _same(
         sessions[0].result.log.true_x_m, sessions[1].result.log.true_x_m
     )  # the same seed, the same run
+
+
+def test_real_time_session_reports_the_client_timing() -> None:
+    x0, th0 = STARTS[0]
+    settings = SessionSettings(
+        x0_m=x0, theta0_rad=th0, duration_s=1.0, wait_client_s=10.0, mode=p.MODE_REALTIME
+    )
+    began = time.perf_counter()
+    with _serving(settings) as (server, box), RemoteRig("127.0.0.1", server.port) as rig:
+        run = run_remote(_build("appendix-sf", rig.parameters()), rig)
+    wall_s = time.perf_counter() - began
+    served = _session(box)
+    n = served.result.log.timem.size
+    assert run.ended == "last sample" and run.log.timem.size == n
+    assert run.timing is not None and run.timing.ticks == n - 1
+    assert abs(run.timing.jitter_p50_ms) < run.timing.period_ms  # the samples came at the period
+    assert wall_s > (n - 2) * settings.params.daq.period_s  # paced by the wall clock, not as fast as possible
+    c = served.counts
+    assert c.late_commands <= c.missing_commands and c.watchdog_trips == 0
+    if c.missing_commands == 0:  # every command in time: the same run as in one process
+        ref = run_closed_loop(_build("appendix-sf", Parameters()), x0_m=x0, theta0_rad=th0, duration_s=1.0)
+        assert _same(ref.log.aout[:-1], served.result.log.aout[:-1])  # the last is not awaited in real time
+        assert _same(ref.log.true_x_m, served.result.log.true_x_m)

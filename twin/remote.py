@@ -23,9 +23,18 @@ from twin.guard import Guard
 from twin.interface import Controller, DaqSample, Rig
 from twin.log import RunLog
 from twin.parameters import Parameters, SoftwareCalibration
+from twin.realtime import TickTiming
 from twin.rig import RigError
 
-__all__ = ["RemoteError", "RemoteRig", "RemoteRun", "SessionEnded", "parse_udp_url", "run_remote"]
+__all__ = [
+    "RemoteError",
+    "RemoteRig",
+    "RemoteRun",
+    "SessionEnded",
+    "arrival_timing",
+    "parse_udp_url",
+    "run_remote",
+]
 
 _HELLO_INTERVAL_S = 0.2  # the doc's HELLO repetition
 
@@ -200,6 +209,26 @@ class RemoteRun:
     controller: str
     log: RunLog
     ended: str  # "last sample", or the STOP / error that ended it
+    timing: TickTiming | None = None  # real time: how the samples kept the period, as ``run --realtime``
+
+
+def arrival_timing(arrivals_s: list[float], compute_s: list[float], period_s: float) -> TickTiming:
+    """Tick timing from the wall-clock arrivals of the samples after the first: jitter is an arrival's
+    lateness against the first's + k·period (negative: early), compute the controller's update and write."""
+    t = np.asarray(arrivals_s, dtype=float)
+    late = (t - t[0] - np.arange(t.size) * period_s) * 1e3 if t.size else np.zeros(1)
+    compute = np.asarray(compute_s or [0.0], dtype=float) * 1e3
+    period_ms = period_s * 1e3
+    return TickTiming(
+        ticks=int(t.size),
+        period_ms=period_ms,
+        jitter_p50_ms=float(np.percentile(late, 50)),
+        jitter_p99_ms=float(np.percentile(late, 99)),
+        jitter_max_ms=float(late.max()),
+        compute_p50_ms=float(np.percentile(compute, 50)),
+        compute_max_ms=float(compute.max()),
+        overruns=int(np.sum((late >= period_ms) | (compute > period_ms))),
+    )
 
 
 def run_remote(
@@ -217,16 +246,20 @@ def run_remote(
         rows.append([sample.time_s, sample.ball_v, sample.angle_v, command_v, *est, tel.u, tel.u_computed])
 
     ended = "last sample"
+    arrivals: list[float] = []
+    compute: list[float] = []
     sample = rig.read()
     checked_start(controller, sample, guard=guard)
     add(sample, rig.command_v)
     try:
         while True:
             sample = rig.read()
+            arrivals.append(time.perf_counter())
             k = len(rows)
             where = f"at tick k = {k} (t = {sample.time_s:.3f} s)"  # a string per tick: the network dominates
             command = checked_update(controller, sample, where, guard, daq)
             rig.write(command)
+            compute.append(time.perf_counter() - arrivals[-1])
             add(sample, command)
             if rig.is_last:
                 break
@@ -235,4 +268,7 @@ def run_remote(
     table = np.array(rows, dtype=float).reshape(len(rows), 10)
     names = ("timem", "datam1", "datam2", "aout", "x1", "x2", "x3", "x4", "u", "uhesap")
     log = RunLog(**{name: table[:, j].copy() for j, name in enumerate(names)})
-    return RemoteRun(controller=getattr(controller, "name", "controller"), log=log, ended=ended)
+    timing = arrival_timing(arrivals, compute, rig.period_s) if rig.config.mode == p.MODE_REALTIME else None
+    return RemoteRun(
+        controller=getattr(controller, "name", "controller"), log=log, ended=ended, timing=timing
+    )

@@ -352,6 +352,7 @@ def _run_on_remote_rig(args: argparse.Namespace, params: Parameters) -> int:
         "ended": run.ended,
         "ball_lost": rig.ball_lost,
         "verdict": "the server's (printed by ballbeam serve)",
+        **({} if run.timing is None else {"realtime": run.timing.to_json()}),
     }
     if args.json:
         print(json.dumps(summary))
