@@ -22,7 +22,7 @@ One run measures, on the same work (a 10 s episode from x0 = 0.2 m, θ0 = 0.3 ra
   ``control.nlsys``) and ``scipy.integrate.solve_ivp`` (both with their default method and tolerances);
 - (e) calibration: wall time of a 5-parameter fit to a 60 s log;
 - physics: µs per MuJoCo step, ms per 20 ms tick of the TwinRig;
-- wire: a lock-step session over loopback UDP (``ballbeam serve`` in a thread, ``RemoteRig`` here) per tick
+- wire: a lock-step session over loopback UDP (``ballbeam serve`` in its own process, ``RemoteRig`` here) per tick
   against the same appendix-sf episode in process (target ≤ 2×);
 - view: the live view's tick rate at speed 1.0 over the given wall time (target 50 Hz ± 1 %) and its CPU
   time per tick, headless.
@@ -373,36 +373,33 @@ def bench_view(seconds: float) -> dict[str, float]:
 
 
 def bench_wire(repeats: int) -> dict[str, float]:
-    """Lock-step over loopback UDP (``twin.serve`` in a thread, ``twin.remote.run_remote`` here) per tick
-    against the same episode in process (appendix-sf; target ≤ 2×), best of ``repeats``."""
-    import threading
+    """Lock-step over loopback UDP per tick against the same episode in process (appendix-sf; target ≤ 2×),
+    best of ``repeats``: ``ballbeam serve`` in its own process, ``twin.remote.run_remote`` here, timed from
+    the handshake to the last sample (the server's start-up is not the session's cost)."""
+    import subprocess
+    import sys
 
-    from twin.remote import RemoteRig, run_remote
-    from twin.serve import Server, SessionSettings
+    from twin.remote import RemoteRig, parse_udp_url, run_remote
 
-    settings = SessionSettings(
-        x0_m=X0_M,
-        theta0_rad=THETA0_RAD,
-        duration_s=DURATION_S,
-        seed=0,
-        stop_when_lost=False,
-        wait_client_s=30,
-    )
+    serve = [sys.executable, "-m", "twin.app.cli", "serve", "--x0", str(X0_M), "--theta0", str(THETA0_RAD)]
+    serve += ["--duration", str(DURATION_S), "--seed", "0", "--wait-client", "60", "--json"]
 
-    def wire() -> int:
-        with Server(settings, log=lambda _: None) as server:
-            thread = threading.Thread(target=server.serve, daemon=True)
-            thread.start()
-            with RemoteRig("127.0.0.1", server.port) as rig:
-                ticks = run_remote(registry.make("appendix-sf", rig.parameters()), rig).log.timem.size
-            thread.join()
-        return int(ticks)
+    def wire() -> tuple[float, int]:
+        server = subprocess.Popen(serve, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+        assert server.stdout is not None
+        host, port = parse_udp_url(server.stdout.readline().split()[-1])
+        start = time.perf_counter()
+        with RemoteRig(host, port) as rig:
+            ticks = run_remote(registry.make("appendix-sf", rig.parameters()), rig).log.timem.size
+        elapsed = time.perf_counter() - start
+        server.communicate(timeout=60)
+        return elapsed, int(ticks)
 
-    ticks = _episode("appendix-sf").log.timem.size
-    best_in, best_wire = np.inf, np.inf
+    best_in, best_wire, ticks = np.inf, np.inf, 0
     for _ in range(repeats):
         best_in = min(best_in, _timed(lambda: _episode("appendix-sf"))[0])
-        best_wire = min(best_wire, _timed(wire)[0])
+        elapsed, ticks = wire()
+        best_wire = min(best_wire, elapsed)
     return {
         "ticks": float(ticks),
         "in_process_ms_per_tick": 1e3 * best_in / ticks,

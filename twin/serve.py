@@ -336,8 +336,8 @@ class Server:
             c.unexpected += 1
             return None
         if msg.seq != self._seq:
-            if msg.seq < self._seq and self.settings.mode == p.MODE_REALTIME and msg.seq == self._seq - 1:
-                c.late_commands += 1  # the answer to the previous sample, after its boundary
+            if msg.seq < self._seq and self.settings.mode == p.MODE_REALTIME:
+                c.late_commands += 1  # the answer to an earlier sample, after its boundary
             else:
                 c.stale_commands += 1
             return None
