@@ -54,7 +54,7 @@ from controllers import registry
 from controllers import thesis_numbers as T
 from twin.batch import run_batch
 from twin.engine import RunResult, StateLaw, run_closed_loop
-from twin.interface import Telemetry
+from twin.interface import Controller, Telemetry
 from twin.parameters import Parameters
 from twin.plant import Plant
 from twin.reference import ReferenceModel
@@ -390,7 +390,9 @@ def bench_wire(repeats: int) -> dict[str, float]:
         host, port = parse_udp_url(server.stdout.readline().split()[-1])
         start = time.perf_counter()
         with RemoteRig(host, port) as rig:
-            ticks = run_remote(registry.make("appendix-sf", rig.parameters()), rig).log.timem.size
+            controller = registry.make("appendix-sf", rig.parameters())
+            assert isinstance(controller, Controller)
+            ticks = run_remote(controller, rig).log.timem.size
         elapsed = time.perf_counter() - start
         server.communicate(timeout=60)
         return elapsed, int(ticks)
