@@ -442,3 +442,37 @@ def test_real_time_session_reports_the_client_timing() -> None:
         ref = run_closed_loop(_build("appendix-sf", Parameters()), x0_m=x0, theta0_rad=th0, duration_s=1.0)
         assert _same(ref.log.aout[:-1], served.result.log.aout[:-1])  # the last is not awaited in real time
         assert _same(ref.log.true_x_m, served.result.log.true_x_m)
+
+
+@pytest.mark.slow
+def test_a_flood_of_datagrams_leaves_the_session_alive_and_its_state_unchanged() -> None:
+    x0, th0 = STARTS[2]
+    settings = SessionSettings(x0_m=x0, theta0_rad=th0, seed=1, duration_s=5.0, wait_client_s=10.0)
+    stop = threading.Event()
+    flooded = [0]
+
+    def flood(port: int) -> None:
+        rng = random.Random(7)
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+            s.connect(("127.0.0.1", port))
+            while not stop.is_set():
+                try:
+                    s.send(bytes(rng.getrandbits(8) for _ in range(rng.choice((0, 24, 32, 56, 200, 1500)))))
+                    flooded[0] += 1
+                except OSError:
+                    time.sleep(0.001)  # the kernel's buffer is full: the flood is bounded there
+
+    with _serving(settings) as (server, box):
+        flooder = threading.Thread(target=flood, args=(server.port,), daemon=True)
+        flooder.start()
+        with RemoteRig("127.0.0.1", server.port) as rig:
+            run = run_remote(_build("appendix-clp", rig.parameters()), rig)
+        stop.set()
+        flooder.join(5.0)
+    served = _session(box)
+    assert run.ended == "last sample" and flooded[0] > 1000
+    assert served.counts.malformed > 1000
+    ref = run_closed_loop(
+        _build("appendix-clp", Parameters()), x0_m=x0, theta0_rad=th0, duration_s=5.0, seed=1
+    )
+    _check_equal(ref, served, run.log)

@@ -162,6 +162,10 @@ class RemoteRig(Rig):
             msg = frame.msg
             if isinstance(msg, p.Stop):
                 raise SessionEnded(f"{self.url} ended the session (STOP {msg.reason})", msg.reason)
+            if isinstance(msg, p.Sample) and msg.seq == after and self._answered and self.last is not None:
+                if self.config.role == p.ROLE_CONTROL:  # a repeated sample: our answer was lost, repeat it
+                    self._send(p.Command(seq=after, dac_v=self.command_v), self.session)
+                continue
             if isinstance(msg, p.Sample) and msg.seq > after:
                 self.last = msg
                 self._answered = self.config.role != p.ROLE_CONTROL

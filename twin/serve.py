@@ -52,6 +52,10 @@ DEFAULT_WATCHDOG_PERIODS = 5  # 0.1 s at 50 Hz: a dead controller's last command
 DEFAULT_TIMEOUT_S = 5.0  # lock-step: the longest wait for one command before the session ends (STOP 3)
 MAX_OBSERVERS = 4  # further clients are refused: the samples sent per tick stay bounded
 _RECV_BYTES = 4096  # larger than any frame, so that an oversized datagram is seen whole and refused
+_RESEND_S = (
+    0.2  # lock-step: SAMPLE k is repeated this often while its COMMAND is awaited (UDP may lose either)
+)
+_RCVBUF_BYTES = 1 << 20  # room for a burst of datagrams, so that a flood drops less of the client's traffic
 _RT_MARGIN_S = 0.0005  # real time: stop waiting for a command this long before the next tick's boundary
 _LOOPBACK = frozenset({"127.0.0.1", "localhost", "::1"})
 
@@ -97,6 +101,7 @@ class SessionCounts:
     missing_commands: int = 0  # real time: periods that ended without their command
     watchdog_trips: int = 0  # times the watchdog put the output at the zero command
     watchdog_ticks: int = 0  # samples sent with the watchdog flag
+    resent_samples: int = 0  # lock-step: a sample repeated because its command had not come
 
     def to_json(self) -> dict[str, int]:
         return asdict(self)
@@ -195,6 +200,10 @@ class Server:
         except OSError as exc:
             self.sock.close()
             raise ServeError(f"cannot bind udp://{host}:{port}: {exc.strerror or exc}") from None
+        try:
+            self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, _RCVBUF_BYTES)
+        except OSError:
+            pass  # the system's default buffer: still correct, only less tolerant of bursts
         self.port: int = self.sock.getsockname()[1]
         # The session id only tells sessions apart (never a result): not seeded, as a restarted server's must differ.
         self.session = session_id if session_id is not None else (secrets.randbits(32) or 1)
@@ -390,11 +399,17 @@ class Server:
             assert self._pacer is not None
             deadline = self._pacer.next_boundary() - _RT_MARGIN_S
         clock = time.perf_counter if realtime else time.monotonic
+        resend = clock() + _RESEND_S
         while True:
-            left = deadline - clock()
+            now = clock()
+            left = deadline - now
             if left <= 0:
                 break
-            got = self._receive(left)
+            if not realtime and now >= resend and self.controller_addr is not None:
+                self._send(out, self.controller_addr)  # the sample or its answer may have been lost
+                self.counts.resent_samples += 1
+                resend = now + _RESEND_S
+            got = self._receive(left if realtime else min(left, max(resend - now, 1e-4)))
             if isinstance(got, p.Stop):
                 self._end = (p.STOP_CLIENT_QUIT, f"the client sent STOP {got.reason}")
                 raise _SessionOver(self._end[1])
