@@ -481,3 +481,15 @@ def test_a_flood_of_datagrams_leaves_the_session_alive_and_its_state_unchanged()
         _build("appendix-clp", Parameters()), x0_m=x0, theta0_rad=th0, duration_s=3.0, seed=1
     )
     _check_equal(ref, served, run.log)
+
+
+def test_binding_beyond_loopback_warns_and_loopback_does_not() -> None:
+    lines: list[str] = []
+    with Server(SessionSettings(), "127.0.0.1", 0, log=lines.append):
+        assert lines == []
+    with Server(SessionSettings(), "0.0.0.0", 0, log=lines.append) as server:
+        assert lines == [
+            f"warning: serving on every interface (port {server.port}): anyone who can reach this machine "
+            "there can drive the twin — there is no authentication. Serve on 127.0.0.1 (the default) unless "
+            "that is what you want."
+        ]

@@ -187,13 +187,6 @@ class Server:
         self.settings = settings
         self.host = host
         self._log = log or (lambda line: print(line, file=sys.stderr, flush=True))
-        if host not in _LOOPBACK:
-            where = "every interface" if host in ("", "0.0.0.0", "::") else host
-            self._log(
-                f"warning: serving on {where} (port {port}): anyone who can reach this machine there can "
-                "drive the twin — there is no authentication. Serve on 127.0.0.1 (the default) unless that "
-                "is what you want."
-            )
         self.sock = socket.socket(_family(host), socket.SOCK_DGRAM)
         try:
             self.sock.bind((host, port))
@@ -205,6 +198,13 @@ class Server:
         except OSError:
             pass  # the system's default buffer: still correct, only less tolerant of bursts
         self.port: int = self.sock.getsockname()[1]
+        if host not in _LOOPBACK:
+            where = "every interface" if host in ("", "0.0.0.0", "::") else host
+            self._log(
+                f"warning: serving on {where} (port {self.port}): anyone who can reach this machine there can "
+                "drive the twin — there is no authentication. Serve on 127.0.0.1 (the default) unless that "
+                "is what you want."
+            )
         # The session id only tells sessions apart (never a result): not seeded, as a restarted server's must differ.
         self.session = session_id if session_id is not None else (secrets.randbits(32) or 1)
         self._sessions = 0
