@@ -1,7 +1,7 @@
 """Benchmarks (measured here, never asserted in tests): the twin's costs as ratios to the physical floor.
 
     python scripts/bench.py [--json] [--repeats 15] [--batch-side 41] [--skip-batch] [--skip-peers]
-                            [--skip-calibration] [--skip-view] [--view-seconds 60]
+                            [--skip-calibration] [--skip-view] [--view-seconds 60] [--skip-wire] [--only-wire]
 
 One run measures, on the same work (a 10 s episode from x0 = 0.2 m, θ0 = 0.3 rad, noise on, seed 0):
 
@@ -22,6 +22,8 @@ One run measures, on the same work (a 10 s episode from x0 = 0.2 m, θ0 = 0.3 ra
   ``control.nlsys``) and ``scipy.integrate.solve_ivp`` (both with their default method and tolerances);
 - (e) calibration: wall time of a 5-parameter fit to a 60 s log;
 - physics: µs per MuJoCo step, ms per 20 ms tick of the TwinRig;
+- wire: a lock-step session over loopback UDP (``ballbeam serve`` in its own process, ``RemoteRig`` here) per tick
+  against the same appendix-sf episode in process (target ≤ 2×);
 - view: the live view's tick rate at speed 1.0 over the given wall time (target 50 Hz ± 1 %) and its CPU
   time per tick, headless.
 
@@ -52,7 +54,7 @@ from controllers import registry
 from controllers import thesis_numbers as T
 from twin.batch import run_batch
 from twin.engine import RunResult, StateLaw, run_closed_loop
-from twin.interface import Telemetry
+from twin.interface import Controller, Telemetry
 from twin.parameters import Parameters
 from twin.plant import Plant
 from twin.reference import ReferenceModel
@@ -370,6 +372,44 @@ def bench_view(seconds: float) -> dict[str, float]:
     return stats
 
 
+def bench_wire(repeats: int) -> dict[str, float]:
+    """Lock-step over loopback UDP per tick against the same episode in process (appendix-sf; target ≤ 2×),
+    best of ``repeats``: ``ballbeam serve`` in its own process, ``twin.remote.run_remote`` here, timed from
+    the handshake to the last sample (the server's start-up is not the session's cost)."""
+    import subprocess
+    import sys
+
+    from twin.remote import RemoteRig, parse_udp_url, run_remote
+
+    serve = [sys.executable, "-m", "twin.app.cli", "serve", "--x0", str(X0_M), "--theta0", str(THETA0_RAD)]
+    serve += ["--duration", str(DURATION_S), "--seed", "0", "--wait-client", "60", "--json"]
+
+    def wire() -> tuple[float, int]:
+        server = subprocess.Popen(serve, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+        assert server.stdout is not None
+        host, port = parse_udp_url(server.stdout.readline().split()[-1])
+        start = time.perf_counter()
+        with RemoteRig(host, port) as rig:
+            controller = registry.make("appendix-sf", rig.parameters())
+            assert isinstance(controller, Controller)
+            ticks = run_remote(controller, rig).log.timem.size
+        elapsed = time.perf_counter() - start
+        server.communicate(timeout=60)
+        return elapsed, int(ticks)
+
+    best_in, best_wire, ticks = np.inf, np.inf, 0
+    for _ in range(repeats):
+        best_in = min(best_in, _timed(lambda: _episode("appendix-sf"))[0])
+        elapsed, ticks = wire()
+        best_wire = min(best_wire, elapsed)
+    return {
+        "ticks": float(ticks),
+        "in_process_ms_per_tick": 1e3 * best_in / ticks,
+        "lockstep_udp_ms_per_tick": 1e3 * best_wire / ticks,
+        "lockstep_over_in_process": best_wire / best_in,
+    }
+
+
 def ratios(results: dict[str, Any]) -> dict[str, float]:
     """(b)/(a), (c)/(a, 2 threads), (d)/(b) and (d)/(c per episode), wall time (CPU time where noted)."""
     episode = results["episodes"]["appendix-sf"]
@@ -389,6 +429,9 @@ def ratios(results: dict[str, Any]) -> dict[str, float]:
                 out[f"d_{key}_over_c_per_episode"] = (
                     peers[f"{key}_s"] / batch["batch_all_to_end_per_episode_s"]
                 )
+    wire = results.get("wire")
+    if wire is not None:
+        out["wire_lockstep_over_in_process"] = wire["lockstep_over_in_process"]
     return out
 
 
@@ -401,8 +444,18 @@ def main() -> None:
     parser.add_argument("--skip-calibration", action="store_true")
     parser.add_argument("--skip-batch", action="store_true")
     parser.add_argument("--skip-peers", action="store_true")
+    parser.add_argument("--skip-wire", action="store_true")
+    parser.add_argument("--only-wire", action="store_true", help="measure the lock-step UDP session only")
     parser.add_argument("--batch-side", type=int, default=41, help="the batch grid's points per side")
     args = parser.parse_args()
+    if args.only_wire:
+        only = {"wire": bench_wire(max(1, args.repeats))}
+        print(
+            json.dumps(only)
+            if args.json
+            else "\n".join(f"{k:40s} {v:12.4f}" for k, v in only["wire"].items())
+        )
+        return
     episodes = {name: bench_episode(name, max(1, args.repeats)) for name in EPISODES}
     results: dict[str, Any] = {"physics": bench_physics(), "episodes": episodes}
     if not args.skip_batch:
@@ -413,6 +466,8 @@ def main() -> None:
         results["calibration"] = bench_calibration()
     if not args.skip_view:
         results["view"] = bench_view(args.view_seconds)
+    if not args.skip_wire:
+        results["wire"] = bench_wire(max(1, args.repeats))
     results["ratios"] = ratios(results)
     if args.json:
         print(json.dumps(results))

@@ -217,6 +217,14 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from twin.plant import NumericalError
 
     params = _load_params(args)
+    if args.rig is not None:
+        return _run_on_remote_rig(args, params)
+    if args.x0 is None or args.theta0 is None:
+        print(
+            "ballbeam run: error: --x0 and --theta0 are required (unless --rig: the server's)",
+            file=sys.stderr,
+        )
+        return 2
     user = user_controller(args.controller)
     paths = check_outputs(
         [
@@ -287,6 +295,144 @@ def _cmd_run(args: argparse.Namespace) -> int:
         for key, value in summary.items():
             print(f"{key:<26} {value}")
     return 0 if result.verdict.held else 1
+
+
+def _run_on_remote_rig(args: argparse.Namespace, params: Parameters) -> int:
+    """``run --rig udp://HOST:PORT``: the controller through ``twin.remote.RemoteRig``. The rig's initial state,
+    duration and noise are the server's; the verdict is judged from the measured signals (``ballbeam serve``
+    prints the true state's)."""
+    from controllers import registry
+    from twin.engine import ControllerError
+    from twin.interface import Controller
+    from twin.log import save_csv, save_mat
+    from twin.remote import RemoteError, RemoteRig, parse_udp_url, run_remote
+    from twin.verdict import evaluate_measured
+
+    host, port = parse_udp_url(args.rig)
+    user = user_controller(args.controller)
+    paths = check_outputs(
+        [("--log", args.log, LOG_SUFFIXES, _log_bytes(args.log, args.duration, params))],
+        overwrite=args.overwrite,
+        inputs=_inputs(args),
+    )
+    try:
+        rig = RemoteRig(host, port, client=f"ballbeam run {args.controller}"[:32])
+    except RemoteError as exc:
+        print(f"ballbeam run: {exc}", file=sys.stderr)
+        return 1
+    with rig:
+        rig_params = rig.parameters(params)  # the rig's period, DAC and software calibration
+        controller = (
+            registry.make(args.controller, rig_params)
+            if user is None
+            else construct(user, args.controller, rig_params)
+        )
+        if not isinstance(controller, Controller):
+            rig.stop()
+            print(
+                f"ballbeam run: {args.controller} is a law on the true state (simulation only): it cannot drive "
+                "a rig",
+                file=sys.stderr,
+            )
+            return 2
+        try:
+            run = run_remote(controller, rig)
+        except ControllerError as exc:
+            rig.stop()
+            print(f"ballbeam run: the controller failed: {exc}", file=sys.stderr)
+            return 1
+    if "--log" in paths:
+        log_path = paths["--log"]
+        save = save_csv if log_path.suffix.lower() == ".csv" else save_mat
+        with writing("--log", args.log):
+            save(run.log, log_path, overwrite=args.overwrite)
+    # A rig has no true state: the run is judged from what it measured, as a recorded log is.
+    verdict = evaluate_measured(run.log, rig_params)
+    summary = {
+        "controller": args.controller,
+        "rig": args.rig,
+        "rig_identity": rig.config.rig,
+        "ticks": int(run.log.timem.size),
+        "ended": run.ended,
+        "ball_lost": rig.ball_lost,
+        "verdict_source": "measured (the rig's volts through its calibration: ballbeam judge)",
+        **verdict.to_json(),
+        **({} if run.timing is None else {"realtime": run.timing.to_json()}),
+    }
+    if args.json:
+        print(json.dumps(summary))
+    else:
+        for key, value in summary.items():
+            print(f"{key:<26} {value}")
+    return 0 if run.ended == "last sample" and verdict.held else 1
+
+
+def _cmd_serve(args: argparse.Namespace) -> int:
+    from twin import protocol
+    from twin.engine import ControllerError
+    from twin.log import save_csv, save_mat
+    from twin.plant import NumericalError
+    from twin.serve import ServeError, Server, SessionSettings
+
+    params = _load_params(args)
+    paths = check_outputs(
+        [("--log", args.log, LOG_SUFFIXES, _log_bytes(args.log, args.duration, params))],
+        overwrite=args.overwrite,
+        inputs=_inputs(args),
+    )
+    ideal = bool(args.ideal_sensors or args.plant == "reference")
+    settings = SessionSettings(
+        x0_m=args.x0,
+        theta0_rad=args.theta0,
+        duration_s=args.duration,
+        seed=args.seed,
+        noise=not args.no_noise,
+        params=params,
+        plant=args.plant,
+        ideal_sensors=ideal,
+        mode=protocol.MODE_REALTIME if args.mode == "realtime" else protocol.MODE_LOCKSTEP,
+        timeout_s=args.timeout,
+        watchdog_periods=args.watchdog,
+        wait_client_s=args.wait_client,
+        rig_name=f"ballbeam-twin {package_version()} {args.plant}",
+    )
+    try:
+        server = Server(settings, args.host, args.port)
+    except ServeError as exc:
+        print(f"ballbeam serve: error: {exc}", file=sys.stderr)
+        return 2
+    with server:
+        print(f"serving on {server.url}", flush=True)
+        try:
+            session = server.serve()
+        except ServeError as exc:
+            print(f"ballbeam serve: {exc}", file=sys.stderr)
+            return 1
+        except (ControllerError, NumericalError) as exc:
+            print(f"ballbeam serve: {one_line(exc)}", file=sys.stderr)
+            return 1
+    if "--log" in paths:
+        log_path = paths["--log"]
+        save = save_csv if log_path.suffix.lower() == ".csv" else save_mat
+        with writing("--log", args.log):
+            save(session.result.log, log_path, overwrite=args.overwrite)
+    summary = {
+        "mode": args.mode,
+        "x0_m": args.x0,
+        "theta0_rad": args.theta0,
+        "seed": args.seed,
+        "noise": not args.no_noise,
+        "plant": args.plant,
+        "ideal_sensors": ideal,
+        **session.summary(),
+        **session.result.verdict.to_json(),
+    }
+    if args.json:
+        print(json.dumps(summary))
+    else:
+        for key, value in summary.items():
+            print(f"{key:<26} {value}")
+    return 0 if session.result.verdict.held else 1
 
 
 def _read_log(path_text: str) -> Any:
@@ -797,10 +943,16 @@ def build_parser() -> argparse.ArgumentParser:
     )
     run.add_argument("--controller", required=True, metavar="NAME|MODULE:CLASS", help=controller_help)
     run.add_argument(
-        "--x0", type=finite_float(), required=True, metavar="M", help="initial ball position (m)"
+        "--x0", type=finite_float(), metavar="M", help="initial ball position (m; required unless --rig)"
     )
     run.add_argument(
-        "--theta0", type=finite_float(), required=True, metavar="RAD", help="initial beam angle (rad)"
+        "--theta0", type=finite_float(), metavar="RAD", help="initial beam angle (rad; required unless --rig)"
+    )
+    run.add_argument(
+        "--rig",
+        metavar="udp://HOST:PORT",
+        help="run on a rig served over protocol 1 (ballbeam serve, or firmware speaking docs/protocol.md); "
+        "its state, duration and verdict are the server's",
     )
     run.add_argument(
         "--duration",
@@ -835,6 +987,60 @@ def build_parser() -> argparse.ArgumentParser:
     _add_params_options(run)
     run.add_argument("--json", action="store_true", help="print the verdict as JSON")
     run.set_defaults(func=_cmd_run)
+
+    srv = sub.add_parser(
+        "serve",
+        help="serve the twin as an I/O card on protocol 1 over UDP (docs/protocol.md) for one session; "
+        "prints the session summary and the verdict (exit 0 held, 1 not)",
+    )
+    srv.add_argument("--mode", choices=("lockstep", "realtime"), default="lockstep", help="default lockstep")
+    srv.add_argument(
+        "--host", default="127.0.0.1", help="interface to serve on (default 127.0.0.1: this machine only)"
+    )
+    srv.add_argument(
+        "--port", type=count(0, 65535), default=0, help="UDP port (default 0: a free one, printed)"
+    )
+    srv.add_argument(
+        "--x0", type=finite_float(), required=True, metavar="M", help="initial ball position (m)"
+    )
+    srv.add_argument(
+        "--theta0", type=finite_float(), required=True, metavar="RAD", help="initial beam angle (rad)"
+    )
+    srv.add_argument(
+        "--duration",
+        type=finite_float(0, MAX_RUN_S, lo_open=True, unit="s", why="the log keeps every tick in memory"),
+        default=15.0,
+        metavar="S",
+        help=f"simulated seconds after release (default 15, at most {MAX_RUN_S:g})",
+    )
+    srv.add_argument("--seed", type=seed(), default=0, help="seed of the sensor noise (default 0)")
+    srv.add_argument("--no-noise", action="store_true", help="switch the ball sensor's contact noise off")
+    _add_plant_options(srv)
+    srv.add_argument(
+        "--timeout",
+        type=finite_float(0, 3600, lo_open=True, unit="s"),
+        default=5.0,
+        metavar="S",
+        help="lock-step: the longest wait for one command before the session ends with STOP 3 (default 5)",
+    )
+    srv.add_argument(
+        "--watchdog",
+        type=count(1, 10_000),
+        default=5,
+        metavar="N",
+        help="real time: periods without a command before the output goes to the zero command (default 5)",
+    )
+    srv.add_argument(
+        "--wait-client",
+        type=finite_float(0, lo_open=True, unit="s"),
+        metavar="S",
+        help="give up when no controlling client says HELLO within S seconds (default: wait)",
+    )
+    srv.add_argument("--log", metavar="FILE", help="save the session: .mat or .csv, with the true state")
+    srv.add_argument("--overwrite", action="store_true", help="replace an existing --log file")
+    _add_params_options(srv)
+    srv.add_argument("--json", action="store_true", help="print the summary and verdict as JSON")
+    srv.set_defaults(func=_cmd_serve)
 
     jdg = sub.add_parser(
         "judge",

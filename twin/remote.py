@@ -1,0 +1,278 @@
+"""``RemoteRig``: a ``Rig`` over protocol 1 (docs/protocol.md) on UDP — the served twin or any rig whose
+firmware speaks it — and ``run_remote``, a controller's run on it with the log the rig software keeps.
+
+The handshake repeats HELLO until CONFIG comes (bounded: ``connect_timeout_s``); ``read`` waits at most
+``timeout_s`` for the next SAMPLE; a server that disappears is a ``RemoteError`` within that time, never a
+hang. A sample that has not been answered when the next is read (the held block that ``start`` reads) is
+acknowledged with the command the DAC holds, as the protocol's session requires.
+"""
+
+from __future__ import annotations
+
+import math
+import socket
+import time
+from dataclasses import dataclass
+from urllib.parse import urlsplit
+
+import numpy as np
+
+from twin import protocol as p
+from twin.engine import checked_start, checked_update
+from twin.guard import Guard
+from twin.interface import Controller, DaqSample, Rig
+from twin.log import RunLog
+from twin.parameters import Parameters, SoftwareCalibration
+from twin.realtime import TickTiming
+from twin.rig import RigError
+
+__all__ = [
+    "RemoteError",
+    "RemoteRig",
+    "RemoteRun",
+    "SessionEnded",
+    "arrival_timing",
+    "parse_udp_url",
+    "run_remote",
+]
+
+_HELLO_INTERVAL_S = 0.2  # the doc's HELLO repetition
+
+
+class RemoteError(RigError):
+    """The remote rig cannot be reached, refused us, or went silent; the message names it and the wait."""
+
+
+class SessionEnded(RemoteError):
+    """The server sent STOP: ``reason`` is its code (docs/protocol.md)."""
+
+    def __init__(self, message: str, reason: int) -> None:
+        super().__init__(message)
+        self.reason = reason
+
+
+def parse_udp_url(url: str) -> tuple[str, int]:
+    """``udp://HOST:PORT`` → (host, port); a ``ValueError`` naming the URL otherwise."""
+    parts = urlsplit(url)
+    try:
+        port = parts.port
+    except ValueError:
+        port = None
+    if parts.scheme != "udp" or not parts.hostname or port is None or port == 0:
+        raise ValueError(f"--rig {url!r}: expected udp://HOST:PORT (port 1…65535)")
+    return parts.hostname, port
+
+
+class RemoteRig(Rig):
+    """The I/O card of a rig across UDP (``twin.interface.Rig``'s three calls, plus the session's flags)."""
+
+    def __init__(
+        self,
+        host: str,
+        port: int,
+        *,
+        role: int = p.ROLE_CONTROL,
+        client: str = "ballbeam-twin RemoteRig",
+        connect_timeout_s: float = 5.0,
+        timeout_s: float = 5.0,
+    ) -> None:
+        self.url = f"udp://{host}:{port}"
+        self.timeout_s = timeout_s
+        self.sock = socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            self.sock.connect((host, port))  # datagrams from any other address are dropped by the kernel
+        except OSError as exc:
+            self.sock.close()
+            raise RemoteError(f"{self.url}: {exc.strerror or exc}") from None
+        self.counts_malformed = 0
+        self.config, self.session = self._handshake(role, client, connect_timeout_s)
+        self.command_v = self.config.zero_command_v  # the DAC's value as we last set it (reset: zero volts)
+        self.last: p.Sample | None = None
+        self._answered = True
+
+    # --- the session ---------------------------------------------------------------------------------
+    def _send(self, msg: p.Message, session: int) -> None:
+        try:
+            self.sock.send(p.encode(msg, session))
+        except OSError:
+            pass  # nobody listening (ICMP unreachable): the bounded wait for an answer reports it
+
+    def _recv(self, wait_s: float) -> p.Frame | None:
+        self.sock.settimeout(max(wait_s, 1e-6))
+        try:
+            data = self.sock.recv(4096)
+        except TimeoutError:
+            return None
+        except OSError:  # ICMP port unreachable: the server is not (or no longer) there
+            time.sleep(min(wait_s, 0.01))
+            return None
+        try:
+            return p.decode_frame(data)
+        except p.ProtocolError:
+            self.counts_malformed += 1
+            return None
+
+    def _handshake(self, role: int, client: str, timeout_s: float) -> tuple[p.Config, int]:
+        deadline = time.monotonic() + timeout_s
+        next_hello = 0.0
+        while (now := time.monotonic()) < deadline:
+            if now >= next_hello:
+                self._send(p.Hello(role=role, client=client), 0)
+                next_hello = now + _HELLO_INTERVAL_S
+            frame = self._recv(min(next_hello, deadline) - time.monotonic())
+            if frame is not None and isinstance(frame.msg, p.Config):
+                if frame.msg.role == p.ROLE_REFUSED:
+                    raise RemoteError(f"{self.url} refused this client (another client controls the rig)")
+                return frame.msg, frame.session
+        raise RemoteError(f"no CONFIG from {self.url} within {timeout_s:g} s: is `ballbeam serve` running?")
+
+    def close(self) -> None:
+        self.sock.close()
+
+    def __enter__(self) -> RemoteRig:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # --- the Rig interface ---------------------------------------------------------------------------
+    @property
+    def period_s(self) -> float:
+        return self.config.period_s
+
+    @property
+    def software(self) -> SoftwareCalibration:
+        """The rig's software calibration (CONFIG): build controllers with ``software=`` this."""
+        return self.config.software
+
+    def parameters(self, base: Parameters | None = None) -> Parameters:
+        """``base`` with the rig's period, DAC range and software calibration (``Config.to_parameters``)."""
+        return self.config.to_parameters(base)
+
+    def read(self) -> DaqSample:
+        """The next SAMPLE (an unanswered previous one acknowledged first with the DAC's value)."""
+        if not self._answered and self.last is not None:
+            self.write(self.command_v)
+        deadline = time.monotonic() + self.timeout_s
+        after = -1 if self.last is None else self.last.seq
+        while (left := deadline - time.monotonic()) > 0:
+            frame = self._recv(left)
+            if frame is None or frame.session != self.session:
+                continue
+            msg = frame.msg
+            if isinstance(msg, p.Stop):
+                raise SessionEnded(f"{self.url} ended the session (STOP {msg.reason})", msg.reason)
+            if isinstance(msg, p.Sample) and msg.seq == after and self._answered and self.last is not None:
+                if self.config.role == p.ROLE_CONTROL:  # a repeated sample: our answer was lost, repeat it
+                    self._send(p.Command(seq=after, dac_v=self.command_v), self.session)
+                continue
+            if isinstance(msg, p.Sample) and msg.seq > after:
+                self.last = msg
+                self._answered = self.config.role != p.ROLE_CONTROL
+                return DaqSample(time_s=msg.time_s, ball_v=msg.ball_v, angle_v=msg.angle_v)
+        raise RemoteError(f"no SAMPLE from {self.url} within {self.timeout_s:g} s: the server is gone")
+
+    def write(self, command_v: float) -> None:
+        """COMMAND answering the latest sample (the DAC then holds ``command_v``)."""
+        if not (isinstance(command_v, (int, float)) and math.isfinite(command_v)):
+            raise ValueError(f"command_v = {command_v!r}: the DAC command must be a finite number of volts")
+        if self.last is None:
+            raise RemoteError(f"{self.url}: write before the first read")
+        self.command_v = float(command_v)
+        self._send(p.Command(seq=self.last.seq, dac_v=self.command_v), self.session)
+        self._answered = True
+
+    def stop(self, reason: int = p.STOP_CLIENT_QUIT) -> None:
+        self._send(p.Stop(reason), self.session)
+
+    # --- the latest sample's flags --------------------------------------------------------------------
+    def _flag(self, bit: int) -> bool:
+        return self.last is not None and bool(self.last.flags & bit)
+
+    @property
+    def held(self) -> bool:
+        return self._flag(p.FLAG_HELD)
+
+    @property
+    def ball_lost(self) -> bool:
+        return self._flag(p.FLAG_BALL_LOST)
+
+    @property
+    def watchdog(self) -> bool:
+        return self._flag(p.FLAG_WATCHDOG)
+
+    @property
+    def is_last(self) -> bool:
+        return self._flag(p.FLAG_LAST)
+
+
+@dataclass
+class RemoteRun:
+    """A controller's run on a remote rig: the log the rig software keeps (no true state) and how it ended."""
+
+    controller: str
+    log: RunLog
+    ended: str  # "last sample", or the STOP / error that ended it
+    timing: TickTiming | None = None  # real time: how the samples kept the period, as ``run --realtime``
+
+
+def arrival_timing(arrivals_s: list[float], compute_s: list[float], period_s: float) -> TickTiming:
+    """Tick timing from the wall-clock arrivals of the samples after the first: jitter is an arrival's
+    lateness against the first's + k·period (negative: early), compute the controller's update and write."""
+    t = np.asarray(arrivals_s, dtype=float)
+    late = (t - t[0] - np.arange(t.size) * period_s) * 1e3 if t.size else np.zeros(1)
+    compute = np.asarray(compute_s or [0.0], dtype=float) * 1e3
+    period_ms = period_s * 1e3
+    return TickTiming(
+        ticks=int(t.size),
+        period_ms=period_ms,
+        jitter_p50_ms=float(np.percentile(late, 50)),
+        jitter_p99_ms=float(np.percentile(late, 99)),
+        jitter_max_ms=float(late.max()),
+        compute_p50_ms=float(np.percentile(compute, 50)),
+        compute_max_ms=float(compute.max()),
+        overruns=int(np.sum((late >= period_ms) | (compute > period_ms))),
+    )
+
+
+def run_remote(
+    controller: Controller, rig: RemoteRig, *, controller_timeout_s: float | None = None
+) -> RemoteRun:
+    """``controller`` on ``rig`` as the engine runs it (``start`` on the held block, then ``update`` and
+    ``write`` every block) until the sample flagged last, a STOP or the rig going silent."""
+    guard = Guard.for_period(rig.period_s, controller_timeout_s)
+    daq = rig.parameters().daq  # the command's range check of an in-process run, on the rig's DAC
+    rows: list[list[float]] = []
+
+    def add(sample: DaqSample, command_v: float) -> None:
+        tel = controller.telemetry
+        est = np.broadcast_to(np.asarray(tel.estimate, dtype=float), (4,)).tolist()
+        rows.append([sample.time_s, sample.ball_v, sample.angle_v, command_v, *est, tel.u, tel.u_computed])
+
+    ended = "last sample"
+    arrivals: list[float] = []
+    compute: list[float] = []
+    sample = rig.read()
+    checked_start(controller, sample, guard=guard)
+    add(sample, rig.command_v)
+    try:
+        while True:
+            sample = rig.read()
+            arrivals.append(time.perf_counter())
+            k = len(rows)
+            where = f"at tick k = {k} (t = {sample.time_s:.3f} s)"  # a string per tick: the network dominates
+            command = checked_update(controller, sample, where, guard, daq)
+            rig.write(command)
+            compute.append(time.perf_counter() - arrivals[-1])
+            add(sample, command)
+            if rig.is_last:
+                break
+    except RemoteError as exc:
+        ended = str(exc)
+    table = np.array(rows, dtype=float).reshape(len(rows), 10)
+    names = ("timem", "datam1", "datam2", "aout", "x1", "x2", "x3", "x4", "u", "uhesap")
+    log = RunLog(**{name: table[:, j].copy() for j, name in enumerate(names)})
+    timing = arrival_timing(arrivals, compute, rig.period_s) if rig.config.mode == p.MODE_REALTIME else None
+    return RemoteRun(
+        controller=getattr(controller, "name", "controller"), log=log, ended=ended, timing=timing
+    )

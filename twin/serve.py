@@ -1,0 +1,437 @@
+"""The twin served as a virtual I/O card on protocol 1 (docs/protocol.md) over UDP: ``ballbeam serve``.
+
+One session per ``Server.serve()``: a client says HELLO and gets CONFIG; the server then runs the engine's
+own closed loop (``twin.engine.ClosedLoop``, the sequence of ``run_closed_loop``) with a ``Controller``
+adapter whose ``start``/``update`` send the block as SAMPLE and return the client's COMMAND. The session
+log, the true state and the verdict therefore come from the engine unchanged: a lock-step session
+reproduces the in-process run of the same controller bit for bit.
+
+* **Lock-step**: SAMPLE k, then wait (at most ``timeout_s``) for COMMAND k; a silent client ends the
+  session with STOP 3.
+* **Real time**: the ticks are paced by the wall clock (``twin.realtime.WallClockPacer``, as ``run
+  --realtime``). The command answering SAMPLE k is awaited until the next tick's boundary and applied
+  there: the simulation integrates a whole control period at once, so a command takes effect at the next
+  period boundary (the granularity is one period, as the thesis software, which writes once per tick).
+  A command that is not there by then is counted missing (and late if it arrives afterwards); the DAC
+  holds its last value. After ``watchdog_periods`` missing periods in a row the output goes to the zero
+  command and the samples carry the watchdog flag until a command arrives.
+
+Anything that is not a valid frame of this session from the right peer — malformed, oversized, another
+session's, a replayed or out-of-order command, an observer's command, a non-finite or out-of-range DAC
+value — is counted in ``SessionCounts`` and otherwise ignored.
+"""
+
+from __future__ import annotations
+
+import math
+import secrets
+import socket
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+
+from twin import protocol as p
+from twin.engine import ClosedLoop, ControllerError, RunResult, update_ticks
+from twin.interface import Controller, DaqSample
+from twin.parameters import Parameters
+from twin.realtime import TickTiming, WallClockPacer
+from twin.rig import PlantKind, SimRig, make_rig
+
+__all__ = [
+    "DEFAULT_TIMEOUT_S",
+    "DEFAULT_WATCHDOG_PERIODS",
+    "Server",
+    "ServeError",
+    "SessionCounts",
+    "SessionResult",
+    "SessionSettings",
+]
+
+DEFAULT_WATCHDOG_PERIODS = 5  # 0.1 s at 50 Hz: a dead controller's last command drives the beam no longer
+DEFAULT_TIMEOUT_S = 5.0  # lock-step: the longest wait for one command before the session ends (STOP 3)
+MAX_OBSERVERS = 4  # further clients are refused: the samples sent per tick stay bounded
+_RECV_BYTES = 4096  # larger than any frame, so that an oversized datagram is seen whole and refused
+_RESEND_S = (
+    0.2  # lock-step: SAMPLE k is repeated this often while its COMMAND is awaited (UDP may lose either)
+)
+_RCVBUF_BYTES = 1 << 20  # room for a burst of datagrams, so that a flood drops less of the client's traffic
+_RT_MARGIN_S = 0.0005  # real time: stop waiting for a command this long before the next tick's boundary
+_LOOPBACK = frozenset({"127.0.0.1", "localhost", "::1"})
+
+
+class ServeError(RuntimeError):
+    """A session that could not run (no client came, the socket failed); the message says which."""
+
+
+@dataclass(frozen=True)
+class SessionSettings:
+    """The served rig (every option of ``run`` that shapes it) and the session's timing."""
+
+    x0_m: float = 0.0
+    theta0_rad: float = 0.0
+    duration_s: float = 15.0
+    seed: int = 0
+    noise: bool = True
+    params: Parameters = field(default_factory=Parameters)
+    plant: PlantKind = "twin"
+    ideal_sensors: bool = False
+    mode: int = p.MODE_LOCKSTEP
+    timeout_s: float = DEFAULT_TIMEOUT_S
+    watchdog_periods: int = DEFAULT_WATCHDOG_PERIODS
+    wait_client_s: float | None = None  # how long to wait for a controlling client (None: until one comes)
+    stop_when_lost: bool = True
+    rig_name: str = "ballbeam-twin"
+
+
+@dataclass
+class SessionCounts:
+    """What the server received and refused, and how the commands kept time."""
+
+    frames: int = 0  # datagrams received
+    malformed: int = 0  # not a frame of protocol 1 (length, magic, version, type, crc, field)
+    wrong_session: int = 0  # a valid frame of another session
+    stale_commands: int = 0  # a replayed or out-of-order command (seq not the latest sample's)
+    unauthorised_commands: int = 0  # a command from an observer or an unknown peer
+    refused_commands: int = 0  # a non-finite or out-of-range dac_v: not an answer, the DAC keeps its value
+    unexpected: int = 0  # a valid frame the server does not take (a SAMPLE or CONFIG sent to it)
+    refused_clients: int = 0  # HELLOs answered with role 0
+    observers: int = 0
+    late_commands: int = 0  # real time: a command that arrived after its tick's boundary
+    missing_commands: int = 0  # real time: periods that ended without their command
+    watchdog_trips: int = 0  # times the watchdog put the output at the zero command
+    watchdog_ticks: int = 0  # samples sent with the watchdog flag
+    resent_samples: int = 0  # lock-step: a sample repeated because its command had not come
+
+    def to_json(self) -> dict[str, int]:
+        return asdict(self)
+
+
+_STOP_NAMES = {
+    p.STOP_DONE: "done",
+    p.STOP_CLIENT_QUIT: "client quit",
+    p.STOP_BALL_LOST: "ball lost",
+    p.STOP_ERROR: "error",
+    p.STOP_SHUTDOWN: "server shutting down",
+}
+
+
+@dataclass
+class SessionResult:
+    """One served session: the engine's result (log and verdict), why it ended, what was counted."""
+
+    result: RunResult
+    stop_reason: int
+    stop_detail: str
+    counts: SessionCounts
+    client: str
+    timing: TickTiming | None = None
+
+    def summary(self) -> dict[str, object]:
+        out: dict[str, object] = {
+            "client": self.client,
+            "stop": _STOP_NAMES.get(self.stop_reason, str(self.stop_reason)),
+            **({"stop_detail": self.stop_detail} if self.stop_detail else {}),
+            **self.counts.to_json(),
+        }
+        if self.timing is not None:
+            out["realtime"] = self.timing.to_json()
+        return out
+
+
+class _SessionOver(Exception):
+    """Raised inside the adapter's start/update to end the session (a silent or quitting client)."""
+
+
+class _ServePacer(WallClockPacer):
+    """The wall-clock pacer of ``run --realtime``, telling the adapter when the next tick begins."""
+
+    def next_boundary(self) -> float:
+        """The wall-clock deadline of the tick after the current one (``wait(k)`` was the last call)."""
+        return self._start + (len(self._late) + 1) * self.period_s
+
+
+class _WireController(Controller):
+    """The remote client as the engine's ``Controller``: a block out as SAMPLE, the DAC command back."""
+
+    name = "udp client"
+
+    def __init__(self, server: Server, period_s: float) -> None:
+        super().__init__()
+        self.server = server
+        self.period_s = period_s
+
+    def start(self, sample: DaqSample) -> None:
+        self.server._exchange(sample, start=True)
+
+    def update(self, sample: DaqSample) -> float:
+        return self.server._exchange(sample, start=False)
+
+
+def _family(host: str) -> socket.AddressFamily:
+    return socket.AF_INET6 if ":" in host else socket.AF_INET
+
+
+class Server:
+    """A UDP socket bound to ``host:port`` (port 0: any free one, see ``port``) serving sessions."""
+
+    def __init__(
+        self,
+        settings: SessionSettings,
+        host: str = "127.0.0.1",
+        port: int = 0,
+        *,
+        session_id: int | None = None,
+        log: Callable[[str], None] | None = None,
+    ) -> None:
+        self.settings = settings
+        self.host = host
+        self._log = log or (lambda line: print(line, file=sys.stderr, flush=True))
+        self.sock = socket.socket(_family(host), socket.SOCK_DGRAM)
+        try:
+            self.sock.bind((host, port))
+        except OSError as exc:
+            self.sock.close()
+            raise ServeError(f"cannot bind udp://{host}:{port}: {exc.strerror or exc}") from None
+        try:
+            self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, _RCVBUF_BYTES)
+        except OSError:
+            pass  # the system's default buffer: still correct, only less tolerant of bursts
+        self.port: int = self.sock.getsockname()[1]
+        if host not in _LOOPBACK:
+            where = "every interface" if host in ("", "0.0.0.0", "::") else host
+            self._log(
+                f"warning: serving on {where} (port {self.port}): anyone who can reach this machine there can "
+                "drive the twin — there is no authentication. Serve on 127.0.0.1 (the default) unless that "
+                "is what you want."
+            )
+        # The session id only tells sessions apart (never a result): not seeded, as a restarted server's must differ.
+        self.session = session_id if session_id is not None else (secrets.randbits(32) or 1)
+        self._sessions = 0
+        self._reset_session()
+
+    @property
+    def url(self) -> str:
+        return f"udp://{self.host}:{self.port}"
+
+    def close(self) -> None:
+        self.sock.close()
+
+    def __enter__(self) -> Server:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # --- a session ----------------------------------------------------------------------------------
+    def _reset_session(self) -> None:
+        self.counts = SessionCounts()
+        self.controller_addr: tuple[object, ...] | None = None
+        self.client_name = ""
+        self.observers: list[tuple[object, ...]] = []
+        self._seq = 0
+        self._n_ticks = 0
+        self._rig: SimRig | None = None
+        self._pacer: _ServePacer | None = None
+        self._applied_seq = 0
+        self._late_flag = False
+        self._missing_streak = 0
+        self._watchdog = False
+        self._end: tuple[int, str] | None = None
+
+    def _config(self, role: int) -> p.Config:
+        s = self.settings
+        return p.Config.from_parameters(
+            s.params, role=role, mode=s.mode, watchdog_periods=s.watchdog_periods, rig=s.rig_name
+        )
+
+    def _send(self, msg: p.Message, addr: tuple[object, ...]) -> None:
+        try:
+            self.sock.sendto(p.encode(msg, self.session), addr)
+        except OSError:
+            pass  # a peer that went away (ICMP unreachable on loopback): its silence is handled by timeouts
+
+    def serve(self) -> SessionResult:
+        """Wait for a controlling client, run one session, send STOP; the result of the session."""
+        s = self.settings
+        if self._sessions:  # a new session id: the previous session's late datagrams are dropped
+            self.session = (self.session + 1) & 0xFFFFFFFF or 1
+        self._sessions += 1
+        self._reset_session()
+        self._await_controller()
+        rig = make_rig(s.params, plant=s.plant, ideal_sensors=s.ideal_sensors, seed=s.seed, noise=s.noise)
+        rig.reset(s.x0_m, s.theta0_rad)
+        self._rig = rig
+        adapter = _WireController(self, rig.period_s)
+        # The budget is this server's own (lock-step timeout, real-time boundary): no engine watchdog.
+        loop = ClosedLoop(rig, adapter, controller_timeout_s=math.inf)
+        self._n_ticks = update_ticks(s.duration_s, rig.params)
+        pacer = self._pacer = _ServePacer(rig.period_s) if s.mode == p.MODE_REALTIME else None
+        reason, detail = p.STOP_DONE, ""
+        try:
+            try:
+                loop.start()
+                for k in range(self._n_ticks):  # run_closed_loop's sequence, tick for tick
+                    if pacer is not None:
+                        pacer.wait(k)
+                    loop.tick()
+                    if pacer is not None:
+                        pacer.done()
+                    if s.stop_when_lost and rig.ball_lost:
+                        reason = p.STOP_BALL_LOST
+                        break
+            except ControllerError:
+                if self._end is None:
+                    raise
+                reason, detail = self._end
+        except KeyboardInterrupt:
+            self._stop_all(p.STOP_SHUTDOWN)
+            raise
+        self._stop_all(reason)
+        if not loop.started:  # nothing was logged: no session to report
+            raise ServeError(f"the session ended before the client acknowledged the held sample: {detail}")
+        result = RunResult(controller=adapter.name, log=loop.log(), verdict=loop.verdict(s.x0_m))
+        timing = pacer.timing() if pacer is not None else None
+        return SessionResult(result, reason, detail, self.counts, self.client_name, timing)
+
+    def _stop_all(self, reason: int) -> None:
+        for addr in ([self.controller_addr] if self.controller_addr else []) + self.observers:
+            self._send(p.Stop(reason), addr)
+
+    def _await_controller(self) -> None:
+        wait_s = self.settings.wait_client_s
+        deadline = math.inf if wait_s is None else time.monotonic() + wait_s
+        while self.controller_addr is None:
+            left = deadline - time.monotonic()
+            if left <= 0:
+                raise ServeError(f"no controlling client said HELLO to {self.url} within {wait_s:g} s")
+            self._receive(min(left, 0.5))
+
+    # --- receiving ----------------------------------------------------------------------------------
+    def _receive(self, wait_s: float) -> p.Command | p.Stop | None:
+        """Handle one datagram (waiting at most ``wait_s``): HELLOs answered, refusals counted; the
+        controller's valid COMMAND for the latest sample or its STOP returned, else ``None``."""
+        try:
+            self.sock.settimeout(max(wait_s, 1e-6))
+            data, addr = self.sock.recvfrom(_RECV_BYTES)
+        except TimeoutError:
+            return None
+        except OSError:  # ICMP port unreachable from a vanished client, or our socket closed under us
+            time.sleep(min(wait_s, 0.01))
+            return None
+        c = self.counts
+        c.frames += 1
+        try:
+            frame = p.decode_frame(data)
+        except p.ProtocolError:
+            c.malformed += 1
+            return None
+        msg = frame.msg
+        if isinstance(msg, p.Hello):
+            self._hello(msg, addr)
+            return None
+        if frame.session != self.session:
+            c.wrong_session += 1
+            return None
+        if addr != self.controller_addr:
+            if isinstance(msg, p.Command):
+                c.unauthorised_commands += 1
+            else:
+                c.unexpected += 1
+            return None
+        if isinstance(msg, p.Stop):
+            return msg
+        if not isinstance(msg, p.Command):
+            c.unexpected += 1
+            return None
+        if msg.seq != self._seq:
+            if msg.seq < self._seq and self.settings.mode == p.MODE_REALTIME:
+                c.late_commands += 1  # the answer to an earlier sample, after its boundary
+            else:
+                c.stale_commands += 1
+            return None
+        daq = self.settings.params.daq
+        if not (math.isfinite(msg.dac_v) and daq.dac_min_v <= msg.dac_v <= daq.dac_max_v):
+            c.refused_commands += 1  # not an answer: the DAC keeps its last value, the wait goes on
+            return None
+        return msg
+
+    def _hello(self, msg: p.Hello, addr: tuple[object, ...]) -> None:
+        c = self.counts
+        if addr == self.controller_addr:  # a repeated HELLO: our CONFIG was lost
+            self._send(self._config(p.ROLE_CONTROL), addr)
+        elif addr in self.observers:
+            self._send(self._config(p.ROLE_OBSERVE), addr)
+        elif msg.role == p.ROLE_CONTROL and self.controller_addr is None:
+            self.controller_addr, self.client_name = addr, msg.client
+            self._send(self._config(p.ROLE_CONTROL), addr)
+        elif msg.role == p.ROLE_OBSERVE and len(self.observers) < MAX_OBSERVERS:
+            self.observers.append(addr)
+            c.observers += 1
+            self._send(self._config(p.ROLE_OBSERVE), addr)
+        else:
+            c.refused_clients += 1
+            self._send(self._config(p.ROLE_REFUSED), addr)
+
+    # --- one block out, one command back ------------------------------------------------------------
+    def _exchange(self, sample: DaqSample, *, start: bool) -> float:
+        rig = self._rig
+        assert rig is not None
+        s = self.settings
+        seq = 0 if start else self._seq + 1
+        self._seq = seq
+        last = not start and (seq == self._n_ticks or (s.stop_when_lost and rig.ball_lost))
+        flags = p.FLAG_HELD if (start or rig.held) else 0
+        flags |= p.FLAG_BALL_LOST if rig.ball_lost else 0
+        flags |= p.FLAG_WATCHDOG if self._watchdog else 0
+        flags |= p.FLAG_LATE if self._late_flag else 0
+        flags |= p.FLAG_LAST if last else 0
+        if self._watchdog:
+            self.counts.watchdog_ticks += 1
+        out = p.Sample(seq, sample.time_s, sample.ball_v, sample.angle_v, flags, self._applied_seq)
+        for addr in ([self.controller_addr] if self.controller_addr else []) + self.observers:
+            self._send(out, addr)
+        realtime = s.mode == p.MODE_REALTIME and not start and self._pacer is not None
+        if realtime and last:
+            return rig.command_v  # real time: the last sample is not answered (docs/protocol.md)
+        deadline = time.monotonic() + s.timeout_s
+        if realtime:
+            assert self._pacer is not None
+            deadline = self._pacer.next_boundary() - _RT_MARGIN_S
+        clock = time.perf_counter if realtime else time.monotonic
+        resend = clock() + _RESEND_S
+        while True:
+            now = clock()
+            left = deadline - now
+            if left <= 0:
+                break
+            if not realtime and now >= resend and self.controller_addr is not None:
+                self._send(out, self.controller_addr)  # the sample or its answer may have been lost
+                self.counts.resent_samples += 1
+                resend = now + _RESEND_S
+            got = self._receive(left if realtime else min(left, max(resend - now, 1e-4)))
+            if isinstance(got, p.Stop):
+                self._end = (p.STOP_CLIENT_QUIT, f"the client sent STOP {got.reason}")
+                raise _SessionOver(self._end[1])
+            if isinstance(got, p.Command):
+                return self._accept(got)
+        if not realtime:
+            self._end = (p.STOP_ERROR, f"no COMMAND {seq} within {s.timeout_s:g} s")
+            raise _SessionOver(self._end[1])
+        # real time: the period ended without its command; the DAC holds, then the watchdog
+        self.counts.missing_commands += 1
+        self._late_flag = True
+        self._missing_streak += 1
+        if self._missing_streak >= s.watchdog_periods:
+            if not self._watchdog:
+                self.counts.watchdog_trips += 1
+            self._watchdog = True
+            return s.params.amplifier.zero_command_v
+        return rig.command_v
+
+    def _accept(self, cmd: p.Command) -> float:
+        self._late_flag = False
+        self._missing_streak = 0
+        self._watchdog = False
+        self._applied_seq = cmd.seq
+        return cmd.dac_v
