@@ -492,3 +492,54 @@ def test_ctrl_c_ends_the_session_with_a_stop_not_a_silent_controller(
     assert client.receive(STOP)[1:] == (12, (1,))  # reason 1: client quit
     code, err = client.finish()
     assert code == 130 and err == "bb_sf: interrupted (signal 2) after sample 0: sent STOP 1 (client quit)\n"
+
+
+# --- against the served twin: bb_sf over UDP, ballbeam's own server in lock-step ----------------------------
+
+
+@pytest.mark.parametrize(("figure", "start"), list(HARDWARE_STARTS.items()), ids=list(HARDWARE_STARTS))
+def test_the_c_controller_against_the_served_twin_is_the_python_port_bit_for_bit(
+    bb_sf: Path, params: Parameters, figure: str, start: tuple[float, float]
+) -> None:
+    """``bb_sf udp`` against ``twin.serve.Server`` (lock-step, 10 s, seed 0): the session's log and verdict
+    (true state included) equal the in-process ``appendix-sf`` run's, array by array; held."""
+    import threading
+
+    from twin.serve import Server, SessionSettings
+
+    x0, theta0 = start
+    settings = SessionSettings(x0_m=x0, theta0_rad=theta0, seed=0, duration_s=10.0, wait_client_s=30.0)
+    server = Server(settings, "127.0.0.1", 0, log=lambda _: None)
+    box: dict[str, object] = {}
+    thread = threading.Thread(target=lambda: box.setdefault("session", server.serve()), daemon=True)
+    thread.start()
+    try:
+        client = subprocess.run(
+            [str(bb_sf), "udp", "127.0.0.1", str(server.port), "--timeout", "10"],
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
+    finally:
+        thread.join(30.0)
+        server.close()
+    assert not thread.is_alive(), "the server hung"
+    assert client.returncode == 0, client.stderr
+    served = box["session"].result  # type: ignore[attr-defined]
+    py = run_closed_loop(AppendixStateFeedback(params.software), x0_m=x0, theta0_rad=theta0, seed=0)
+    assert served.verdict.held, f"{figure}: {served.verdict.reason}"
+    assert served.verdict == py.verdict
+    for name in (
+        "timem",
+        "datam1",
+        "datam2",
+        "aout",
+        "true_time_s",
+        "true_x_m",
+        "true_theta_rad",
+        "true_xdot_m_s",
+        "true_thetadot_rad_s",
+        "motor_volts_v",
+        "ball_lost",
+    ):
+        np.testing.assert_array_equal(getattr(served.log, name), getattr(py.log, name), err_msg=name)
