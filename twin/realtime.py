@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -66,17 +66,22 @@ class WallClockPacer:
         self._compute.append(self.clock() - self._began)
 
     def timing(self) -> TickTiming:
-        late = np.array(self._late or [0.0]) * 1e3
-        compute = np.array(self._compute or [0.0]) * 1e3
-        period_ms = self.period_s * 1e3
-        overruns = int(np.sum((late >= period_ms) | (compute > period_ms)))
-        return TickTiming(
-            ticks=len(self._late),
-            period_ms=period_ms,
-            jitter_p50_ms=float(np.percentile(late, 50)),
-            jitter_p99_ms=float(np.percentile(late, 99)),
-            jitter_max_ms=float(late.max()),
-            compute_p50_ms=float(np.percentile(compute, 50)),
-            compute_max_ms=float(compute.max()),
-            overruns=overruns,
-        )
+        return tick_timing(self._late, self._compute, self.period_s)
+
+
+def tick_timing(late_s: Sequence[float], compute_s: Sequence[float], period_s: float) -> TickTiming:
+    """The figures of ticks that were ``late_s`` (s after their due time; negative: early) and spent
+    ``compute_s`` in the controller: percentiles, maxima, and overruns (late by a period or computing longer)."""
+    late = np.array(late_s or [0.0], dtype=float) * 1e3
+    compute = np.array(compute_s or [0.0], dtype=float) * 1e3
+    period_ms = period_s * 1e3
+    return TickTiming(
+        ticks=len(late_s),
+        period_ms=period_ms,
+        jitter_p50_ms=float(np.percentile(late, 50)),
+        jitter_p99_ms=float(np.percentile(late, 99)),
+        jitter_max_ms=float(late.max()),
+        compute_p50_ms=float(np.percentile(compute, 50)),
+        compute_max_ms=float(compute.max()),
+        overruns=int(np.sum((late >= period_ms) | (compute > period_ms))),
+    )

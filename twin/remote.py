@@ -23,7 +23,7 @@ from twin.guard import Guard
 from twin.interface import Controller, DaqSample, Rig
 from twin.log import RunLog
 from twin.parameters import Parameters, SoftwareCalibration
-from twin.realtime import TickTiming
+from twin.realtime import TickTiming, tick_timing
 from twin.rig import RigError
 
 __all__ = [
@@ -220,19 +220,8 @@ def arrival_timing(arrivals_s: list[float], compute_s: list[float], period_s: fl
     """Tick timing from the wall-clock arrivals of the samples after the first: jitter is an arrival's
     lateness against the first's + k·period (negative: early), compute the controller's update and write."""
     t = np.asarray(arrivals_s, dtype=float)
-    late = (t - t[0] - np.arange(t.size) * period_s) * 1e3 if t.size else np.zeros(1)
-    compute = np.asarray(compute_s or [0.0], dtype=float) * 1e3
-    period_ms = period_s * 1e3
-    return TickTiming(
-        ticks=int(t.size),
-        period_ms=period_ms,
-        jitter_p50_ms=float(np.percentile(late, 50)),
-        jitter_p99_ms=float(np.percentile(late, 99)),
-        jitter_max_ms=float(late.max()),
-        compute_p50_ms=float(np.percentile(compute, 50)),
-        compute_max_ms=float(compute.max()),
-        overruns=int(np.sum((late >= period_ms) | (compute > period_ms))),
-    )
+    late_s = (t - t[0] - np.arange(t.size) * period_s).tolist() if t.size else []
+    return tick_timing(late_s, compute_s, period_s)
 
 
 def run_remote(

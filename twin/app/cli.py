@@ -917,6 +917,19 @@ _JOB_RUN_S = finite_float(
 _WORKERS = count(1, MAX_WORKERS, unit="local processes")
 
 
+def _add_episode_options(parser: argparse.ArgumentParser) -> None:
+    """How long one episode of the rig runs and its noise (run and serve)."""
+    parser.add_argument(
+        "--duration",
+        type=finite_float(0, MAX_RUN_S, lo_open=True, unit="s", why="the log keeps every tick in memory"),
+        default=15.0,
+        metavar="S",
+        help=f"simulated seconds after release (default 15, at most {MAX_RUN_S:g}: the log keeps every tick)",
+    )
+    parser.add_argument("--seed", type=seed(), default=0, help="seed of the sensor noise (default 0)")
+    parser.add_argument("--no-noise", action="store_true", help="switch the ball sensor's contact noise off")
+
+
 def build_parser() -> argparse.ArgumentParser:
     from controllers import registry  # its names only: importing it loads no design code
 
@@ -952,16 +965,9 @@ def build_parser() -> argparse.ArgumentParser:
         "--rig",
         metavar="udp://HOST:PORT",
         help="run on a rig served over protocol 1 (ballbeam serve, or firmware speaking docs/protocol.md); "
-        "its state, duration and verdict are the server's",
+        "its state and duration are the server's; the verdict is judged from the measured signals",
     )
-    run.add_argument(
-        "--duration",
-        type=finite_float(0, MAX_RUN_S, lo_open=True, unit="s", why="the log keeps every tick in memory"),
-        default=15.0,
-        metavar="S",
-        help=f"simulated seconds (default 15, at most {MAX_RUN_S:g}: the log keeps every tick in memory)",
-    )
-    run.add_argument("--seed", type=seed(), default=0, help="seed of the sensor noise (default 0)")
+    _add_episode_options(run)
     run.add_argument(
         "--setpoint",
         type=finite_float(unit="m"),
@@ -969,7 +975,6 @@ def build_parser() -> argparse.ArgumentParser:
         help="ball setpoint (m, on the track) for a controller that has one (twin.interface.Setpoint); the "
         "verdict is then judged about it",
     )
-    run.add_argument("--no-noise", action="store_true", help="switch the ball sensor's contact noise off")
     run.add_argument(
         "--realtime",
         action="store_true",
@@ -1006,15 +1011,7 @@ def build_parser() -> argparse.ArgumentParser:
     srv.add_argument(
         "--theta0", type=finite_float(), required=True, metavar="RAD", help="initial beam angle (rad)"
     )
-    srv.add_argument(
-        "--duration",
-        type=finite_float(0, MAX_RUN_S, lo_open=True, unit="s", why="the log keeps every tick in memory"),
-        default=15.0,
-        metavar="S",
-        help=f"simulated seconds after release (default 15, at most {MAX_RUN_S:g})",
-    )
-    srv.add_argument("--seed", type=seed(), default=0, help="seed of the sensor noise (default 0)")
-    srv.add_argument("--no-noise", action="store_true", help="switch the ball sensor's contact noise off")
+    _add_episode_options(srv)
     _add_plant_options(srv)
     srv.add_argument(
         "--timeout",
