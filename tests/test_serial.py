@@ -281,6 +281,14 @@ def test_bad_serial_options_are_one_line_errors() -> None:
     )
     assert serve.returncode == 2 and "cannot open /nonexistent/tty" in serve.stderr
     assert "Traceback" not in serve.stderr and len(serve.stderr.strip().splitlines()) == 1
+    both = subprocess.run(
+        [*cli, "serve", "--serial", "/dev/null", "--port", "5750", "--x0", "0.1", "--theta0", "0"],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=60,
+    )
+    assert both.returncode == 2 and "--serial replaces --host and --port" in both.stderr
     run = subprocess.run(
         [*cli, "run", "--rig", "serial:///dev/null?baud=7", "--controller", "appendix-sf"],
         capture_output=True,

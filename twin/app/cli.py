@@ -378,6 +378,12 @@ def _cmd_serve(args: argparse.Namespace) -> int:
     from twin.plant import NumericalError
     from twin.serve import ServeError, Server, SessionSettings
 
+    if args.serial is not None and (args.host != "127.0.0.1" or args.port != 0):
+        print(
+            "ballbeam serve: error: --serial replaces --host and --port: give one or the other",
+            file=sys.stderr,
+        )
+        return 2
     params = _load_params(args)
     paths = check_outputs(
         [("--log", args.log, LOG_SUFFIXES, _log_bytes(args.log, args.duration, params))],
