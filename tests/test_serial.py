@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import os
+import random
 import select
 import subprocess
 import sys
@@ -158,24 +159,31 @@ def _build(name: str, params: Parameters) -> Controller:
 def _served_over_pty(settings: SessionSettings, name: str) -> tuple[SessionResult, RunLog]:
     """A lock-step session: the server on the master end (a thread), RemoteRig on the slave's path."""
     with _pty() as (master, path):
-        server = Server(settings, log=lambda _: None, link=SerialLink.from_fd(master))
-        box: dict[str, object] = {}
+        return _serve_on(SerialLink.from_fd(master), path, settings, name)
 
-        def target() -> None:
-            try:
-                box["session"] = server.serve()
-            except BaseException as exc:  # noqa: BLE001 - reported to the test
-                box["error"] = exc
 
-        thread = threading.Thread(target=target, daemon=True)
-        thread.start()
+def _serve_on(
+    link: SerialLink, client_path: str, settings: SessionSettings, name: str
+) -> tuple[SessionResult, RunLog]:
+    """The server on ``link`` (a thread), RemoteRig on the tty at ``client_path``."""
+    server = Server(settings, log=lambda _: None, link=link)
+    box: dict[str, object] = {}
+
+    def target() -> None:
         try:
-            with open_remote(f"serial://{path}?baud=115200") as rig:
-                assert rig.url == f"serial://{path}?baud=115200"
-                run = run_remote(_build(name, rig.parameters()), rig)
-        finally:
-            thread.join(30.0)
-        assert not thread.is_alive(), "the server hung"
+            box["session"] = server.serve()
+        except BaseException as exc:  # noqa: BLE001 - reported to the test
+            box["error"] = exc
+
+    thread = threading.Thread(target=target, daemon=True)
+    thread.start()
+    try:
+        with open_remote(f"serial://{client_path}?baud=115200") as rig:
+            assert rig.url == f"serial://{client_path}?baud=115200"
+            run = run_remote(_build(name, rig.parameters()), rig)
+    finally:
+        thread.join(30.0)
+    assert not thread.is_alive(), "the server hung"
     if "error" in box:
         raise box["error"]  # type: ignore[misc]
     served = box["session"]
@@ -210,16 +218,56 @@ def test_lockstep_over_a_pty_from_the_hardware_starts(name: str, start: int) -> 
     _lockstep_case(name, start, 0, 15.0)
 
 
-def _bridge(a: int, b: int, stop: threading.Event) -> None:
-    """Copy bytes both ways between two pty masters: a null-modem cable between two processes' ttys."""
+def _bridge(a: int, b: int, stop: threading.Event, noise: list[bytes] | None = None) -> None:
+    """Copy bytes both ways between two pty masters: a null-modem cable between two processes' ttys;
+    with ``noise``, one of its pieces is written into the line every 40th chunk (inside a frame if a
+    chunk boundary falls there)."""
+    chunks = 0
     while not stop.is_set():
         ready, _, _ = select.select([a, b], [], [], 0.05)
         for fd in ready:
             try:
                 data = os.read(fd, 4096)
+                chunks += 1
+                if noise and chunks % 40 == 0:
+                    cut = len(data) // 2
+                    data = data[:cut] + noise[(chunks // 40) % len(noise)] + data[cut:]
                 os.write(b if fd == a else a, data)
             except OSError:
                 pass  # a side that closed its tty: the processes' own timeouts handle it
+
+
+def test_line_noise_during_a_session_changes_nothing_in_it() -> None:
+    """Noise on the line (random bytes, a false sync and magic, a cut frame) between the two ttys: the
+    readers resync, a frame hit by it is dropped and repeated (lock-step's 0.2 s repeat), and the session
+    still equals the in-process run bit for bit."""
+    rng = random.Random(0)
+    x0, th0 = STARTS[1]
+    settings = SessionSettings(x0_m=x0, theta0_rad=th0, seed=0, duration_s=2.0, wait_client_s=10.0)
+    noise = [
+        bytes(rng.randrange(256) for _ in range(40)),
+        SYNC + p.MAGIC + b"\x01\x03\x38\x00",
+        SYNC + SAMPLE[:30],
+    ]
+    stop = threading.Event()
+    with _pty() as (master_a, path_a), _pty() as (master_b, path_b):
+        bridge = threading.Thread(target=_bridge, args=(master_a, master_b, stop, noise), daemon=True)
+        bridge.start()
+        try:
+            server_link = SerialLink.open(path_a, 115200)
+            try:
+                served, client_log = _serve_on(server_link, path_b, settings, "appendix-sf")
+            finally:
+                server_link.close()
+        finally:
+            stop.set()
+            bridge.join(5.0)
+    ref = run_closed_loop(
+        _build("appendix-sf", Parameters()), x0_m=x0, theta0_rad=th0, duration_s=2.0, seed=0
+    )
+    assert served.counts.resent_samples >= 1  # some frames were hit and had to be repeated
+    assert server_link.counts.resyncs >= 1 and server_link.counts.frames > 100
+    _check_equal(ref, served, client_log)
 
 
 def test_serve_serial_and_run_rig_serial_on_the_command_line(tmp_path: Path) -> None:
