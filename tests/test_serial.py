@@ -312,6 +312,8 @@ def test_serve_serial_and_run_rig_serial_on_the_command_line(tmp_path: Path) -> 
     ref = run_closed_loop(_build("appendix-sf", Parameters()), x0_m=0.14, theta0_rad=-0.2, duration_s=2.0)
     assert summary["stop"] == "done" and summary["held"] == ref.verdict.held
     assert serve.returncode == (0 if ref.verdict.held else 1), err
+    line = summary["serial"]  # a clean line: every frame (HELLO, one COMMAND a tick) and nothing thrown away
+    assert line["frames"] >= ref.log.timem.size + 1 and line["garbage_bytes"] == line["crc_errors"] == 0
     client = json.loads(run.stdout)
     assert client["ticks"] == ref.log.timem.size
     assert run.returncode == (0 if client["held"] else 1), run.stderr

@@ -374,6 +374,7 @@ def _run_on_remote_rig(args: argparse.Namespace, params: Parameters) -> int:
 def _cmd_serve(args: argparse.Namespace) -> int:
     from twin import protocol
     from twin.engine import ControllerError
+    from twin.links import LinkError, SerialLink
     from twin.log import save_csv, save_mat
     from twin.plant import NumericalError
     from twin.serve import ServeError, Server, SessionSettings
@@ -408,8 +409,6 @@ def _cmd_serve(args: argparse.Namespace) -> int:
     )
     try:
         if args.serial is not None:
-            from twin.links import LinkError, SerialLink
-
             try:
                 link = SerialLink.open(args.serial, args.baud)
             except LinkError as exc:
@@ -446,6 +445,8 @@ def _cmd_serve(args: argparse.Namespace) -> int:
         **session.summary(),
         **session.result.verdict.to_json(),
     }
+    if isinstance(server.link, SerialLink):  # what the serial reader threw away before a frame existed
+        summary["serial"] = server.link.counts.to_json()
     if args.json:
         print(json.dumps(summary))
     else:
