@@ -1,5 +1,6 @@
-"""``RemoteRig``: a ``Rig`` over protocol 1 (docs/protocol.md) on UDP — the served twin or any rig whose
-firmware speaks it — and ``run_remote``, a controller's run on it with the log the rig software keeps.
+"""``RemoteRig``: a ``Rig`` over protocol 1 (docs/protocol.md) on UDP or a serial line (``twin.links``) —
+the served twin or any rig whose firmware speaks it — and ``run_remote``, a controller's run on it with
+the log the rig software keeps.
 
 The handshake repeats HELLO until CONFIG comes (bounded: ``connect_timeout_s``); ``read`` waits at most
 ``timeout_s`` for the next SAMPLE; a server that disappears is a ``RemoteError`` within that time, never a
@@ -13,6 +14,7 @@ import math
 import socket
 import time
 from dataclasses import dataclass
+from typing import Any
 from urllib.parse import urlsplit
 
 import numpy as np
@@ -21,6 +23,7 @@ from twin import protocol as p
 from twin.engine import checked_start, checked_update
 from twin.guard import Guard
 from twin.interface import Controller, DaqSample, Rig
+from twin.links import Link, LinkError, UdpLink, open_link, parse_url
 from twin.log import RunLog
 from twin.parameters import Parameters, SoftwareCalibration
 from twin.realtime import TickTiming, tick_timing
@@ -32,6 +35,7 @@ __all__ = [
     "RemoteRun",
     "SessionEnded",
     "arrival_timing",
+    "open_remote",
     "parse_udp_url",
     "run_remote",
 ]
@@ -51,6 +55,17 @@ class SessionEnded(RemoteError):
         self.reason = reason
 
 
+def open_remote(url: str, **kw: Any) -> RemoteRig:
+    """The ``RemoteRig`` at ``udp://HOST:PORT`` or ``serial:///dev/ttyX?baud=N`` (``twin.links.open_link``);
+    a ``ValueError`` naming a malformed URL, a ``RemoteError`` a rig that cannot be reached."""
+    parse_url(url)  # a malformed URL is a ValueError (the caller's usage error), not an unreachable rig
+    try:
+        link = open_link(url)
+    except LinkError as exc:
+        raise RemoteError(str(exc)) from None
+    return RemoteRig(link=link, **kw)
+
+
 def parse_udp_url(url: str) -> tuple[str, int]:
     """``udp://HOST:PORT`` → (host, port); a ``ValueError`` naming the URL otherwise."""
     parts = urlsplit(url)
@@ -64,50 +79,48 @@ def parse_udp_url(url: str) -> tuple[str, int]:
 
 
 class RemoteRig(Rig):
-    """The I/O card of a rig across UDP (``twin.interface.Rig``'s three calls, plus the session's flags)."""
+    """The I/O card of a rig across UDP at ``host:port``, or across the ``link`` given (``open_remote``
+    makes either from a URL): ``twin.interface.Rig``'s three calls, plus the session's flags."""
 
     def __init__(
         self,
-        host: str,
-        port: int,
+        host: str = "",
+        port: int = 0,
         *,
+        link: Link | None = None,
         role: int = p.ROLE_CONTROL,
         client: str = "ballbeam-twin RemoteRig",
         connect_timeout_s: float = 5.0,
         timeout_s: float = 5.0,
     ) -> None:
-        self.url = f"udp://{host}:{port}"
         self.timeout_s = timeout_s
-        self.sock = socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET, socket.SOCK_DGRAM)
-        try:
-            self.sock.connect((host, port))  # datagrams from any other address are dropped by the kernel
-        except OSError as exc:
-            self.sock.close()
-            raise RemoteError(f"{self.url}: {exc.strerror or exc}") from None
+        if link is None:
+            try:
+                link = UdpLink.connect(host, port)
+            except LinkError as exc:
+                raise RemoteError(str(exc)) from None
+        self.link: Link = link
+        self.url = link.url
         self.counts_malformed = 0
-        self.config, self.session = self._handshake(role, client, connect_timeout_s)
+        try:
+            self.config, self.session = self._handshake(role, client, connect_timeout_s)
+        except RemoteError:
+            link.close()
+            raise
         self.command_v = self.config.zero_command_v  # the DAC's value as we last set it (reset: zero volts)
         self.last: p.Sample | None = None
         self._answered = True
 
     # --- the session ---------------------------------------------------------------------------------
     def _send(self, msg: p.Message, session: int) -> None:
-        try:
-            self.sock.send(p.encode(msg, session))
-        except OSError:
-            pass  # nobody listening (ICMP unreachable): the bounded wait for an answer reports it
+        self.link.send(p.encode(msg, session))  # nobody listening: the bounded wait for an answer reports it
 
     def _recv(self, wait_s: float) -> p.Frame | None:
-        self.sock.settimeout(max(wait_s, 1e-6))
-        try:
-            data = self.sock.recv(4096)
-        except TimeoutError:
-            return None
-        except OSError:  # ICMP port unreachable: the server is not (or no longer) there
-            time.sleep(min(wait_s, 0.01))
+        got = self.link.recv(wait_s)
+        if got is None:
             return None
         try:
-            return p.decode_frame(data)
+            return p.decode_frame(got[0])
         except p.ProtocolError:
             self.counts_malformed += 1
             return None
@@ -126,8 +139,15 @@ class RemoteRig(Rig):
                 return frame.msg, frame.session
         raise RemoteError(f"no CONFIG from {self.url} within {timeout_s:g} s: is `ballbeam serve` running?")
 
+    @property
+    def sock(self) -> socket.socket:
+        """The UDP link's socket (an ``AttributeError`` on a serial line)."""
+        if not isinstance(self.link, UdpLink):
+            raise AttributeError(f"{self.url} has no socket")
+        return self.link.sock
+
     def close(self) -> None:
-        self.sock.close()
+        self.link.close()
 
     def __enter__(self) -> RemoteRig:
         return self

@@ -1,4 +1,5 @@
-"""The twin served as a virtual I/O card on protocol 1 (docs/protocol.md) over UDP: ``ballbeam serve``.
+"""The twin served as a virtual I/O card on protocol 1 (docs/protocol.md) over UDP or a serial line
+(``twin.links``): ``ballbeam serve``.
 
 One session per ``Server.serve()``: a client says HELLO and gets CONFIG; the server then runs the engine's
 own closed loop (``twin.engine.ClosedLoop``, the sequence of ``run_closed_loop``) with a ``Controller``
@@ -28,12 +29,13 @@ import secrets
 import socket
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Hashable
 from dataclasses import asdict, dataclass, field
 
 from twin import protocol as p
 from twin.engine import ClosedLoop, ControllerError, RunResult, update_ticks
 from twin.interface import Controller, DaqSample
+from twin.links import Link, LinkError, UdpLink
 from twin.parameters import Parameters
 from twin.realtime import TickTiming, WallClockPacer
 from twin.rig import PlantKind, SimRig, make_rig
@@ -51,11 +53,9 @@ __all__ = [
 DEFAULT_WATCHDOG_PERIODS = 5  # 0.1 s at 50 Hz: a dead controller's last command drives the beam no longer
 DEFAULT_TIMEOUT_S = 5.0  # lock-step: the longest wait for one command before the session ends (STOP 3)
 MAX_OBSERVERS = 4  # further clients are refused: the samples sent per tick stay bounded
-_RECV_BYTES = 4096  # larger than any frame, so that an oversized datagram is seen whole and refused
 _RESEND_S = (
     0.2  # lock-step: SAMPLE k is repeated this often while its COMMAND is awaited (UDP may lose either)
 )
-_RCVBUF_BYTES = 1 << 20  # room for a burst of datagrams, so that a flood drops less of the client's traffic
 _RT_MARGIN_S = 0.0005  # real time: stop waiting for a command this long before the next tick's boundary
 _LOOPBACK = frozenset({"127.0.0.1", "localhost", "::1"})
 
@@ -168,12 +168,9 @@ class _WireController(Controller):
         return self.server._exchange(sample, start=False)
 
 
-def _family(host: str) -> socket.AddressFamily:
-    return socket.AF_INET6 if ":" in host else socket.AF_INET
-
-
 class Server:
-    """A UDP socket bound to ``host:port`` (port 0: any free one, see ``port``) serving sessions."""
+    """A UDP socket bound to ``host:port`` (port 0: any free one, see ``port``) serving sessions, or the
+    ``link`` given (``twin.links.SerialLink``: a serial line, whose one peer is the controller)."""
 
     def __init__(
         self,
@@ -183,22 +180,19 @@ class Server:
         *,
         session_id: int | None = None,
         log: Callable[[str], None] | None = None,
+        link: Link | None = None,
     ) -> None:
         self.settings = settings
         self.host = host
         self._log = log or (lambda line: print(line, file=sys.stderr, flush=True))
-        self.sock = socket.socket(_family(host), socket.SOCK_DGRAM)
-        try:
-            self.sock.bind((host, port))
-        except OSError as exc:
-            self.sock.close()
-            raise ServeError(f"cannot bind udp://{host}:{port}: {exc.strerror or exc}") from None
-        try:
-            self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, _RCVBUF_BYTES)
-        except OSError:
-            pass  # the system's default buffer: still correct, only less tolerant of bursts
-        self.port: int = self.sock.getsockname()[1]
-        if host not in _LOOPBACK:
+        if link is None:
+            try:
+                link = UdpLink.listen(host, port)
+            except LinkError as exc:
+                raise ServeError(str(exc)) from None
+        self.link: Link = link
+        self.port: int = link.port if isinstance(link, UdpLink) else 0
+        if isinstance(link, UdpLink) and host not in _LOOPBACK:
             where = "every interface" if host in ("", "0.0.0.0", "::") else host
             self._log(
                 f"warning: serving on {where} (port {self.port}): anyone who can reach this machine there can "
@@ -212,10 +206,17 @@ class Server:
 
     @property
     def url(self) -> str:
-        return f"udp://{self.host}:{self.port}"
+        return self.link.url
+
+    @property
+    def sock(self) -> socket.socket:
+        """The UDP link's socket (an ``AttributeError`` on a serial line)."""
+        if not isinstance(self.link, UdpLink):
+            raise AttributeError(f"{self.url} has no socket")
+        return self.link.sock
 
     def close(self) -> None:
-        self.sock.close()
+        self.link.close()
 
     def __enter__(self) -> Server:
         return self
@@ -226,9 +227,9 @@ class Server:
     # --- a session ----------------------------------------------------------------------------------
     def _reset_session(self) -> None:
         self.counts = SessionCounts()
-        self.controller_addr: tuple[object, ...] | None = None
+        self.controller_addr: Hashable | None = None
         self.client_name = ""
-        self.observers: list[tuple[object, ...]] = []
+        self.observers: list[Hashable] = []
         self._seq = 0
         self._n_ticks = 0
         self._rig: SimRig | None = None
@@ -245,11 +246,8 @@ class Server:
             s.params, role=role, mode=s.mode, watchdog_periods=s.watchdog_periods, rig=s.rig_name
         )
 
-    def _send(self, msg: p.Message, addr: tuple[object, ...]) -> None:
-        try:
-            self.sock.sendto(p.encode(msg, self.session), addr)
-        except OSError:
-            pass  # a peer that went away (ICMP unreachable on loopback): its silence is handled by timeouts
+    def _send(self, msg: p.Message, addr: Hashable) -> None:
+        self.link.send(p.encode(msg, self.session), addr)
 
     def serve(self) -> SessionResult:
         """Wait for a controlling client, run one session, send STOP; the result of the session."""
@@ -311,14 +309,10 @@ class Server:
     def _receive(self, wait_s: float) -> p.Command | p.Stop | None:
         """Handle one datagram (waiting at most ``wait_s``): HELLOs answered, refusals counted; the
         controller's valid COMMAND for the latest sample or its STOP returned, else ``None``."""
-        try:
-            self.sock.settimeout(max(wait_s, 1e-6))
-            data, addr = self.sock.recvfrom(_RECV_BYTES)
-        except TimeoutError:
+        got = self.link.recv(wait_s)
+        if got is None:
             return None
-        except OSError:  # ICMP port unreachable from a vanished client, or our socket closed under us
-            time.sleep(min(wait_s, 0.01))
-            return None
+        data, addr = got
         c = self.counts
         c.frames += 1
         try:
@@ -356,7 +350,7 @@ class Server:
             return None
         return msg
 
-    def _hello(self, msg: p.Hello, addr: tuple[object, ...]) -> None:
+    def _hello(self, msg: p.Hello, addr: Hashable) -> None:
         c = self.counts
         if addr == self.controller_addr:  # a repeated HELLO: our CONFIG was lost
             self._send(self._config(p.ROLE_CONTROL), addr)

@@ -298,17 +298,21 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 
 def _run_on_remote_rig(args: argparse.Namespace, params: Parameters) -> int:
-    """``run --rig udp://HOST:PORT``: the controller through ``twin.remote.RemoteRig``. The rig's initial state,
-    duration and noise are the server's; the verdict is judged from the measured signals (``ballbeam serve``
-    prints the true state's)."""
+    """``run --rig udp://HOST:PORT`` (or ``serial:///dev/ttyX?baud=N``): the controller through
+    ``twin.remote.RemoteRig``. The rig's initial state, duration and noise are the server's; the verdict is
+    judged from the measured signals (``ballbeam serve`` prints the true state's)."""
     from controllers import registry
     from twin.engine import ControllerError
     from twin.interface import Controller
+    from twin.links import parse_url
     from twin.log import save_csv, save_mat
-    from twin.remote import RemoteError, RemoteRig, parse_udp_url, run_remote
+    from twin.remote import RemoteError, open_remote, run_remote
     from twin.verdict import evaluate_measured
 
-    host, port = parse_udp_url(args.rig)
+    try:
+        parse_url(args.rig)
+    except ValueError as exc:
+        raise ValueError(f"--rig {exc}") from None
     user = user_controller(args.controller)
     paths = check_outputs(
         [("--log", args.log, LOG_SUFFIXES, _log_bytes(args.log, args.duration, params))],
@@ -316,7 +320,7 @@ def _run_on_remote_rig(args: argparse.Namespace, params: Parameters) -> int:
         inputs=_inputs(args),
     )
     try:
-        rig = RemoteRig(host, port, client=f"ballbeam run {args.controller}"[:32])
+        rig = open_remote(args.rig, client=f"ballbeam run {args.controller}"[:32])
     except RemoteError as exc:
         print(f"ballbeam run: {exc}", file=sys.stderr)
         return 1
@@ -370,10 +374,17 @@ def _run_on_remote_rig(args: argparse.Namespace, params: Parameters) -> int:
 def _cmd_serve(args: argparse.Namespace) -> int:
     from twin import protocol
     from twin.engine import ControllerError
+    from twin.links import LinkError, SerialLink
     from twin.log import save_csv, save_mat
     from twin.plant import NumericalError
     from twin.serve import ServeError, Server, SessionSettings
 
+    if args.serial is not None and (args.host != "127.0.0.1" or args.port != 0):
+        print(
+            "ballbeam serve: error: --serial replaces --host and --port: give one or the other",
+            file=sys.stderr,
+        )
+        return 2
     params = _load_params(args)
     paths = check_outputs(
         [("--log", args.log, LOG_SUFFIXES, _log_bytes(args.log, args.duration, params))],
@@ -397,7 +408,14 @@ def _cmd_serve(args: argparse.Namespace) -> int:
         rig_name=f"ballbeam-twin {package_version()} {args.plant}",
     )
     try:
-        server = Server(settings, args.host, args.port)
+        if args.serial is not None:
+            try:
+                link = SerialLink.open(args.serial, args.baud)
+            except LinkError as exc:
+                raise ServeError(str(exc)) from None
+            server = Server(settings, link=link)
+        else:
+            server = Server(settings, args.host, args.port)
     except ServeError as exc:
         print(f"ballbeam serve: error: {exc}", file=sys.stderr)
         return 2
@@ -427,6 +445,8 @@ def _cmd_serve(args: argparse.Namespace) -> int:
         **session.summary(),
         **session.result.verdict.to_json(),
     }
+    if isinstance(server.link, SerialLink):  # what the serial reader threw away before a frame existed
+        summary["serial"] = server.link.counts.to_json()
     if args.json:
         print(json.dumps(summary))
     else:
@@ -963,8 +983,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     run.add_argument(
         "--rig",
-        metavar="udp://HOST:PORT",
-        help="run on a rig served over protocol 1 (ballbeam serve, or firmware speaking docs/protocol.md); "
+        metavar="URL",
+        help="udp://HOST:PORT or serial:///dev/ttyX?baud=N: run on a rig served over protocol 1 (ballbeam "
+        "serve, or firmware speaking docs/protocol.md); "
         "its state and duration are the server's; the verdict is judged from the measured signals",
     )
     _add_episode_options(run)
@@ -995,7 +1016,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     srv = sub.add_parser(
         "serve",
-        help="serve the twin as an I/O card on protocol 1 over UDP (docs/protocol.md) for one session; "
+        help="serve the twin as an I/O card on protocol 1 over UDP or a serial line (docs/protocol.md) for one "
+        "session; "
         "prints the session summary and the verdict (exit 0 held, 1 not)",
     )
     srv.add_argument("--mode", choices=("lockstep", "realtime"), default="lockstep", help="default lockstep")
@@ -1004,6 +1026,14 @@ def build_parser() -> argparse.ArgumentParser:
     )
     srv.add_argument(
         "--port", type=count(0, 65535), default=0, help="UDP port (default 0: a free one, printed)"
+    )
+    srv.add_argument(
+        "--serial",
+        metavar="/dev/ttyX",
+        help="serve on this serial line (a tty, raw mode, frames after the sync bytes 0xA5 0x5A) instead of UDP",
+    )
+    srv.add_argument(
+        "--baud", type=count(1, 4_000_000), default=115200, help="the serial line's speed (default 115200)"
     )
     srv.add_argument(
         "--x0", type=finite_float(), required=True, metavar="M", help="initial ball position (m)"
