@@ -362,3 +362,11 @@ def _check_equal(ref: RunResult, served: SessionResult, client: RunLog) -> None:
     for name in THESIS_FIELDS:
         assert same(getattr(ref.log, name), getattr(client, name)), f"client log {name}"
     assert served.result.verdict == ref.verdict
+
+
+def test_baud_without_serial_is_refused(capsys: pytest.CaptureFixture[str]) -> None:
+    from twin.app.cli import main
+
+    rc = main(["serve", "--x0", "0.1", "--theta0", "0", "--baud", "9600"])
+    err = capsys.readouterr().err
+    assert rc == 2 and "--baud" in err and "--serial" in err and len(err.strip().splitlines()) == 1

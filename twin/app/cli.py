@@ -374,7 +374,7 @@ def _run_on_remote_rig(args: argparse.Namespace, params: Parameters) -> int:
 def _cmd_serve(args: argparse.Namespace) -> int:
     from twin import protocol
     from twin.engine import ControllerError
-    from twin.links import LinkError, SerialLink
+    from twin.links import DEFAULT_BAUD, LinkError, SerialLink
     from twin.log import save_csv, save_mat
     from twin.plant import NumericalError
     from twin.serve import ServeError, Server, SessionSettings
@@ -384,6 +384,9 @@ def _cmd_serve(args: argparse.Namespace) -> int:
             "ballbeam serve: error: --serial replaces --host and --port: give one or the other",
             file=sys.stderr,
         )
+        return 2
+    if args.baud is not None and args.serial is None:
+        print("ballbeam serve: error: --baud is the serial line's speed: it needs --serial", file=sys.stderr)
         return 2
     params = _load_params(args)
     paths = check_outputs(
@@ -410,7 +413,7 @@ def _cmd_serve(args: argparse.Namespace) -> int:
     try:
         if args.serial is not None:
             try:
-                link = SerialLink.open(args.serial, args.baud)
+                link = SerialLink.open(args.serial, args.baud or DEFAULT_BAUD)
             except LinkError as exc:
                 raise ServeError(str(exc)) from None
             server = Server(settings, link=link)
@@ -1033,7 +1036,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="serve on this serial line (a tty, raw mode, frames after the sync bytes 0xA5 0x5A) instead of UDP",
     )
     srv.add_argument(
-        "--baud", type=count(1, 4_000_000), default=115200, help="the serial line's speed (default 115200)"
+        "--baud", type=count(1, 4_000_000), help="the serial line's speed (with --serial; default 115200)"
     )
     srv.add_argument(
         "--x0", type=finite_float(), required=True, metavar="M", help="initial ball position (m)"
