@@ -21,7 +21,7 @@ import tty
 import zlib
 from collections.abc import Hashable
 from dataclasses import asdict, dataclass
-from typing import Any, Protocol, cast
+from typing import Any, Protocol, Self, cast
 from urllib.parse import parse_qs, urlsplit
 
 from twin import protocol as p
@@ -77,6 +77,28 @@ class Link(Protocol):
 
 def _family(host: str) -> socket.AddressFamily:
     return socket.AF_INET6 if ":" in host else socket.AF_INET
+
+
+class OverLink:
+    """What talks over a ``link`` (the server, ``RemoteRig``): its UDP socket, ``close`` and with-blocks."""
+
+    link: Link
+
+    @property
+    def sock(self) -> socket.socket:
+        """The UDP link's socket (an ``AttributeError`` on a serial line)."""
+        if not isinstance(self.link, UdpLink):
+            raise AttributeError(f"{self.link.url} has no socket")
+        return self.link.sock
+
+    def close(self) -> None:
+        self.link.close()
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
 
 
 class UdpLink:

@@ -11,7 +11,6 @@ acknowledged with the command the DAC holds, as the protocol's session requires.
 from __future__ import annotations
 
 import math
-import socket
 import time
 from dataclasses import dataclass
 from typing import Any
@@ -23,7 +22,7 @@ from twin import protocol as p
 from twin.engine import checked_start, checked_update
 from twin.guard import Guard
 from twin.interface import Controller, DaqSample, Rig
-from twin.links import Link, LinkError, UdpLink, open_link, parse_url
+from twin.links import Link, LinkError, OverLink, UdpLink, open_link, parse_url
 from twin.log import RunLog
 from twin.parameters import Parameters, SoftwareCalibration
 from twin.realtime import TickTiming, tick_timing
@@ -78,7 +77,7 @@ def parse_udp_url(url: str) -> tuple[str, int]:
     return parts.hostname, port
 
 
-class RemoteRig(Rig):
+class RemoteRig(OverLink, Rig):
     """The I/O card of a rig across UDP at ``host:port``, or across the ``link`` given (``open_remote``
     makes either from a URL): ``twin.interface.Rig``'s three calls, plus the session's flags."""
 
@@ -138,22 +137,6 @@ class RemoteRig(Rig):
                     raise RemoteError(f"{self.url} refused this client (another client controls the rig)")
                 return frame.msg, frame.session
         raise RemoteError(f"no CONFIG from {self.url} within {timeout_s:g} s: is `ballbeam serve` running?")
-
-    @property
-    def sock(self) -> socket.socket:
-        """The UDP link's socket (an ``AttributeError`` on a serial line)."""
-        if not isinstance(self.link, UdpLink):
-            raise AttributeError(f"{self.url} has no socket")
-        return self.link.sock
-
-    def close(self) -> None:
-        self.link.close()
-
-    def __enter__(self) -> RemoteRig:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
 
     # --- the Rig interface ---------------------------------------------------------------------------
     @property

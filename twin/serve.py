@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import math
 import secrets
-import socket
 import sys
 import time
 from collections.abc import Callable, Hashable
@@ -35,7 +34,7 @@ from dataclasses import asdict, dataclass, field
 from twin import protocol as p
 from twin.engine import ClosedLoop, ControllerError, RunResult, update_ticks
 from twin.interface import Controller, DaqSample
-from twin.links import Link, LinkError, UdpLink
+from twin.links import Link, LinkError, OverLink, UdpLink
 from twin.parameters import Parameters
 from twin.realtime import TickTiming, WallClockPacer
 from twin.rig import PlantKind, SimRig, make_rig
@@ -168,7 +167,7 @@ class _WireController(Controller):
         return self.server._exchange(sample, start=False)
 
 
-class Server:
+class Server(OverLink):
     """A UDP socket bound to ``host:port`` (port 0: any free one, see ``port``) serving sessions, or the
     ``link`` given (``twin.links.SerialLink``: a serial line, whose one peer is the controller)."""
 
@@ -207,22 +206,6 @@ class Server:
     @property
     def url(self) -> str:
         return self.link.url
-
-    @property
-    def sock(self) -> socket.socket:
-        """The UDP link's socket (an ``AttributeError`` on a serial line)."""
-        if not isinstance(self.link, UdpLink):
-            raise AttributeError(f"{self.url} has no socket")
-        return self.link.sock
-
-    def close(self) -> None:
-        self.link.close()
-
-    def __enter__(self) -> Server:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
 
     # --- a session ----------------------------------------------------------------------------------
     def _reset_session(self) -> None:
