@@ -197,16 +197,20 @@ def load_rig_log(path: str | Path) -> RigLog:
 
     The file is only read. Refusals are ``LogError`` naming the file, the field and the first bad index."""
     path = Path(path)
+    return rig_log(read_log(path), path)
+
+
+def read_log(path: str | Path) -> RunLog:
+    """A ``.mat`` (v5 or MATLAB v7.3) or ``.csv`` log as it is in the file, not yet checked as a rig log
+    (``ballbeam judge`` reads logs so). Refusals are ``LogError``s naming the file."""
+    path = Path(path)
     suffix = path.suffix.lower()
-    log: RunLog
     if suffix == ".mat":
-        log = load_mat(path, variables=read_mat73(path) if _is_mat73(path) else None)
-    elif suffix == ".csv":
-        log = load_csv(path)
-    else:
-        shown = f"suffix '{path.suffix}'" if path.suffix else "no suffix"
-        raise LogError(f"{path}: {shown}: a rig log is a .mat (data_file.mat) or a .csv file")
-    return rig_log(log, path)
+        return load_mat(path, variables=read_mat73(path) if _is_mat73(path) else None)
+    if suffix == ".csv":
+        return load_csv(path)
+    shown = f"suffix '{path.suffix}'" if path.suffix else "no suffix"
+    raise LogError(f"{path}: {shown}: a rig log is a .mat (data_file.mat) or a .csv file")
 
 
 def _is_mat73(path: Path) -> bool:

@@ -32,6 +32,7 @@ from twin.outputs import JobFiles, check_output_folder, check_outputs, writing
 if TYPE_CHECKING:
     from twin.app.montecarlo import Distribution
     from twin.engine import Catalogue, RunResult
+    from twin.log import RunLog
     from twin.parameters import Parameters
     from twin.verdict import Verdict
 
@@ -213,7 +214,6 @@ def _verdict_about(result: RunResult, params: Parameters, x0_m: float, setpoint_
 def _cmd_run(args: argparse.Namespace) -> int:
     from controllers import registry
     from twin.engine import ControllerError, run_closed_loop
-    from twin.log import save_csv, save_mat
     from twin.plant import NumericalError
 
     params = _load_params(args)
@@ -266,10 +266,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     if args.setpoint is not None:
         result.verdict = _verdict_about(result, params, args.x0, args.setpoint)
     if "--log" in paths:
-        log_path = paths["--log"]
-        save = save_csv if log_path.suffix.lower() == ".csv" else save_mat
-        with writing("--log", args.log):
-            save(result.log, log_path, overwrite=args.overwrite)
+        _save_log(result.log, "--log", args.log, paths["--log"], args.overwrite)
     if "--plot" in paths:
         from twin.plots import plot_run
 
@@ -305,7 +302,6 @@ def _run_on_remote_rig(args: argparse.Namespace, params: Parameters) -> int:
     from twin.engine import ControllerError
     from twin.interface import Controller
     from twin.links import parse_url
-    from twin.log import save_csv, save_mat
     from twin.remote import RemoteError, open_remote, run_remote
     from twin.verdict import evaluate_measured
 
@@ -346,10 +342,7 @@ def _run_on_remote_rig(args: argparse.Namespace, params: Parameters) -> int:
             print(f"ballbeam run: the controller failed: {exc}", file=sys.stderr)
             return 1
     if "--log" in paths:
-        log_path = paths["--log"]
-        save = save_csv if log_path.suffix.lower() == ".csv" else save_mat
-        with writing("--log", args.log):
-            save(run.log, log_path, overwrite=args.overwrite)
+        _save_log(run.log, "--log", args.log, paths["--log"], args.overwrite)
     # A rig has no true state: the run is judged from what it measured, as a recorded log is.
     verdict = evaluate_measured(run.log, rig_params)
     summary = {
@@ -375,7 +368,6 @@ def _cmd_serve(args: argparse.Namespace) -> int:
     from twin import protocol
     from twin.engine import ControllerError
     from twin.links import DEFAULT_BAUD, LinkError, SerialLink
-    from twin.log import save_csv, save_mat
     from twin.plant import NumericalError
     from twin.serve import ServeError, Server, SessionSettings
 
@@ -433,10 +425,7 @@ def _cmd_serve(args: argparse.Namespace) -> int:
             print(f"ballbeam serve: {one_line(exc)}", file=sys.stderr)
             return 1
     if "--log" in paths:
-        log_path = paths["--log"]
-        save = save_csv if log_path.suffix.lower() == ".csv" else save_mat
-        with writing("--log", args.log):
-            save(session.result.log, log_path, overwrite=args.overwrite)
+        _save_log(session.result.log, "--log", args.log, paths["--log"], args.overwrite)
     summary = {
         "mode": args.mode,
         "x0_m": args.x0,
@@ -458,29 +447,21 @@ def _cmd_serve(args: argparse.Namespace) -> int:
     return 0 if session.result.verdict.held else 1
 
 
-def _read_log(path_text: str) -> Any:
-    """A recorded log (.mat, also MATLAB v7.3, or .csv) as a ``twin.log.RunLog``; a LogError names the file."""
-    from calib.logs import HDF5_SIGNATURE, MAT73_HEADER, MAT73_USERBLOCK_BYTES, read_mat73
-    from twin.log import LogError, load_csv, load_mat
+def _save_log(log: RunLog, option: str, text: str, path: Path, overwrite: bool) -> None:
+    """Write ``log`` to the checked output ``path`` (``option`` as typed ``text``): .csv as CSV, else .mat."""
+    from twin.log import save_csv, save_mat
 
-    path = Path(path_text)
-    suffix = path.suffix.lower()
-    if suffix == ".csv":
-        return load_csv(path)
-    if suffix != ".mat":
-        shown = f"suffix '{path.suffix}'" if path.suffix else "no suffix"
-        raise LogError(f"{path}: {shown}: a log is a .mat (data_file.mat) or a .csv file")
-    with path.open("rb") as fh:  # a missing or unreadable file is an OSError naming it
-        head = fh.read(MAT73_USERBLOCK_BYTES + len(HDF5_SIGNATURE))
-    mat73 = head.startswith(MAT73_HEADER) and head[MAT73_USERBLOCK_BYTES:] == HDF5_SIGNATURE
-    return load_mat(path, variables=read_mat73(path) if mat73 else None)
+    save = save_csv if path.suffix.lower() == ".csv" else save_mat
+    with writing(option, text):
+        save(log, path, overwrite=overwrite)
 
 
 def _cmd_judge(args: argparse.Namespace) -> int:
+    from calib.logs import read_log
     from twin.verdict import evaluate_measured
 
     params = _load_params(args)
-    log = _read_log(args.log)
+    log = read_log(args.log)
     verdict = evaluate_measured(log, params, x_ref_m=args.setpoint or 0.0)
     summary = {
         "log": args.log,
@@ -839,7 +820,6 @@ def _cmd_calibrate_static(args: argparse.Namespace) -> int:
 
 def _cmd_experiment(args: argparse.Namespace) -> int:
     from calib.experiments import EXPERIMENTS, run_experiment
-    from twin.log import save_csv, save_mat
     from twin.parameters import ParameterError
 
     params = _load_params(args)
@@ -851,9 +831,7 @@ def _cmd_experiment(args: argparse.Namespace) -> int:
         inputs=_inputs(args),
     )["--out"]
     result = run_experiment(args.name, params, duration_s=args.duration, seed=args.seed)
-    save = save_csv if out.suffix.lower() == ".csv" else save_mat
-    with writing("--out", args.out):
-        save(result.log, out, overwrite=args.overwrite)
+    _save_log(result.log, "--out", args.out, out, args.overwrite)
     print(
         f"{args.name}: {args.duration:g} s, {result.log.k} ticks, ball lost: {result.verdict.ball_lost}; "
         f"wrote {args.out}"
