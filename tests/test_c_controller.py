@@ -503,29 +503,22 @@ def test_the_c_controller_against_the_served_twin_is_the_python_port_bit_for_bit
 ) -> None:
     """``bb_sf udp`` against ``twin.serve.Server`` (lock-step, 10 s, seed 0): the session's log and verdict
     (true state included) equal the in-process ``appendix-sf`` run's, array by array; held."""
-    import threading
+    from serving import in_thread, session_of
 
     from twin.serve import Server, SessionSettings
 
     x0, theta0 = start
     settings = SessionSettings(x0_m=x0, theta0_rad=theta0, seed=0, duration_s=10.0, wait_client_s=30.0)
     server = Server(settings, "127.0.0.1", 0, log=lambda _: None)
-    box: dict[str, object] = {}
-    thread = threading.Thread(target=lambda: box.setdefault("session", server.serve()), daemon=True)
-    thread.start()
-    try:
+    with in_thread(server) as box:
         client = subprocess.run(
             [str(bb_sf), "udp", "127.0.0.1", str(server.port), "--timeout", "10"],
             capture_output=True,
             text=True,
             timeout=120,
         )
-    finally:
-        thread.join(30.0)
-        server.close()
-    assert not thread.is_alive(), "the server hung"
     assert client.returncode == 0, client.stderr
-    served = box["session"].result  # type: ignore[attr-defined]
+    served = session_of(box).result
     py = run_closed_loop(AppendixStateFeedback(params.software), x0_m=x0, theta0_rad=theta0, seed=0)
     assert served.verdict.held, f"{figure}: {served.verdict.reason}"
     assert served.verdict == py.verdict

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from serving import in_thread, session_of
 
 from controllers import registry
 from controllers.thesis_numbers import HARDWARE_STARTS
@@ -167,27 +168,11 @@ def _serve_on(
 ) -> tuple[SessionResult, RunLog]:
     """The server on ``link`` (a thread), RemoteRig on the tty at ``client_path``."""
     server = Server(settings, log=lambda _: None, link=link)
-    box: dict[str, object] = {}
-
-    def target() -> None:
-        try:
-            box["session"] = server.serve()
-        except BaseException as exc:  # noqa: BLE001 - reported to the test
-            box["error"] = exc
-
-    thread = threading.Thread(target=target, daemon=True)
-    thread.start()
-    try:
+    with in_thread(server) as box:
         with open_remote(f"serial://{client_path}?baud=115200") as rig:
             assert rig.url == f"serial://{client_path}?baud=115200"
             run = run_remote(_build(name, rig.parameters()), rig)
-    finally:
-        thread.join(30.0)
-    assert not thread.is_alive(), "the server hung"
-    if "error" in box:
-        raise box["error"]  # type: ignore[misc]
-    served = box["session"]
-    assert isinstance(served, SessionResult)
+    served = session_of(box)
     assert run.ended == "last sample"
     return served, run.log
 

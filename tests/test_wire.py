@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from serving import in_thread, session_of
 
 from controllers import registry
 from controllers.thesis_numbers import HARDWARE_STARTS
@@ -74,30 +75,11 @@ def _build(name: str, params: Parameters) -> Controller:
 def _serving(settings: SessionSettings, **kw: object) -> Iterator[tuple[Server, dict[str, object]]]:
     """A server in a thread on a free loopback port; ``box["session"]`` (or ``box["error"]``) when done."""
     server = Server(settings, "127.0.0.1", 0, log=lambda _: None, **kw)  # type: ignore[arg-type]
-    box: dict[str, object] = {}
-
-    def target() -> None:
-        try:
-            box["session"] = server.serve()
-        except BaseException as exc:  # noqa: BLE001 - reported to the test
-            box["error"] = exc
-
-    thread = threading.Thread(target=target, daemon=True)
-    thread.start()
-    try:
+    with in_thread(server) as box:
         yield server, box
-    finally:
-        thread.join(30.0)
-        server.close()
-        assert not thread.is_alive(), "the server hung"
-    if "error" in box:
-        raise box["error"]  # type: ignore[misc]
 
 
-def _session(box: dict[str, object]) -> SessionResult:
-    s = box["session"]
-    assert isinstance(s, SessionResult)
-    return s
+_session = session_of
 
 
 def _same(a: np.ndarray, b: np.ndarray) -> bool:
