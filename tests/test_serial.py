@@ -11,6 +11,7 @@ import select
 import subprocess
 import sys
 import threading
+import time
 import tty
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -23,7 +24,7 @@ from serving import in_thread, session_of
 from controllers import registry
 from controllers.thesis_numbers import HARDWARE_STARTS
 from twin import protocol as p
-from twin.engine import RunResult, run_closed_loop
+from twin.engine import RunResult, run_closed_loop, update_ticks
 from twin.interface import Controller
 from twin.links import SERIAL_PEER, SYNC, FrameReader, LinkError, SerialLink, open_link, parse_url
 from twin.log import THESIS_FIELDS, TRUTH_FIELDS, RunLog
@@ -355,3 +356,38 @@ def test_baud_without_serial_is_refused(capsys: pytest.CaptureFixture[str]) -> N
     rc = main(["serve", "--x0", "0.1", "--theta0", "0", "--baud", "9600"])
     err = capsys.readouterr().err
     assert rc == 2 and "--baud" in err and "--serial" in err and len(err.strip().splitlines()) == 1
+
+
+def test_real_time_over_a_pty_keeps_the_period_and_reports_the_timing() -> None:
+    """Real time over the serial line: the server paces the ticks by the wall clock, the client's timing is
+    reported as over UDP, and a session whose every command came in time is the in-process run."""
+    x0, th0 = STARTS[0]
+    duration_s = 2.0
+    settings = SessionSettings(
+        x0_m=x0, theta0_rad=th0, duration_s=duration_s, wait_client_s=10.0, mode=p.MODE_REALTIME
+    )
+    with _pty() as (master, path):
+        server = Server(settings, log=lambda _: None, link=SerialLink.from_fd(master))
+        began = time.perf_counter()
+        with in_thread(server) as box, open_remote(f"serial://{path}?baud=115200") as rig:
+            assert rig.config.mode == p.MODE_REALTIME
+            run = run_remote(_build("appendix-sf", rig.parameters()), rig)
+        wall_s = time.perf_counter() - began
+    served = session_of(box)
+    n = served.result.log.timem.size
+    period_s = settings.params.daq.period_s
+    assert (
+        run.ended == "last sample" and run.log.timem.size == n == update_ticks(duration_s, Parameters()) + 1
+    )
+    assert wall_s > (n - 2) * period_s  # paced by the wall clock, not as fast as the line goes
+    assert served.timing is not None and served.timing.ticks == n - 1
+    assert run.timing is not None and run.timing.ticks == n - 1
+    assert abs(run.timing.jitter_p50_ms) < run.timing.period_ms
+    c = served.counts
+    assert c.late_commands <= c.missing_commands and c.watchdog_trips == 0 and c.malformed == 0
+    if c.missing_commands == 0:  # every command in time: the same run as in one process
+        ref = run_closed_loop(
+            _build("appendix-sf", Parameters()), x0_m=x0, theta0_rad=th0, duration_s=duration_s
+        )
+        assert np.array_equal(ref.log.aout[:-1], served.result.log.aout[:-1])  # the last is not awaited
+        assert np.array_equal(ref.log.true_x_m, served.result.log.true_x_m)

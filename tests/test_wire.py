@@ -432,38 +432,79 @@ def test_real_time_session_reports_the_client_timing() -> None:
         assert _same(ref.log.true_x_m, served.result.log.true_x_m)
 
 
+_FLOODER = """
+import random, socket, sys, time
+port, seconds = int(sys.argv[1]), float(sys.argv[2])
+rng = random.Random(7)
+sent = 0
+with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+    s.connect(("127.0.0.1", port))
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        try:
+            s.send(rng.randbytes(rng.choice((0, 16, 24, 32, 56, 200, 1500))))
+            sent += 1
+        except OSError:
+            time.sleep(0.0005)  # the server's receive buffer is full: the flood is bounded there
+print(sent)
+"""
+
+
+class _Paced(Controller):
+    """A controller answering at the rig's own pace (one block per period of wall clock), as a client on a
+    target would: a lock-step session that lasts as long as its simulated time."""
+
+    def __init__(self, inner: Controller, period_s: float) -> None:
+        super().__init__()
+        self.inner, self.period_s, self.name = inner, period_s, inner.name
+        self._t0 = 0.0
+        self._k = 0
+
+    def start(self, sample: DaqSample) -> None:
+        self.inner.start(sample)
+        self.telemetry = self.inner.telemetry
+        self._t0, self._k = time.monotonic(), 0
+
+    def update(self, sample: DaqSample) -> float:
+        self._k += 1
+        time.sleep(max(0.0, self._t0 + self._k * self.period_s - time.monotonic()))
+        command = self.inner.update(sample)
+        self.telemetry = self.inner.telemetry  # the law may hand over a new record each tick
+        return command
+
+
 @pytest.mark.slow
-def test_a_flood_of_datagrams_leaves_the_session_alive_and_its_state_unchanged() -> None:
+def test_a_ten_second_flood_leaves_the_session_alive_and_its_state_unchanged() -> None:
+    """A 10 s flood of random datagrams from another process at a lock-step session paced at 50 Hz: the
+    session ticks through it, every refused datagram is counted, a sample or command the full buffer lost
+    is repeated, and the session equals the in-process run bit for bit."""
     x0, th0 = STARTS[2]
-    settings = SessionSettings(x0_m=x0, theta0_rad=th0, seed=1, duration_s=3.0, wait_client_s=10.0)
-    stop = threading.Event()
-    flooded = [0]
-
-    def flood(port: int) -> None:
-        rng = random.Random(7)
-        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-            s.connect(("127.0.0.1", port))
-            while not stop.is_set():
-                try:
-                    s.send(bytes(rng.getrandbits(8) for _ in range(rng.choice((0, 24, 32, 56, 200, 1500)))))
-                    flooded[0] += 1
-                    if flooded[0] % 50 == 0:
-                        time.sleep(0.0005)  # bursts of 50: the flood thread must not hold this process's GIL
-                except OSError:
-                    time.sleep(0.001)  # the kernel's buffer is full: the flood is bounded there
-
+    duration_s, flood_s = 12.0, 10.0
+    settings = SessionSettings(x0_m=x0, theta0_rad=th0, seed=1, duration_s=duration_s, wait_client_s=10.0)
     with _serving(settings) as (server, box):
-        flooder = threading.Thread(target=flood, args=(server.port,), daemon=True)
-        flooder.start()
         with RemoteRig("127.0.0.1", server.port) as rig:
-            run = run_remote(_build("appendix-clp", rig.parameters()), rig)
-        stop.set()
-        flooder.join(5.0)
+            flooder = subprocess.Popen(
+                [sys.executable, "-c", _FLOODER, str(server.port), str(flood_s)],
+                stdout=subprocess.PIPE,
+                text=True,
+            )
+            began = time.monotonic()
+            run = run_remote(_Paced(_build("appendix-clp", rig.parameters()), rig.period_s), rig)
+            wall_s = time.monotonic() - began
+        out, _ = flooder.communicate(timeout=30)
+    flooded = int(out)
     served = _session(box)
-    assert run.ended == "last sample" and flooded[0] > 1000
-    assert served.counts.malformed > 1000
+    c = served.counts
+    print(
+        f"\n{flood_s:g} s flood: {flooded} datagrams sent; the server received {c.frames} frames, "
+        f"{c.malformed} malformed, {c.wrong_session} of no session, repeated {c.resent_samples} samples; "
+        f"session of {served.result.log.timem.size} ticks in {wall_s:.1f} s wall, ended: {run.ended}"
+    )
+    assert run.ended == "last sample" and wall_s > flood_s  # the flood lasted through the session
+    assert flooded > 10_000 and c.malformed + c.wrong_session > 1_000
+    assert c.frames == c.malformed + c.wrong_session + served.result.log.timem.size + 1 + c.stale_commands
     ref = run_closed_loop(
-        _build("appendix-clp", Parameters()), x0_m=x0, theta0_rad=th0, duration_s=3.0, seed=1
+        _build("appendix-clp", Parameters()), x0_m=x0, theta0_rad=th0, duration_s=duration_s, seed=1
     )
     _check_equal(ref, served, run.log)
 

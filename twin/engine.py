@@ -247,6 +247,11 @@ _TRUE_TIME = _COLUMNS.index("true_time_s")
 _TRUE_STATE = slice(_COLUMNS.index("true_x_m"), _COLUMNS.index("true_thetadot_rad_s") + 1)
 
 
+_FLUSH_TICKS = (
+    1024  # pending ticks written into the table: a long session's memory is the table's, ~160 B/tick
+)
+
+
 class _Recorder:
     """The log's columns. A tick is appended as one tuple of Python floats (per tick, the cost is the number
     of numpy calls, and a tuple needs none) and written into the table when the columns are read
@@ -304,6 +309,10 @@ class _Recorder:
                 peak,
             )
         )
+        if (
+            len(self._ticks) >= _FLUSH_TICKS
+        ):  # a pending tick's Python objects cost ~1 kB, its table row 160 B
+            self.flush()
 
     def flush(self) -> None:
         """Write the appended ticks into the table, their pending true states computed at once."""
