@@ -382,3 +382,30 @@ if __name__ == "__main__":
             "usage: python tests/test_engine.py --record  (re-records tests/data/log_digests.json)"
         )
     _record_digests()
+
+
+@pytest.mark.slow
+def test_a_long_recorded_run_costs_its_log_table_per_tick() -> None:
+    """A session of hours (``ballbeam serve``, the view) keeps every tick: its memory must be the log
+    table's row per tick (16 doubles, the lost flag and the block's peak |θ|: 137 B; up to twice that as
+    the table's capacity doubles), not the ~1 kB of Python objects a pending tick costs."""
+    import tracemalloc
+
+    params = Parameters()
+    rig = make_rig(params, seed=0)
+    rig.reset(0.15, 0.1)
+    loop = ClosedLoop(rig, registry.make("appendix-sf", params))
+    loop.start()
+    for _ in range(100):
+        loop.tick()
+    n = 16_000
+    tracemalloc.start()
+    try:
+        before = tracemalloc.get_traced_memory()[0]
+        for _ in range(n):
+            loop.tick()
+        per_tick = (tracemalloc.get_traced_memory()[0] - before) / n
+    finally:
+        tracemalloc.stop()
+    assert 137 <= per_tick <= 2 * 137 + 80, per_tick
+    assert loop.log().timem.size == n + 101

@@ -247,9 +247,9 @@ _TRUE_TIME = _COLUMNS.index("true_time_s")
 _TRUE_STATE = slice(_COLUMNS.index("true_x_m"), _COLUMNS.index("true_thetadot_rad_s") + 1)
 
 
-_FLUSH_TICKS = (
-    1024  # pending ticks written into the table: a long session's memory is the table's, ~160 B/tick
-)
+# Pending ticks are written into the table every 1024: a pending tick's Python objects cost ~1 kB, its
+# table row 137 B, so a long session's memory is the table's.
+_FLUSH_TICKS = 1024
 
 
 class _Recorder:
@@ -309,9 +309,7 @@ class _Recorder:
                 peak,
             )
         )
-        if (
-            len(self._ticks) >= _FLUSH_TICKS
-        ):  # a pending tick's Python objects cost ~1 kB, its table row 160 B
+        if len(self._ticks) >= _FLUSH_TICKS:
             self.flush()
 
     def flush(self) -> None:
