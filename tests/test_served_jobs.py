@@ -15,6 +15,7 @@ import threading
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
+from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
@@ -346,3 +347,50 @@ def test_a_port_in_use_is_refused(capsys: pytest.CaptureFixture[str]) -> None:
         busy.bind(("127.0.0.1", 0))
         port = busy.getsockname()[1]
         refused(capsys, ["sweep", "--serve", str(port), "--x0", "0", "--theta0", "0"], f"--serve {port}")
+
+
+def test_run_rig_sessions_n_runs_n_and_a_job_without_a_client_stops(tmp_path: Path) -> None:
+    """``run --rig … --sessions 2`` against a served job of 3 runs: two sessions, their measured verdicts
+    printed; the job's third session waits --wait-client for nobody and the job stops, exit 1, the two
+    runs kept in its JSON."""
+    out_dir = tmp_path / "out"
+    job = ["sweep", "--x0", "-0.1:0.1:3", "--theta0", "0", "--duration", "1", "--wait-client", "1"]
+    out, err, code, client = _served_cli(
+        [*job, "--out", str(out_dir)],
+        [*CLI, "run", "--rig", "{url}", "--controller", "appendix-sf", "--sessions", "2"],
+    )
+    assert code == 1 and "within 1 s: the job stopped after 2 of 3 runs (they are kept)" in err, err
+    lines = [line for line in client.splitlines() if line.startswith("session ")]
+    assert [line.split(":")[0] for line in lines] == ["session 1", "session 2"], client
+    assert all("ended last sample" in line for line in lines)
+    result = json.loads((out_dir / "sweep.json").read_text())
+    assert not result["complete"] and result["summary"]["done"] == 2
+    assert result["settings"]["controller"] == "ballbeam run appendix-sf"
+    assert result["served"]["stopped"].startswith("no controlling client said HELLO")
+
+
+@pytest.mark.slow
+def test_the_default_validation_served_to_bb_sf_gives_the_in_process_report(bb_sf: Path) -> None:
+    """The whole default battery (no spread: 18 nominal, 255 + 1 region, 28 sensitivity runs) served to the C
+    client: every check, with its rows, the in-process appendix-sf validation's."""
+    from twin.app.validate import validate
+
+    t0 = time.perf_counter()
+    ref = validate("appendix-sf", Parameters())
+    in_process_s = time.perf_counter() - t0
+    job = served()
+    with job.server:
+        client = subprocess.Popen(
+            [str(bb_sf), "udp", "127.0.0.1", str(job.server.port), "--sessions", "0", "--timeout", "2"],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        t0 = time.perf_counter()
+        got = validate("appendix-sf", Parameters(), serve=job)
+        served_s = time.perf_counter() - t0
+        client.communicate(timeout=60)
+    print(f"default validation: in process {in_process_s:.1f} s, served to bb_sf {served_s:.1f} s")
+    assert got.complete and len(job.clients) == 18 + 256 + 28
+    assert same([asdict(c) for c in got.checks], [asdict(c) for c in ref.checks])
+    assert got.passed == ref.passed
