@@ -25,11 +25,12 @@ from cli_checks import refused
 
 from controllers import registry
 from controllers.thesis_numbers import HARDWARE_STARTS
+from twin.app.cli import _connect
 from twin.app.fanout import Runs, Served, run_starts
 from twin.app.montecarlo import MonteCarloSettings, load_spread, run_montecarlo
 from twin.app.sweep import Grid, SweepSettings, point_seeds, run_sweep
 from twin.parameters import Parameters
-from twin.remote import RemoteError, RemoteRig, run_remote
+from twin.remote import RemoteError, run_remote
 from twin.serve import Server, SessionSettings
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -52,7 +53,7 @@ def python_client(
     seen: dict[str, Any] = {"sessions": 0, "ended": []}
     while sessions == 0 or seen["sessions"] < sessions:
         try:
-            rig = RemoteRig("127.0.0.1", port, connect_timeout_s=wait_s, client="py appendix-sf")
+            rig = _connect(f"udp://127.0.0.1:{port}", "py appendix-sf", wait_s, retry_refused=True)
         except RemoteError:
             break
         seen["sessions"] += 1
@@ -63,9 +64,8 @@ def python_client(
                 for _ in range(die_after):
                     rig.write(controller.update(rig.read()))
                 seen["ended"].append("died")
-                # no answer and no STOP: the server hears nothing more; the client is started again once the
-                # dead session has timed out (before, its HELLO would be refused: the rig is taken)
-                time.sleep(1.0)
+                # no answer and no STOP: the server hears nothing more; the client starts again at once and is
+                # refused until the dead session has timed out, asking again as run --rig --sessions does
                 continue
             run = run_remote(controller, rig)
             seen["ended"].append(run.ended)
@@ -351,10 +351,10 @@ def test_a_port_in_use_is_refused(capsys: pytest.CaptureFixture[str]) -> None:
 
 def test_run_rig_sessions_n_runs_n_and_a_job_without_a_client_stops(tmp_path: Path) -> None:
     """``run --rig … --sessions 2`` against a served job of 3 runs: two sessions, their measured verdicts
-    printed; the job's third session waits --wait-client for nobody and the job stops, exit 1, the two
-    runs kept in its JSON."""
+    printed; the job's third session waits for nobody (after the first, a session waits --timeout without
+    --wait-client) and the job stops, exit 1, the two runs kept in its JSON."""
     out_dir = tmp_path / "out"
-    job = ["sweep", "--x0", "-0.1:0.1:3", "--theta0", "0", "--duration", "1", "--wait-client", "1"]
+    job = ["sweep", "--x0", "-0.1:0.1:3", "--theta0", "0", "--duration", "1", "--timeout", "1"]
     out, err, code, client = _served_cli(
         [*job, "--out", str(out_dir)],
         [*CLI, "run", "--rig", "{url}", "--controller", "appendix-sf", "--sessions", "2"],

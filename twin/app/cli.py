@@ -311,7 +311,7 @@ def _run_on_remote_rig(args: argparse.Namespace, params: Parameters) -> int:
     sessions one after the other (0: until the server stops answering HELLO within ``--wait-server``), a
     fresh controller each, built from that session's CONFIG (a served job's runs, ``sweep --serve``)."""
     from twin.links import parse_url
-    from twin.remote import RemoteError, open_remote
+    from twin.remote import RemoteError
 
     try:
         parse_url(args.rig)
@@ -329,14 +329,11 @@ def _run_on_remote_rig(args: argparse.Namespace, params: Parameters) -> int:
         inputs=_inputs(args),
     )
     many = args.sessions != 1
+    wait_s = args.wait_server or 5.0
     done, ok = 0, True
     while args.sessions == 0 or done < args.sessions:
         try:
-            rig = open_remote(
-                args.rig,
-                client=f"ballbeam run {args.controller}"[:32],
-                connect_timeout_s=args.wait_server or 5.0,
-            )
+            rig = _connect(args.rig, f"ballbeam run {args.controller}"[:32], wait_s, retry_refused=many)
         except RemoteError as exc:
             if args.sessions == 0 and done:  # the server has no further session: the job is over
                 break
@@ -370,6 +367,23 @@ def _run_on_remote_rig(args: argparse.Namespace, params: Parameters) -> int:
             for key, value in summary.items():
                 print(f"{key:<26} {value}")
     return 0 if ok else 1
+
+
+def _connect(url: str, client: str, wait_s: float, *, retry_refused: bool) -> RemoteRig:
+    """``open_remote`` within ``wait_s``; ``retry_refused``: a refusal (the rig is still another session's,
+    e.g. a dead client's waiting out its timeout) is asked again until then."""
+    import time
+
+    from twin.remote import Refused, open_remote
+
+    deadline = time.monotonic() + wait_s
+    while True:
+        try:
+            return open_remote(url, client=client, connect_timeout_s=max(deadline - time.monotonic(), 0.2))
+        except Refused:
+            if not retry_refused or time.monotonic() >= deadline:
+                raise
+            time.sleep(0.2)
 
 
 def _remote_session(
