@@ -34,6 +34,7 @@ __all__ = [
     "RemoteError",
     "RemoteRig",
     "RemoteRun",
+    "Refused",
     "SessionEnded",
     "arrival_timing",
     "open_remote",
@@ -46,6 +47,10 @@ _HELLO_INTERVAL_S = 0.2  # the doc's HELLO repetition
 
 class RemoteError(RigError):
     """The remote rig cannot be reached, refused us, or went silent; the message names it and the wait."""
+
+
+class Refused(RemoteError):
+    """The server answered HELLO with role 0: another client controls the rig (its session still runs)."""
 
 
 class SessionEnded(RemoteError):
@@ -136,7 +141,7 @@ class RemoteRig(OverLink, Rig):
             frame = self._recv(min(next_hello, deadline) - time.monotonic())
             if frame is not None and isinstance(frame.msg, p.Config):
                 if frame.msg.role == p.ROLE_REFUSED:
-                    raise RemoteError(f"{self.url} refused this client (another client controls the rig)")
+                    raise Refused(f"{self.url} refused this client (another client controls the rig)")
                 return frame.msg, frame.session
         raise RemoteError(f"no CONFIG from {self.url} within {timeout_s:g} s: is `ballbeam serve` running?")
 

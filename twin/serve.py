@@ -232,8 +232,12 @@ class Server(OverLink):
     def _send(self, msg: p.Message, addr: Hashable) -> None:
         self.link.send(p.encode(msg, self.session), addr)
 
-    def serve(self) -> SessionResult:
-        """Wait for a controlling client, run one session, send STOP; the result of the session."""
+    def serve(self, settings: SessionSettings | None = None) -> SessionResult:
+        """Wait for a controlling client, run one session, send STOP; the result of the session.
+        ``settings``: this session's and the next ones' (a served job's runs each have their own start,
+        seed, parameters and duration); default the server's."""
+        if settings is not None:
+            self.settings = settings
         s = self.settings
         if self._sessions:  # a new session id: the previous session's late datagrams are dropped
             self.session = (self.session + 1) & 0xFFFFFFFF or 1

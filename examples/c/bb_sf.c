@@ -5,11 +5,16 @@
  *   bb_sf selftest                  decode the frames on stdin, print their fields and re-encoded bytes
  *   bb_sf crc                       print the CRC-32 of stdin
  * options: --timeout S (default 10: the longest wait for a frame), --trace PATH (one line per sample:
- *          seq, x1..x4, u, u_temp, command as C99 hex floats; "-" is stderr), --name NAME (HELLO's client).
+ *          seq, x1..x4, u, u_temp, command as C99 hex floats; "-" is stderr; with several sessions their
+ *          lines follow each other, each session's from seq 0), --name NAME (HELLO's client),
+ *          --sessions N (default 1: N sessions one after the other, a fresh controller each, as a served
+ *          job's runs come: ballbeam sweep/montecarlo/validate --serve; 0: until no CONFIG answers HELLO
+ *          within --timeout).
  *
- * Exit status: 0 the session ended as the server said it would (STOP done, or the last sample answered);
- * 1 the session failed (refused, a server that went silent, a ball lost, a bad CONFIG, a non-finite
- * value); 2 a usage error; 128 + the signal after SIGINT/SIGTERM (having sent STOP 1, client quit).
+ * Exit status: 0 every session ended as the server said it would (STOP done, or the last sample
+ * answered); 1 a session failed (refused, a server that went silent, a ball lost, a bad CONFIG, a
+ * non-finite value; the next session is still run unless the server refused us or is gone); 2 a usage
+ * error; 128 + the signal after SIGINT/SIGTERM (having sent STOP 1, client quit).
  */
 #define _POSIX_C_SOURCE 200809L
 
@@ -36,6 +41,9 @@
 /* --- transports: one frame per datagram, or a byte stream of frames ------------------------------ */
 
 enum { RX_FRAME = 1, RX_TIMEOUT = 0, RX_EOF = 2, RX_QUIT = 3 }; /* negative: a rejected frame */
+
+/* run_session's results besides 0 (ended as the server said), 1 (failed) and 128 + a signal */
+enum { SESSION_NO_CONFIG = 3, SESSION_FATAL = 4 }; /* no server within the timeout; no further session */
 
 /* SIGINT/SIGTERM: the session ends with STOP 1 (client quit) rather than a silent controller. */
 static volatile sig_atomic_t quit_signal = 0;
@@ -187,6 +195,7 @@ typedef struct {
     double timeout_s;
     const char *trace_path;
     const char *name;
+    long sessions; /* 0: until the server stops answering HELLO */
 } options;
 
 typedef struct {
@@ -272,7 +281,10 @@ static const char *stop_reason_text(uint32_t reason)
     }
 }
 
-static int run_session(transport *t, const options *o)
+/* One session; *session is its id once CONFIG came. A CONFIG of the previous session (prev, when
+ * has_prev: a late answer to a repeated HELLO on the same socket) is not this session's. */
+static int run_session(transport *t, const options *o, FILE *tr, int has_prev, uint32_t prev,
+                       uint32_t *session_out)
 {
     int timeout_ms = (int)(o->timeout_s * 1000.0);
     uint8_t buf[BB_MAX_FRAME_LEN];
@@ -280,15 +292,6 @@ static int run_session(transport *t, const options *o)
     bb_frame f;
     counts n = {0, 0};
     char msg[200];
-
-    FILE *tr = NULL;
-    if (o->trace_path != NULL) {
-        tr = strcmp(o->trace_path, "-") == 0 ? stderr : fopen(o->trace_path, "w");
-        if (tr == NULL) {
-            fprintf(stderr, "bb_sf: --trace %s: %s\n", o->trace_path, strerror(errno));
-            return 2;
-        }
-    }
 
     /* HELLO until CONFIG */
     bb_frame hello;
@@ -314,10 +317,11 @@ static int run_session(transport *t, const options *o)
             }
             if (r == RX_EOF) {
                 fprintf(stderr, "bb_sf: the server closed the stream before CONFIG\n");
-                return 1;
+                return SESSION_FATAL;
             }
             if (r == RX_TIMEOUT) break;
-            if (r < 0 || bb_decode(buf, len, &f) != BB_OK || f.type != BB_CONFIG) {
+            if (r < 0 || bb_decode(buf, len, &f) != BB_OK || f.type != BB_CONFIG ||
+                (has_prev && f.session == prev)) {
                 n.ignored++;
                 continue;
             }
@@ -326,21 +330,19 @@ static int run_session(transport *t, const options *o)
             configured = 1;
             break;
         }
-        if (!configured && now_s() >= give_up) {
-            fprintf(stderr, "bb_sf: no CONFIG from the server within %g s\n", o->timeout_s);
-            return 1;
-        }
+        if (!configured && now_s() >= give_up) return SESSION_NO_CONFIG; /* main says why */
     }
     uint32_t session = hello.session;
+    *session_out = session;
     if (cfg.role != BB_ROLE_CONTROL) {
         fprintf(stderr, "bb_sf: the server %s control (CONFIG role = %u): another client controls\n",
                 cfg.role == BB_ROLE_OBSERVE ? "granted observe only, not" : "refused", cfg.role);
-        return 1;
+        return SESSION_FATAL; /* asking again would be refused again */
     }
     if (config_problem(&cfg, msg, sizeof msg) != NULL) {
         fprintf(stderr, "bb_sf: %s\n", msg);
         send_stop(t, session, BB_STOP_ERROR);
-        return 1;
+        return SESSION_FATAL; /* this controller cannot run on that rig: nor on its next session */
     }
     sf_calibration cal = {cfg.ball_gain_m_per_v,    cfg.ball_offset_m,
                           cfg.angle_gain_deg_per_v, cfg.angle_reference_v,
@@ -435,7 +437,7 @@ static int run_session(transport *t, const options *o)
         if (send_typed(t, &cmd) != 0 && !t->udp) {
             fprintf(stderr, "bb_sf: cannot write COMMAND %lu to stdout: %s\n", (unsigned long)f.seq,
                     strerror(errno));
-            return 1;
+            return SESSION_FATAL;
         }
         n.answered++;
         if (s->flags & BB_FLAG_LAST) last_seen = 1;
@@ -522,8 +524,8 @@ static int crc_of_stdin(void)
 static int usage(const char *problem)
 {
     if (problem != NULL) fprintf(stderr, "bb_sf: %s\n", problem);
-    fprintf(stderr, "usage: bb_sf udp HOST PORT [--timeout S] [--trace PATH] [--name NAME]\n"
-                    "       bb_sf pipe [--timeout S] [--trace PATH] [--name NAME]\n"
+    fprintf(stderr, "usage: bb_sf udp HOST PORT [--timeout S] [--trace PATH] [--name NAME] [--sessions N]\n"
+                    "       bb_sf pipe [--timeout S] [--trace PATH] [--name NAME] [--sessions N]\n"
                     "       bb_sf selftest | bb_sf crc\n");
     return 2;
 }
@@ -549,7 +551,7 @@ int main(int argc, char **argv)
         snprintf(msg, sizeof msg, "unknown mode '%.60s'", mode);
         return usage(msg);
     }
-    options o = {10.0, NULL, "bb_sf appendix-sf (C99)"};
+    options o = {10.0, NULL, "bb_sf appendix-sf (C99)", 1};
     for (int i = first_option; i < argc; i++) {
         if (i + 1 >= argc) return usage("an option needs a value");
         if (strcmp(argv[i], "--timeout") == 0) {
@@ -563,6 +565,15 @@ int main(int argc, char **argv)
             o.trace_path = argv[i + 1];
         } else if (strcmp(argv[i], "--name") == 0) {
             o.name = argv[i + 1];
+        } else if (strcmp(argv[i], "--sessions") == 0) {
+            char *end = NULL;
+            errno = 0;
+            o.sessions = strtol(argv[i + 1], &end, 10);
+            if (end == argv[i + 1] || *end != '\0' || errno != 0 || o.sessions < 0) {
+                fprintf(stderr, "bb_sf: --sessions %s: a whole number >= 0 (0: until none comes)\n",
+                        argv[i + 1]);
+                return 2;
+            }
         } else {
             char msg[120];
             snprintf(msg, sizeof msg, "unknown option '%.60s'", argv[i]);
@@ -585,5 +596,36 @@ int main(int argc, char **argv)
         t.fd_in = 0;
         t.fd_out = 1;
     }
-    return run_session(&t, &o);
+    FILE *tr = NULL;
+    if (o.trace_path != NULL) {
+        tr = strcmp(o.trace_path, "-") == 0 ? stderr : fopen(o.trace_path, "w");
+        if (tr == NULL) {
+            fprintf(stderr, "bb_sf: --trace %s: %s\n", o.trace_path, strerror(errno));
+            return 2;
+        }
+    }
+    long done = 0;
+    int failed = 0, has_prev = 0;
+    uint32_t prev = 0;
+    while (o.sessions == 0 || done < o.sessions) {
+        uint32_t session = 0;
+        int rc = run_session(&t, &o, tr, has_prev, prev, &session);
+        if (rc >= 128) return rc;
+        if (rc == SESSION_NO_CONFIG) {
+            if (o.sessions == 0 && done > 0) break; /* the served job is over */
+            fprintf(stderr, "bb_sf: no CONFIG from the server within %g s", o.timeout_s);
+            if (o.sessions != 1) fprintf(stderr, " (after %ld sessions)", done);
+            fprintf(stderr, "\n");
+            return 1;
+        }
+        done++;
+        has_prev = 1;
+        prev = session;
+        if (rc != 0) failed = 1;
+        if (rc == SESSION_FATAL) break;
+    }
+    if (o.sessions != 1)
+        fprintf(stderr, "bb_sf: %ld sessions, %s\n", done,
+                failed ? "not all as the server said" : "each as the server said");
+    return failed ? 1 : 0;
 }

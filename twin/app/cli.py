@@ -21,7 +21,9 @@ import argparse
 import json
 import re
 import sys
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
+from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, NoReturn
 
@@ -30,10 +32,13 @@ from twin.app.options import MAX_JOB_RUN_S, GridType, NumberType, count, finite_
 from twin.outputs import JobFiles, check_output_folder, check_outputs, writing
 
 if TYPE_CHECKING:
+    from twin.app.fanout import Served
     from twin.app.montecarlo import Distribution
     from twin.engine import Catalogue, RunResult
+    from twin.interface import Controller
     from twin.log import RunLog
     from twin.parameters import Parameters
+    from twin.remote import RemoteRig, RemoteRun
     from twin.verdict import Verdict
 
 CONTROLLER_HELP = (
@@ -219,6 +224,11 @@ def _cmd_run(args: argparse.Namespace) -> int:
     params = _load_params(args)
     if args.rig is not None:
         return _run_on_remote_rig(args, params)
+    if args.sessions != 1 or args.wait_server is not None:
+        print(
+            "ballbeam run: error: --sessions and --wait-server are a rig's: they need --rig", file=sys.stderr
+        )
+        return 2
     if args.x0 is None or args.theta0 is None:
         print(
             "ballbeam run: error: --x0 and --theta0 are required (unless --rig: the server's)",
@@ -297,52 +307,127 @@ def _cmd_run(args: argparse.Namespace) -> int:
 def _run_on_remote_rig(args: argparse.Namespace, params: Parameters) -> int:
     """``run --rig udp://HOST:PORT`` (or ``serial:///dev/ttyX?baud=N``): the controller through
     ``twin.remote.RemoteRig``. The rig's initial state, duration and noise are the server's; the verdict is
-    judged from the measured signals (``ballbeam serve`` prints the true state's)."""
-    from controllers import registry
-    from twin.engine import ControllerError
-    from twin.interface import Controller
+    judged from the measured signals (``ballbeam serve`` prints the true state's). ``--sessions N``: N
+    sessions one after the other (0: until the server stops answering HELLO within ``--wait-server``), a
+    fresh controller each, built from that session's CONFIG (a served job's runs, ``sweep --serve``)."""
     from twin.links import parse_url
-    from twin.remote import RemoteError, open_remote, run_remote
-    from twin.verdict import evaluate_measured
+    from twin.remote import RemoteError
 
     try:
         parse_url(args.rig)
     except ValueError as exc:
         raise ValueError(f"--rig {exc}") from None
+    if args.sessions != 1 and args.log is not None:
+        raise ValueError(
+            "--log keeps one session's log: with --sessions other than 1 the server keeps every run (its "
+            "job's report, or serve --log)"
+        )
     user = user_controller(args.controller)
     paths = check_outputs(
         [("--log", args.log, LOG_SUFFIXES, _log_bytes(args.log, args.duration, params))],
         overwrite=args.overwrite,
         inputs=_inputs(args),
     )
-    try:
-        rig = open_remote(args.rig, client=f"ballbeam run {args.controller}"[:32])
-    except RemoteError as exc:
-        print(f"ballbeam run: {exc}", file=sys.stderr)
-        return 1
-    with rig:
-        rig_params = rig.parameters(params)  # the rig's period, DAC and software calibration
-        controller = (
-            registry.make(args.controller, rig_params)
-            if user is None
-            else construct(user, args.controller, rig_params)
-        )
-        if not isinstance(controller, Controller):
-            rig.stop()
-            print(
-                f"ballbeam run: {args.controller} is a law on the true state (simulation only): it cannot drive "
-                "a rig",
-                file=sys.stderr,
-            )
-            return 2
+    many = args.sessions != 1
+    wait_s = args.wait_server or 5.0
+    done, ok = 0, True
+    while args.sessions == 0 or done < args.sessions:
         try:
-            run = run_remote(controller, rig)
-        except ControllerError as exc:
-            rig.stop()
-            print(f"ballbeam run: the controller failed: {exc}", file=sys.stderr)
+            rig = _connect(args.rig, f"ballbeam run {args.controller}"[:32], wait_s, retry_refused=many)
+        except RemoteError as exc:
+            if args.sessions == 0 and done:  # the server has no further session: the job is over
+                break
+            print(f"ballbeam run: {exc}", file=sys.stderr)
             return 1
-    if "--log" in paths:
-        _save_log(run.log, "--log", args.log, paths["--log"], args.overwrite)
+        done += 1
+        with rig:
+            session = _remote_session(args, rig, params, user, many)
+        if session is None:
+            return 2  # a law on the true state (reported): refused at the first session
+        held, run, summary = session
+        if run is None:  # the controller failed (reported, STOP sent): the server records that run failed
+            if not many:
+                return 1
+            ok = False
+            continue
+        ok = ok and held and run.ended == "last sample"
+        if "--log" in paths:
+            _save_log(run.log, "--log", args.log, paths["--log"], args.overwrite)
+        if many:
+            summary = {"session": done, **summary}
+        if args.json:
+            print(json.dumps(summary), flush=True)
+        elif many:
+            print(
+                f"session {done}: held {summary['held']}, ball_lost {summary['ball_lost']}, ticks "
+                f"{summary['ticks']}, settling_time_s {summary['settling_time_s']}, ended {summary['ended']}",
+                flush=True,
+            )
+        else:
+            for key, value in summary.items():
+                print(f"{key:<26} {value}")
+    return 0 if ok else 1
+
+
+def _connect(url: str, client: str, wait_s: float, *, retry_refused: bool) -> RemoteRig:
+    """``open_remote`` within ``wait_s``; ``retry_refused``: a refusal (the rig is still another session's,
+    e.g. a dead client's waiting out its timeout) is asked again until then."""
+    import time
+
+    from twin.remote import Refused, open_remote
+
+    deadline = time.monotonic() + wait_s
+    while True:
+        try:
+            return open_remote(url, client=client, connect_timeout_s=max(deadline - time.monotonic(), 0.2))
+        except Refused:
+            if not retry_refused or time.monotonic() >= deadline:
+                raise
+            time.sleep(0.2)
+
+
+def _remote_session(
+    args: argparse.Namespace,
+    rig: RemoteRig,
+    params: Parameters,
+    user: type[Controller] | None,
+    many: bool,
+) -> tuple[bool, RemoteRun | None, dict[str, Any]] | None:
+    """One session of ``run --rig`` on the open ``rig``: (held, the run or None if the controller failed,
+    the summary); None when the controller cannot drive a rig (reported)."""
+    from controllers import registry
+    from twin.engine import ControllerError
+    from twin.interface import Controller
+    from twin.remote import RemoteError, run_remote
+    from twin.verdict import evaluate_measured
+
+    rig_params = rig.parameters(params)  # the rig's period, DAC and software calibration
+    controller = (
+        registry.make(args.controller, rig_params)
+        if user is None
+        else construct(user, args.controller, rig_params)
+    )
+    if not isinstance(controller, Controller):
+        rig.stop()
+        print(
+            f"ballbeam run: {args.controller} is a law on the true state (simulation only): it cannot drive a rig",
+            file=sys.stderr,
+        )
+        return None
+    try:
+        run = run_remote(controller, rig)
+    except ControllerError as exc:
+        rig.stop()
+        print(f"ballbeam run: the controller failed: {exc}", file=sys.stderr)
+        return False, None, {}
+    if many and run.ended == "last sample":
+        # Wait for the server's STOP (answering a repeated last sample): the next HELLO then reaches the next
+        # session, not this one, which would refuse a second controller.
+        try:
+            while True:
+                rig.read()
+        except RemoteError:
+            pass
     # A rig has no true state: the run is judged from what it measured, as a recorded log is.
     verdict = evaluate_measured(run.log, rig_params)
     summary = {
@@ -356,12 +441,7 @@ def _run_on_remote_rig(args: argparse.Namespace, params: Parameters) -> int:
         **verdict.to_json(),
         **({} if run.timing is None else {"realtime": run.timing.to_json()}),
     }
-    if args.json:
-        print(json.dumps(summary))
-    else:
-        for key, value in summary.items():
-            print(f"{key:<26} {value}")
-    return 0 if run.ended == "last sample" and verdict.held else 1
+    return verdict.held, run, summary
 
 
 def _cmd_serve(args: argparse.Namespace) -> int:
@@ -539,7 +619,8 @@ def _check_job(args: argparse.Namespace, params: Parameters, outputs: JobFiles) 
     ``outputs`` into."""
     from twin.app.catalogue import catalogue_for
 
-    catalogue_for(args.controller, params)
+    if args.serve is None:  # served: the client's controller is none of ours
+        catalogue_for(args.controller, params)
     if args.out is not None:
         check_output_folder("--out", args.out, outputs, overwrite=args.overwrite, inputs=_inputs(args))
 
@@ -558,6 +639,90 @@ def _params_and_spread(args: argparse.Namespace) -> tuple[Parameters, Distributi
     return params, load_spread(args.spread, params) if args.spread is not None else None
 
 
+def _check_served(args: argparse.Namespace) -> None:
+    """The options of a many-run job that go with --serve or without it (a ParameterError: exit 2)."""
+    from twin.parameters import ParameterError
+
+    if args.serve is None:
+        if args.controller is None:
+            raise ParameterError("--controller is required (unless --serve: the client's controller)")
+        for option, value in (("--timeout", args.timeout), ("--wait-client", args.wait_client)):
+            if value is not None:
+                raise ParameterError(f"{option} is a served job's wait: it needs --serve")
+        return
+    _serve_address(args.serve)
+    if getattr(args, "workers", 1) > 1 or getattr(args, "scheduler", None) is not None:
+        raise ParameterError(
+            "--serve runs every session here, one after the other on one socket: drop --workers/--scheduler"
+        )
+    if getattr(args, "controller_timeout", None) is not None:
+        raise ParameterError("--controller-timeout: with --serve the client's budget is --timeout")
+
+
+def _serve_address(text: str) -> tuple[str, int]:
+    """--serve's ``[HOST:]PORT`` (a bare port: 127.0.0.1, this machine only)."""
+    from twin.parameters import ParameterError
+
+    host, colon, port_text = text.rpartition(":")
+    host = host.strip("[]") if colon else "127.0.0.1"  # [::1]:PORT
+    port = int(port_text) if port_text.isdigit() else -1
+    if not 0 <= port <= 65535 or not host:
+        raise ParameterError(f"--serve {text!r}: expected [HOST:]PORT, a UDP port 0…65535 (0: a free one)")
+    return host, port
+
+
+@contextmanager
+def _served(args: argparse.Namespace, params: Parameters) -> Iterator[Served | None]:
+    """With --serve: the job's server (one socket for all its sessions, bound before the work; its URL
+    printed first), closed after the job; else None."""
+    from twin.app.fanout import Served
+    from twin.parameters import ParameterError
+    from twin.serve import DEFAULT_TIMEOUT_S, ServeError, Server, SessionSettings
+
+    if args.serve is None:
+        yield None
+        return
+    host, port = _serve_address(args.serve)
+    settings = SessionSettings(params=params, rig_name=f"ballbeam-twin {package_version()} {args.command}")
+    try:
+        server = Server(settings, host, port)
+    except ServeError as exc:
+        raise ParameterError(f"--serve {args.serve}: {exc}") from None
+    timeout_s = args.timeout if args.timeout is not None else DEFAULT_TIMEOUT_S
+    with server:
+        print(f"serving on {server.url}", flush=True)
+        yield Served(
+            server,
+            timeout_s=timeout_s,
+            first_wait_s=args.wait_client,
+            next_wait_s=args.wait_client if args.wait_client is not None else timeout_s,
+        )
+
+
+def _job_name(args: argparse.Namespace) -> str:
+    """What a job's report calls its controller: --controller, else (served) a placeholder until the
+    client has said its name (``_client_name``)."""
+    return str(args.controller) if args.controller is not None else "served client"
+
+
+def _client_name(args: argparse.Namespace, served: Served | None) -> str | None:
+    """A served job without --controller: the clients' HELLO names, which the report then carries."""
+    if served is None or args.controller is not None:
+        return None
+    return ", ".join(served.client_names()) or "served client (none came)"
+
+
+def _served_stopped(served: Served | None, what: str, done: int, total: int) -> int | None:
+    """1 with a line on stderr when a served job ended for want of a client; else None."""
+    if served is None or not served.stopped:
+        return None
+    print(
+        f"ballbeam {what}: {served.stopped}: the job stopped after {done} of {total} runs (they are kept)",
+        file=sys.stderr,
+    )
+    return 1
+
+
 def _cmd_sweep(args: argparse.Namespace) -> int:
     from twin.app.sweep import (
         DEFAULT_THETA0,
@@ -571,9 +736,10 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     )
     from twin.parameters import ParameterError
 
+    _check_served(args)
     params = _load_params(args)
     settings = SweepSettings(
-        controller=args.controller,
+        controller=_job_name(args),
         x0=parse_range("--x0", args.x0) if args.x0 else DEFAULT_X0,
         theta0=parse_range("--theta0", args.theta0) if args.theta0 else DEFAULT_THETA0,
         duration_s=args.duration,
@@ -588,9 +754,17 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
             f"--x0 {settings.x0.n} × --theta0 {settings.theta0.n} = {points} starts: at most {MAX_POINTS}"
         )
     _check_job(args, params, OUTPUT_FILES)
-    result = run_sweep(
-        settings, params, workers=args.workers, scheduler=args.scheduler, progress=_progress_bar("sweep")
-    )
+    with _served(args, params) as served:
+        result = run_sweep(
+            settings,
+            params,
+            workers=args.workers,
+            scheduler=args.scheduler,
+            progress=_progress_bar("sweep"),
+            serve=served,
+        )
+    if (client := _client_name(args, served)) is not None:
+        result.settings = settings = replace(settings, controller=client)
     _write_out(args, write_sweep, result)
     report = result.to_json()
     if args.json:
@@ -608,6 +782,9 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
             )
         if args.out is not None:
             print(f"wrote {Path(args.out) / 'sweep.json'} and {Path(args.out) / 'map.png'}")
+    stopped = _served_stopped(served, "sweep", sum(map(bool, result.points)), len(result.points))
+    if stopped is not None:
+        return stopped
     if not result.complete:
         print("ballbeam sweep: interrupted: the starts done so far are kept", file=sys.stderr)
         return 130
@@ -619,6 +796,7 @@ def _cmd_montecarlo(args: argparse.Namespace) -> int:
     from twin.parameters import ParameterError
     from twin.physics import check_initial_state
 
+    _check_served(args)
     if (args.spread is None) == (args.calibration is None):
         raise ParameterError(
             "give one of --spread FILE or --calibration DIR (what to perturb, and by how much)"
@@ -631,7 +809,7 @@ def _cmd_montecarlo(args: argparse.Namespace) -> int:
         raise ParameterError(f"--x0/--theta0: {exc}") from None
     _check_job(args, base, OUTPUT_FILES)
     settings = MonteCarloSettings(
-        controller=args.controller,
+        controller=_job_name(args),
         n=args.n,
         x0_m=args.x0,
         theta0_rad=args.theta0,
@@ -641,14 +819,18 @@ def _cmd_montecarlo(args: argparse.Namespace) -> int:
         ideal_sensors=bool(args.ideal_sensors or args.plant == "reference"),
         seed=args.seed,
     )
-    result = run_montecarlo(
-        settings,
-        base,
-        spread,
-        workers=args.workers,
-        scheduler=args.scheduler,
-        progress=_progress_bar("montecarlo"),
-    )
+    with _served(args, base) as served:
+        result = run_montecarlo(
+            settings,
+            base,
+            spread,
+            workers=args.workers,
+            scheduler=args.scheduler,
+            progress=_progress_bar("montecarlo"),
+            serve=served,
+        )
+    if (client := _client_name(args, served)) is not None:
+        result.settings = settings = replace(settings, controller=client)
     _write_out(args, write_montecarlo, result)
     if args.json:
         print(json.dumps(result.to_json()))
@@ -656,7 +838,7 @@ def _cmd_montecarlo(args: argparse.Namespace) -> int:
         s = result.summary
         ci = s["success_ci"]
         print(
-            f"{args.controller} from ({args.x0:g} m, {args.theta0:g} rad): held {s['held']} of {s['runs']}"
+            f"{settings.controller} from ({args.x0:g} m, {args.theta0:g} rad): held {s['held']} of {s['runs']}"
             + (
                 f" ({100 * s['success_rate']:.1f} %, 95 % CI {100 * ci[0]:.1f}–{100 * ci[1]:.1f} %)"
                 if ci
@@ -676,6 +858,9 @@ def _cmd_montecarlo(args: argparse.Namespace) -> int:
             print(f"  worst: {run['reason']} (seed {run['seed']}): {changed}")
         if args.out is not None:
             print(f"wrote {Path(args.out) / 'montecarlo.json'} and {Path(args.out) / 'distributions.png'}")
+    stopped = _served_stopped(served, "montecarlo", sum(map(bool, result.runs)), len(result.runs))
+    if stopped is not None:
+        return stopped
     if not result.complete:
         print("ballbeam montecarlo: interrupted: the runs done so far are kept", file=sys.stderr)
         return 130
@@ -693,6 +878,7 @@ def _cmd_validate(args: argparse.Namespace) -> int:
     )
     from twin.parameters import ParameterError
 
+    _check_served(args)
     params, spread = _params_and_spread(args)
     criteria = load_criteria(args.criteria) if args.criteria else ValidationCriteria()
     try:
@@ -700,15 +886,19 @@ def _cmd_validate(args: argparse.Namespace) -> int:
     except ParameterError as exc:
         raise ParameterError(f"{args.criteria or 'the default criteria'}: {exc}") from None
     _check_job(args, params, OUTPUT_FILES)
-    report = validate(
-        args.controller,
-        params,
-        criteria,
-        spread=spread,
-        seed=args.seed,
-        workers=args.workers,
-        progress=_progress_bar("validate"),
-    )
+    with _served(args, params) as served:
+        report = validate(
+            _job_name(args),
+            params,
+            criteria,
+            spread=spread,
+            seed=args.seed,
+            workers=args.workers,
+            progress=_progress_bar("validate"),
+            serve=served,
+        )
+    if (client := _client_name(args, served)) is not None:
+        report.controller = client
     _write_out(args, write_validation, report)
     if args.json:
         print(json.dumps(report.to_json()))
@@ -716,9 +906,12 @@ def _cmd_validate(args: argparse.Namespace) -> int:
         mark = {True: "pass", False: "FAIL", None: "not run"}
         for check in report.checks:
             print(f"{mark[check.passed]:<8} {check.name}: {check.measured}  [{check.criterion}]")
-        print(f"{args.controller}: {'PASS' if report.passed else 'FAIL'} ({report.wall_s:.0f} s)")
+        print(f"{report.controller}: {'PASS' if report.passed else 'FAIL'} ({report.wall_s:.0f} s)")
         if args.out is not None:
             print(f"wrote {Path(args.out) / 'report.md'}")
+    if served is not None and served.stopped:
+        print(f"ballbeam validate: {served.stopped}: the checks done so far are reported", file=sys.stderr)
+        return 1
     if not report.complete:
         print("ballbeam validate: interrupted: the checks done so far are reported", file=sys.stderr)
         return 130
@@ -918,6 +1111,37 @@ _JOB_RUN_S = finite_float(
 _WORKERS = count(1, MAX_WORKERS, unit="local processes")
 
 
+_SERVED_CONTROLLER = (
+    "; required unless --serve, where it only names what the client runs (never built here; the region "
+    "claims about that name are then judged) and the report names the client from its HELLO without it"
+)
+
+
+def _add_served_options(parser: argparse.ArgumentParser) -> None:
+    """A many-run job served over the wire to a controller in any language (sweep, montecarlo, validate)."""
+    parser.add_argument(
+        "--serve",
+        metavar="[HOST:]PORT",
+        help="serve every run as one lock-step session of protocol 1 over UDP (docs/protocol.md), in order, "
+        "to the controlling client that connects (e.g. examples/c/bb_sf udp HOST PORT --sessions 0, or "
+        "ballbeam run --rig udp://HOST:PORT --sessions 0) instead of running a controller here; HOST "
+        "defaults to 127.0.0.1 (this machine only), PORT 0 picks a free one (printed)",
+    )
+    parser.add_argument(
+        "--timeout",
+        type=finite_float(0, 3600, lo_open=True, unit="s"),
+        metavar="S",
+        help="with --serve: the longest wait for one command; a silent client fails that run (default 5)",
+    )
+    parser.add_argument(
+        "--wait-client",
+        type=finite_float(0, lo_open=True, unit="s"),
+        metavar="S",
+        help="with --serve: how long each session waits for a client to say HELLO (default: the first "
+        "until one comes, every later one --timeout); none within it ends the job with the runs done",
+    )
+
+
 def _add_episode_options(parser: argparse.ArgumentParser) -> None:
     """How long one episode of the rig runs and its noise (run and serve)."""
     parser.add_argument(
@@ -970,6 +1194,21 @@ def build_parser() -> argparse.ArgumentParser:
         "its state and duration are the server's; the verdict is judged from the measured signals",
     )
     _add_episode_options(run)
+    run.add_argument(
+        "--sessions",
+        type=count(0, 10_000_000),
+        default=1,
+        metavar="N",
+        help="with --rig: N sessions one after the other, each with a fresh controller and its verdict printed "
+        "(0: until the server answers no HELLO within --wait-server: a served job's every run, sweep --serve); "
+        "exit 0 only if every session held (default 1)",
+    )
+    run.add_argument(
+        "--wait-server",
+        type=finite_float(0, 3600, lo_open=True, unit="s"),
+        metavar="S",
+        help="with --rig: how long HELLO is repeated before the server counts as gone (default 5)",
+    )
     run.add_argument(
         "--setpoint",
         type=finite_float(unit="m"),
@@ -1067,7 +1306,7 @@ def build_parser() -> argparse.ArgumentParser:
         "sweep",
         help="region of attraction: a grid of initial states, a map (PNG) and the verdict of every start (JSON)",
     )
-    sweep.add_argument("--controller", required=True, metavar="NAME|MODULE:CLASS", help=controller_help)
+    sweep.add_argument("--controller", metavar="NAME|MODULE:CLASS", help=controller_help + _SERVED_CONTROLLER)
     sweep.add_argument(
         "--x0",
         type=GridType("--x0", max_n=_sweep_max_points),
@@ -1098,6 +1337,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="a Dask distributed scheduler, e.g. tcp://10.0.0.5:8786, to fan the grid out to "
         "(pip install 'ballbeam-twin[distributed]'); results equal the local run's",
     )
+    _add_served_options(sweep)
     sweep.add_argument("--out", metavar="DIR", help="write DIR/sweep.json and DIR/map.png")
     sweep.add_argument("--overwrite", action="store_true", help="replace its own files in an existing --out")
     sweep.add_argument("--json", action="store_true", help="print the whole result as JSON")
@@ -1107,7 +1347,7 @@ def build_parser() -> argparse.ArgumentParser:
         "montecarlo",
         help="robustness: one start over many perturbed rigs and noise seeds; success rate with its interval",
     )
-    mc.add_argument("--controller", required=True, metavar="NAME|MODULE:CLASS", help=controller_help)
+    mc.add_argument("--controller", metavar="NAME|MODULE:CLASS", help=controller_help + _SERVED_CONTROLLER)
     mc.add_argument("--n", type=count(1, _mc_max_runs), default=200, help="runs (default 200)")
     what = mc.add_mutually_exclusive_group()
     what.add_argument(
@@ -1135,6 +1375,7 @@ def build_parser() -> argparse.ArgumentParser:
     mc.add_argument(
         "--scheduler", metavar="ADDRESS", help="a Dask distributed scheduler to fan the runs out to"
     )
+    _add_served_options(mc)
     mc.add_argument("--out", metavar="DIR", help="write DIR/montecarlo.json and DIR/distributions.png")
     mc.add_argument("--overwrite", action="store_true", help="replace its own files in an existing --out")
     mc.add_argument("--json", action="store_true", help="print the whole result as JSON")
@@ -1145,7 +1386,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="the standard battery before hardware: nominal starts, region, sensitivities, saturation, "
         "Monte Carlo; one report, exit 0 pass / 1 fail",
     )
-    val.add_argument("--controller", required=True, metavar="NAME|MODULE:CLASS", help=controller_help)
+    val.add_argument("--controller", metavar="NAME|MODULE:CLASS", help=controller_help + _SERVED_CONTROLLER)
     spread = val.add_mutually_exclusive_group()
     spread.add_argument("--spread", metavar="FILE", help="parameter uncertainties for the Monte Carlo check")
     spread.add_argument(
@@ -1155,6 +1396,7 @@ def build_parser() -> argparse.ArgumentParser:
     val.add_argument("--seed", type=seed(), default=0, help="base seed of every run's noise")
     _add_params_options(val)
     val.add_argument("--workers", type=_WORKERS, default=1, help="local processes (default 1: this process)")
+    _add_served_options(val)
     val.add_argument("--out", metavar="DIR", help="write DIR/report.md, DIR/validation.json, DIR/region.png")
     val.add_argument("--overwrite", action="store_true", help="replace its own files in an existing --out")
     val.add_argument("--json", action="store_true", help="print the report as JSON")

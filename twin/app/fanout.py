@@ -6,6 +6,10 @@ lands. Because every run's numbers depend only on its own start, seed and parame
 same however the job is chunked and wherever the chunks run. Ctrl-C stops handing out chunks and returns
 what came back (``complete`` false).
 
+A served job (``Served``, ``run_served``) runs the same starts, seeds and parameters as sessions of the
+twin served on protocol 1, one after the other, to a controller in any language: each record is made from
+the twin's true state exactly as in process, so the reports are the same.
+
 Why Dask for more than one machine: it is pip-installable, pure Python, starts a local cluster in a test,
 and its futures map one-to-one onto chunks; Ray would bring a much larger runtime for the same use here.
 """
@@ -16,14 +20,18 @@ import os
 import signal
 from collections.abc import Callable, Generator, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
-from dataclasses import dataclass, fields
-from typing import Any, Protocol
+from dataclasses import dataclass, field, fields
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
 from twin.parameters import ParameterError, Parameters
 
-__all__ = ["CHUNK_RUNS", "Progress", "Runs", "Stages", "run_chunk", "run_starts"]
+if TYPE_CHECKING:
+    from twin.serve import Server
+    from twin.verdict import Verdict
+
+__all__ = ["CHUNK_RUNS", "Progress", "Runs", "Served", "Stages", "run_chunk", "run_served", "run_starts"]
 
 CHUNK_RUNS = 64  # runs per batch: enough to keep rollout's threads busy (progress moves within a batch)
 
@@ -141,26 +149,29 @@ def _records(
         progress=report,
     )
     return [
-        {
-            "x0_m": chunk.x0_m[i],
-            "theta0_rad": chunk.theta0_rad[i],
-            "seed": chunk.seeds[i],
-            "failed": False,
-            **result.verdict.to_json(),
-        }
+        _record(chunk.x0_m[i], chunk.theta0_rad[i], chunk.seeds[i], result.verdict)
         for i, result in zip(pick, results, strict=True)
     ]
 
 
+def _record(x0_m: float, theta0_rad: float, seed: int, verdict: Verdict) -> dict[str, Any]:
+    """The record of a run (in process or served): its start, seed and verdict as JSON values."""
+    return {"x0_m": x0_m, "theta0_rad": theta0_rad, "seed": seed, "failed": False, **verdict.to_json()}
+
+
 def _failed(chunk: _Chunk, i: int, reason: str) -> dict[str, Any]:
+    return _failed_record(chunk.x0_m[i], chunk.theta0_rad[i], chunk.seeds[i], reason)
+
+
+def _failed_record(x0_m: float, theta0_rad: float, seed: int, reason: str) -> dict[str, Any]:
     """The record of a run whose controller failed: not held, the reason, no figures."""
     from twin.verdict import Verdict
 
     empty = {f.name: None for f in fields(Verdict)}
     return {
-        "x0_m": chunk.x0_m[i],
-        "theta0_rad": chunk.theta0_rad[i],
-        "seed": chunk.seeds[i],
+        "x0_m": x0_m,
+        "theta0_rad": theta0_rad,
+        "seed": seed,
         "failed": True,
         **empty,
         "held": False,
@@ -216,6 +227,105 @@ def _dask(
         client.close()
 
 
+@dataclass
+class Served:
+    """A served job: every run is one lock-step session of ``server`` (``twin.serve``), in order, to
+    whatever controlling client says HELLO; nothing runs a controller here.
+
+    ``first_wait_s``: how long the job's first session waits for a client (None: until one comes);
+    ``next_wait_s``: every later session's wait (a client running many sessions reconnects at once; none
+    within it ends the job, incomplete). ``timeout_s``: the lock-step wait for each command (a silent client
+    fails that run). What the job saw is kept here: the clients' HELLO names and why it stopped early."""
+
+    server: Server
+    timeout_s: float = 5.0
+    first_wait_s: float | None = None
+    next_wait_s: float = 5.0
+    clients: list[str] = field(default_factory=list)  # each session's HELLO name, in order
+    stopped: str = ""  # no client came: the job ended before its last run
+
+    def client_names(self) -> list[str]:
+        return list(dict.fromkeys(self.clients))
+
+    def to_json(self) -> dict[str, Any]:
+        """What a served job's report adds: where it was served, the clients, why it stopped early."""
+        return {
+            "url": self.server.url,
+            "clients": self.client_names(),
+            "sessions": len(self.clients),
+            **({"stopped": self.stopped} if self.stopped else {}),
+        }
+
+
+def run_served(
+    runs: Runs,
+    starts: np.ndarray,
+    seeds: np.ndarray,
+    served: Served,
+    *,
+    params: Sequence[Parameters] | None = None,
+    progress: Progress | None = None,
+) -> tuple[list[dict[str, Any] | None], bool]:
+    """``run_starts`` over the wire: run i is a session with start ``starts[i]``, seed ``seeds[i]`` and its
+    parameters, judged from the twin's true state as in process (``Server.serve`` runs the engine's
+    closed loop), so its record is the in-process run's when the client computes what the in-process
+    controller does. A client that quits or goes silent fails that run with the server's reason; Ctrl-C or
+    no client within the wait ends the job with what came back (``complete`` false)."""
+    from twin import protocol
+    from twin.engine import ControllerError
+    from twin.plant import NumericalError
+    from twin.serve import ServeError, SessionSettings
+
+    n = len(starts)
+    results: list[dict[str, Any] | None] = [None] * n
+    if progress is not None:
+        progress(0, n)
+    server = served.server
+    for i in range(n):
+        if served.stopped:  # an earlier stage (validate) ran out of clients: nothing more is served
+            return results, False
+        x0, th0, seed = float(starts[i, 0]), float(starts[i, 1]), int(seeds[i])
+        settings = SessionSettings(
+            x0_m=x0,
+            theta0_rad=th0,
+            duration_s=runs.duration_s,
+            seed=seed,
+            noise=runs.noise,
+            params=params[i] if params is not None else runs.params,
+            plant=runs.plant,  # type: ignore[arg-type]
+            ideal_sensors=runs.ideal_sensors,
+            mode=protocol.MODE_LOCKSTEP,
+            timeout_s=served.timeout_s,
+            wait_client_s=served.next_wait_s if served.clients else served.first_wait_s,
+            rig_name=server.settings.rig_name,
+        )
+        try:
+            session = server.serve(settings)
+        except KeyboardInterrupt:
+            return results, False
+        except ServeError as exc:
+            if server.controller_addr is None:  # nobody said HELLO within the wait
+                served.stopped = str(exc)
+                return results, False
+            served.clients.append(server.client_name)
+            results[i] = _failed_record(x0, th0, seed, str(exc))
+        except ControllerError as exc:
+            served.clients.append(server.client_name)
+            results[i] = _failed_record(x0, th0, seed, str(exc))
+        except NumericalError as exc:  # the simulation failed, not the client: no physical verdict
+            served.clients.append(server.client_name)
+            results[i] = {**_failed_record(x0, th0, seed, ""), "numerical": True, "reason": str(exc)}
+        else:
+            served.clients.append(session.client)
+            if session.stop_reason in (protocol.STOP_DONE, protocol.STOP_BALL_LOST):
+                results[i] = _record(x0, th0, seed, session.result.verdict)
+            else:  # the client quit or went silent: its run failed, as a failing controller's does
+                results[i] = _failed_record(x0, th0, seed, f"{session.client!r}: {session.stop_detail}")
+        if progress is not None:
+            progress(i + 1, n)
+    return results, True
+
+
 def run_starts(
     runs: Runs,
     starts: np.ndarray,
@@ -226,12 +336,18 @@ def run_starts(
     scheduler: str | None = None,
     nthread: int | None = None,
     progress: Progress | None = None,
+    serve: Served | None = None,
 ) -> tuple[list[dict[str, Any] | None], bool]:
     """Every start ((N, 2): x0, θ0) with its seed (and its parameters, when given): the records in the
     starts' order (None where not run) and whether all ran. ``workers`` local processes (1: here), or a Dask
     ``scheduler`` address; ``nthread``: rollout threads per batch (default: the cores shared by the
     workers). Each controller call's watchdog budget is the process's (``twin.guard.default_timeout_s``,
-    the CLI's ``--controller-timeout``), carried to the workers with the chunks."""
+    the CLI's ``--controller-timeout``), carried to the workers with the chunks. ``serve``: every run a
+    session to a client over the wire instead (``run_served``; ``runs.controller`` is then only a name)."""
+    if serve is not None:
+        if workers > 1 or scheduler is not None:
+            raise ParameterError("a served job runs its sessions here, one after the other: no workers")
+        return run_served(runs, starts, seeds, serve, params=params, progress=progress)
     from twin.guard import default_timeout_s
 
     timeout_s = default_timeout_s()

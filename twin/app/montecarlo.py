@@ -32,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from twin.app.fanout import Progress, Runs, run_starts
+from twin.app.fanout import Progress, Runs, Served, run_starts
 from twin.app.sweep import point_seeds
 from twin.outputs import JobFiles, atomic_directory
 from twin.parameters import DuplicateKeyError, ParameterError, Parameters, load_json
@@ -247,10 +247,12 @@ class MonteCarloResult:
     complete: bool
     wall_s: float = 0.0
     summary: dict[str, Any] = field(default_factory=dict)
+    served: dict[str, Any] | None = None  # a served job: where, and the clients (fanout.Served.to_json)
 
     def to_json(self) -> dict[str, Any]:
         return {
             "settings": asdict(self.settings),
+            **({"served": self.served} if self.served is not None else {}),
             "spread": {
                 "source": self.spread.source,
                 "kind": self.spread.kind,
@@ -309,7 +311,10 @@ def run_montecarlo(
     workers: int = 1,
     scheduler: str | None = None,
     progress: Progress | None = None,
+    serve: Served | None = None,
 ) -> MonteCarloResult:
+    """The runs (``serve``: each a session to a client over the wire, ``fanout.run_served``) and their
+    summary."""
     if not 1 <= settings.n <= MAX_RUNS:
         raise ParameterError(f"--n = {settings.n}: 1 … {MAX_RUNS} runs")
     sets, values = sample_parameters(base, spread, settings.n, settings.seed)
@@ -320,7 +325,7 @@ def run_montecarlo(
     )
     start = time.perf_counter()
     records, complete = run_starts(
-        runs, starts, seeds, params=sets, workers=workers, scheduler=scheduler, progress=progress
+        runs, starts, seeds, params=sets, workers=workers, scheduler=scheduler, progress=progress, serve=serve
     )
     out: list[dict[str, Any]] = []
     for record, sample in zip(records, values, strict=True):
@@ -330,6 +335,7 @@ def run_montecarlo(
         out.append({**record, "parameters": {n: float(v) for n, v in zip(spread.names, sample, strict=True)}})
     result = MonteCarloResult(settings, spread, out, complete, wall_s=time.perf_counter() - start)
     result.summary = summarize(out)
+    result.served = serve.to_json() if serve is not None else None
     return result
 
 

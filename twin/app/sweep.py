@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from controllers import thesis_numbers as T
-from twin.app.fanout import Progress, Runs, run_starts
+from twin.app.fanout import Progress, Runs, Served, run_starts
 from twin.outputs import JobFiles, atomic_directory
 from twin.parameters import ParameterError, Parameters
 from twin.physics import check_initial_state
@@ -149,11 +149,13 @@ class SweepResult:
     corners: list[dict[str, Any]] = field(default_factory=list)  # the claims' named starts
     claims: list[dict[str, Any]] = field(default_factory=list)
     wall_s: float = 0.0
+    served: dict[str, Any] | None = None  # a served job: where, and the clients (fanout.Served.to_json)
 
     def to_json(self) -> dict[str, Any]:
         s = self.settings
         return {
             "settings": {**asdict(s), "x0": asdict(s.x0), "theta0": asdict(s.theta0)},
+            **({"served": self.served} if self.served is not None else {}),
             "complete": self.complete,
             "summary": summarize(self.points),
             "claims": self.claims,
@@ -182,10 +184,12 @@ def run_sweep(
     scheduler: str | None = None,
     nthread: int | None = None,
     progress: Progress | None = None,
+    serve: Served | None = None,
 ) -> SweepResult:
     """Run the grid (and the claims' corner states) and judge the claims. ``workers`` local processes
     (1: this process), or a Dask ``scheduler`` address; ``nthread``: rollout threads per batch (default:
-    the cores, divided among the local workers)."""
+    the cores, divided among the local workers); ``serve``: every start a session to a client over the
+    wire (``fanout.run_served``; ``settings.controller`` names what the client runs)."""
     p = params or Parameters()
     xs, ths = settings.x0.values(), settings.theta0.values()
     grid = np.array([(x, th) for x in xs for th in ths], dtype=float)
@@ -214,7 +218,14 @@ def run_sweep(
         ideal_sensors=settings.ideal_sensors,
     )
     results, complete = run_starts(
-        runs, starts, seeds, workers=workers, scheduler=scheduler, nthread=nthread, progress=progress
+        runs,
+        starts,
+        seeds,
+        workers=workers,
+        scheduler=scheduler,
+        nthread=nthread,
+        progress=progress,
+        serve=serve,
     )
     points = [r or {} for r in results[: len(grid)]]
     corner_records = [
@@ -222,6 +233,7 @@ def run_sweep(
         for i, (_, _, claim, note) in enumerate(corners)
     ]
     result = SweepResult(settings, points, complete, corner_records, wall_s=time.perf_counter() - start)
+    result.served = serve.to_json() if serve is not None else None
     result.claims = [_judge(claim, result, p) for claim in CLAIMS if settings.controller in claim.applies_to]
     return result
 

@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from controllers import thesis_numbers as T
-from twin.app.fanout import Progress, Runs, Stages, run_starts
+from twin.app.fanout import Progress, Runs, Served, Stages, run_starts
 from twin.app.montecarlo import MAX_RUNS, Distribution, MonteCarloSettings, run_montecarlo
 from twin.app.options import MAX_JOB_RUN_S
 from twin.app.sweep import MAX_POINTS, Grid, SweepResult, SweepSettings, point_seeds, run_sweep
@@ -236,6 +236,7 @@ class ValidationReport:
     wall_s: float
     criteria: ValidationCriteria
     complete: bool = True  # False: interrupted (Ctrl-C); the checks done so far
+    served: dict[str, Any] | None = None  # a served job: where, and the clients (fanout.Served.to_json)
 
     @property
     def passed(self) -> bool:
@@ -244,6 +245,7 @@ class ValidationReport:
     def to_json(self) -> dict[str, Any]:
         return {
             "controller": self.controller,
+            **({"served": self.served} if self.served is not None else {}),
             "passed": self.passed,
             "complete": self.complete,
             "criteria": asdict(self.criteria),
@@ -266,6 +268,24 @@ def validate(
     seed: int = 0,
     workers: int = 1,
     progress: Progress | None = None,
+    serve: Served | None = None,
+) -> ValidationReport:
+    """The battery; ``serve``: every run a session to a client over the wire (``fanout.run_served``), the
+    stages one after the other on its one server (``controller`` then only names what the client runs)."""
+    report = _validate(controller, params, criteria, spread, seed, workers, progress, serve)
+    report.served = serve.to_json() if serve is not None else None
+    return report
+
+
+def _validate(
+    controller: str,
+    params: Parameters,
+    criteria: ValidationCriteria | None,
+    spread: Distribution | None,
+    seed: int,
+    workers: int,
+    progress: Progress | None,
+    serve: Served | None,
 ) -> ValidationReport:
     c = criteria or ValidationCriteria()
     check_criteria_for(c, params)  # before any run
@@ -288,7 +308,9 @@ def validate(
     # Nominal: the thesis's starts, several seeds.
     grid = np.array([s for s in starts for _ in range(c.nominal_seeds)], dtype=float)
     seeds = point_seeds(seed, len(grid))
-    records, complete = run_starts(runs, grid, seeds, workers=workers, progress=stages.stage("nominal"))
+    records, complete = run_starts(
+        runs, grid, seeds, workers=workers, progress=stages.stage("nominal"), serve=serve
+    )
     if not complete:
         return ValidationReport(controller, checks, None, time.perf_counter() - started, c, complete=False)
     held, n = _runs_held(records)
@@ -321,7 +343,7 @@ def validate(
         noise=True,
         seed=seed,
     )
-    region = run_sweep(settings, params, workers=workers, progress=stages.stage("region"))
+    region = run_sweep(settings, params, workers=workers, progress=stages.stage("region"), serve=serve)
     if not region.complete:
         return ValidationReport(controller, checks, None, time.perf_counter() - started, c, complete=False)
     (xlo, xhi), (tlo, thi) = c.required_x0_m, c.required_theta0_rad
@@ -358,6 +380,7 @@ def validate(
         params=per_run,
         workers=workers,
         progress=stages.stage("sensitivity"),
+        serve=serve,
     )
     if not complete:
         return ValidationReport(controller, checks, region, time.perf_counter() - started, c, complete=False)
@@ -401,6 +424,7 @@ def validate(
             spread,
             workers=workers,
             progress=stages.stage("monte carlo"),
+            serve=serve,
         )
         if not mc.complete:
             return ValidationReport(
