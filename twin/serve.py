@@ -292,6 +292,11 @@ class Server(OverLink):
         self._reset_session()
         self._rig = rig
 
+    @property
+    def watchdog(self) -> bool:
+        """Whether the watchdog holds the output at the zero command now (commands stopped)."""
+        return self._watchdog
+
     def stop_clients(self, reason: int) -> None:
         """STOP ``reason`` to the controller and the observers of this session."""
         self._stop_all(reason)
