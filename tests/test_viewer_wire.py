@@ -289,3 +289,40 @@ def test_a_flick_and_the_noise_switch_act_on_the_wire_run() -> None:
         assert name.startswith("ballbeam_run2_wire-client-udp-127.0.0.1-") and name.endswith(".csv")
         assert data
         live.apply("reset")
+
+
+def _free_port(kind: int) -> int:
+    with socket.socket(socket.AF_INET, kind) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_the_view_serves_with_a_warning_beyond_loopback_and_stops_its_client_at_shutdown(
+    capfd: pytest.CaptureFixture[str],
+) -> None:
+    from twin.viewer import serve
+
+    udp = _free_port(socket.SOCK_DGRAM)
+    box: dict[str, RemoteRun] = {}
+
+    def client() -> None:  # repeats HELLO until the view listens, then runs until the view's STOP
+        with RemoteRig("127.0.0.1", udp, client="pytest", connect_timeout_s=20.0) as rig:
+            box["run"] = run_remote(registry.make("appendix-sf", rig.parameters()), rig)
+
+    thread = threading.Thread(target=client, daemon=True)
+    thread.start()
+    stats = serve(
+        registry,
+        port=_free_port(socket.SOCK_STREAM),
+        duration_s=2.5,
+        wire=("0.0.0.0", udp),
+        wait_for_client=False,  # no browser here: the run goes
+    )
+    thread.join(10.0)
+    out, err = capfd.readouterr()
+    assert f"warning: serving on every interface (port {udp}): anyone who can reach this machine" in err
+    assert f"(controller wire client (udp://0.0.0.0:{udp}), speed ×1)" in out
+    assert f"serving the twin on udp://0.0.0.0:{udp} (protocol 1, real time)" in out
+    run = box["run"]
+    assert run.ended.endswith("ended the session (STOP 4)")  # the view shut down
+    assert run.log.k > 25 and stats["ticks"] >= run.log.k - 1
