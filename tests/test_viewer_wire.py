@@ -326,3 +326,61 @@ def test_the_view_serves_with_a_warning_beyond_loopback_and_stops_its_client_at_
     run = box["run"]
     assert run.ended.endswith("ended the session (STOP 4)")  # the view shut down
     assert run.log.k > 25 and stats["ticks"] >= run.log.k - 1
+
+
+def test_a_stalled_client_never_slows_the_views_frames() -> None:
+    """The client acknowledges the held sample and then says nothing: the view's own loop (``serve``) keeps
+    sending a sample every 20 ms, every period counts missing, the output goes to the zero command after the
+    watchdog, and the ball (released at 0.15 m, 0.1 rad) rolls off: STOP 2."""
+    from twin.viewer import Viewer, serve
+
+    udp = _free_port(socket.SOCK_DGRAM)
+    seen: list[Viewer] = []
+    arrivals: list[float] = []
+    stops: list[int] = []
+
+    def stalled() -> None:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+            s.connect(("127.0.0.1", udp))
+            s.settimeout(0.2)
+            while True:  # HELLO until CONFIG (the view may not listen yet)
+                s.send(p.encode(p.Hello(role=p.ROLE_CONTROL, client="stalled"), 0))
+                try:
+                    frame = p.decode_frame(s.recv(4096))
+                except OSError:
+                    continue
+                if isinstance(frame.msg, p.Config):
+                    break
+            s.settimeout(5.0)
+            while not isinstance((held := p.decode_frame(s.recv(4096)).msg), p.Sample):
+                pass  # a repeated HELLO's CONFIG
+            s.send(p.encode(p.Command(held.seq, 2.5), frame.session))
+            while True:  # alive, silent: only the arrivals are noted
+                msg = p.decode_frame(s.recv(4096)).msg
+                if isinstance(msg, p.Stop):
+                    stops.append(msg.reason)
+                    return
+                if isinstance(msg, p.Sample) and msg.seq > 0:
+                    arrivals.append(time.perf_counter())
+
+    thread = threading.Thread(target=stalled, daemon=True)
+    thread.start()
+    serve(
+        registry,
+        port=_free_port(socket.SOCK_STREAM),
+        duration_s=3.0,
+        wire=("127.0.0.1", udp),
+        wait_for_client=False,
+        announce=False,
+        on_ready=seen.append,
+    )
+    thread.join(5.0)
+    live = seen[0].live
+    c = _wire(live).server.counts
+    log = live.loop.log()
+    assert live.rig.ball_lost and stops == [p.STOP_BALL_LOST]
+    gaps = np.diff(arrivals)
+    assert len(arrivals) == log.k - 1 > 20
+    assert abs(float(np.mean(gaps)) - FRAME_S) < 0.002 and float(np.max(gaps)) < 3 * FRAME_S, gaps
+    assert c.missing_commands == log.k - 2 and c.watchdog_trips == 1  # the lost ball's sample: not awaited
+    assert np.all(log.aout[5:] == Parameters().amplifier.zero_command_v)
