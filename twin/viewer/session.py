@@ -521,15 +521,20 @@ class LiveTwin:
             return
         wire = self.wire
         try:
+            n = max(1, int(round(FRAME_S / self.rig.period_s)))
             if wire is not None:
                 until = deadline if deadline is not None else time.perf_counter() + FRAME_S
                 if not wire.released:
                     wire.service(until)
                     return
-                wire.deadline = until
-                self.loop.tick()
+                for i in range(
+                    n
+                ):  # a shorter period: its ticks' deadlines one period apart, the last at until
+                    wire.deadline = until - (n - 1 - i) * self.rig.period_s
+                    self.loop.tick()
+                    if self.rig.ball_lost:
+                        break  # its sample was the session's last
             else:
-                n = max(1, int(round(FRAME_S / self.rig.period_s)))
                 for _ in range(n):
                     self.loop.tick()
             self._record()
