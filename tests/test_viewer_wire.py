@@ -384,3 +384,26 @@ def test_a_stalled_client_never_slows_the_views_frames() -> None:
     assert abs(float(np.mean(gaps)) - FRAME_S) < 0.002 and float(np.max(gaps)) < 3 * FRAME_S, gaps
     assert c.missing_commands == log.k - 2 and c.watchdog_trips == 1  # the lost ball's sample: not awaited
     assert np.all(log.aout[5:] == Parameters().amplifier.zero_command_v)
+
+
+def test_another_controller_ends_the_session_and_selecting_the_wire_entry_opens_a_new_one() -> None:
+    with _wired() as (live, server):
+        wire_name = live.controller_name
+        raw = RawClient(server.port)
+        _frames_until(live, lambda: _wire(live).phase == "held")
+        config, held = raw.recv(), raw.recv()
+        assert isinstance(config.msg, p.Config) and isinstance(held.msg, p.Sample)
+        raw.sock.send(p.encode(p.Command(0, 2.5), config.session))
+        _frames_until(live, lambda: _wire(live).released)
+        live.apply("controller", "appendix-sf")  # the in-process controller: the client's session is done
+        while not isinstance((frame := raw.recv()).msg, p.Stop):
+            pass
+        assert frame.msg == p.Stop(p.STOP_DONE) and frame.session == config.session
+        assert live.wire is None and live.controller_name == "appendix-sf"
+        _frames(live, 10)
+        assert live.rig.time_s > 0.1  # the in-process run goes
+        live.apply("controller", wire_name)
+        assert _wire(live).phase == "waiting" and server.session != config.session
+        _frames(live, 5)
+        assert live.rig.time_s < 0.0 and server.controller_addr is None  # held; the old client is not in it
+        raw.close()
