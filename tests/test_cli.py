@@ -570,3 +570,55 @@ def test_view_offers_the_user_controller_beside_the_registry(user_dir: Path, cap
     assert catalogue.NAMES == (*registry.NAMES, spec)
     assert isinstance(catalogue.make(spec), Controller)
     assert type(catalogue.make("lqr")) is type(registry.make("lqr"))
+
+
+@pytest.mark.parametrize(
+    ("value", "says"),
+    [
+        ("70000", "PORT an integer 0…65535"),
+        ("127.0.0.1:65536", "PORT an integer 0…65535"),
+        ("127.0.0.1:-1", "PORT an integer 0…65535"),
+        ("localhost:http", "PORT an integer 0…65535"),
+        ("", "PORT an integer 0…65535"),
+        ("bad_host!:5750", "'bad_host!' is not a host name or an IP address"),
+        (":5750", "'' is not a host name or an IP address"),
+        ("[::1:5750", "is not a host name or an IP address"),
+    ],
+)
+def test_view_refuses_a_bad_serve_address(capsys, monkeypatch, value: str, says: str) -> None:
+    import twin.viewer
+
+    monkeypatch.setattr(twin.viewer, "serve", lambda *a, **k: pytest.fail("served"))
+    _refused(capsys, ["view", "--serve", value, "--duration", "1"], "--serve", says)
+
+
+def test_view_refuses_a_udp_port_that_is_taken(capsys) -> None:
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as taken:
+        taken.bind(("127.0.0.1", 0))
+        port = taken.getsockname()[1]
+        line = _refused(capsys, ["view", "--serve", f"127.0.0.1:{port}", "--duration", "1"], "--serve")
+    assert (
+        line == f"ballbeam view: error: --serve: cannot bind udp://127.0.0.1:{port}: Address already in use"
+    )
+
+
+@pytest.mark.parametrize(
+    ("argv", "wire", "controller"),
+    [
+        (["--serve", "5750"], ("127.0.0.1", 5750), None),  # the wire client starts
+        (["--serve", "0.0.0.0:0"], ("0.0.0.0", 0), None),
+        (["--serve", "[::1]:5750"], ("::1", 5750), None),
+        (["--serve", "lab-pc.local:5750", "--controller", "lqr"], ("lab-pc.local", 5750), "lqr"),
+        ([], None, "appendix-clp"),
+    ],
+)
+def test_view_serve_options_reach_the_view(monkeypatch, argv: list[str], wire, controller) -> None:
+    import twin.viewer
+
+    seen: dict[str, object] = {}
+    monkeypatch.setattr(twin.viewer, "serve", lambda catalogue, **kwargs: seen.update(kwargs) or {})
+    assert main(["view", *argv, "--seed", "3", "--no-noise", "--duration", "1"]) == 0
+    assert seen["wire"] == wire and seen["controller"] == controller and seen["seed"] == 3
+    assert seen["params"].ball_sensor.noise_enabled is False  # type: ignore[attr-defined]

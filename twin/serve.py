@@ -222,6 +222,7 @@ class Server(OverLink):
         self._missing_streak = 0
         self._watchdog = False
         self._end: tuple[int, str] | None = None
+        self._resend_at: float | None = None  # when the latest sample is repeated (set by its first wait)
 
     def _config(self, role: int) -> p.Config:
         s = self.settings
@@ -283,6 +284,27 @@ class Server(OverLink):
         for addr in ([self.controller_addr] if self.controller_addr else []) + self.observers:
             self._send(p.Stop(reason), addr)
 
+    # --- a session another loop drives (the live view: twin.viewer.wire) ----------------------------
+    def open_session(self, rig: SimRig) -> None:
+        """Begin a session on ``rig`` (already reset) that the caller's loop runs: a new session id, as
+        ``serve`` begins one (the previous session's late datagrams are dropped), counts and clients reset.
+        The loop then calls ``receive`` until a controller has said HELLO (``controller_addr``) and, per
+        tick, ``send_sample``, ``await_command`` to its own deadline, then ``accept`` or ``missed``."""
+        if self._sessions:
+            self.session = (self.session + 1) & 0xFFFFFFFF or 1
+        self._sessions += 1
+        self._reset_session()
+        self._rig = rig
+
+    @property
+    def watchdog(self) -> bool:
+        """Whether the watchdog holds the output at the zero command now (commands stopped)."""
+        return self._watchdog
+
+    def stop_clients(self, reason: int) -> None:
+        """STOP ``reason`` to the controller and the observers of this session."""
+        self._stop_all(reason)
+
     def _await_controller(self) -> None:
         wait_s = self.settings.wait_client_s
         deadline = math.inf if wait_s is None else time.monotonic() + wait_s
@@ -290,10 +312,10 @@ class Server(OverLink):
             left = deadline - time.monotonic()
             if left <= 0:
                 raise ServeError(f"no controlling client said HELLO to {self.url} within {wait_s:g} s")
-            self._receive(min(left, 0.5))
+            self.receive(min(left, 0.5))
 
     # --- receiving ----------------------------------------------------------------------------------
-    def _receive(self, wait_s: float) -> p.Command | p.Stop | None:
+    def receive(self, wait_s: float) -> p.Command | p.Stop | None:
         """Handle one datagram (waiting at most ``wait_s``): HELLOs answered, refusals counted; the
         controller's valid COMMAND for the latest sample or its STOP returned, else ``None``."""
         got = self.link.recv(wait_s)
@@ -355,13 +377,42 @@ class Server(OverLink):
             self._send(self._config(p.ROLE_REFUSED), addr)
 
     # --- one block out, one command back ------------------------------------------------------------
+    # The pieces of one tick's exchange (``send_sample``, ``await_command``, ``accept``, ``missed``) are
+    # public: ``serve`` runs them in ``_exchange`` to its own deadlines, the live view (``twin.viewer.wire``)
+    # to the boundaries of its frames.
     def _exchange(self, sample: DaqSample, *, start: bool) -> float:
         rig = self._rig
         assert rig is not None
         s = self.settings
         seq = 0 if start else self._seq + 1
-        self._seq = seq
         last = not start and (seq == self._n_ticks or (s.stop_when_lost and rig.ball_lost))
+        out = self.send_sample(sample, start=start, last=last)
+        realtime = s.mode == p.MODE_REALTIME and not start and self._pacer is not None
+        if realtime and last:
+            return rig.command_v  # real time: the last sample is not answered (docs/protocol.md)
+        deadline = time.monotonic() + s.timeout_s
+        if realtime:
+            assert self._pacer is not None
+            deadline = self._pacer.next_boundary() - _RT_MARGIN_S
+        clock = time.perf_counter if realtime else time.monotonic
+        got = self.await_command(out, deadline, resend=not realtime, clock=clock)
+        if isinstance(got, p.Stop):
+            self._end = (p.STOP_CLIENT_QUIT, f"the client sent STOP {got.reason}")
+            raise _SessionOver(self._end[1])
+        if isinstance(got, p.Command):
+            return self.accept(got)
+        if not realtime:
+            self._end = (p.STOP_ERROR, f"no COMMAND {seq} within {s.timeout_s:g} s")
+            raise _SessionOver(self._end[1])
+        return self.missed(rig.command_v)
+
+    def send_sample(self, sample: DaqSample, *, start: bool, last: bool) -> p.Sample:
+        """``sample`` as SAMPLE to the controller and the observers: seq 0 for the held block that ``start``
+        reads, else the next; the flags from the rig and the session (``last``: the session ends after it)."""
+        rig = self._rig
+        assert rig is not None
+        seq = 0 if start else self._seq + 1
+        self._seq = seq
         flags = p.FLAG_HELD if (start or rig.held) else 0
         flags |= p.FLAG_BALL_LOST if rig.ball_lost else 0
         flags |= p.FLAG_WATCHDOG if self._watchdog else 0
@@ -372,34 +423,47 @@ class Server(OverLink):
         out = p.Sample(seq, sample.time_s, sample.ball_v, sample.angle_v, flags, self._applied_seq)
         for addr in ([self.controller_addr] if self.controller_addr else []) + self.observers:
             self._send(out, addr)
-        realtime = s.mode == p.MODE_REALTIME and not start and self._pacer is not None
-        if realtime and last:
-            return rig.command_v  # real time: the last sample is not answered (docs/protocol.md)
-        deadline = time.monotonic() + s.timeout_s
-        if realtime:
-            assert self._pacer is not None
-            deadline = self._pacer.next_boundary() - _RT_MARGIN_S
-        clock = time.perf_counter if realtime else time.monotonic
-        resend = clock() + _RESEND_S
+        self._resend_at = None
+        return out
+
+    def await_command(
+        self,
+        out: p.Sample,
+        deadline: float,
+        *,
+        resend: bool,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> p.Command | p.Stop | None:
+        """Handle datagrams until ``deadline`` (on ``clock``): the controller's valid COMMAND answering ``out``
+        (the latest sample) or its STOP, else ``None``. With ``resend`` (lock-step, a held sample), ``out``
+        is repeated every 0.2 s meanwhile; a caller may wait for one sample in several calls."""
+        if self._resend_at is None:
+            self._resend_at = clock() + _RESEND_S
         while True:
             now = clock()
             left = deadline - now
             if left <= 0:
-                break
-            if not realtime and now >= resend and self.controller_addr is not None:
+                return None
+            if resend and now >= self._resend_at and self.controller_addr is not None:
                 self._send(out, self.controller_addr)  # the sample or its answer may have been lost
                 self.counts.resent_samples += 1
-                resend = now + _RESEND_S
-            got = self._receive(left if realtime else min(left, max(resend - now, 1e-4)))
-            if isinstance(got, p.Stop):
-                self._end = (p.STOP_CLIENT_QUIT, f"the client sent STOP {got.reason}")
-                raise _SessionOver(self._end[1])
-            if isinstance(got, p.Command):
-                return self._accept(got)
-        if not realtime:
-            self._end = (p.STOP_ERROR, f"no COMMAND {seq} within {s.timeout_s:g} s")
-            raise _SessionOver(self._end[1])
-        # real time: the period ended without its command; the DAC holds, then the watchdog
+                self._resend_at = now + _RESEND_S
+            got = self.receive(min(left, max(self._resend_at - now, 1e-4)) if resend else left)
+            if got is not None:
+                return got
+
+    def accept(self, cmd: p.Command) -> float:
+        """The controller's COMMAND answered in time: the DAC takes its volts, the watchdog is reset."""
+        self._late_flag = False
+        self._missing_streak = 0
+        self._watchdog = False
+        self._applied_seq = cmd.seq
+        return cmd.dac_v
+
+    def missed(self, hold_v: float) -> float:
+        """Real time: the period ended without its command. The DAC holds ``hold_v`` (its value); after
+        ``watchdog_periods`` such periods in a row the output is the zero command (the watchdog)."""
+        s = self.settings
         self.counts.missing_commands += 1
         self._late_flag = True
         self._missing_streak += 1
@@ -408,11 +472,4 @@ class Server(OverLink):
                 self.counts.watchdog_trips += 1
             self._watchdog = True
             return s.params.amplifier.zero_command_v
-        return rig.command_v
-
-    def _accept(self, cmd: p.Command) -> float:
-        self._late_flag = False
-        self._missing_streak = 0
-        self._watchdog = False
-        self._applied_seq = cmd.seq
-        return cmd.dac_v
+        return hold_v

@@ -28,7 +28,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, NoReturn
 
 from twin.app.catalogue import WithUserController, construct, one_line, user_controller
-from twin.app.options import MAX_JOB_RUN_S, GridType, NumberType, count, finite_float, seed
+from twin.app.options import MAX_JOB_RUN_S, GridType, NumberType, count, finite_float, seed, serve_address
 from twin.outputs import JobFiles, check_output_folder, check_outputs, writing
 
 if TYPE_CHECKING:
@@ -563,17 +563,21 @@ def _cmd_view(args: argparse.Namespace) -> int:
     from twin.viewer import ViewerError, serve
 
     params = _load_params(args)
-    user = user_controller(args.controller)
+    if args.no_noise:  # the view's noise switch starts off
+        params = params.with_overrides({"ball_sensor.noise_enabled": False})
+    user = user_controller(args.controller) if args.controller is not None else None
     catalogue: Catalogue = registry
     if user is not None:
         construct(user, args.controller, params)  # a failing constructor is refused here, not in the view
         catalogue = WithUserController(registry, args.controller, user)
+    # With --serve the wire client starts unless --controller names another (both are in the menu).
+    controller = args.controller or (None if args.serve is not None else "appendix-clp")
     try:
         stats = serve(
             catalogue,
             host=args.host,
             port=args.port,
-            controller=args.controller,
+            controller=controller,
             speed=args.speed,
             seed=args.seed,
             duration_s=args.duration,
@@ -582,6 +586,8 @@ def _cmd_view(args: argparse.Namespace) -> int:
             ideal_sensors=args.ideal_sensors or args.plant == "reference",
             allowed_origins=tuple(args.allow_origin or ()),
             params_source=_params_source(args),
+            wire=args.serve,
+            rig_name=f"ballbeam-twin {package_version()} {args.plant}",
         )
     except ViewerError as exc:
         print(f"ballbeam view: error: {exc}", file=sys.stderr)
@@ -1418,9 +1424,16 @@ def build_parser() -> argparse.ArgumentParser:
     )
     view.add_argument(
         "--controller",
-        default="appendix-clp",
         metavar="NAME|MODULE:CLASS",
-        help=f"the controller to start with (default appendix-clp): {controller_help}",
+        help=f"the controller to start with (default appendix-clp; with --serve the wire client): {controller_help}",
+    )
+    view.add_argument(
+        "--serve",
+        type=serve_address,
+        metavar="[HOST:]PORT",
+        help="serve the twin on protocol 1 over UDP there (host 127.0.0.1 unless given; port 0: a free one) "
+        "to a controller in any language, e.g. examples/c/bb_sf udp 127.0.0.1 PORT: the menu's wire client, "
+        "in real time (docs/protocol.md)",
     )
     view.add_argument(
         "--speed",
@@ -1434,6 +1447,9 @@ def build_parser() -> argparse.ArgumentParser:
         help=f"simulated seconds per wall second, {SPEED_MIN:g}…{SPEED_MAX:g} (default 1.0)",
     )
     view.add_argument("--seed", type=seed(), default=0, help="seed of the sensor noise (default 0)")
+    view.add_argument(
+        "--no-noise", action="store_true", help="start with the ball sensor's contact noise off (the switch)"
+    )
     view.add_argument(
         "--duration",
         type=finite_float(0, lo_open=True, unit="s"),

@@ -11,7 +11,9 @@ Monte Carlo's run count, the sweep's grid size) is given as a function, called o
 from __future__ import annotations
 
 import argparse
+import ipaddress
 import math
+import re
 from collections.abc import Callable
 
 Limit = float | Callable[[], float]
@@ -139,3 +141,32 @@ class GridType:
             except argparse.ArgumentTypeError as exc:
                 raise argparse.ArgumentTypeError(f"{shown}: N: {exc}") from None
         return text
+
+
+_HOST_NAME = re.compile(
+    r"(?=.{1,253}$)[A-Za-z0-9](?:[A-Za-z0-9-]{0,61}[A-Za-z0-9])?(?:\.[A-Za-z0-9](?:[A-Za-z0-9-]{0,61}[A-Za-z0-9])?)*\.?"
+)
+
+
+def serve_address(text: str) -> tuple[str, int]:
+    """``[HOST:]PORT`` (``view --serve``): (host, port), the host 127.0.0.1 unless given, an IPv6 host in
+    brackets (``[::1]:5750``), port 0 meaning any free one. A host is a name or an address; whether it can be
+    bound is the server's to say."""
+    shown = text if len(text) <= 60 else text[:57] + "..."
+    host, colon, port_text = text.rpartition(":")
+    if not colon:
+        host = "127.0.0.1"
+    elif host.startswith("[") and host.endswith("]"):
+        host = host[1:-1]
+    if not (port_text.isascii() and port_text.isdigit() and int(port_text) <= 65535):
+        raise argparse.ArgumentTypeError(
+            f"{shown!r}: expected [HOST:]PORT with PORT an integer 0…65535 (0: a free one)"
+        )
+    try:
+        ipaddress.ip_address(host)
+    except ValueError:
+        if not _HOST_NAME.fullmatch(host):
+            raise argparse.ArgumentTypeError(
+                f"{shown!r}: {host[:40]!r} is not a host name or an IP address (expected [HOST:]PORT)"
+            ) from None
+    return host, int(port_text)

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import functools
 import math
 import threading
 import time
@@ -12,9 +13,11 @@ from typing import Any
 
 import viser
 
+from twin import protocol as p
 from twin.engine import Catalogue
 from twin.parameters import Parameters
 from twin.rig import PlantKind
+from twin.serve import ServeError, Server, SessionSettings
 from twin.viewer.common import (
     DEFAULT_CONTROLLER,
     FRAME_S,
@@ -35,10 +38,14 @@ from twin.viewer.security import (
     is_loopback,
 )
 from twin.viewer.session import LiveTwin, owe
+from twin.viewer.wire import WIRE_MARGIN_S, WireCatalogue
 
 PLOT_EVERY_FRAMES = 10  # plots and status at 5 Hz: enough for the eye, a tenth of the traffic
 MAX_CATCH_UP_S = 0.25  # after a stall longer than this the pacing restarts instead of racing to catch up
 SPEED_WINDOW_S = 2.0  # the achieved speed is measured over the last 2 s of wall time
+# A wire client's frame that starts with less than this left is re-anchored: the client gets a whole frame
+# to answer (the rig's time then falls behind the wall clock, as the rig's timer skips a missed callback).
+WIRE_MIN_WAIT_S = 0.005
 
 
 class Viewer:
@@ -139,7 +146,8 @@ class Viewer:
             if duration_s is not None and now - start >= duration_s:
                 break
             self._safely(live.apply_actions)
-            if live.running:
+            wire = live.wire is not None
+            if live.running and not wire:
                 owed_s = owe(owed_s, live.speed)
                 self.owed_s, self.max_owed_s = owed_s, max(self.max_owed_s, owed_s)
                 while owed_s >= FRAME_S - 1e-12 and live.running:
@@ -149,6 +157,17 @@ class Viewer:
             self._safely(self.report)
             self._safely(self.publish)
             next_frame += FRAME_S
+            if wire:
+                # The wire client's tick comes last and fills the rest of the frame: SAMPLE k now, COMMAND k
+                # awaited on the socket until the frame's end (twin.viewer.wire). One tick per frame, at ×1.
+                if next_frame - time.perf_counter() < WIRE_MIN_WAIT_S:
+                    next_frame = time.perf_counter() + FRAME_S  # fell behind: give the client a whole frame
+                deadline = next_frame - WIRE_MARGIN_S
+                if live.running:
+                    self._safely(functools.partial(live.tick, deadline))
+                    sim_ticks += 1
+                else:
+                    self._safely(functools.partial(live.service_wire, deadline))
             delay = next_frame - time.perf_counter()
             if delay > 0:
                 stop.wait(delay)
@@ -169,7 +188,7 @@ def serve(
     *,
     host: str = "127.0.0.1",
     port: int = 8080,
-    controller: str = DEFAULT_CONTROLLER,
+    controller: str | None = None,
     speed: float = 1.0,
     seed: int = 0,
     duration_s: float | None = None,
@@ -182,6 +201,8 @@ def serve(
     wait_for_client: bool = True,
     stop: threading.Event | None = None,
     on_ready: Callable[[Viewer], None] | None = None,
+    wire: tuple[str, int] | None = None,
+    rig_name: str = "ballbeam-twin",
 ) -> dict[str, float]:
     """Start the live view and block until interrupted, ``stop`` is set or ``duration_s`` of wall time passed.
 
@@ -189,15 +210,77 @@ def serve(
     ``("https://twin.lab.example",)`` behind a reverse proxy). A host other than loopback is served with a
     warning on stderr: anyone who can reach it can drive the twin. ``on_ready(viewer)`` is called once the
     server listens (tests). The twin waits, paused, until the first browser connects (``wait_for_client``),
-    so that a visitor sees the run from its start; ``params_source`` is shown in the panel."""
+    so that a visitor sees the run from its start; ``params_source`` is shown in the panel.
+
+    ``wire=(host, port)`` serves the twin on protocol 1 over UDP there (port 0: a free one) to a controller in
+    any language (``ballbeam view --serve``): the menu's first entry, "wire client (udp://host:port)", the
+    one started unless ``controller`` names another (twin.viewer.wire); ``rig_name`` is CONFIG's rig."""
     if not (isinstance(speed, (int, float)) and math.isfinite(speed) and SPEED_MIN <= speed <= SPEED_MAX):
         raise ViewerError(
             f"--speed = {speed!r} must be within {SPEED_MIN:g} … {SPEED_MAX:g} (the speed slider)"
         )
+    params = params or Parameters()
+    wire_server: Server | None = None
+    if wire is not None:
+        settings = SessionSettings(
+            params=params, plant=plant, ideal_sensors=ideal_sensors, mode=p.MODE_REALTIME, rig_name=rig_name
+        )
+        try:
+            wire_server = Server(settings, wire[0], wire[1], log=_log)
+        except ServeError as exc:
+            raise ViewerError(f"--serve: {exc}") from None
+        catalogue = WireCatalogue(catalogue, wire_server)
+    try:
+        return _serve(
+            catalogue,
+            wire_server,
+            host=host,
+            port=port,
+            controller=controller,
+            speed=speed,
+            seed=seed,
+            duration_s=duration_s,
+            params=params,
+            plant=plant,
+            ideal_sensors=ideal_sensors,
+            announce=announce,
+            allowed_origins=allowed_origins,
+            params_source=params_source,
+            wait_for_client=wait_for_client,
+            stop=stop,
+            on_ready=on_ready,
+        )
+    finally:
+        if wire_server is not None:
+            wire_server.close()
+
+
+def _serve(
+    catalogue: Catalogue,
+    wire_server: Server | None,
+    *,
+    host: str,
+    port: int,
+    controller: str | None,
+    speed: float,
+    seed: int,
+    duration_s: float | None,
+    params: Parameters,
+    plant: PlantKind,
+    ideal_sensors: bool,
+    announce: bool,
+    allowed_origins: tuple[str, ...],
+    params_source: str,
+    wait_for_client: bool,
+    stop: threading.Event | None,
+    on_ready: Callable[[Viewer], None] | None,
+) -> dict[str, float]:
+    if controller is None:
+        controller = catalogue.NAMES[0] if wire_server is not None else DEFAULT_CONTROLLER
     if controller not in catalogue.NAMES:
         raise ViewerError(f"unknown controller {controller!r}; known: {', '.join(catalogue.NAMES)}")
     live = LiveTwin(
-        params or Parameters(),
+        params,
         catalogue,
         controller,
         seed,
@@ -206,7 +289,11 @@ def serve(
         ideal_sensors=ideal_sensors,
         wait_for_client=wait_for_client,
     )
-    viewer = Viewer(live, host, port, allowed_origins, params_source)
+    try:
+        viewer = Viewer(live, host, port, allowed_origins, params_source)
+    except BaseException:
+        live.close()
+        raise
     if not is_loopback(host):
         where = "every interface" if _is_wildcard(host) else host
         _log(
@@ -219,6 +306,8 @@ def serve(
             f"ballbeam view: http://{host}:{viewer.server.get_port()} (controller {controller}, speed ×{speed:g})",
             flush=True,
         )
+        if wire_server is not None:
+            print(f"ballbeam view: serving the twin on {wire_server.url} (protocol 1, real time)", flush=True)
     stop = stop if stop is not None else threading.Event()
     try:
         if on_ready is not None:
@@ -227,4 +316,5 @@ def serve(
     except KeyboardInterrupt:
         return {}
     finally:
+        live.close()
         viewer.server.stop()

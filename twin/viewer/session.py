@@ -9,6 +9,7 @@ from __future__ import annotations
 import html
 import io
 import math
+import re
 import sys
 import threading
 import time
@@ -21,6 +22,7 @@ import numpy as np
 
 from twin import converters
 from twin import log as log_io
+from twin import protocol as p
 from twin.engine import Catalogue, ClosedLoop, ControllerError
 from twin.interface import DaqSample, Setpoint
 from twin.parameters import Parameters
@@ -44,6 +46,7 @@ from twin.viewer.common import (
     _printable,
     _show,
 )
+from twin.viewer.wire import WireClient
 
 HISTORY_S = 10.0  # live plots show the last 10 s
 MAX_PENDING_ACTIONS = 1024  # beyond this, actions are dropped (a flood, not a user)
@@ -219,9 +222,15 @@ class LiveTwin:
             rig = make_rig(params, plant=self.plant, ideal_sensors=self.ideal_sensors, seed=self.seed)
             rig.reset(self.x0_m, self.theta0_rad)
             limit = int(RECORD_LIMIT_S / rig.period_s) + 1
-            loop = ClosedLoop(rig, controller, record=True, record_limit=limit)
+            wire = controller if isinstance(controller, WireClient) else None
+            # A wire client's budget is the view's frame (twin.viewer.wire), not the engine's watchdog.
+            timeout = math.inf if wire is not None else None
+            loop = ClosedLoop(rig, controller, record=True, record_limit=limit, controller_timeout_s=timeout)
         except Exception as exc:  # noqa: BLE001 - a controller or rig that cannot start is refused
             raise _Refused(f"cannot start {_show(name)}: {type(exc).__name__}: {exc}") from exc
+        old = self.wire if hasattr(self, "loop") else None
+        if old is not None:  # the run is replaced: its client's session is over (STOP 0, the run is done)
+            old.end(p.STOP_DONE, "the run was replaced (Reset, another controller): STOP 0")
         self.runs += 1
         self.error = None
         if self.lost_paused:  # the pause was the lost ball's, not the user's: the new run goes
@@ -229,6 +238,8 @@ class LiveTwin:
         self.lost_paused = False
         self.controller_name = name
         self.rig, self.loop = rig, loop
+        if wire is not None:
+            wire.begin(rig)  # a new session: the rig stays held until a client acknowledges its sample
         self.run_x0_m, self.run_theta0_rad = self.x0_m, self.theta0_rad  # this run's start
         # (tick, wall time, verdict, setpoint) of the last verdict
         self._verdict: tuple[int, float, Verdict, float] | None = None
@@ -243,6 +254,12 @@ class LiveTwin:
     @property
     def controller(self) -> Any:
         return self.loop.controller
+
+    @property
+    def wire(self) -> WireClient | None:
+        """The wire client when it is this run's controller (``ballbeam view --serve``)."""
+        controller = self.loop.controller
+        return controller if isinstance(controller, WireClient) else None
 
     @property
     def last_sample(self) -> DaqSample | None:
@@ -263,6 +280,8 @@ class LiveTwin:
         """Why the setpoint control does (or does not) act on this controller."""
         if self.supports_reference:
             return "The ball position the controller regulates to."
+        if self.wire is not None:
+            return "A wire client's setpoint is its own: protocol 1 carries none (docs/protocol.md)."
         return (
             f"{self.controller_name} regulates the ball to the centre: it declares no setpoint "
             "(twin.interface.Setpoint; the appendix programs and the sliding-mode law are written for x = 0)."
@@ -307,7 +326,9 @@ class LiveTwin:
             self._download = None  # the previous file goes before the next is built (one held at a time)
             buffer = io.BytesIO()
             writers[kind](self.loop.log(), buffer)
-            name = f"ballbeam_run{self.runs}_{self.controller_name}.{kind}"
+            # A file name of letters, digits, '.', '_' and '-' ("wire client (udp://…)" has slashes).
+            label = re.sub(r"[^A-Za-z0-9._-]+", "-", self.controller_name).strip("-") or "controller"
+            name = f"ballbeam_run{self.runs}_{label}.{kind}"
             self._download = (key, name, buffer.getvalue())
             self.downloads_built += 1
         return self._download[1], self._download[2]
@@ -331,6 +352,9 @@ class LiveTwin:
         self.error = _printable(reason, 500)
         self.running = False
         self.failures += 1
+        wire = self.wire
+        if wire is not None:
+            wire.end(p.STOP_ERROR, "the run failed: STOP 3")
         _log(self.error, stream=sys.stdout)
 
     def _refuse(self, action: str, value: Any, reason: str) -> None:
@@ -387,8 +411,11 @@ class LiveTwin:
     def _do_connected(self, value: Any) -> None:
         if self.awaiting_client:  # the first browser: a fresh run from t = 0, running
             self.awaiting_client = False
-            self.runs = 0  # nobody saw the run built while waiting: the first one watched is run 1
-            self._start_run(self.controller_name)
+            if self.wire is not None:  # never released while waiting; a client may hold its session
+                self.runs = 1
+            else:
+                self.runs = 0  # nobody saw the run built while waiting: the first one watched is run 1
+                self._start_run(self.controller_name)
             self.running = self.error is None
 
     def _do_download(self, value: Any) -> None:
@@ -485,15 +512,31 @@ class LiveTwin:
         "download": _do_download,
     }
 
-    def tick(self) -> None:
+    def tick(self, deadline: float | None = None) -> None:
         """One 20 ms frame of simulated time: as many control periods as fit in it. Never raises: a failure
-        marks the run failed."""
+        marks the run failed. A wire client's tick exchanges one sample, its command awaited until
+        ``deadline`` (time.perf_counter; default one frame from now); until the client acknowledged the held
+        sample the rig stays held and the frame only services the link."""
         if self.error is not None:
             return
+        wire = self.wire
         try:
             n = max(1, int(round(FRAME_S / self.rig.period_s)))
-            for _ in range(n):
-                self.loop.tick()
+            if wire is not None:
+                until = deadline if deadline is not None else time.perf_counter() + FRAME_S
+                if not wire.released:
+                    wire.service(until)
+                    return
+                for i in range(
+                    n
+                ):  # a shorter period: its ticks' deadlines one period apart, the last at until
+                    wire.deadline = until - (n - 1 - i) * self.rig.period_s
+                    self.loop.tick()
+                    if self.rig.ball_lost:
+                        break  # its sample was the session's last
+            else:
+                for _ in range(n):
+                    self.loop.tick()
             self._record()
         except Exception as exc:  # noqa: BLE001 - a failing controller or rig fails the run, not the server
             self._fail(exc)
@@ -501,10 +544,29 @@ class LiveTwin:
         if self.rig.ball_lost and not self.lost_paused:  # an event: pause on the state it left with
             self.lost_paused = True
             self.running = False
+            if wire is not None:
+                wire.end(p.STOP_BALL_LOST, "the ball was lost: STOP 2; Reset starts a new session")
             _log(
                 f"ball lost at t = {self.rig.ball_lost_time_s:.2f} s: paused (Reset starts again)",
                 stream=sys.stdout,
             )
+
+    def service_wire(self, deadline: float) -> None:
+        """A frame in which the run does not tick (paused, waiting for a browser): the wire client's link is
+        still serviced until ``deadline`` (HELLOs, the held sample, refusals counted). Never raises."""
+        wire = self.wire
+        if wire is None:
+            return
+        try:
+            wire.service(deadline)
+        except Exception as exc:  # noqa: BLE001 - the link's failure fails the run, not the server
+            self._fail(exc)
+
+    def close(self) -> None:
+        """The view shuts down: a wire client's session ends with STOP 4."""
+        wire = self.wire
+        if wire is not None:
+            wire.end(p.STOP_SHUTDOWN, "the view shut down: STOP 4")
 
     def _record(self) -> None:
         x, theta, xdot, thetadot = self.rig.true_state()
@@ -554,13 +616,18 @@ class LiveTwin:
                 f"(this run started at {self.run_x0_m:+.2f} m, {self.run_theta0_rad:+.2f} rad)"
             )
         error = f"  \n**run failed**: {_markdown_text(self.error)}" if self.error else ""
+        wire = self.wire
+        speed = f"speed ×{self.speed:g}{self._speed_note()}"
+        if wire is not None:
+            speed = "real time ×1 (the wire client)"
+            error = f"  \n{wire.status_markdown()}{error}"
         notice = ""
         if self.notice is not None and time.monotonic() - self.notice[0] < NOTICE_S:
             notice = f"  \n**refused**: {_markdown_text(self.notice[1])}"
         return (
             f"run {self.runs} · **t = {self.rig.time_s:.2f} s** · {state} · controller: "
             f"**{_markdown_text(self.controller_name)}** · {ball}  \n"
-            f"noise {'on' if self.noise else 'off'} · speed ×{self.speed:g}{self._speed_note()} · "
+            f"noise {'on' if self.noise else 'off'} · {speed} · "
             f"motor {self.rig.motor_volts_v:+.2f} V{judged}{pending}{error}{notice}"
         )
 
