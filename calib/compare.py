@@ -275,8 +275,8 @@ class WindowedPrediction:
                 }
             )
         return {
-            "window_s": self.window_s,
-            "horizon_s": self.horizon_s,
+            "window_s": round(self.window_s, 6),
+            "horizon_s": round(self.horizon_s, 6),
             "dropout_ticks": self.dropouts,
             "ticks_per_window": self.ticks_per_window,
             "windows": self.n_windows,
