@@ -328,9 +328,9 @@ def fit_states(
     """Each window's start state fitted to its own readings at the problem's parameters (none fitted), the
     windows independent: calibration's residuals (units, robust soft_l1 loss) without its continuity terms.
 
-    Levenberg–Marquardt on every window at once, each window with its own damping and its own acceptance
-    (one trust region for all windows stops when the total cost stalls, leaving a badly started window
-    unconverged), the robust loss by iteratively reweighted least squares. The Jacobian is block diagonal (a
+    Levenberg–Marquardt on every window at once, each window with its own damping, acceptance and stop (they
+    are independent problems; one trust region over all stops on the total cost), the robust loss by
+    iteratively reweighted least squares. The Jacobian is block diagonal (a
     window's state moves only its own ticks): a forward difference per state component, all windows in one
     batched simulation. Returns the states (nw, 4) and a one-line account of the convergence."""
     if problem.n_global:
