@@ -237,7 +237,7 @@ def render_markdown(result: Comparison) -> str:
         f"{1e3 * q['ball'].quantization:.3g} mm; angle: one encoder count /√12 = "
         f"{1e3 * q['angle'].quantization:.3g} mrad) and the log's tick-to-tick scatter (1.4826·MAD of the "
         f"second difference /√6: ball {1e3 * q['ball'].scatter:.3g} mm, angle {1e3 * q['angle'].scatter:.3g} mrad). "
-        f"{wp.dropouts} ball ticks are contact dropouts (more than 3 mm from the median of their neighbours) and "
+        f"{wp.dropouts} ball ticks are contact dropouts (more than 3 mm from the median of the five about them) and "
         "are left out of the ball's scores. Whiteness: a prediction's residual grows over the horizon, so it "
         "is correlated; the fitted residual's autocorrelation is the model's one-window error.",
         "",

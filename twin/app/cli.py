@@ -32,6 +32,7 @@ from twin.outputs import JobFiles, check_output_folder, check_outputs, writing
 if TYPE_CHECKING:
     from twin.app.montecarlo import Distribution
     from twin.engine import Catalogue, RunResult
+    from twin.interface import Controller
     from twin.log import RunLog
     from twin.parameters import Parameters
     from twin.verdict import Verdict
@@ -817,33 +818,47 @@ def _compare_params(args: argparse.Namespace) -> tuple[Parameters, str]:
     return _load_params(args), _params_source(args) or "the defaults (thesis values)"
 
 
+def _hardware_controller(spec: str, params: Parameters) -> Callable[[], Controller]:
+    """A factory of fresh hardware controllers named by ``spec`` (one per replayed log); a law on the true state
+    or a failing constructor is refused here, before the work."""
+    from controllers import registry
+    from twin.parameters import ParameterError
+
+    user = user_controller(spec)
+    if user is None:
+        if registry.simulation_only(spec):
+            raise ParameterError(
+                f"--controller {spec}: a law on the true state (simulation only); a log is replayed with a "
+                "hardware controller (raw volts in, DAC volts out)"
+            )
+
+        def named() -> Controller:
+            from twin.interface import Controller
+
+            made = registry.make(spec, params)
+            if not isinstance(made, Controller):  # the registry's flag says so; the type checker cannot
+                raise ParameterError(f"--controller {spec}: not a hardware controller")
+            return made
+
+        return named
+    construct(user, spec, params)
+
+    def own() -> Controller:
+        return construct(user, spec, params)
+
+    return own
+
+
 def _cmd_compare(args: argparse.Namespace) -> int:
     from calib.compare import OUTPUT_FILES, Criterion, compare, write_comparison
     from calib.logs import read_log, rig_log
-    from twin.app.catalogue import construct, user_controller
     from twin.engine import ControllerError
     from twin.parameters import ParameterError
     from twin.plant import NumericalError
 
     params, source = _compare_params(args)
     criterion = Criterion(min_fit_percent=args.min_fit, max_floor_ratio=args.max_floor_ratio)
-    factory: Callable[[], Any] | None = None
-    if args.controller is not None:
-        from controllers import registry
-
-        user = user_controller(args.controller)
-        if user is None and registry.simulation_only(args.controller):
-            raise ParameterError(
-                f"--controller {args.controller}: a law on the true state (simulation only); a log is replayed "
-                "with a hardware controller (raw volts in, DAC volts out)"
-            )
-        if user is None:
-            name = args.controller
-            factory = lambda: registry.make(name, params)  # noqa: E731
-        else:
-            construct(user, args.controller, params)  # a failing constructor is refused before the work
-            cls, spec = user, args.controller
-            factory = lambda: construct(cls, spec, params)  # noqa: E731
+    factory = None if args.controller is None else _hardware_controller(args.controller, params)
     check_output_folder("--out", args.out, OUTPUT_FILES, overwrite=args.overwrite, inputs=_inputs(args))
     logs = [(path, read_log(path)) for path in args.logs]
     rigs = [rig_log(log, path) for path, log in logs]  # every log checked before the work
