@@ -27,6 +27,7 @@ from calib.logs import RigLog, rig_log
 from controllers import registry
 from twin.app.cli import build_parser, main
 from twin.engine import run_closed_loop
+from twin.interface import Controller
 from twin.log import RunLog, save_csv, save_mat
 from twin.parameters import Parameters
 
@@ -315,3 +316,32 @@ def _as_run_log(log: RigLog) -> RunLog:
     """A RigLog back as the file's rows (the start row put back as the first tick, as a rig's log has one)."""
     cols = [np.concatenate([[0.0], getattr(log, f)]) for f in ("time_s", "ball_v", "angle_v", "command_v")]
     return RunLog(*cols, *(np.full(cols[0].size, np.nan) for _ in range(6)))
+
+
+def test_progress_advances_by_stage_and_changes_no_number(sf_log: Path) -> None:
+    from twin.log import load_mat
+
+    log = load_mat(sf_log)
+    calls: list[tuple[int, int, str]] = []
+
+    def progress(done: int, total: int, stage: str) -> None:
+        calls.append((done, total, stage))
+
+    def controller() -> Controller:
+        made = registry.make("appendix-sf")
+        assert isinstance(made, Controller)
+        return made
+
+    with_bar = compare([("sf", log)], P, controller=controller, progress=progress)
+    plain = compare([("sf", log)], P, controller=controller)
+    stages = list(dict.fromkeys(stage for _, _, stage in calls))
+    assert stages == ["fitting the window states", "closed loop sf"]
+    for stage in stages:
+        counts = [(done, total) for done, total, s in calls if s == stage]
+        assert len(counts) >= 5 and counts[-1][0] == counts[-1][1]
+        assert all(b[0] >= a[0] for a, b in zip(counts, counts[1:], strict=False))
+    # The closed loop's 751 ticks reported as they run (every 50), not only at the end.
+    assert [d for d, _, s in calls if s == "closed loop sf"][:3] == [0, 50, 100]
+    a, b = with_bar.to_json(), plain.to_json()
+    a.pop("wall_s"), b.pop("wall_s")
+    assert a == b
