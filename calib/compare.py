@@ -658,13 +658,15 @@ class Criterion:
     no predicted window diverged. The closed loop is reported, not judged: an unstable plant's closed-loop
     replay parts from the log at the first difference the controller does not correct, whatever the model."""
 
-    # Measured (README, "Compare"): the twin's own logs with the true parameters predict at 97–99.6 %, an
-    # independent rig with its calibrated parameters at 98.9–99.8 %, with the nominal ones (resistance +15 %,
-    # inertia −15 %, a 10 mrad zeroing error) at 74 % (ball) and −167 % (beam). 90 % lies between.
+    # Measured (docs/design.md, "Compare"): the twin's own experiment logs at the true parameters predict at
+    # 99.6 % (ball) and 98.2–98.6 % (beam); an independent rig with its calibrated parameters at 99.8 % and
+    # 99.1 %, with the nominal ones (resistance +15 %, inertia −15 %, a 10 mrad zeroing error) at 74 % and
+    # −151 %. 90 % lies between.
     min_fit_percent: float = 90.0
     # A prediction from an estimated state carries the estimate's error grown over the horizon: the twin's own
-    # logs reach 4–9 × the ball's quantization floor (a noiseless wiper: the floor is 0.05 mm), the independent
-    # rig's calibrated parameters 1.3 × (its 0.3 mm noise is the floor); the nominal parameters there 130 ×.
+    # experiment logs reach 3.5–3.8 × the ball's floor (their 0.10 mm scatter), a regulation run at rest 11 ×
+    # (its floor the 0.049 mm quantization alone: the twin's wiper has no white noise); the independent rig's
+    # calibrated parameters 1.2 × (its 0.3 mm noise is the floor), its nominal ones 133 ×.
     max_floor_ratio: float = 20.0
 
     def __post_init__(self) -> None:
