@@ -9,6 +9,7 @@ The public surface (the implementation is in the modules named):
     load_table(path), calibrate_table(table)           calib.static: Table 6.3-style sensor tables
     EXPERIMENTS, run_experiment(name, params)          calib.experiments: what to record on a rig
     write_report(calibration, out_dir)                 calib.report: params.toml, calibration.json, report
+    calib.compare.compare(logs, params)                the twin's prediction of recorded logs (ballbeam compare)
 """
 
 from calib.experiments import EXPERIMENTS, RECOMMENDED, run_experiment

@@ -442,7 +442,7 @@ COMPUTING = [
     "twin/app/validate.py",
     "calib/static.py",
 ]
-COMPUTING += ["calib/report.py"]
+COMPUTING += ["calib/report.py", "calib/compare.py"]
 
 
 @pytest.mark.parametrize("name", COMPUTING)

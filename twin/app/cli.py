@@ -931,7 +931,7 @@ def _write_out(args: argparse.Namespace, write: Callable[..., Any], result: Any)
             write(result, args.out, overwrite=args.overwrite)
 
 
-def _progress_bar(what: str) -> Callable[..., None]:
+def _progress_bar(what: str, unit: str = "run") -> Callable[..., None]:
     """A progress bar with ETA on stderr (tqdm), advanced by ``(done, total[, stage])`` calls (a
     ``fanout.Progress``). A job of stages (validate) reports over all its runs, the stage in the label, so
     that the ETA is the whole job's; a count that goes back starts a new bar."""
@@ -944,7 +944,7 @@ def _progress_bar(what: str) -> Callable[..., None]:
         if not bar or done < bar[0].n:
             if bar:
                 bar.pop().close()
-            bar.append(tqdm(total=total, desc=label, unit="run", file=sys.stderr, dynamic_ncols=True))
+            bar.append(tqdm(total=total, desc=label, unit=unit, file=sys.stderr, dynamic_ncols=True))
         b = bar[0]
         if b.total != total:  # a stage's size corrected once it is known
             b.total = total
@@ -998,6 +998,133 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
         if args.out is not None:
             print(f"wrote {Path(args.out) / 'params.toml'}, calibration.json, report.md")
     return 0 if cal.converged else 1
+
+
+def _compare_params(args: argparse.Namespace) -> tuple[Parameters, str]:
+    """compare's parameters: a calibration folder's params.toml, or --params/--set (the defaults without)."""
+    from twin.parameters import ParameterError, Parameters
+
+    if args.calibration is not None:
+        if args.params or args.set:
+            raise ParameterError("--calibration brings its own parameters: drop --params/--set")
+        path = Path(args.calibration) / "params.toml"
+        if not path.is_file():
+            raise ParameterError(
+                f"--calibration {args.calibration}: no params.toml in it (calibrate --out DIR writes one)"
+            )
+        return Parameters.from_file(path), f"--calibration {args.calibration}"
+    return _load_params(args), _params_source(args) or "the defaults (thesis values)"
+
+
+def _hardware_controller(spec: str, params: Parameters) -> Callable[[], Controller]:
+    """A factory of fresh hardware controllers named by ``spec`` (one per replayed log); a law on the true state
+    or a failing constructor is refused here, before the work."""
+    from controllers import registry
+    from twin.parameters import ParameterError
+
+    user = user_controller(spec)
+    if user is None:
+        if registry.simulation_only(spec):
+            raise ParameterError(
+                f"--controller {spec}: a law on the true state (simulation only); a log is replayed with a "
+                "hardware controller (raw volts in, DAC volts out)"
+            )
+
+        def named() -> Controller:
+            from twin.interface import Controller
+
+            made = registry.make(spec, params)
+            if not isinstance(made, Controller):  # the registry's flag says so; the type checker cannot
+                raise ParameterError(f"--controller {spec}: not a hardware controller")
+            return made
+
+        return named
+    construct(user, spec, params)
+
+    def own() -> Controller:
+        return construct(user, spec, params)
+
+    return own
+
+
+def _cmd_compare(args: argparse.Namespace) -> int:
+    from calib.compare import OUTPUT_FILES, Criterion, compare, write_comparison
+    from calib.logs import read_log, rig_log
+    from twin.engine import ControllerError
+    from twin.parameters import ParameterError
+    from twin.plant import NumericalError
+
+    params, source = _compare_params(args)
+    criterion = Criterion(min_fit_percent=args.min_fit, max_floor_ratio=args.max_floor_ratio)
+    factory = None if args.controller is None else _hardware_controller(args.controller, params)
+    check_output_folder("--out", args.out, OUTPUT_FILES, overwrite=args.overwrite, inputs=_inputs(args))
+    logs = [(path, read_log(path)) for path in args.logs]
+    rigs = [rig_log(log, path) for path, log in logs]  # every log checked before the work
+    period_s = min(r.period_s for r in rigs)
+    if args.window < 2 * period_s:
+        raise ParameterError(
+            f"--window = {args.window:g}: at least 2 ticks of the logs' {period_s * 1e3:g} ms period "
+            f"({2 * period_s:g} s)"
+        )
+    if not period_s <= args.horizon <= args.window:
+        raise ParameterError(
+            f"--horizon = {args.horizon:g}: from one tick ({period_s:g} s) to the window ({args.window:g} s)"
+        )
+    bar = _progress_bar("compare", unit="step")
+    try:
+        result = compare(
+            logs,
+            params,
+            params_source=source,
+            controller=factory,
+            controller_name=args.controller or "",
+            window_s=args.window,
+            horizon_s=args.horizon,
+            criterion=criterion,
+            seed=args.seed,
+            progress=bar,
+        )
+    except ControllerError as exc:
+        print(f"ballbeam compare: the controller failed: {exc}", file=sys.stderr)
+        return 1
+    except NumericalError as exc:
+        print(f"ballbeam compare: {one_line(exc)}", file=sys.stderr)
+        return 1
+    _write_out(args, write_comparison, result)
+    if args.json:
+        print(json.dumps(result.to_json()))
+        return 0 if result.passed else 1
+    wp = result.windowed
+    print(
+        f"{wp.n_windows} windows of {wp.window_s:g} s; each window predicted {wp.horizon_s:g} s ahead from the "
+        "previous window's fitted end state (scored), and fitted to itself (shown apart)"
+    )
+    for c in ("ball", "angle"):
+        pred, fitted = wp.predicted[c], wp.fitted[c]
+        unit, scale = ("mm", 1e3) if c == "ball" else ("mrad", 1e3)
+        print(
+            f"{c:<6} predicted fit {pred.fit_percent:7.2f} %  RMS {scale * pred.rms:.3g} {unit} "
+            f"= {pred.floor_ratio:.1f} × floor {scale * pred.floor:.3g} {unit}  "
+            f"whiteness {pred.outside}/{len(pred.acf) - 1} lags outside  (fitted {fitted.fit_percent:.2f} %)"
+        )
+    for cl in result.closed_loop:
+        tracked = ", ".join(
+            f"{c} until {'the end' if t is None else f'{t:.2f} s'}" for c, t in cl.tracked_s.items()
+        )
+        print(f"closed loop {cl.path} ({cl.controller}): tracks the log: {tracked}")
+        print(
+            f"  verdict  log: {cl.verdict_log.reason}; twin: {cl.verdict_twin.reason} (measured), "
+            f"{cl.verdict_twin_true.reason} (true state); agree: {'yes' if cl.verdicts_agree else 'no'}"
+        )
+    crit = result.criterion
+    if result.passed:
+        print(
+            f"conforms: fit ≥ {crit.min_fit_percent:g} % and RMS ≤ {crit.max_floor_ratio:g} × floor on both channels"
+        )
+    else:
+        print(f"does not conform: {'; '.join(result.failures)}")
+    print(f"wrote {Path(args.out) / 'report.md'}, comparison.json and the figures")
+    return 0 if result.passed else 1
 
 
 def _cmd_calibrate_static(args: argparse.Namespace) -> int:
@@ -1483,6 +1610,63 @@ def build_parser() -> argparse.ArgumentParser:
     _add_params_options(cal)
     cal.set_defaults(func=_cmd_calibrate)
 
+    cmp_ = sub.add_parser(
+        "compare",
+        help="the twin's prediction of recorded logs: windowed prediction and, with --controller, the closed loop "
+        "from the first block; report, figures, JSON (exit 0 conforms, 1 not, 2 bad input)",
+    )
+    cmp_.add_argument(
+        "logs", nargs="+", metavar="LOG", help="data_file.mat or .csv logs (rig, run, serve, experiment)"
+    )
+    cmp_.add_argument(
+        "--out", required=True, metavar="DIR", help="write report.md, comparison.json and PNGs here"
+    )
+    cmp_.add_argument("--overwrite", action="store_true", help="replace its own files in an existing --out")
+    cmp_.add_argument(
+        "--calibration",
+        metavar="DIR",
+        help="the parameters of a calibration (its params.toml; not with --params)",
+    )
+    cmp_.add_argument(
+        "--controller",
+        metavar="NAME|MODULE:CLASS",
+        help="the hardware controller that ran: the twin then runs it from each log's first block. "
+        + controller_help,
+    )
+    cmp_.add_argument(
+        "--window",
+        type=finite_float(0, unit="s"),  # its minimum, 2 ticks, follows from the logs' period
+        default=1.0,
+        metavar="S",
+        help="window whose fitted state starts the next prediction (default 1 s, as calibrate)",
+    )
+    cmp_.add_argument(
+        "--horizon",
+        type=finite_float(0, lo_open=True, unit="s"),
+        default=0.5,
+        metavar="S",
+        help="seconds predicted and scored from each window's start (default 0.5: two e-folding times of the "
+        "open-loop plant's unstable pole, 3.8 /s)",
+    )
+    cmp_.add_argument(
+        "--min-fit",
+        type=finite_float(hi=100.0, unit="%"),
+        default=90.0,
+        metavar="PCT",
+        help="conformance: the prediction's fit %% on each channel at least this (default 90)",
+    )
+    cmp_.add_argument(
+        "--max-floor-ratio",
+        type=finite_float(0, lo_open=True),
+        default=20.0,
+        metavar="K",
+        help="conformance: the prediction's residual RMS at most K × the channel's noise floor (default 20)",
+    )
+    cmp_.add_argument("--seed", type=seed(), default=0, help="seed of the closed-loop twin's sensor noise")
+    cmp_.add_argument("--json", action="store_true", help="print comparison.json")
+    _add_params_options(cmp_)
+    cmp_.set_defaults(func=_cmd_compare)
+
     stat = sub.add_parser("calibrate-static", help="fit a sensor's static curve from a measured table (CSV)")
     stat.add_argument(
         "table", metavar="TABLE.csv", help="columns position_m,volts_v (ball) or di,volts_v (angle)"
@@ -1512,7 +1696,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_params_options(par)
     par.add_argument("--json", action="store_true", help="print JSON")
     par.set_defaults(func=_cmd_params)
-    for command in (run, sweep, mc, val, view):
+    for command in (run, sweep, mc, val, view, cmp_):
         _add_controller_timeout(command)
     return parser
 
