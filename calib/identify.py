@@ -43,6 +43,7 @@ import numpy as np
 import scipy.ndimage
 import scipy.optimize
 import scipy.sparse
+import scipy.sparse.linalg
 import scipy.stats
 
 from calib.logs import RigLog
@@ -92,6 +93,8 @@ MODEL_RESOLUTION: dict[str, tuple[float, float]] = {
 # Residuals stay correlated over seconds (a still beam reads the same encoder level; the reference model's
 # small errors against the rig): the intervals treat each 5 s of log as one independent cluster.
 CLUSTER_S = 5.0
+# A fit's progress: (evaluations done, evaluation budget, stage).
+Progress = Callable[[int, int, str], None]
 
 
 class CalibrationError(ValueError):
@@ -359,17 +362,25 @@ class WindowProblem:
         windows; columns: global parameters, then window states."""
         nw, W, ng = self.n_windows, self.W, self.n_global
         joins = np.flatnonzero(self.windows.joined)
-        m = scipy.sparse.lil_matrix((2 * nw * W + 4 * joins.size, ng + 4 * nw), dtype=np.int8)
-        for w in range(nw):
-            for channel in range(2):
-                rows = slice(channel * nw * W + w * W, channel * nw * W + (w + 1) * W)
-                m[rows, :ng] = 1
-                m[rows, ng + 4 * w : ng + 4 * w + 4] = 1
-        for i, w in enumerate(joins.tolist()):
-            rows = slice(2 * nw * W + 4 * i, 2 * nw * W + 4 * i + 4)
-            m[rows, :ng] = 1
-            m[rows, ng + 4 * w : ng + 4 * w + 8] = 1
-        return m.tocsr()
+        # Built as coordinates (a 1-hour log has 360 000 rows): each reading row touches the globals and its
+        # window's 4 states, each continuity row the globals and the 8 states of the windows it joins.
+        reading_window = np.tile(np.repeat(np.arange(nw), W), 2)
+        n_read = reading_window.size
+        read_rows = np.repeat(np.arange(n_read), ng + 4)
+        read_cols = np.concatenate(
+            [np.tile(np.arange(ng), (n_read, 1)), ng + 4 * reading_window[:, None] + np.arange(4)], axis=1
+        ).ravel()
+        join_rows = n_read + np.arange(4 * joins.size)
+        join_window = np.repeat(joins, 4)
+        cont_rows = np.repeat(join_rows, ng + 8)
+        cont_cols = np.concatenate(
+            [np.tile(np.arange(ng), (join_rows.size, 1)), ng + 4 * join_window[:, None] + np.arange(8)],
+            axis=1,
+        ).ravel()
+        rows = np.concatenate([read_rows, cont_rows])
+        cols = np.concatenate([read_cols, cont_cols])
+        shape = (n_read + join_rows.size, ng + 4 * nw)
+        return scipy.sparse.csr_matrix((np.ones(rows.size, dtype=np.int8), (rows, cols)), shape=shape)
 
     # --- the model --------------------------------------------------------------------------------------
     def parameters(self, z: np.ndarray) -> Parameters:
@@ -494,48 +505,48 @@ def _solve(
     free: np.ndarray,
     *,
     max_nfev: int,
-    progress: Callable[[str], None] | None,
+    progress: Progress | None,
+    stage: str = "",
 ) -> scipy.optimize.OptimizeResult:
-    """least_squares over the ``free`` entries of z (the others held at z0)."""
+    """least_squares over the ``free`` entries of z (the others held at z0).
+
+    The Jacobian stays sparse (its rows touch the globals and one or two windows' states): memory and
+    each iteration's cost are linear in the log's length, and the trust-region steps are solved by LSMR. A
+    dense Jacobian of a 1-hour log is 40 GiB, and the exact solver's SVD of a 60 s log's (6 236 × 244) took
+    most of that fit's time."""
     lo, hi = problem.bounds()
     scale = problem.scale()
-    sparsity = problem.sparsity()[:, free]
+    pattern = problem.sparsity()[:, free].tocoo()
+    rows, cols = pattern.row.astype(np.int64), pattern.col.astype(np.int64)
+    shape = pattern.shape
     calls = [0]
-    started = time.perf_counter()
 
     def fun(u: np.ndarray) -> np.ndarray:
         z = z0.copy()
         z[free] = u
         r = problem.residuals(z)
         calls[0] += 1
-        if progress is not None and calls[0] % 10 == 0:
-            cost = float(np.sum(np.sqrt(1 + (r / ROBUST_SCALE) ** 2) - 1))
-            progress(
-                f"evaluations {calls[0]:4d}  robust cost {cost:12.1f}  {time.perf_counter() - started:6.1f} s"
-            )
+        if progress is not None:
+            progress(min(calls[0], max_nfev), max_nfev, stage)
         return r
 
     u0 = np.clip(z0[free], lo[free], hi[free])
-    pattern = sparsity.tocsc()
-    groups = _color_columns(pattern)
+    groups = _color_columns(pattern.tocsc())
     n_groups = int(groups.max()) + 1
 
-    def jac(u: np.ndarray) -> np.ndarray:
+    def jac(u: np.ndarray) -> scipy.sparse.csr_matrix:
         # Forward differences, every group of columns that share no row perturbed at once, all groups in
-        # one batched simulation; returned dense (a few hundred unknowns: the exact trust-region solver).
+        # one batched simulation.
         step = 1.49e-8 * np.maximum(np.abs(u), scale[free])
         step = np.where(u + step > hi[free], -step, step)
         zs = np.tile(z0, (n_groups + 1, 1))
         zs[:, free] = u
         for g in range(n_groups):
-            cols = np.flatnonzero(groups == g)
-            zs[g + 1, free[cols]] += step[cols]
+            members = np.flatnonzero(groups == g)
+            zs[g + 1, free[members]] += step[members]
         r = problem.residuals_batch(zs)
-        out = np.zeros((r.shape[1], u.size))
-        for j in range(u.size):
-            rows = pattern.indices[pattern.indptr[j] : pattern.indptr[j + 1]]
-            out[rows, j] = (r[groups[j] + 1, rows] - r[0, rows]) / step[j]
-        return out
+        data = (r[groups[cols] + 1, rows] - r[0, rows]) / step[cols]
+        return scipy.sparse.csr_matrix((data, (rows, cols)), shape=shape)
 
     return scipy.optimize.least_squares(
         fun,
@@ -546,7 +557,7 @@ def _solve(
         loss="soft_l1",
         f_scale=ROBUST_SCALE,
         method="trf",
-        tr_solver="exact",
+        tr_solver="lsmr",
         max_nfev=max_nfev,
         xtol=1e-8,
         ftol=1e-8,
@@ -624,6 +635,50 @@ def _rms(problem: WindowProblem, pred_b: np.ndarray, pred_a: np.ndarray) -> dict
     }
 
 
+@dataclass(frozen=True)
+class _Covariance:
+    cov: np.ndarray  # (g, g) cluster-robust covariance of the global parameters
+    naive_var: np.ndarray  # (g,) their variances if the residuals were white
+    information: np.ndarray  # (g, g) the globals' Fisher information, the window states marginalized
+    n_clusters: int
+
+
+def _row_windows(problem: WindowProblem) -> np.ndarray:
+    """The window each residual row belongs to (a continuity row: the window it leaves)."""
+    nw, W = problem.n_windows, problem.W
+    joins = np.flatnonzero(problem.windows.joined)
+    per_tick = np.repeat(np.arange(nw), W)
+    return np.concatenate([per_tick, per_tick, np.repeat(joins, 4)])
+
+
+def _sandwich(problem: WindowProblem, jac: scipy.sparse.spmatrix, rw: np.ndarray) -> _Covariance:
+    """The globals' block of the sandwich covariance H⁻¹·(Σ_c J_cᵀr_c r_cᵀJ_c)·H⁻¹ (H = JᵀJ) without
+    forming a dense matrix over the window states: the g columns of H⁻¹ by a sparse LU of H (normalized by
+    its diagonal, which keeps it well scaled), then J·H⁻¹[:, :g] (rows × g) summed per cluster."""
+    n_g = problem.n_global
+    J = scipy.sparse.csr_matrix(jac)
+    H = (J.T @ J).tocsc()
+    d = np.sqrt(np.maximum(H.diagonal(), 1e-300))
+    Dinv = scipy.sparse.diags(1.0 / d)
+    # A flat direction (a parameter the data do not touch) leaves H singular: a ridge of 1e-12 of the
+    # normalized diagonal keeps the factorization and shows up as a huge variance.
+    Hn = (Dinv @ H @ Dinv + 1e-12 * scipy.sparse.identity(H.shape[0])).tocsc()
+    lu = scipy.sparse.linalg.splu(Hn)
+    rhs = np.zeros((H.shape[0], n_g))
+    rhs[np.arange(n_g), np.arange(n_g)] = 1.0 / d[:n_g]
+    X = lu.solve(rhs) / d[:, None]  # H⁻¹[:, :g]
+    per_cluster = max(1, int(round(CLUSTER_S / (problem.W * problem.windows.period_s))))
+    cluster = _row_windows(problem) // per_cluster
+    n_c = int(cluster.max()) + 1 if cluster.size else 1
+    B = np.asarray(J @ X)  # (rows, g)
+    G = np.stack([np.bincount(cluster, weights=B[:, k] * rw, minlength=n_c) for k in range(n_g)], axis=1)
+    cov = G.T @ G * n_c / max(n_c - 1, 1)
+    inv_block = X[:n_g]
+    with np.errstate(all="ignore"):
+        information = np.linalg.pinv(0.5 * (inv_block + inv_block.T))
+    return _Covariance(cov, np.diag(inv_block).copy(), information, n_c)
+
+
 def calibrate(
     logs: Sequence[RigLog],
     fit: Sequence[str],
@@ -632,7 +687,7 @@ def calibrate(
     window_s: float = 1.0,
     substeps: int = 5,
     max_nfev: int = 100,
-    progress: Callable[[str], None] | None = None,
+    progress: Progress | None = None,
 ) -> Calibration:
     """Fit ``fit`` (names from ``FITTABLE``) to ``logs`` from ``start`` (default: the thesis's values)."""
     started = time.perf_counter()
@@ -644,58 +699,32 @@ def calibrate(
     z0 = problem.initial_vector()
     n_g = problem.n_global
     states = np.arange(n_g, z0.size)
-    # 1. The window states alone at the starting parameters: the "before" of the report.
-    if progress:
-        progress(
-            f"{problem.n_windows} windows of {problem.W} ticks, {n_g} parameters: fitting the window states"
-        )
-    before = _solve(problem, z0, states, max_nfev=10, progress=progress)
+    # 1. The window states alone at the starting parameters, fitted to convergence: the "before" of the
+    # report is then the best the starting parameters can do (a few evaluations would leave the states
+    # short and overstate what the fit did).
+    before = _solve(problem, z0, states, max_nfev=max_nfev, progress=progress, stage="window states, start")
     z_before = z0.copy()
     z_before[states] = before.x
     # 2. Everything together.
-    if progress:
-        progress("fitting the parameters and the window states together")
     every = np.arange(z0.size)
-    result = _solve(problem, z_before, every, max_nfev=max_nfev, progress=progress)
+    result = _solve(
+        problem, z_before, every, max_nfev=max_nfev, progress=progress, stage="parameters and states"
+    )
     z = result.x
 
-    # Intervals: the cluster-robust ("sandwich") covariance with a window as the cluster. Residuals within a
-    # window are correlated (quantization that holds for many ticks, the model's own small errors), which
-    # makes the plain Gauss-Newton covariance optimistic; the windows are independent of each other (each
-    # has its own initial state). Bread: the loss-weighted Jacobian scipy returns; meat: each window's
-    # gradient contribution Jᵀr with the robust loss's weights.
-    jac = result.jac.toarray() if scipy.sparse.issparse(result.jac) else np.asarray(result.jac)
+    # Intervals: the cluster-robust ("sandwich") covariance, clusters of CLUSTER_S of log. Residuals within a
+    # cluster are correlated (quantization that holds for many ticks, the model's own small errors), which
+    # makes the plain Gauss-Newton covariance optimistic. Bread: the loss-weighted Jacobian scipy returns;
+    # meat: each cluster's gradient contribution Jᵀr with the robust loss's weights.
     r = problem.residuals(z)
     weights = 1.0 / np.sqrt(np.sqrt(1.0 + (r / ROBUST_SCALE) ** 2))  # √ρ′ of soft_l1
     rw = r * weights
-    nw, W = problem.n_windows, problem.W
-    bread = np.linalg.pinv(jac.T @ jac)
-    meat = np.zeros_like(bread)
-    per_cluster = max(1, int(round(CLUSTER_S / (W * problem.windows.period_s))))
-    clusters = [range(c, min(c + per_cluster, nw)) for c in range(0, nw, per_cluster)]
-    joins = np.flatnonzero(problem.windows.joined)
-    join_rows = {int(w): 2 * nw * W + 4 * i + np.arange(4) for i, w in enumerate(joins)}
-    for members in clusters:
-        rows = np.concatenate(
-            [
-                np.concatenate(
-                    [
-                        np.arange(w * W, (w + 1) * W),
-                        nw * W + np.arange(w * W, (w + 1) * W),
-                        join_rows.get(w, np.zeros(0, dtype=int)),
-                    ]
-                )
-                for w in members
-            ]
-        )
-        g = jac[rows].T @ rw[rows]
-        meat += np.outer(g, g)
-    n_c = len(clusters)
-    cov = bread @ meat @ bread * n_c / max(n_c - 1, 1)
+    sandwich = _sandwich(problem, result.jac, rw)
+    n_c = sandwich.n_clusters
     # The same covariance assuming white residuals, to report how much the correlation widens the intervals.
     spread2 = float(rw @ rw) / max(r.size - z.size, 1)
-    naive = np.sqrt(np.maximum(np.diag(bread)[:n_g] * spread2, 1e-300))
-    cov_g = cov[:n_g, :n_g]
+    naive = np.sqrt(np.maximum(sandwich.naive_var * spread2, 1e-300))
+    cov_g = sandwich.cov
     std = np.sqrt(np.maximum(np.diag(cov_g), 0.0))
     inflation = float(np.median(std / naive)) if n_g else 1.0
     with np.errstate(invalid="ignore", divide="ignore"):

@@ -732,7 +732,7 @@ def _write_out(args: argparse.Namespace, write: Callable[..., Any], result: Any)
             write(result, args.out, overwrite=args.overwrite)
 
 
-def _progress_bar(what: str) -> Callable[..., None]:
+def _progress_bar(what: str, unit: str = "run") -> Callable[..., None]:
     """A progress bar with ETA on stderr (tqdm), advanced by ``(done, total[, stage])`` calls (a
     ``fanout.Progress``). A job of stages (validate) reports over all its runs, the stage in the label, so
     that the ETA is the whole job's; a count that goes back starts a new bar."""
@@ -745,7 +745,7 @@ def _progress_bar(what: str) -> Callable[..., None]:
         if not bar or done < bar[0].n:
             if bar:
                 bar.pop().close()
-            bar.append(tqdm(total=total, desc=label, unit="run", file=sys.stderr, dynamic_ncols=True))
+            bar.append(tqdm(total=total, desc=label, unit=unit, file=sys.stderr, dynamic_ncols=True))
         b = bar[0]
         if b.total != total:  # a stage's size corrected once it is known
             b.total = total
@@ -780,10 +780,8 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
             f"({2 * period_s:g} s)"
         )
 
-    def progress(line: str) -> None:
-        if not args.json:
-            print(f"  {line}", file=sys.stderr, flush=True)
-
+    # A bar per stage over its evaluation budget: the ETA is an upper bound (a fit stops when it converges).
+    progress = None if args.json else _progress_bar("calibrate", unit="evaluation")
     cal = calibrate(logs, fit, start, window_s=args.window, progress=progress)
     _write_out(args, write_report, cal)
     if args.json:
