@@ -46,7 +46,8 @@ import scipy.sparse
 import scipy.sparse.linalg
 import scipy.stats
 
-from calib.logs import RigLog
+from calib.adequacy import ChannelAdequacy, channel_adequacy
+from calib.logs import DAC_STEP_V, RigLog
 from twin.converters import ball_position_m
 from twin.dcmotor import torque_nm
 from twin.output_stage import amplifier_volts
@@ -58,6 +59,7 @@ __all__ = [
     "FITTABLE",
     "Calibration",
     "CalibrationError",
+    "DroppedWindow",
     "FitSpec",
     "FittedValue",
     "WindowProblem",
@@ -78,6 +80,9 @@ STATE_SCALE = np.array([0.05, 0.05, 0.2, 0.5])
 # 11.7 mV steps and unmodelled friction can push the state in a second — the rig's state is continuous.
 CONTINUITY_SIGMA = np.array([0.2e-3, 0.5e-3, 5e-3, 20e-3])
 CONFIDENCE = 0.95
+# A log's median tick spacing (timem) must be daq.period_s within 1 %: a PC timer's period holds to far better
+# over a log, and a log recorded at another period (10 ms read as 20 ms) is a factor away.
+PERIOD_TOLERANCE = 0.01
 # The smooth model's own resolution (95 %), measured: on logs whose physics is exactly the fit's equations (the
 # reference plant) but whose sensors are the rig's quantized chain, fits of the recommended experiment miss by
 # up to 0.07 % (resistance), 0.09 % (inertia), 1.4 % (pivot damping) and 0.04 mrad (zeroing error); on logs of
@@ -95,6 +100,52 @@ MODEL_RESOLUTION: dict[str, tuple[float, float]] = {
 CLUSTER_S = 5.0
 # A fit's progress: (evaluations done, evaluation budget, stage).
 Progress = Callable[[int, int, str], None]
+
+
+# Windows the smooth model cannot be trusted on are dropped before the fit (a warning names them):
+# * the amplifier at its rails in more than RAILED_SHARE of a window's ticks (a command within one DAC step
+#   of the rail or beyond): a real amplifier's output there sags with the current and its recovery is not
+#   the clipped line of §6.4, and a railed tick tells the fit nothing about the command's gain;
+#   RAILED_SHARE was set by measurement (docs/design.md);
+# * the ball at the track's end (its reading within a ball radius of ±track.half_length_m) and everything
+#   after it in that log: the ball is against a stop or has left the wires (the open wiper then reads as a
+#   ball near the centre), and the software cannot tell which.
+RAILED_SHARE = 0.2
+
+
+@dataclass(frozen=True)
+class DroppedWindow:
+    """A window left out of the fit, and why."""
+
+    path: str
+    start_s: float  # its first tick's time (timem)
+    reason: str  # "railed" or "ball lost"
+
+
+# Model adequacy (calib.adequacy), thresholds measured on fits whose model is right (twin logs and the
+# independent rig with the fitted effects only: residual RMS 0.4–0.6× the floor, |ρ(1)| ≤ 0.3) and on the
+# audit's mismatched cases (docs/design.md): a channel is mismatched when its residual RMS is over
+# MISMATCH_RATIO × its floor, or over COLOURED_RATIO × with |ρ(1)| > COLOURED_LAG1 (large and coloured,
+# where white excess is contact noise heavier than the floor, which the intervals already carry).
+MISMATCH_RATIO = 3.0
+COLOURED_RATIO = 1.5
+COLOURED_LAG1 = 0.5
+# Effects a mismatch is refitted with, freed one at a time, to name the one that explains it.
+DIAGNOSTIC_EFFECTS = {"beam.pivot_friction_nm": "Coulomb (dry) friction in the pivot"}
+# Weak excitation: a parameter whose statistical standard deviation exceeds its bound (relative to its value,
+# or absolute) is only loosely determined by the logs: measured on the recommended experiment (resistance
+# 0.05 %, inertia 0.07 %, damping 1.9 %, zeroing 0.04 mrad) against regulation without setpoint moves or
+# dither (0.05 %, 0.15 %, 5.9 %, 0.04 mrad), docs/design.md.
+WEAK_EXCITATION: dict[str, tuple[str, float]] = {
+    "motor.resistance_ohm": ("relative", 0.01),
+    "beam.inertia_pivot_kgm2": ("relative", 0.01),
+    "beam.pivot_damping_nm_s_per_rad": ("relative", 0.04),
+    "angle_sensor.zeroing_error_rad": ("absolute", 0.3e-3),
+}
+INTERVAL_METHOD = (
+    f"cluster-robust (sandwich) covariance, {CLUSTER_S:g} s clusters, Student's t, plus the model's measured "
+    "resolution in quadrature"
+)
 
 
 class CalibrationError(ValueError):
@@ -183,6 +234,17 @@ class Calibration:
     n_ticks: int
     ci_inflation: float
     traces: dict[str, np.ndarray] = field(default_factory=dict)
+    # What makes the result untrustworthy (model mismatch, weak excitation): calibrate exits 1 when any.
+    problems: list[str] = field(default_factory=list)
+    adequacy: dict[str, ChannelAdequacy] = field(default_factory=dict)
+    dropped: list[DroppedWindow] = field(default_factory=list)
+    information_condition: float = math.nan
+    diagnosis: str = ""
+    interval_method: str = INTERVAL_METHOD
+
+    @property
+    def trustworthy(self) -> bool:
+        return self.converged and not self.problems
 
     @property
     def correlation_names(self) -> list[str]:
@@ -218,6 +280,16 @@ class Calibration:
             "ticks": self.n_ticks,
             "ci_inflation": round(self.ci_inflation, 3),
             "ci_level": CONFIDENCE,
+            "interval_method": self.interval_method,
+            "problems": list(self.problems),
+            "adequacy": {k: a.to_json() for k, a in self.adequacy.items()},
+            "dropped_windows": [
+                {"log": d.path, "start_s": round(d.start_s, 4), "reason": d.reason} for d in self.dropped
+            ],
+            "information_condition": round(self.information_condition, 2)
+            if math.isfinite(self.information_condition)
+            else None,
+            "diagnosis": self.diagnosis,
         }
 
 
@@ -280,7 +352,10 @@ class WindowProblem:
         *,
         window_s: float = 1.0,
         substeps: int = 5,
+        screen: bool = True,
     ) -> None:
+        """``screen``: drop the windows the model cannot be trusted on (``RAILED_SHARE``, the ball lost),
+        listed in ``dropped``."""
         unknown = [n for n in fit if n not in FITTABLE]
         if unknown:
             raise CalibrationError(f"cannot fit {unknown}: fittable parameters are {sorted(FITTABLE)}")
@@ -293,9 +368,19 @@ class WindowProblem:
             raise CalibrationError(
                 f"the logs have different tick periods {sorted(periods)} s: fit them separately"
             )
+        expected = base.daq.period_s
+        for log in logs:
+            if abs(log.period_s - expected) > PERIOD_TOLERANCE * expected:
+                raise CalibrationError(
+                    f"{log.path}: 'timem' (time_s) ticks every {log.period_s * 1e3:.6g} ms but the parameters' "
+                    f"daq.period_s is {expected * 1e3:.6g} ms: the model's zero-order hold and block mean would "
+                    f"be wrong; give the log's period (--set daq.period_s={log.period_s:.6g})"
+                )
         self.base = base
         self.fit = list(fit)
         self.substeps = substeps
+        self.screen = screen
+        self.dropped: list[DroppedWindow] = []
         self.windows = self._cut(logs, window_s)
         self.n_windows, self.W = self.windows.command_v.shape
         self.n_global = len(self.fit)
@@ -308,6 +393,8 @@ class WindowProblem:
         parts: dict[str, list[np.ndarray]] = {k: [] for k in ("cmd", "prev", "yb", "ya", "s0")}
         joined: list[bool] = []
         curve_x, curve_v = np.asarray(p.ball_sensor.curve_position_m), np.asarray(p.ball_sensor.curve_volts_v)
+        amp = p.amplifier
+        rail_command_v = amp.rail_v / amp.gain_v_per_v
         for log in logs:
             yb = np.asarray(ball_position_m(log.ball_v, p.software))
             # The angle channel in counts (the level table inverted), then radians from the zeroing angle.
@@ -316,16 +403,30 @@ class WindowProblem:
             # First guesses of the window states: the curve inverted, through a 5-tick median so that a
             # contact-noise spike at a window's start does not throw its first guess off the track.
             x_est = scipy.ndimage.median_filter(
-                np.interp(log.ball_v, curve_v, curve_x), size=5, mode="nearest"
+                np.interp(log.ball_v, curve_x, curve_v), size=5, mode="nearest"
             )
             th_est = (
                 scipy.ndimage.median_filter(ya, size=3, mode="nearest") + p.angle_sensor.zeroing_error_rad
             )
             n = len(log.time_s)
-            for j, i0 in enumerate(range(1, n - w, w)):  # tick i0 ends where the window starts
-                if parts["cmd"]:
-                    joined.append(j > 0)
+            railed = np.abs(log.command_v - amp.zero_command_v) >= rail_command_v - DAC_STEP_V
+            at_end = np.flatnonzero(np.abs(yb) >= p.track.half_length_m - p.ball.radius_m)
+            lost_from = int(at_end[0]) if self.screen and at_end.size else n
+            kept_last = False
+            for i0 in range(1, n - w, w):  # tick i0 ends where the window starts
                 idx = np.arange(i0 + 1, i0 + w + 1)
+                reason = ""
+                if self.screen and idx[-1] >= lost_from:
+                    reason = "ball lost"
+                elif self.screen and np.mean(railed[idx - 1]) > RAILED_SHARE:
+                    reason = "railed"
+                if reason:
+                    self.dropped.append(DroppedWindow(str(log.path), float(log.time_s[idx[0]]), reason))
+                    kept_last = False
+                    continue
+                if parts["cmd"]:
+                    joined.append(kept_last)
+                kept_last = True
                 parts["cmd"].append(log.command_v[idx - 1])
                 parts["prev"].append(log.command_v[idx - 2])
                 parts["yb"].append(yb[idx])
@@ -333,6 +434,12 @@ class WindowProblem:
                 xd = (x_est[i0 + 1] - x_est[i0 - 1]) / (2 * period)
                 thd = (th_est[i0 + 1] - th_est[i0 - 1]) / (2 * period)
                 parts["s0"].append(np.array([x_est[i0], th_est[i0], xd, thd]))
+        if not parts["cmd"] and self.dropped:
+            raise CalibrationError(
+                f"{logs[0].path}: every window was dropped ("
+                + ", ".join(sorted({d.reason for d in self.dropped}))
+                + "): 'aout' (command_v) at the amplifier's rails or 'datam1' (ball_v) at the track's end"
+            )
         if not parts["cmd"]:
             raise CalibrationError(f"the logs are shorter than one window ({w} ticks)")
         return _Windows(
@@ -558,6 +665,7 @@ def _solve(
         f_scale=ROBUST_SCALE,
         method="trf",
         tr_solver="lsmr",
+        tr_options={"atol": 1e-12, "btol": 1e-12},
         max_nfev=max_nfev,
         xtol=1e-8,
         ftol=1e-8,
@@ -679,6 +787,60 @@ def _sandwich(problem: WindowProblem, jac: scipy.sparse.spmatrix, rw: np.ndarray
     return _Covariance(cov, np.diag(inv_block).copy(), information, n_c)
 
 
+def _adequacy(problem: WindowProblem, z: np.ndarray) -> dict[str, ChannelAdequacy]:
+    pred_b, pred_a = problem.predict(z)
+    win = problem.windows
+    return {
+        "ball": channel_adequacy(
+            pred_b - win.y_ball_m, channel="ball", unit="m", floor=SIGMA_BALL_M, outlier=OUTLIER_M
+        ),
+        "angle": channel_adequacy(
+            pred_a - win.y_angle_rad, channel="angle", unit="rad", floor=SIGMA_ANGLE_RAD
+        ),
+    }
+
+
+def _mismatched(adequacy: dict[str, ChannelAdequacy]) -> list[str]:
+    """The channels whose residual says the model misses something (``MISMATCH_RATIO``, ``COLOURED_*``)."""
+    out = []
+    for a in adequacy.values():
+        if a.ratio > MISMATCH_RATIO or (a.ratio > COLOURED_RATIO and abs(a.lag1) > COLOURED_LAG1):
+            out.append(a.channel)
+    return out
+
+
+@dataclass(frozen=True)
+class _Fit:
+    z_before: np.ndarray
+    result: scipy.optimize.OptimizeResult
+    sandwich: _Covariance
+    rw: np.ndarray
+
+
+def _fit(problem: WindowProblem, *, max_nfev: int, progress: Progress | None, stage: str = "") -> _Fit:
+    z0 = problem.initial_vector()
+    n_g = problem.n_global
+    states = np.arange(n_g, z0.size)
+    # 1. The window states alone at the starting parameters, fitted to convergence: the "before" of the
+    # report is then the best the starting parameters can do (a few evaluations would leave the states
+    # short and overstate what the fit did).
+    before = _solve(problem, z0, states, max_nfev=max_nfev, progress=progress, stage=f"{stage}window states")
+    z_before = z0.copy()
+    z_before[states] = before.x
+    # 2. Everything together.
+    every = np.arange(z0.size)
+    result = _solve(
+        problem, z_before, every, max_nfev=max_nfev, progress=progress, stage=f"{stage}parameters and states"
+    )
+    # Intervals: the cluster-robust ("sandwich") covariance, clusters of CLUSTER_S of log. Residuals within a
+    # cluster are correlated (quantization that holds for many ticks, the model's own small errors), which
+    # makes the plain Gauss-Newton covariance optimistic. Bread: the loss-weighted Jacobian scipy returns;
+    # meat: each cluster's gradient contribution Jᵀr with the robust loss's weights.
+    r = problem.residuals(result.x)
+    rw = r / np.sqrt(np.sqrt(1.0 + (r / ROBUST_SCALE) ** 2))  # r·√ρ′ of soft_l1
+    return _Fit(z_before, result, _sandwich(problem, result.jac, rw), rw)
+
+
 def calibrate(
     logs: Sequence[RigLog],
     fit: Sequence[str],
@@ -688,41 +850,38 @@ def calibrate(
     substeps: int = 5,
     max_nfev: int = 100,
     progress: Progress | None = None,
+    diagnose: bool = True,
 ) -> Calibration:
-    """Fit ``fit`` (names from ``FITTABLE``) to ``logs`` from ``start`` (default: the thesis's values)."""
+    """Fit ``fit`` (names from ``FITTABLE``) to ``logs`` from ``start`` (default: the thesis's values).
+
+    ``diagnose``: when the residuals say model mismatch, refit with the candidate effects
+    (``DIAGNOSTIC_EFFECTS``) freed and name one that explains the residual."""
     started = time.perf_counter()
     base = start or Parameters()
     dynamic = [name for name in fit if name != DROPOUT]
     if DROPOUT in fit and DROPOUT not in FITTABLE:
         raise CalibrationError(f"cannot fit {DROPOUT}")
     problem = WindowProblem(logs, base, dynamic, window_s=window_s, substeps=substeps)
-    z0 = problem.initial_vector()
     n_g = problem.n_global
-    states = np.arange(n_g, z0.size)
-    # 1. The window states alone at the starting parameters, fitted to convergence: the "before" of the
-    # report is then the best the starting parameters can do (a few evaluations would leave the states
-    # short and overstate what the fit did).
-    before = _solve(problem, z0, states, max_nfev=max_nfev, progress=progress, stage="window states, start")
-    z_before = z0.copy()
-    z_before[states] = before.x
-    # 2. Everything together.
-    every = np.arange(z0.size)
-    result = _solve(
-        problem, z_before, every, max_nfev=max_nfev, progress=progress, stage="parameters and states"
-    )
-    z = result.x
-
-    # Intervals: the cluster-robust ("sandwich") covariance, clusters of CLUSTER_S of log. Residuals within a
-    # cluster are correlated (quantization that holds for many ticks, the model's own small errors), which
-    # makes the plain Gauss-Newton covariance optimistic. Bread: the loss-weighted Jacobian scipy returns;
-    # meat: each cluster's gradient contribution Jᵀr with the robust loss's weights.
-    r = problem.residuals(z)
-    weights = 1.0 / np.sqrt(np.sqrt(1.0 + (r / ROBUST_SCALE) ** 2))  # √ρ′ of soft_l1
-    rw = r * weights
-    sandwich = _sandwich(problem, result.jac, rw)
+    warnings: list[str] = []
+    problems: list[str] = []
+    for reason, what in (
+        ("railed", f"the amplifier at its rails in more than {RAILED_SHARE:.0%} of their ticks"),
+        ("ball lost", "the ball at the track's end (lost or against a stop) from then on"),
+    ):
+        dropped = [d for d in problem.dropped if d.reason == reason]
+        if dropped:
+            where = ", ".join(sorted({d.path for d in dropped}))
+            warnings.append(
+                f"{len(dropped)} window(s) dropped, {what}: {where} from t = {dropped[0].start_s:.2f} s"
+                + (f" (and {len(dropped) - 1} more)" if len(dropped) > 1 and reason == "railed" else "")
+            )
+    fitted = _fit(problem, max_nfev=max_nfev, progress=progress)
+    result, sandwich, rw = fitted.result, fitted.sandwich, fitted.rw
+    z, z_before = result.x, fitted.z_before
     n_c = sandwich.n_clusters
     # The same covariance assuming white residuals, to report how much the correlation widens the intervals.
-    spread2 = float(rw @ rw) / max(r.size - z.size, 1)
+    spread2 = float(rw @ rw) / max(rw.size - z.size, 1)
     naive = np.sqrt(np.maximum(sandwich.naive_var * spread2, 1e-300))
     cov_g = sandwich.cov
     std = np.sqrt(np.maximum(np.diag(cov_g), 0.0))
@@ -733,13 +892,13 @@ def calibrate(
     # Student's t with (clusters − 1) degrees of freedom: few clusters make the covariance itself uncertain.
     z_crit = float(scipy.stats.t.ppf(0.5 + CONFIDENCE / 2, max(n_c - 1, 1)))
     values: dict[str, FittedValue] = {}
-    warnings: list[str] = []
+    weak: list[str] = []
     for i, name in enumerate(problem.fit):
         spec = FITTABLE[name]
         rel, absolute = MODEL_RESOLUTION.get(name, (0.0, 0.0))
         half = math.hypot(z_crit * std[i], max(rel * abs(float(z[i])), absolute))
         lo, hi = float(z[i] - half), float(z[i] + half)
-        values[name] = FittedValue(float(z[i]), lo, hi, float(z0[i]), spec.unit, sd=half / z_crit)
+        values[name] = FittedValue(float(z[i]), lo, hi, float(z_before[i]), spec.unit, sd=half / z_crit)
         if not np.isfinite(std[i]) or std[i] == 0.0:
             warnings.append(f"{name}: the data do not determine it (flat direction)")
         elif hi - lo > spec.upper - spec.lower:
@@ -750,6 +909,22 @@ def calibrate(
             warnings.append(
                 f"{name} = {z[i]:.6g} {spec.unit} sits on its bound [{spec.lower:g}, {spec.upper:g}]"
             )
+        bound = WEAK_EXCITATION.get(name)
+        if bound is not None:
+            size = std[i] / abs(float(z[i])) if bound[0] == "relative" and z[i] != 0 else std[i]
+            if size > bound[1]:
+                shown = f"{size:.1%} of its value" if bound[0] == "relative" else f"{size:.3g} {spec.unit}"
+                weak.append(f"{name} (standard deviation {shown})")
+    condition = _normalized_condition(sandwich.information)
+    adequacy = _adequacy(problem, z)
+    mismatched = _mismatched(adequacy)
+    # A mismatched model's standard deviations mean nothing: only an adequate fit is judged on excitation.
+    if weak and not mismatched:
+        problems.append(
+            "weak excitation: the logs determine "
+            + ", ".join(weak)
+            + " only loosely (README: how to record a log — move the setpoint and add the dither)"
+        )
     for i in range(n_g):
         for j in range(i + 1, n_g):
             if abs(corr[i, j]) > 0.95:
@@ -757,6 +932,22 @@ def calibrate(
                     f"{problem.fit[i]} and {problem.fit[j]} are correlated ({corr[i, j]:+.2f}): the logs barely "
                     "separate them; excite the rig differently (README: how to record a log)"
                 )
+    diagnosis = ""
+    if mismatched:
+        shown = "; ".join(
+            f"{a.channel} residual {a.ratio:.1f}× its noise floor, lag-1 autocorrelation {a.lag1:+.2f}"
+            for a in adequacy.values()
+            if a.channel in mismatched
+        )
+        diagnosis = (
+            _diagnose(logs, base, dynamic, adequacy, window_s, substeps, max_nfev, progress)
+            if diagnose
+            else ""
+        )
+        problems.append(
+            f"model mismatch: {shown}: the fitted values are not to be trusted"
+            + (f"; {diagnosis}" if diagnosis else "; no candidate effect explains it (docs/design.md)")
+        )
     params_fitted = problem.parameters(z)
     if DROPOUT in fit:
         rate, rate_lo, rate_hi, outliers = dropout_rate(problem, z, params_fitted)
@@ -785,6 +976,11 @@ def calibrate(
         n_windows=problem.n_windows,
         n_ticks=problem.n_windows * problem.W,
         ci_inflation=inflation,
+        problems=problems,
+        adequacy=adequacy,
+        dropped=list(problem.dropped),
+        information_condition=condition,
+        diagnosis=diagnosis,
         traces={
             "t_s": np.arange(problem.n_windows * problem.W) * problem.windows.period_s,
             "y_ball_m": problem.windows.y_ball_m.ravel(),
@@ -795,3 +991,42 @@ def calibrate(
             "after_angle_rad": pred_a1.ravel(),
         },
     )
+
+
+def _normalized_condition(information: np.ndarray) -> float:
+    """The condition number of the globals' Fisher information scaled to unit diagonal (a correlation-like
+    matrix: 1 when the parameters are determined independently, large when a combination is not)."""
+    d = np.sqrt(np.abs(np.diag(information)))
+    if information.size == 0 or not np.all(d > 0):
+        return math.inf if information.size else 1.0
+    eig = np.linalg.eigvalsh(information / np.outer(d, d))
+    return float(eig[-1] / eig[0]) if eig[0] > 0 else math.inf
+
+
+def _diagnose(
+    logs: Sequence[RigLog],
+    base: Parameters,
+    fit: list[str],
+    adequacy: dict[str, ChannelAdequacy],
+    window_s: float,
+    substeps: int,
+    max_nfev: int,
+    progress: Progress | None,
+) -> str:
+    """Refit with each candidate effect the fit left out freed; name the first whose refit brings every
+    channel back to adequate (or halves the worst channel's residual at least)."""
+    worst = max(adequacy.values(), key=lambda a: a.ratio)
+    for name, effect in DIAGNOSTIC_EFFECTS.items():
+        if name in fit:
+            continue
+        problem = WindowProblem(logs, base, [*fit, name], window_s=window_s, substeps=substeps)
+        refit = _fit(problem, max_nfev=max_nfev, progress=progress, stage=f"diagnosis ({name}): ")
+        after = _adequacy(problem, refit.result.x)
+        value = float(refit.result.x[problem.fit.index(name)])
+        if not _mismatched(after) or after[worst.channel].ratio < 0.5 * worst.ratio:
+            return (
+                f"likely {effect}: refitted with {name} free it is {value:.3g} {FITTABLE[name].unit} and the "
+                f"{worst.channel} residual falls from {worst.ratio:.1f}× to {after[worst.channel].ratio:.1f}× "
+                f"its floor; add {name} to --fit"
+            )
+    return ""

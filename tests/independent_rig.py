@@ -110,6 +110,9 @@ def simulate(
     filtered = [float(np.interp(0.05, curve_x, curve_v))]
     on_track = [True]
 
+    def adc(v: float) -> float:  # 12 bits over ±5 V: codes 0…4095
+        return -5.0 + lsb_adc * min(max(round((v + 5.0) / lsb_adc), 0), 4095)
+
     def ball_reading(xs: np.ndarray) -> float:
         wiper = np.interp(xs, curve_x, curve_v)
         if rng.random() < spike_rate:
@@ -119,12 +122,11 @@ def simulate(
         for w in wiper:
             filtered[0] = w + (filtered[0] - w) * decay
         v = filtered[0] + rng.normal(0.0, noise_m / 0.0693)
-        return -5.0 + lsb_adc * round((v + 5.0) / lsb_adc)
+        return adc(v)
 
     def angle_level(theta: float) -> float:
         di = 512 + round((theta - p.angle_sensor.zeroing_error_rad) / step)
-        v = 0.009818 * di - 5.042
-        return -5.0 + lsb_adc * round((v + 5.0) / lsb_adc)
+        return adc(0.009818 * di - 5.042)
 
     def measured(ball_v: float, angle_v: float) -> tuple[float, float]:
         x = sw.ball_gain_m_per_v * ball_v + sw.ball_offset_m
