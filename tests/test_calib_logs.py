@@ -260,7 +260,9 @@ def test_command_outside_the_dac_range(tmp_path: Path, fmt: str, value: float) -
 
 
 @pytest.mark.parametrize("fmt", ["mat", "csv"])
-@pytest.mark.parametrize(("name", "field", "value"), [("datam1", "ball_v", 12.7), ("datam2", "angle_v", -27.5)])
+@pytest.mark.parametrize(
+    ("name", "field", "value"), [("datam1", "ball_v", 12.7), ("datam2", "angle_v", -27.5)]
+)
 def test_a_channel_outside_the_adc_range_is_refused(
     tmp_path: Path, fmt: str, name: str, field: str, value: float
 ) -> None:
