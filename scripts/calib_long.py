@@ -10,15 +10,21 @@ values against the truth, the wall time of the calibration and the process's pea
 
 from __future__ import annotations
 
-import argparse
-import resource
-import sys
-import time
+import os
 
-from calib.experiments import run_experiment
-from calib.identify import calibrate
-from calib.logs import rig_log
-from twin.parameters import Parameters
+# One BLAS thread (before numpy loads), as scripts/bench.py: the solver's many short vector products pay
+# OpenBLAS's thread wake-ups otherwise (a 60 s fit on the busy 2-core machine: 38 s → 24 s).
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import argparse  # noqa: E402
+import resource  # noqa: E402
+import sys  # noqa: E402
+import time  # noqa: E402
+
+from calib.experiments import run_experiment  # noqa: E402
+from calib.identify import calibrate  # noqa: E402
+from calib.logs import rig_log  # noqa: E402
+from twin.parameters import Parameters  # noqa: E402
 
 FIT = [
     "motor.resistance_ohm",
