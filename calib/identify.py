@@ -816,7 +816,9 @@ def _sandwich(problem: WindowProblem, jac: scipy.sparse.spmatrix, rw: np.ndarray
     cluster = _row_windows(problem) // per_cluster
     n_c = int(cluster.max()) + 1 if cluster.size else 1
     B = np.asarray(J @ X)  # (rows, g)
-    G = np.stack([np.bincount(cluster, weights=B[:, k] * rw, minlength=n_c) for k in range(n_g)], axis=1)
+    G = np.zeros((n_c, n_g))  # no globals (the dropout rate alone is fitted apart): an empty covariance
+    for k in range(n_g):
+        G[:, k] = np.bincount(cluster, weights=B[:, k] * rw, minlength=n_c)
     cov = G.T @ G * n_c / max(n_c - 1, 1)
     inv_block = X[:n_g]
     with np.errstate(all="ignore"):
