@@ -4,7 +4,9 @@ The public surface (the implementation is in the modules named):
 
     load_rig_log(path) -> RigLog                       calib.logs: a data_file.mat or CSV, validated
     calibrate(logs, fit=[...], start=Parameters) -> Calibration
-                                                       calib.identify: dynamic identification
+                                                       calib.identify: dynamic identification (windows
+                                                       screened, adequacy and excitation judged:
+                                                       Calibration.problems; calib.adequacy: the residuals)
     FITTABLE                                           the parameters it can fit, with their bounds
     load_table(path), calibrate_table(table)           calib.static: Table 6.3-style sensor tables
     EXPERIMENTS, run_experiment(name, params)          calib.experiments: what to record on a rig

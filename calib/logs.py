@@ -31,6 +31,8 @@ from twin.log import LogError, RunLog, load_csv, load_mat
 
 __all__ = [
     "rig_log",
+    "ADC_MAX_V",
+    "ADC_MIN_V",
     "ADC_STEP_V",
     "DAC_MAX_V",
     "DAC_MIN_V",
@@ -50,6 +52,8 @@ DAC_MIN_V = 0.0
 DAC_MAX_V = 5.0
 DAC_STEP_V = (DAC_MAX_V - DAC_MIN_V) / 4096  # 1.221 mV
 ADC_STEP_V = 10.0 / 4096  # 2.441 mV
+ADC_MIN_V = -5.0
+ADC_MAX_V = 5.0
 
 # At least 5 s of data: several periods of the closed loop's slowest motion (the limit cycles seen on the twin
 # last 0.7 s, the settling 2.5–3 s), 250 ticks at 50 Hz.
@@ -172,6 +176,20 @@ class RigLog:
             raise self._fail(
                 "command_v", i, f"{float(u[i])!r} V is outside the DAC's {DAC_MIN_V}…{DAC_MAX_V} V"
             )
+        # The two channels are the ADC's volts (a reading, or a block mean of readings): a value beyond its
+        # ±5 V range (half a step of rounding allowed) is not what the card recorded — a channel converted
+        # to other units (metres, degrees, counts) or a different card.
+        for name in ("ball_v", "angle_v"):
+            arr = getattr(self, name)
+            bad = np.flatnonzero((arr < ADC_MIN_V - ADC_STEP_V / 2) | (arr > ADC_MAX_V + ADC_STEP_V / 2))
+            if bad.size:
+                i = int(bad[0])
+                raise self._fail(
+                    name,
+                    i,
+                    f"{float(arr[i])!r} V is outside the ADC's {ADC_MIN_V:g}…{ADC_MAX_V:g} V: not the card's raw "
+                    "volts (a channel in other units?)",
+                )
         last = n - 1 + FIRST_INDEX
         span = float(np.ptp(u))
         if span <= MIN_COMMAND_SPAN_V:

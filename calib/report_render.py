@@ -81,16 +81,36 @@ def render_markdown(cal: Calibration) -> str:
         )
     lines += [
         "",
-        f"Intervals: cluster-robust covariance (5 s of log per cluster), Student's t; the plain white-noise "
-        f"intervals would be ×{1 / cal.ci_inflation:.2f} as wide."
+        f"Intervals: {cal.interval_method}; the plain white-noise intervals would be "
+        f"×{1 / cal.ci_inflation:.2f} as wide."
         if cal.ci_inflation > 0
-        else "",
+        else f"Intervals: {cal.interval_method}.",
+        "",
+        "Before: the starting parameters with every window's state fitted to convergence; after: the fit.",
         "",
         "| residual | before | after |",
         "| --- | --- | --- |",
     ]
     for key in cal.rms_after:
         lines.append(f"| {key} | {cal.rms_before[key]:.4g} | {cal.rms_after[key]:.4g} |")
+    if cal.adequacy:
+        lines += [
+            "",
+            "## Model adequacy",
+            "",
+            "| channel | residual RMS | noise floor | RMS / floor | ρ(1…5) | white band ±1.96/√N |",
+            "| --- | --- | --- | --- | --- | --- |",
+        ]
+        for a in cal.adequacy.values():
+            rho = ", ".join(f"{r:+.2f}" for r in a.autocorrelation)
+            lines.append(
+                f"| {a.channel} | {a.rms:.3g} {a.unit} | {a.floor:.3g} {a.unit} | {a.ratio:.2f} | {rho} | "
+                f"±{a.band:.3f} |"
+            )
+        lines.append("")
+        lines.append(f"Normalized information matrix's condition number: {cal.information_condition:.3g}.")
+    lines += ["", "## Problems", ""]
+    lines += [f"- **{p}**" for p in cal.problems] or ["- none"]
     lines += ["", "## Warnings", ""]
     lines += [f"- {w}" for w in cal.warnings] or ["- none"]
     lines += [

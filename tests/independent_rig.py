@@ -13,6 +13,18 @@ Written from the physics, sharing no code with twin/ beyond the parameter values
 * command: 12-bit DAC, amplifier 9.6·(u − 2.5) within ±12 V, no latency;
 * controller: state feedback with finite-difference velocities and a ±0.1 m square-wave setpoint, plus a
   ±0.5 V dither from its own random generator.
+
+The audit's cases (tests/test_calib_adequacy.py) are options of ``simulate``, each written here from the
+physics, not from twin/:
+
+* ``beam.pivot_friction_nm`` of the parameters: Coulomb friction in the pivot, F·tanh(θ̇/1 mrad/s) (the
+  twin's reference model clips θ̇/10 mrad/s instead);
+* ``controller="regulate"``: the same gains at a fixed setpoint 0.05 m, no dither (a user's regulation log);
+  ``controller="rails"``: the gains ×3 and a ±6 V dither, so the amplifier sits at its ±12 V rails often;
+* ``noise_m``, ``spike_rate``: the ball channel's Gaussian noise and the share of ticks with an open wiper;
+* ``fall_at_s``: from then on the controller holds +2 V at the motor, the ball rolls off the −x end
+  (|x| > ``track.half_length_m``), its wiper reads 0 V (open) and the beam turns without it;
+* ``period_s``: the tick (40 samples per block whatever the period).
 """
 
 from __future__ import annotations
@@ -28,8 +40,8 @@ K_SF = (-36.34, 24.6, -15.96, 3.98)  # §5.2.1's printed gains (V per m, rad, m/
 PERIOD_S = 0.02
 
 
-def _rhs(p: Parameters, volts: float):
-    m, r, g = p.ball.mass_kg, p.ball.radius_m, p.physics.gravity_m_s2
+def _rhs(p: Parameters, volts: float, on_track: bool = True):
+    m, r, g = p.ball.mass_kg if on_track else 0.0, p.ball.radius_m, p.physics.gravity_m_s2
     rs = math.sqrt(r * r - p.track.contact_spacing_m**2 / 4)
     j_ball = 0.4 * m * r * r
     c = p.track.contact_height_m + rs
@@ -39,19 +51,27 @@ def _rhs(p: Parameters, volts: float):
     k_t = n * p.motor.torque_constant_nm_per_a / p.motor.resistance_ohm
     k_b = n * p.motor.backemf_constant_v_s_per_rad
     mb, h = p.beam.mass_kg, p.beam.cog_height_m
+    dry = p.beam.pivot_friction_nm
+
+    def torque_of(thd: float) -> float:
+        return k_t * (min(max(volts, -12.0), 12.0) - k_b * thd)
 
     def f(_t: float, s: np.ndarray) -> list[float]:
         x, th, xd, thd = s
         # Ball centre in the pivot frame: (x cos θ − c sin θ, x sin θ + c cos θ); its spin relative to the
         # beam is −ẋ/r*, so its absolute spin is θ̇ − ẋ/r*.
+        if not on_track:  # the ball is gone: the beam alone, the ball's coordinate frozen
+            q = torque_of(thd) - b_beam * thd - dry * math.tanh(thd / 1e-3) + mb * g * h * math.sin(th)
+            return [0.0, thd, 0.0, q / j_beam]
         m11 = m + j_ball / rs**2
         m12 = -(m * c + j_ball / rs)
         m22 = j_beam + j_ball + m * (c * c + x * x)
-        torque = k_t * (min(max(volts, -12.0), 12.0) - k_b * thd)
+        torque = torque_of(thd)
         q1 = m * x * thd**2 - m * g * math.sin(th)
         q2 = (
             torque
             - b_beam * thd
+            - dry * math.tanh(thd / 1e-3)
             - 2 * m * x * xd * thd
             - m * g * (x * math.cos(th) - c * math.sin(th))
             + mb * g * h * math.sin(th)
@@ -62,32 +82,51 @@ def _rhs(p: Parameters, volts: float):
     return f
 
 
-def simulate(params: Parameters, *, duration_s: float = 60.0, seed: int = 0) -> dict[str, np.ndarray]:
+def simulate(
+    params: Parameters,
+    *,
+    duration_s: float = 60.0,
+    seed: int = 0,
+    controller: str = "square",
+    noise_m: float = 0.3e-3,
+    spike_rate: float = 0.04,
+    fall_at_s: float | None = None,
+    period_s: float = PERIOD_S,
+) -> dict[str, np.ndarray]:
     """A closed-loop log: {"timem", "datam1", "datam2", "aout"}, one value per tick, row 0 the start sample."""
+    if controller not in ("square", "regulate", "rails"):
+        raise ValueError(f"unknown controller {controller!r}")
     p = params
     rng = np.random.default_rng(seed)
     curve_x, curve_v = np.array(p.ball_sensor.curve_position_m), np.array(p.ball_sensor.curve_volts_v)
     step = 2 * math.pi / (p.angle_sensor.encoder_pulses_per_rev * p.motor.gear_ratio)
     lsb_adc, lsb_dac = 10.0 / 4096, 5.0 / 4096
     sw = p.software
+    gains = tuple(3 * k for k in K_SF) if controller == "rails" else K_SF
+    dither_v = {"square": 0.5, "regulate": 0.0, "rails": 6.0}[controller]
 
     tau = p.ball_sensor.rc_resistance_ohm * p.ball_sensor.rc_capacitance_f
-    decay = math.exp(-PERIOD_S / 40 / tau)
+    decay = math.exp(-period_s / 40 / tau)
     filtered = [float(np.interp(0.05, curve_x, curve_v))]
+    on_track = [True]
+
+    def adc(v: float) -> float:  # 12 bits over ±5 V: codes 0…4095
+        return -5.0 + lsb_adc * min(max(round((v + 5.0) / lsb_adc), 0), 4095)
 
     def ball_reading(xs: np.ndarray) -> float:
         wiper = np.interp(xs, curve_x, curve_v)
-        if rng.random() < 0.04:
+        if rng.random() < spike_rate:
             wiper[-4:] = 0.0
+        if not on_track[0]:
+            wiper[:] = 0.0  # no ball on the spring: the wiper is open
         for w in wiper:
             filtered[0] = w + (filtered[0] - w) * decay
-        v = filtered[0] + rng.normal(0.0, 0.3e-3 / 0.0693)
-        return -5.0 + lsb_adc * round((v + 5.0) / lsb_adc)
+        v = filtered[0] + rng.normal(0.0, noise_m / 0.0693)
+        return adc(v)
 
     def angle_level(theta: float) -> float:
         di = 512 + round((theta - p.angle_sensor.zeroing_error_rad) / step)
-        v = 0.009818 * di - 5.042
-        return -5.0 + lsb_adc * round((v + 5.0) / lsb_adc)
+        return adc(0.009818 * di - 5.042)
 
     def measured(ball_v: float, angle_v: float) -> tuple[float, float]:
         x = sw.ball_gain_m_per_v * ball_v + sw.ball_offset_m
@@ -96,7 +135,7 @@ def simulate(params: Parameters, *, duration_s: float = 60.0, seed: int = 0) -> 
 
     state = np.array([0.05, 0.0, 0.0, 0.0])
     volts = 0.0
-    ticks = int(round(duration_s / PERIOD_S))
+    ticks = int(round(duration_s / period_s))
     out = {k: np.zeros(ticks + 1) for k in ("timem", "datam1", "datam2", "aout")}
     out["datam1"][0], out["datam2"][0], out["aout"][0] = (
         ball_reading(np.full(40, state[0])),
@@ -107,28 +146,56 @@ def simulate(params: Parameters, *, duration_s: float = 60.0, seed: int = 0) -> 
     prev = measured(out["datam1"][0], out["datam2"][0])
     dither = 0.0
     for k in range(1, ticks + 1):
-        t0 = (k - 1) * PERIOD_S
-        samples = t0 + PERIOD_S * np.arange(1, 41) / 40
+        t0 = (k - 1) * period_s
+        samples = t0 + period_s * np.arange(1, 41) / 40
         sol = solve_ivp(
-            _rhs(p, volts), (t0, t0 + PERIOD_S), state, method="DOP853", t_eval=samples, rtol=1e-9, atol=1e-11
+            _rhs(p, volts, on_track[0]),
+            (t0, t0 + period_s),
+            state,
+            method="DOP853",
+            t_eval=samples,
+            rtol=1e-9,
+            atol=1e-11,
         )
         state = sol.y[:, -1]
+        if abs(state[0]) > p.track.half_length_m:
+            on_track[0] = False
         ball_v = ball_reading(sol.y[0])
         angle_v = float(np.mean([angle_level(th) for th in sol.y[1]]))
         x, th = measured(ball_v, angle_v)
-        setpoint = 0.1 if (t0 // 5.0) % 2 == 0 else -0.1
-        xd, thd = (x - prev[0]) / PERIOD_S, (th - prev[1]) / PERIOD_S
+        if controller == "regulate":
+            setpoint = 0.05
+        else:
+            setpoint = 0.1 if (t0 // 5.0) % 2 == 0 else -0.1
+        xd, thd = (x - prev[0]) / period_s, (th - prev[1]) / period_s
         prev = (x, th)
-        u = -(K_SF[0] * (x - setpoint) + K_SF[1] * th + K_SF[2] * xd + K_SF[3] * thd)
-        if k % 2 == 1:
-            dither = 0.5 if rng.random() < 0.5 else -0.5
-        command = min(max(u / 9.6 + 2.5 + dither / 9.6, 1.25), 3.75)
-        command = lsb_dac * round(command / lsb_dac)
+        u = -(gains[0] * (x - setpoint) + gains[1] * th + gains[2] * xd + gains[3] * thd)
+        if dither_v and k % 2 == 1:
+            dither = dither_v if rng.random() < 0.5 else -dither_v
+        command = u / 9.6 + 2.5 + dither / 9.6
+        if fall_at_s is not None and t0 >= fall_at_s:
+            command = 2.5 + 2.0 / 9.6  # +2 V at the motor: the beam tilts, the ball rolls to −x and off
+        command = lsb_dac * round(min(max(command, 1.25), 3.75) / lsb_dac)
         volts = 9.6 * (command - 2.5)
         out["timem"][k], out["datam1"][k], out["datam2"][k], out["aout"][k] = (
-            t0 + PERIOD_S,
+            t0 + period_s,
             ball_v,
             angle_v,
             command,
         )
     return out
+
+
+def rig_log_of(log: dict[str, np.ndarray], name: str = "independent"):
+    """The identification ticks of a simulated log (row 0, the start sample, dropped) as calib reads them."""
+    from pathlib import Path
+
+    from calib.logs import RigLog
+
+    return RigLog(
+        path=Path(name),
+        time_s=log["timem"][1:],
+        ball_v=log["datam1"][1:],
+        angle_v=log["datam2"][1:],
+        command_v=log["aout"][1:],
+    )

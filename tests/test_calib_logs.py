@@ -259,6 +259,19 @@ def test_command_outside_the_dac_range(tmp_path: Path, fmt: str, value: float) -
     refused(write(tmp_path, fmt, rows), "'aout' (command_v)", "index 77", "outside the DAC's 0.0…5.0 V")
 
 
+@pytest.mark.parametrize("fmt", ["mat", "csv"])
+@pytest.mark.parametrize(
+    ("name", "field", "value"), [("datam1", "ball_v", 12.7), ("datam2", "angle_v", -27.5)]
+)
+def test_a_channel_outside_the_adc_range_is_refused(
+    tmp_path: Path, fmt: str, name: str, field: str, value: float
+) -> None:
+    """A channel in other units (a ball channel in mm, an angle in degrees) leaves the ADC's ±5 V."""
+    rows = rig_rows()
+    rows[name][40] = value  # k = 41
+    refused(write(tmp_path, fmt, rows), f"'{name}' ({field})", "index 41", "outside the ADC's -5…5 V")
+
+
 @pytest.mark.parametrize(("name", "shown"), [("data_file.txt", "suffix '.txt'"), ("data_file", "no suffix")])
 def test_unknown_suffix(tmp_path: Path, name: str, shown: str) -> None:
     path = write_rig_mat(tmp_path / "x.mat", rig_rows()).rename(tmp_path / name)

@@ -979,10 +979,8 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
             f"({2 * period_s:g} s)"
         )
 
-    def progress(line: str) -> None:
-        if not args.json:
-            print(f"  {line}", file=sys.stderr, flush=True)
-
+    # A bar per stage over its evaluation budget: the ETA is an upper bound (a fit stops when it converges).
+    progress = None if args.json else _progress_bar("calibrate", unit="evaluation")
     cal = calibrate(logs, fit, start, window_s=args.window, progress=progress)
     _write_out(args, write_report, cal)
     if args.json:
@@ -997,7 +995,11 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
             print(f"warning: {warning}")
         if args.out is not None:
             print(f"wrote {Path(args.out) / 'params.toml'}, calibration.json, report.md")
-    return 0 if cal.converged else 1
+    # A fit that did not converge, or whose residuals or information say it cannot be trusted (model
+    # mismatch, weak excitation), exits 1: its files are written for inspection, its message is on stderr.
+    for problem in cal.problems:
+        print(f"calibrate: {problem}", file=sys.stderr)
+    return 0 if cal.trustworthy else 1
 
 
 def _compare_params(args: argparse.Namespace) -> tuple[Parameters, str]:
@@ -1588,7 +1590,9 @@ def build_parser() -> argparse.ArgumentParser:
     view.set_defaults(func=_cmd_view)
 
     cal = sub.add_parser(
-        "calibrate", help="fit the twin's parameters to logs recorded on a rig (exit 0 converged, 1 not)"
+        "calibrate",
+        help="fit the twin's parameters to logs recorded on a rig (exit 0 converged and adequate; 1 not "
+        "converged, model mismatch or weak excitation; 2 a log refused)",
     )
     cal.add_argument("logs", nargs="+", metavar="LOG", help="data_file.mat or .csv logs of the same rig")
     cal.add_argument(
