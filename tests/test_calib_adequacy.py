@@ -293,6 +293,7 @@ def test_a_log_ending_with_the_ball_falling_off_is_fitted_without_its_end() -> N
 
 
 @pytest.mark.slow
+@pytest.mark.study  # 40 calibrations, ~10 min on 2 cores: run by hand with -m study
 @pytest.mark.parametrize("source", ["twin", "independent"])
 def test_the_95_percent_intervals_contain_the_truth_at_their_rate(source: str) -> None:
     """scripts/calib_coverage.py over 20 seeds that did not set the model's resolution (20…39): every
