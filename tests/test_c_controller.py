@@ -105,12 +105,13 @@ def _makefile_flags() -> list[str]:
     return flags
 
 
-@pytest.fixture(scope="module")
-def bb_sf(tmp_path_factory: pytest.TempPathFactory) -> Path:
+def build_bb_sf(directory: Path) -> Path:
+    """examples/c/bb_sf built into ``directory`` with the Makefile's flags and the system ``cc`` (skips
+    the test when there is none); the wire tests that run the C client build it here."""
     cc = shutil.which("cc")
     if cc is None:
         pytest.skip("no C compiler: `cc` is not on PATH (install gcc to test examples/c/)")
-    out = tmp_path_factory.mktemp("c") / "bb_sf"
+    out = directory / "bb_sf"
     subprocess.run(
         [cc, *_makefile_flags(), "-Werror", "-o", str(out), *(str(C_DIR / s) for s in SOURCES), "-lm"],
         check=True,
@@ -118,6 +119,11 @@ def bb_sf(tmp_path_factory: pytest.TempPathFactory) -> Path:
         timeout=120,
     )
     return out
+
+
+@pytest.fixture(scope="module")
+def bb_sf(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return build_bb_sf(tmp_path_factory.mktemp("c"))
 
 
 def test_the_makefile_forbids_contraction_into_fma() -> None:

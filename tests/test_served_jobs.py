@@ -248,21 +248,9 @@ def test_validate_served_to_run_rig_sessions_gives_the_in_process_report(tmp_pat
 
 @pytest.fixture(scope="module")
 def bb_sf(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    import shutil
+    from test_c_controller import build_bb_sf  # examples/c built as that test builds it
 
-    from test_c_controller import C_DIR, SOURCES, _makefile_flags  # examples/c built as that test builds it
-
-    cc = shutil.which("cc")
-    if cc is None:
-        pytest.skip("no C compiler: `cc` is not on PATH (install gcc to test examples/c/)")
-    out = tmp_path_factory.mktemp("c") / "bb_sf"
-    subprocess.run(
-        [cc, *_makefile_flags(), "-Werror", "-o", str(out), *(str(C_DIR / s) for s in SOURCES), "-lm"],
-        check=True,
-        capture_output=True,
-        timeout=120,
-    )
-    return out
+    return build_bb_sf(tmp_path_factory.mktemp("c"))
 
 
 @pytest.mark.parametrize("sessions", ["4", "0"])

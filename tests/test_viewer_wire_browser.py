@@ -6,7 +6,6 @@ next session waits."""
 import math
 import os
 import re
-import shutil
 import socket
 import subprocess
 import sys
@@ -14,7 +13,7 @@ import time
 from pathlib import Path
 
 import pytest
-from test_c_controller import C_DIR, SOURCES, _makefile_flags
+from test_c_controller import build_bb_sf
 
 from twin.app.browser import CHROMIUM_ARGS, find_chromium
 
@@ -40,17 +39,7 @@ def _free_port(kind: int) -> int:
 @pytest.fixture(scope="module")
 def bb_sf(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """examples/c/bb_sf built with the Makefile's flags (as tests/test_c_controller.py builds it)."""
-    cc = shutil.which("cc")
-    if cc is None:
-        pytest.skip("no C compiler: `cc` is not on PATH (install gcc to test examples/c/)")
-    out = tmp_path_factory.mktemp("c") / "bb_sf"
-    subprocess.run(
-        [cc, *_makefile_flags(), "-Werror", "-o", str(out), *(str(C_DIR / s) for s in SOURCES), "-lm"],
-        check=True,
-        capture_output=True,
-        timeout=120,
-    )
-    return out
+    return build_bb_sf(tmp_path_factory.mktemp("c"))
 
 
 def _text(page) -> str:
