@@ -99,7 +99,6 @@ def test_fixed_order_products() -> None:
 
 @pytest.mark.slow
 def test_the_bit_pinning_tests_pass_under_every_openblas_kernel() -> None:
-    pytest.importorskip("threadpoolctl")
     digests = {}
     for core_type in CORE_TYPES:
         env = _env(core_type)
@@ -124,7 +123,6 @@ def test_numpy_without_avx512_gives_the_same_bits() -> None:
     """Checked, not promised (README): numpy's AVX-512 code (its X86_V4 target) has other np.exp bits than
     its AVX2 code; the tick takes its exponentials from libm, so the logs and the ball filter's voltage are
     the same with that target disabled."""
-    pytest.importorskip("threadpoolctl")
     from numpy._core._multiarray_umath import __cpu_dispatch__, __cpu_features__
 
     disable = [
