@@ -224,6 +224,13 @@ class Server(OverLink):
         self._end: tuple[int, str] | None = None
         self._resend_at: float | None = None  # when the latest sample is repeated (set by its first wait)
 
+    def _new_session(self) -> None:
+        """A new session id (the previous session's late datagrams are dropped), counts and clients reset."""
+        if self._sessions:
+            self.session = (self.session + 1) & 0xFFFFFFFF or 1
+        self._sessions += 1
+        self._reset_session()
+
     def _config(self, role: int) -> p.Config:
         s = self.settings
         return p.Config.from_parameters(
@@ -240,10 +247,7 @@ class Server(OverLink):
         if settings is not None:
             self.settings = settings
         s = self.settings
-        if self._sessions:  # a new session id: the previous session's late datagrams are dropped
-            self.session = (self.session + 1) & 0xFFFFFFFF or 1
-        self._sessions += 1
-        self._reset_session()
+        self._new_session()
         self._await_controller()
         rig = make_rig(s.params, plant=s.plant, ideal_sensors=s.ideal_sensors, seed=s.seed, noise=s.noise)
         rig.reset(s.x0_m, s.theta0_rad)
@@ -271,18 +275,14 @@ class Server(OverLink):
                     raise
                 reason, detail = self._end
         except KeyboardInterrupt:
-            self._stop_all(p.STOP_SHUTDOWN)
+            self.stop_clients(p.STOP_SHUTDOWN)
             raise
-        self._stop_all(reason)
+        self.stop_clients(reason)
         if not loop.started:  # nothing was logged: no session to report
             raise ServeError(f"the session ended before the client acknowledged the held sample: {detail}")
         result = RunResult(controller=adapter.name, log=loop.log(), verdict=loop.verdict(s.x0_m))
         timing = pacer.timing() if pacer is not None else None
         return SessionResult(result, reason, detail, self.counts, self.client_name, timing)
-
-    def _stop_all(self, reason: int) -> None:
-        for addr in ([self.controller_addr] if self.controller_addr else []) + self.observers:
-            self._send(p.Stop(reason), addr)
 
     # --- a session another loop drives (the live view: twin.viewer.wire) ----------------------------
     def open_session(self, rig: SimRig) -> None:
@@ -290,10 +290,7 @@ class Server(OverLink):
         ``serve`` begins one (the previous session's late datagrams are dropped), counts and clients reset.
         The loop then calls ``receive`` until a controller has said HELLO (``controller_addr``) and, per
         tick, ``send_sample``, ``await_command`` to its own deadline, then ``accept`` or ``missed``."""
-        if self._sessions:
-            self.session = (self.session + 1) & 0xFFFFFFFF or 1
-        self._sessions += 1
-        self._reset_session()
+        self._new_session()
         self._rig = rig
 
     @property
@@ -301,9 +298,14 @@ class Server(OverLink):
         """Whether the watchdog holds the output at the zero command now (commands stopped)."""
         return self._watchdog
 
+    def _peers(self) -> list[Hashable]:
+        """Who receives this session's samples and STOP: the controller (once it said HELLO), the observers."""
+        return ([self.controller_addr] if self.controller_addr else []) + self.observers
+
     def stop_clients(self, reason: int) -> None:
         """STOP ``reason`` to the controller and the observers of this session."""
-        self._stop_all(reason)
+        for addr in self._peers():
+            self._send(p.Stop(reason), addr)
 
     def _await_controller(self) -> None:
         wait_s = self.settings.wait_client_s
@@ -421,7 +423,7 @@ class Server(OverLink):
         if self._watchdog:
             self.counts.watchdog_ticks += 1
         out = p.Sample(seq, sample.time_s, sample.ball_v, sample.angle_v, flags, self._applied_seq)
-        for addr in ([self.controller_addr] if self.controller_addr else []) + self.observers:
+        for addr in self._peers():
             self._send(out, addr)
         self._resend_at = None
         return out
