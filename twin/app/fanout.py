@@ -116,7 +116,7 @@ def run_chunk(chunk: _Chunk) -> list[dict[str, Any]]:
         except ControllerError as exc:
             out.append(_failed(chunk, i, str(exc)))
         except NumericalError as exc:  # the simulation failed, not the controller: no physical verdict
-            out.append({**_failed(chunk, i, ""), "numerical": True, "reason": str(exc)})
+            out.append(_numerical_record(chunk.x0_m[i], chunk.theta0_rad[i], chunk.seeds[i], str(exc)))
     return out
 
 
@@ -179,6 +179,11 @@ def _failed_record(x0_m: float, theta0_rad: float, seed: int, reason: str) -> di
         "hit_stops": False,
         "reason": f"the controller failed: {reason}",
     }
+
+
+def _numerical_record(x0_m: float, theta0_rad: float, seed: int, reason: str) -> dict[str, Any]:
+    """The record of a run whose simulation failed (``NumericalError``): no physical verdict, the reason."""
+    return {**_failed_record(x0_m, theta0_rad, seed, ""), "numerical": True, "reason": reason}
 
 
 def _local(
@@ -314,7 +319,7 @@ def run_served(
             results[i] = _failed_record(x0, th0, seed, str(exc))
         except NumericalError as exc:  # the simulation failed, not the client: no physical verdict
             served.clients.append(server.client_name)
-            results[i] = {**_failed_record(x0, th0, seed, ""), "numerical": True, "reason": str(exc)}
+            results[i] = _numerical_record(x0, th0, seed, str(exc))
         else:
             served.clients.append(session.client)
             if session.stop_reason in (protocol.STOP_DONE, protocol.STOP_BALL_LOST):
