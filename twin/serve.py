@@ -42,6 +42,7 @@ from twin.rig import PlantKind, SimRig, make_rig
 __all__ = [
     "DEFAULT_TIMEOUT_S",
     "DEFAULT_WATCHDOG_PERIODS",
+    "STOP_NAMES",
     "Server",
     "ServeError",
     "SessionCounts",
@@ -106,7 +107,7 @@ class SessionCounts:
         return asdict(self)
 
 
-_STOP_NAMES = {
+STOP_NAMES = {  # a STOP reason in words (docs/protocol.md)
     p.STOP_DONE: "done",
     p.STOP_CLIENT_QUIT: "client quit",
     p.STOP_BALL_LOST: "ball lost",
@@ -129,7 +130,7 @@ class SessionResult:
     def summary(self) -> dict[str, object]:
         out: dict[str, object] = {
             "client": self.client,
-            "stop": _STOP_NAMES.get(self.stop_reason, str(self.stop_reason)),
+            "stop": STOP_NAMES.get(self.stop_reason, str(self.stop_reason)),
             **({"stop_detail": self.stop_detail} if self.stop_detail else {}),
             **self.counts.to_json(),
         }

@@ -37,19 +37,12 @@ from twin.engine import Catalogue, CatalogueEntry, StateLaw
 from twin.interface import Controller, DaqSample
 from twin.parameters import Parameters
 from twin.rig import SimRig
-from twin.serve import Server
+from twin.serve import STOP_NAMES, Server
 from twin.viewer.common import _markdown_text, _printable
 
 WIRE_MARGIN_S = 0.0005  # stop waiting this long before the frame's end: the loop's own work after the wait
 MAX_DISCARD = 4096  # datagrams queued before a session began that are thrown away (bounded: a flood)
 Phase = Literal["waiting", "held", "running", "quit", "ended"]
-_STOP_WORDS = {
-    p.STOP_DONE: "done",
-    p.STOP_CLIENT_QUIT: "client quit",
-    p.STOP_BALL_LOST: "ball lost",
-    p.STOP_ERROR: "error",
-    p.STOP_SHUTDOWN: "server shutting down",
-}
 
 
 def _address(addr: object) -> str:
@@ -113,7 +106,7 @@ class WireClient(Controller):
             return
         self.server.stop_clients(reason)
         self.phase = "ended"
-        self.note = note or f"session ended (STOP {reason}, {_STOP_WORDS.get(reason, '?')})"
+        self.note = note or f"session ended (STOP {reason}, {STOP_NAMES.get(reason, '?')})"
 
     # --- the engine's calls ---------------------------------------------------------------------------
     def start(self, sample: DaqSample) -> None:
