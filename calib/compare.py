@@ -46,6 +46,7 @@ from calib.identify import (
     STATE_BOUNDS,
     STATE_SCALE,
     CalibrationError,
+    DroppedWindow,
     WindowProblem,
 )
 from calib.logs import RigLog
@@ -228,6 +229,8 @@ class LogWindows:
     scatter: dict[str, float]
     dropout: np.ndarray  # (nw, W) bool: the ball channel's contact dropouts (left out of the ball's scores)
     horizon: int  # ticks predicted at the start of each window
+    joined: np.ndarray  # (nw,) bool: the window has a predecessor to predict it from (False: fitted only)
+    dropped: list[DroppedWindow] = field(default_factory=list)  # windows the screen left out (railed, ball lost)
 
 
 @dataclass
@@ -268,6 +271,9 @@ class WindowedPrediction:
                 {
                     "log": log.path,
                     "windows": int(log.t_s.shape[0]),
+                    "dropped_windows": [
+                        {"start_s": round(d.start_s, 4), "reason": d.reason} for d in log.dropped
+                    ],
                     "window_start_s": [round(float(t), 4) for t in log.t_s[:, 0]],
                     "window_rms": {
                         c: [None if not np.isfinite(v) else float(v) for v in rms[c]] for c in CHANNELS
@@ -290,13 +296,21 @@ class WindowedPrediction:
 
 
 def _window_ticks(problem: WindowProblem, log: RigLog) -> np.ndarray:
-    """The RigLog index of every tick of every window (nw, W), as ``WindowProblem`` cuts a log: window j
-    starts at the end of tick 1 + j·W and holds the W ticks after it. Checked against the problem's readings,
-    so that a change in the cutting cannot misalign the times silently."""
-    nw, w = problem.n_windows, problem.W
-    idx = 2 + w * np.arange(nw)[:, None] + np.arange(w)[None, :]
+    """The RigLog index of every tick of every window the problem kept (nw, W), as ``WindowProblem`` cuts a
+    log: window j starts at the end of tick 1 + j·W and holds the W ticks after it; a window its screen
+    dropped (railed, the ball lost: ``problem.dropped``, by start time) is not among them. Checked against the
+    problem's readings, so that a change in the cutting cannot misalign the times silently."""
+    w = problem.W
+    dropped = {d.start_s for d in problem.dropped}
+    idx = np.array(
+        [
+            np.arange(i0 + 1, i0 + w + 1)
+            for i0 in range(1, log.ticks - w, w)
+            if float(log.time_s[i0 + 1]) not in dropped
+        ]
+    ).reshape(-1, w)
     yb = np.asarray(ball_position_m(log.ball_v, problem.base.software))
-    if idx[-1, -1] >= log.ticks or not np.array_equal(yb[idx], problem.windows.y_ball_m):
+    if idx.shape[0] != problem.n_windows or not np.array_equal(yb[idx], problem.windows.y_ball_m):
         raise AssertionError(
             "calib.identify.WindowProblem cuts windows differently than calib.compare assumes"
         )
@@ -417,13 +431,15 @@ def windowed_prediction(
         states, message = fit_states(problem, max_iterations=max_iterations, progress=step)
         messages.append(message)
         fit_b, fit_a, end = problem.simulate(states.reshape(1, -1))
-        # Window k starts where window k − 1 ends (WindowProblem's windows of one log are contiguous).
+        # Window k starts where window k − 1 ends, where the two are joined (a window the screen dropped
+        # between them leaves the later one without a predecessor).
+        joined = np.concatenate([[False], problem.windows.joined])
         starts = states.copy()
-        starts[1:] = end[0, :-1]
+        starts[1:][joined[1:]] = end[0, :-1][joined[1:]]
         pred_b, pred_a, _ = problem.simulate(starts.reshape(1, -1))
         pred_b, pred_a = pred_b[0].copy(), pred_a[0].copy()
         for pred in (pred_b, pred_a):
-            pred[0] = np.nan  # no predecessor
+            pred[~joined] = np.nan  # no predecessor
             pred[:, h:] = np.nan  # beyond the horizon
         yb, ya = problem.windows.y_ball_m, problem.windows.y_angle_rad
         dropout = _dropouts(np.asarray(ball_position_m(log.ball_v, params.software)))[ticks]
@@ -438,6 +454,8 @@ def windowed_prediction(
                 scatter={"ball": _scatter(yb.ravel()), "angle": _scatter(ya.ravel())},
                 dropout=dropout,
                 horizon=h,
+                joined=joined,
+                dropped=list(problem.dropped),
             )
         )
     diverged = 0
@@ -449,8 +467,8 @@ def windowed_prediction(
         finite = np.all(
             np.isfinite(lw.predicted["ball"][:, :h]) & np.isfinite(lw.predicted["angle"][:, :h]), axis=1
         )
-        finite[0] = False
-        diverged += int(np.sum(~finite[1:]))
+        diverged += int(np.sum(lw.joined & ~finite))
+        finite &= lw.joined
         for c in CHANNELS:
             # The ball channel's dropouts are the wiper's, not the model's: left out of its scores.
             keep = ~lw.dropout if c == "ball" else np.ones_like(lw.dropout)

@@ -11,7 +11,14 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from calib.compare import CHANNELS, MAX_LAG, ChannelScore, Comparison, LogWindows  # noqa: E402
+from calib.compare import (  # noqa: E402
+    CHANNELS,
+    MAX_LAG,
+    ChannelScore,
+    Comparison,
+    LogWindows,
+    WindowedPrediction,
+)
 
 __all__ = ["render_figures", "render_markdown"]
 
@@ -188,6 +195,15 @@ def render_figures(result: Comparison, out: Path) -> None:
         plt.close(fig)
 
 
+def _dropped_text(wp: WindowedPrediction) -> str:
+    """The windows calibration's screen left out (railed, the ball lost), counted by reason."""
+    reasons: dict[str, int] = {}
+    for lw in wp.logs:
+        for d in lw.dropped:
+            reasons[d.reason] = reasons.get(d.reason, 0) + 1
+    return ", ".join(f"{n} window(s) {r}" for r, n in sorted(reasons.items()))
+
+
 def _score_row(what: str, c: str, s: ChannelScore) -> str:
     _, scale = _LABEL[c]
     unit = "mm" if c == "ball" else "mrad"
@@ -220,8 +236,14 @@ def render_markdown(result: Comparison) -> str:
         "state (x, θ, ẋ, θ̇) fitted to that window's readings at the given parameters (no parameter fitted; "
         f"windows not joined). **Predicted**: the first {wp.horizon_s:g} s of window k from window k − 1's fitted "
         f"end state with window k's logged commands: no reading of the predicted span entered it "
-        f"({wp.n_predicted} predicted windows; the first window of each log has no predecessor). The scores "
-        "and the criterion are the predictions'; the fitted rows overstate what the model predicts.",
+        f"({wp.n_predicted} predicted windows; the first window of each log has no predecessor"
+        + (
+            f", nor has a window after one left out: {_dropped_text(wp)}"
+            if any(lw.dropped for lw in wp.logs)
+            else ""
+        )
+        + "). The scores and the criterion are the predictions'; the fitted rows overstate what the model "
+        "predicts.",
         "",
         "| channel | | fit % | residual RMS | noise floor | RMS / floor | lags outside ±1.96/√N | samples |",
         "| --- | --- | --- | --- | --- | --- | --- | --- |",

@@ -96,6 +96,9 @@ class RigLog:
     ball_v: np.ndarray
     angle_v: np.ndarray
     command_v: np.ndarray
+    # False: a span of a longer stream (the shadow's live windows): checked tick by tick as a log is, but not
+    # held to identification's minimum duration and excitation.
+    whole: bool = field(default=True, repr=False)
     period_s: float = field(init=False)
 
     def __post_init__(self) -> None:
@@ -162,7 +165,7 @@ class RigLog:
                 f"period {period:.6g} s: a gap in the ticks (a missed block?)",
             )
         duration = float(t[-1] - t[0])
-        if duration < MIN_DURATION_S:
+        if self.whole and duration < MIN_DURATION_S:
             raise self._fail(
                 "time_s",
                 n - 1,
@@ -190,6 +193,8 @@ class RigLog:
                     f"{float(arr[i])!r} V is outside the ADC's {ADC_MIN_V:g}…{ADC_MAX_V:g} V: not the card's raw "
                     "volts (a channel in other units?)",
                 )
+        if not self.whole:
+            return period
         last = n - 1 + FIRST_INDEX
         span = float(np.ptp(u))
         if span <= MIN_COMMAND_SPAN_V:

@@ -97,6 +97,25 @@ def test_parameters_20_percent_off_predict_the_twin_worse(square_log: RunLog) ->
     assert Criterion().judge(off)
 
 
+def test_a_window_the_screen_leaves_out_is_not_scored_nor_predicted_from(square_log: RunLog) -> None:
+    """A stretch at the amplifier's rails (calibration's screen drops its window): the windows before and
+    after it are scored as before, the one after it is fitted only (its predecessor is gone)."""
+    log = rig_log(square_log)
+    railed = log.command_v.copy()
+    railed[501:531] = 5.0  # 30 ticks at the rail in window 10 (its commands: RigLog ticks 501…550)
+    cut = RigLog(path="railed", time_s=log.time_s, ball_v=log.ball_v, angle_v=log.angle_v, command_v=railed)
+    whole, wp = windowed_prediction([log], P), windowed_prediction([cut], P)
+    lw, lw0 = wp.logs[0], whole.logs[0]
+    assert [d.reason for d in lw.dropped] == ["railed"] and lw.dropped[0].start_s == pytest.approx(10.05)
+    assert wp.n_windows == whole.n_windows - 1 and wp.n_predicted == whole.n_predicted - 2
+    assert not lw.joined[0] and not lw.joined[10] and lw.joined[1:10].all() and lw.joined[11:].all()
+    # The cut log's window 10 is the whole log's window 11 (window 10 is gone).
+    rms, rms0 = wp.window_rms(lw), whole.window_rms(lw0)
+    np.testing.assert_allclose(rms["angle"][1:10], rms0["angle"][1:10], rtol=1e-6)
+    np.testing.assert_allclose(rms["angle"][11:], rms0["angle"][12:], rtol=1e-6)
+    assert np.isnan(rms["angle"][10]) and np.isfinite(rms0["angle"][11])
+
+
 def test_a_horizon_of_a_whole_second_predicts_the_unstable_plant_worse(square_log: RunLog) -> None:
     half = windowed_prediction([rig_log(square_log)], P, horizon_s=0.5)
     whole = windowed_prediction([rig_log(square_log)], P, horizon_s=1.0)

@@ -1101,6 +1101,9 @@ def _cmd_compare(args: argparse.Namespace) -> int:
         f"{wp.n_windows} windows of {wp.window_s:g} s; each window predicted {wp.horizon_s:g} s ahead from the "
         "previous window's fitted end state (scored), and fitted to itself (shown apart)"
     )
+    for lw in wp.logs:
+        for d in lw.dropped:
+            print(f"warning: {lw.path}: the window from {d.start_s:.2f} s left out ({d.reason}): not scored")
     for c in ("ball", "angle"):
         pred, fitted = wp.predicted[c], wp.fitted[c]
         unit, scale = ("mm", 1e3) if c == "ball" else ("mrad", 1e3)
