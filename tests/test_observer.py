@@ -195,13 +195,20 @@ def _serving_twice(server: Server) -> Iterator[list[SessionResult]]:
     assert not thread.is_alive(), "the server hung"
 
 
-def test_an_observer_of_a_served_job_sees_each_session(dac_during_blocks: list[list[float]]) -> None:
-    """After the first STOP the observer says HELLO again at once; once it has joined the second session
-    (its ``Joined``) the second controller comes, so the observer sees that session from SAMPLE 0."""
+@pytest.mark.parametrize("follow", [True, False])
+def test_an_observer_of_a_served_job_sees_each_session(
+    dac_during_blocks: list[list[float]], follow: bool
+) -> None:
+    """After the first STOP the observer says HELLO again (at once with ``follow``, else on ``rejoin``); once
+    it has joined the second session (its ``Joined``) the second controller comes, so the observer sees
+    that session from SAMPLE 0."""
     server = Server(_settings(1.0), log=lambda _: None)
-    with _serving_twice(server) as sessions, Observer(server.url) as observer:
+    with _serving_twice(server) as sessions, Observer(server.url, follow=follow) as observer:
         _control(server)
         first = observer.until_stop()
+        if not follow:
+            assert observer.next_event(0.3) is None  # no HELLO yet: not in the next session
+            observer.rejoin()
         joined = observer.next_event(10.0)
         assert isinstance(joined, Joined)
         _control(server)

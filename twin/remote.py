@@ -333,8 +333,9 @@ class Observer(OverLink):
     pauses). The frames of other sessions are dropped, malformed ones counted (``counts``). Each session
     begins with a ``Joined`` event. With ``follow`` (the default) the reader says HELLO again as soon as a
     STOP comes, every 0.2 s until the server's next session admits it: a served job's sessions are seen
-    one after another (its HELLO is queued at the server before the next controller's, if the controller
-    reconnects later than the STOP reaches us). Without it, ``rejoin`` asks for the next session.
+    one after another. That HELLO, sent on the STOP, waits at the server for its next session and so is
+    taken before the next controller's unless that one is quicker; then the observer joins during the
+    session and misses its first blocks. Without ``follow``, ``rejoin`` asks for the next session.
 
     ``config`` and ``session`` are the reader's latest session's (a slow consumer's events may be of an
     earlier one: each ``Joined`` carries its own)."""
@@ -380,11 +381,9 @@ class Observer(OverLink):
         self._reader = threading.Thread(target=self._read, name=f"observer {self.url}", daemon=True)
         self._reader.start()
         if not self._answered.wait(connect_timeout_s) or self.config is None:
-            refused = self._failure
+            failure = self._failure  # a refusal, or a reader that failed
             self.close()
-            if isinstance(refused, Refused):
-                raise refused
-            raise RemoteError(
+            raise failure or RemoteError(
                 f"no CONFIG from {self.url} within {connect_timeout_s:g} s: is `ballbeam serve` running?"
             )
 
