@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import socket
 import threading
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -222,6 +223,36 @@ def test_an_observer_of_a_served_job_sees_each_session(
     # The stream of both sessions at once: each session's seqs are its own.
     both = held_dac_v(first + second, ZERO_V)
     assert _same(both, np.array(dac_during_blocks[0] + dac_during_blocks[1]))
+
+
+def test_in_real_time_the_observer_knows_the_dac_through_a_dead_controller_and_the_watchdog(
+    dac_during_blocks: list[list[float]],
+) -> None:
+    """A controller that answers the first samples (a ramp of commands) and then dies: whichever commands
+    made their boundary, the observer's DAC per block is the rig's, through the hold and the watchdog."""
+    answered = 10
+    settings = dataclasses.replace(_settings(0.6), mode=p.MODE_REALTIME, watchdog_periods=3)
+    server = Server(settings, log=lambda _: None)
+    with in_thread(server) as box, Observer(server.url) as observer:
+        # At the socket: RemoteRig would acknowledge every sample it reads.
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as raw:
+            raw.connect(("127.0.0.1", server.port))
+            raw.settimeout(5.0)
+            raw.send(p.encode(p.Hello(role=p.ROLE_CONTROL, client="dies"), 0))
+            session = p.decode_frame(raw.recv(4096)).session
+            while not isinstance(msg := p.decode_frame(raw.recv(4096)).msg, p.Stop):
+                assert isinstance(msg, p.Sample)
+                if msg.seq <= answered:
+                    raw.send(p.encode(p.Command(msg.seq, 2.5 + 0.05 * msg.seq), session))
+        events = observer.until_stop()
+    served = session_of(box)
+    assert served.counts.watchdog_trips == 1
+    samples = _samples(events)
+    assert [s.seq for s in samples] == list(range(served.result.log.timem.size))
+    assert any(s.flags & p.FLAG_WATCHDOG for s in samples)
+    held = held_dac_v(events, ZERO_V)
+    assert _same(held, np.array(dac_during_blocks[0]))
+    assert {c.dac_v for c in _commands(events)} <= {2.5 + 0.05 * k for k in range(answered + 1)}
 
 
 def test_held_dac_v_from_the_applied_seq_the_echo_and_the_watchdog() -> None:
