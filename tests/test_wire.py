@@ -188,6 +188,7 @@ def test_hostile_datagrams_are_counted_and_change_nothing() -> None:
         stranger = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         stranger.connect(("127.0.0.1", server.port))
         seen: dict[int, p.Sample] = {}
+        answers: dict[int, float] = {}
         n_junk = 0
         while True:
             frame = raw.recv()
@@ -216,13 +217,18 @@ def test_hostile_datagrams_are_counted_and_change_nothing() -> None:
                 sent["unauthorised"] += 2
                 n_junk += 2
             raw.send(p.Command(msg.seq, command))
+            answers[msg.seq] = command
             if msg.flags & p.FLAG_LAST:
                 assert raw.recv().msg == p.Stop(p.STOP_DONE)
                 break
         observed: list[p.Sample] = []  # a copy of every sample since the observer joined, then STOP
+        echoed: list[p.Command] = []  # and of every command the server accepted (the junk none)
         while not isinstance(got := observer.recv().msg, p.Stop):
-            assert isinstance(got, p.Sample)
-            observed.append(got)
+            if isinstance(got, p.Command):
+                echoed.append(got)
+            else:
+                assert isinstance(got, p.Sample)
+                observed.append(got)
         for s in (raw, observer):
             s.close()
         stranger.close()
@@ -238,6 +244,7 @@ def test_hostile_datagrams_are_counted_and_change_nothing() -> None:
     )
     assert c.observers == 1
     assert observed and observed == [seen[k] for k in range(observed[0].seq, len(seen))]
+    assert echoed and echoed == [p.Command(k, answers[k]) for k in range(echoed[0].seq, len(seen))]
     ref = run_closed_loop(
         _build("appendix-sf", Parameters()), x0_m=x0, theta0_rad=th0, duration_s=2.0, seed=2
     )

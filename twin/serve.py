@@ -16,6 +16,8 @@ reproduces the in-process run of the same controller bit for bit.
   A command that is not there by then is counted missing (and late if it arrives afterwards); the DAC
   holds its last value. After ``watchdog_periods`` missing periods in a row the output goes to the zero
   command and the samples carry the watchdog flag until a command arrives.
+* **Observers** (at most ``MAX_OBSERVERS``) get every SAMPLE, every COMMAND the server accepts (the echo:
+  what the DAC holds, from SAMPLE k's ``applied_seq``) and the STOP; a new session forgets them.
 
 Anything that is not a valid frame of this session from the right peer — malformed, oversized, another
 session's, a replayed or out-of-order command, an observer's command, a non-finite or out-of-range DAC
@@ -456,11 +458,14 @@ class Server(OverLink):
                 return got
 
     def accept(self, cmd: p.Command) -> float:
-        """The controller's COMMAND answered in time: the DAC takes its volts, the watchdog is reset."""
+        """The controller's COMMAND answered in time: the DAC takes its volts, the watchdog is reset, and the
+        observers get it (docs/protocol.md, COMMAND: the echo), so that they know the rig's input."""
         self._late_flag = False
         self._missing_streak = 0
         self._watchdog = False
         self._applied_seq = cmd.seq
+        for addr in self.observers:  # usually none: the tick pays nothing
+            self._send(cmd, addr)
         return cmd.dac_v
 
     def missed(self, hold_v: float) -> float:
