@@ -14,7 +14,7 @@ volts it is driven with).
 in-control distribution, the **band**, is measured on windows known to be right (``Band``): the twin's own
 runs at the shadow's parameters (``twin.app.shadow.reference_band``) or logs the user recorded on the rig
 when it was known good. A window's score is its standardized error z = (log RMS − mean)/sd, and a one-sided
-CUSUM per channel, S ← max(0, S + z − k), raises the **drift alarm** when S > h (``Cusum``: k = 1, h = 5,
+CUSUM per channel, S ← max(0, S + z − k), raises the **drift alarm** when S > h (``Cusum``: k = 1, h = 7,
 the reference value half-way to a 2-sd shift). Its false-alarm rate is stated two ways: the average run
 length of the in-control CUSUM by Siegmund's approximation for normal scores, and the probability of an
 alarm within an hour of windows, by resampling the band's own scores (both channels together: an alarm on
@@ -128,7 +128,7 @@ class Cusum:
     """A one-sided CUSUM per channel on standardized scores: S ← max(0, S + z − k), alarm when S > h."""
 
     k: float = 1.0  # reference value: half the 2-sd shift it is tuned to detect fastest
-    h: float = 5.0  # decision threshold
+    h: float = 7.0  # decision threshold: see the module's docstring for its false-alarm rate
 
     def update(self, s: float, z: float) -> float:
         return max(0.0, s + z - self.k)

@@ -16,7 +16,7 @@ import socket
 import threading
 import time
 from array import array
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 from urllib.parse import urlsplit
@@ -44,6 +44,7 @@ __all__ = [
     "Refused",
     "SessionEnded",
     "arrival_timing",
+    "block_dac_v",
     "held_dac_v",
     "open_observer",
     "open_remote",
@@ -514,7 +515,7 @@ def held_dac_v(events: Iterable[ObserverEvent], zero_command_v: float) -> np.nda
     NaN where that echo was lost. A ``Joined`` event begins a new session (seq numbers start again);
     ``zero_command_v`` is the CONFIG's. A held block's value is the DAC's, which does not move the held rig."""
     samples: list[tuple[int, p.Sample]] = []
-    commands: dict[tuple[int, int], float] = {}
+    commands: dict[int, dict[int, float]] = {}  # session → seq → volts
     session = 0  # the index of the session in ``events``: its seqs are its own
     for event in events:
         if isinstance(event, Joined):
@@ -522,11 +523,16 @@ def held_dac_v(events: Iterable[ObserverEvent], zero_command_v: float) -> np.nda
         elif isinstance(event, p.Sample):
             samples.append((session, event))
         elif isinstance(event, p.Command):
-            commands[(session, event.seq)] = event.dac_v
-    out = np.empty(len(samples))
-    for i, (s, sample) in enumerate(samples):
-        if sample.flags & p.FLAG_WATCHDOG or sample.applied_seq == 0:
-            out[i] = zero_command_v
-        else:
-            out[i] = commands.get((s, sample.applied_seq), math.nan)
-    return out
+            commands.setdefault(session, {})[event.seq] = event.dac_v
+    return np.array(
+        [block_dac_v(sample, commands.get(s, {}), zero_command_v) for s, sample in samples], dtype=float
+    )
+
+
+def block_dac_v(sample: p.Sample, commands: Mapping[int, float], zero_command_v: float) -> float:
+    """The DAC's volts during ``sample``'s block (docs/protocol.md, COMMAND: the echo): ``zero_command_v``
+    under the watchdog or before any command applied (``applied_seq`` 0: COMMAND 0 only acknowledges the
+    held block), else the echoed command of that seq in ``commands`` (seq → volts; NaN if it was lost)."""
+    if sample.flags & p.FLAG_WATCHDOG or sample.applied_seq == 0:
+        return zero_command_v
+    return commands.get(sample.applied_seq, math.nan)

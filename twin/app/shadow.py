@@ -1,0 +1,176 @@
+"""``ballbeam shadow``: the twin watching a rig on the wire (``calib.shadow``), and the band it tests against.
+
+The shadow is an observer of the rig's sessions (``twin.remote.Observer``: the samples, and the commands the
+rig applied, echoed to observers): it never writes to the rig. ``watch`` feeds each sample with the DAC volts
+of its block (``twin.remote.block_dac_v``) to a ``calib.shadow.Shadow`` and works off the complete windows
+whenever no sample is waiting (a lock-step session outruns the shadow: its windows are worked off in
+batches, none lost).
+
+The band (the in-control distribution of a window's prediction error) comes from windows a right model
+predicts: by default the twin's own runs at the shadow's parameters — a hardware controller (appendix A's
+state feedback unless told) from the four chapter 6 hardware starts, with the sensor chain and its noise
+(``reference_band``) — or logs the user recorded on the rig when it was known good (``logs_band``, e.g. the
+logs its calibration was fitted to).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from calib.compare import windowed_prediction
+from calib.logs import load_rig_log, rig_log
+from calib.shadow import MAX_BATCH_WINDOWS, Band, Shadow, WindowScore
+from twin import protocol as p
+from twin.remote import Joined, Observer, RemoteError, block_dac_v
+
+if TYPE_CHECKING:
+    from twin.interface import Controller
+    from twin.parameters import Parameters
+
+__all__ = [
+    "REFERENCE_CONTROLLER",
+    "REFERENCE_DURATION_S",
+    "WatchResult",
+    "logs_band",
+    "reference_band",
+    "watch",
+]
+
+REFERENCE_CONTROLLER = "appendix-sf"
+# Four runs of 150 s: 592 predicted windows, enough for the band's tails that set the false-alarm rate
+# (a band of 4 × 60 s put the resampled false-alarm probability per hour at twice that of 4 × 150 s).
+REFERENCE_DURATION_S = 150.0
+FALSE_ALARM_HOURS = 1.0  # the false-alarm probability is stated over an hour of windows
+# The commands kept for the echo lookup: the applied one is at most a few periods old (the watchdog's).
+_COMMANDS_KEPT = 256
+
+
+def reference_band(
+    params: Parameters,
+    controller: Callable[[], Controller],
+    *,
+    name: str = REFERENCE_CONTROLLER,
+    duration_s: float = REFERENCE_DURATION_S,
+    seed: int = 0,
+) -> Band:
+    """The band of the twin at ``params``: ``controller`` run from each chapter 6 hardware start for
+    ``duration_s`` with the hardware sensor chain (noise seeds ``seed``, ``seed`` + 1, …), each run's windows
+    predicted at ``params`` — a model exactly right, with the estimate's error only."""
+    from controllers.thesis_numbers import HARDWARE_STARTS
+    from twin.engine import run_closed_loop
+
+    predictions = []
+    for i, (x0, th0) in enumerate(HARDWARE_STARTS.values()):
+        run = run_closed_loop(
+            controller(), x0_m=x0, theta0_rad=th0, duration_s=duration_s, seed=seed + i, params=params
+        )
+        predictions.append(windowed_prediction([rig_log(run.log, f"reference run {i}")], params))
+    return Band.from_predictions(
+        predictions,
+        f"the twin at these parameters: {name} from the {len(HARDWARE_STARTS)} chapter 6 hardware starts, "
+        f"{duration_s:g} s each, noise seeds {seed}…{seed + len(HARDWARE_STARTS) - 1}",
+    )
+
+
+def logs_band(paths: Sequence[str | Path], params: Parameters) -> Band:
+    """The band of logs recorded on the rig when it was known good, predicted at ``params``."""
+    logs = [load_rig_log(path) for path in paths]  # every log checked before the work
+    return Band.from_predictions(
+        [windowed_prediction([log], params) for log in logs], "the logs " + ", ".join(map(str, paths))
+    )
+
+
+@dataclass
+class WatchResult:
+    """What ``watch`` saw: sessions, windows scored and skipped, the alarms, why it ended."""
+
+    sessions: int = 0
+    windows: list[WindowScore] = field(default_factory=list)
+    ended: str = ""
+    wall_s: float = 0.0
+
+
+def watch(
+    observer: Observer,
+    shadow: Shadow,
+    *,
+    sessions: int = 1,
+    idle_timeout_s: float = 5.0,
+    on_window: Callable[[WindowScore], None] | None = None,
+    on_session: Callable[[int, str], None] | None = None,
+    keep_windows: bool = False,
+) -> WatchResult:
+    """Follow ``observer``'s sessions into ``shadow`` until ``sessions`` have ended (0: until the rig is
+    silent for ``idle_timeout_s`` after a session), the rig goes silent within a session, or Ctrl-C (the
+    watch ends there, keeping what it saw). ``on_window`` gets each window as it is processed, ``on_session``
+    each session's end (its number, the STOP in words)."""
+    from twin.serve import STOP_NAMES
+
+    result = WatchResult()
+    started = time.perf_counter()
+    commands: dict[int, float] = {}
+    zero_v = observer.config.zero_command_v if observer.config else math.nan
+    in_session = False
+
+    def work_off(max_windows: int = MAX_BATCH_WINDOWS) -> None:
+        for score in shadow.process(max_windows):
+            if keep_windows:
+                result.windows.append(score)
+            if on_window is not None:
+                on_window(score)
+
+    try:
+        while True:
+            event = observer.next_event(0.0)
+            if event is None:
+                if shadow.pending():
+                    work_off()
+                    continue
+                event = observer.next_event(idle_timeout_s)
+                if event is None:
+                    result.ended = (
+                        "the rig went silent during a session" if in_session else "no further session"
+                    )
+                    break
+            if isinstance(event, Joined):
+                shadow.new_session()
+                commands.clear()
+                zero_v = event.config.zero_command_v
+                in_session = True
+            elif isinstance(event, p.Command):
+                commands[event.seq] = event.dac_v
+                if len(commands) > 2 * _COMMANDS_KEPT:
+                    for seq in sorted(commands)[:-_COMMANDS_KEPT]:
+                        del commands[seq]
+            elif isinstance(event, p.Sample):
+                shadow.add(
+                    event.seq,
+                    event.time_s,
+                    event.ball_v,
+                    event.angle_v,
+                    event.flags,
+                    block_dac_v(event, commands, zero_v),
+                )
+                if shadow.pending() >= MAX_BATCH_WINDOWS:
+                    work_off()
+            elif isinstance(event, p.Stop):
+                while shadow.pending():
+                    work_off()
+                in_session = False
+                result.sessions += 1
+                if on_session is not None:
+                    on_session(result.sessions, STOP_NAMES.get(event.reason, str(event.reason)))
+                if sessions and result.sessions >= sessions:
+                    result.ended = f"{result.sessions} session(s) watched"
+                    break
+    except KeyboardInterrupt:
+        result.ended = "stopped (Ctrl-C)"
+    except RemoteError as exc:
+        result.ended = str(exc)
+    result.wall_s = time.perf_counter() - started
+    return result
