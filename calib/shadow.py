@@ -40,6 +40,7 @@ import numpy as np
 from calib.compare import CHANNELS, DEFAULT_HORIZON_S, LogWindows, WindowedPrediction, windowed_prediction
 from calib.identify import CalibrationError
 from calib.logs import RigLog
+from twin.log import LogError
 from twin.parameters import Parameters
 
 __all__ = [
@@ -222,8 +223,9 @@ class Shadow:
     """The stream of one rig (``add`` every sample with the DAC volts of its block), its windows predicted
     (``process``) and tested against ``band`` by ``test``.
 
-    Window n holds the samples seq 2 + n·W … 1 + (n + 1)·W of a session (W ticks of ``window_s``); window 0
-    has no predecessor, so the first scored is window 1. The sums carry over from one session to the next
+    Window n holds the samples seq 3 + n·W … 2 + (n + 1)·W of a session (W ticks of ``window_s``), the
+    windows ``calib.compare`` cuts the session's log into (its row 1 is the held block, seq 0); window 0 has
+    no predecessor, so the first scored is window 1. The sums carry over from one session to the next
     (the rig is the same); ``new_session`` forgets the stream."""
 
     def __init__(
@@ -287,12 +289,12 @@ class Shadow:
     def pending(self) -> int:
         """Complete windows not yet processed."""
         last_seq = self._first + len(self._time) - 1
-        complete = (last_seq - 1) // self.W  # window n ends at seq 1 + (n + 1)·W
+        complete = (last_seq - 2) // self.W  # window n ends at seq 2 + (n + 1)·W
         return max(0, complete - self._next)
 
     def _span(self, n: int) -> range:
         """The array indices of window n's samples."""
-        a = 2 + n * self.W - self._first
+        a = 3 + n * self.W - self._first
         return range(a, a + self.W)
 
     def _why_not(self, n: int) -> str:
@@ -348,17 +350,21 @@ class Shadow:
         b = self._span(n1).stop  # one past the last sample
         seg = slice(a, b)
         # A RigLog's command at a tick is the one written then: the DAC of the next block. The segment's last
-        # one acts beyond it (never simulated) and may not have come yet: its predecessor stands in.
-        command = np.array(self._dac[a + 1 : b + 1] + self._dac[b - 1 : b])[: b - a]
-        log = RigLog(
-            path=Path(f"session {self.session}"),
-            time_s=np.array(self._time[seg]),
-            ball_v=np.array(self._ball[seg]),
-            angle_v=np.array(self._angle[seg]),
-            command_v=command,
-            whole=False,
-        )
-        wp = windowed_prediction([log], self.params, window_s=self.window_s, horizon_s=self.horizon_s)
+        # one acts beyond it (never simulated; it may not have come, or be lost): its predecessor stands in.
+        command = np.array(self._dac[a + 1 : b] + self._dac[b - 1 : b])
+        try:
+            log = RigLog(
+                path=Path(f"session {self.session}"),
+                time_s=np.array(self._time[seg]),
+                ball_v=np.array(self._ball[seg]),
+                angle_v=np.array(self._angle[seg]),
+                command_v=command,
+                whole=False,
+            )
+            wp = windowed_prediction([log], self.params, window_s=self.window_s, horizon_s=self.horizon_s)
+        except (LogError, CalibrationError) as exc:  # what a rig sent is not a log (times not increasing, …)
+            reason = str(exc).partition(": ")[2] or str(exc)
+            return [self._skip(n, reason) for n in windows]
         lw = wp.logs[0]
         rms = wp.window_rms(lw)
         by_start = {round(float(t), 9): m for m, t in enumerate(lw.t_s[:, 0])}

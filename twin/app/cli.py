@@ -607,6 +607,8 @@ def _inputs(args: argparse.Namespace) -> list[tuple[str, str]]:
             found.append((f"--{option}" if option != "table" else "TABLE", value))
     for log in getattr(args, "logs", None) or ():
         found.append(("LOG", log))
+    for log in getattr(args, "reference", None) or ():
+        found.append(("--reference", log))
     calibration = getattr(args, "calibration", None)
     if calibration:
         found += [
@@ -1056,7 +1058,7 @@ def _cmd_shadow(args: argparse.Namespace) -> int:
     from dataclasses import asdict
 
     from calib.shadow import Cusum, Shadow, WindowScore
-    from twin.app.shadow import REFERENCE_CONTROLLER, logs_band, reference_band, watch
+    from twin.app.shadow import REFERENCE_CONTROLLER, load_reference, logs_band, reference_band, watch
     from twin.outputs import atomic_output
     from twin.parameters import ParameterError
     from twin.remote import RemoteError, open_observer
@@ -1069,6 +1071,7 @@ def _cmd_shadow(args: argparse.Namespace) -> int:
     paths = check_outputs(
         [("--log", args.log, (".jsonl", ".json"), 1 << 20)], overwrite=args.overwrite, inputs=_inputs(args)
     )
+    reference_logs = load_reference(args.reference) if args.reference else None
     try:
         observer = open_observer(args.rig, client="ballbeam shadow", timeout_s=args.idle)
     except RemoteError as exc:
@@ -1077,7 +1080,7 @@ def _cmd_shadow(args: argparse.Namespace) -> int:
     with observer:
         params = observer.parameters(base)  # the rig's period, DAC range and software calibration
         # The samples queue in the observer meanwhile: none is lost while the band is measured.
-        band = logs_band(args.reference, params) if args.reference else None
+        band = logs_band(reference_logs, params) if reference_logs else None
         if band is None:
             assert factory is not None
             band = reference_band(params, _hardware_controller(reference, params), name=reference)

@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from calib.compare import windowed_prediction
-from calib.logs import load_rig_log, rig_log
+from calib.logs import RigLog, load_rig_log, rig_log
 from calib.shadow import MAX_BATCH_WINDOWS, Band, Shadow, WindowScore
 from twin import protocol as p
 from twin.remote import Joined, Observer, RemoteError, block_dac_v
@@ -36,6 +36,7 @@ __all__ = [
     "REFERENCE_CONTROLLER",
     "REFERENCE_DURATION_S",
     "WatchResult",
+    "load_reference",
     "logs_band",
     "reference_band",
     "watch",
@@ -77,11 +78,15 @@ def reference_band(
     )
 
 
-def logs_band(paths: Sequence[str | Path], params: Parameters) -> Band:
+def load_reference(paths: Sequence[str | Path]) -> list[RigLog]:
+    """The logs of a band, each read and checked (before anything else is done: a refusal names the file)."""
+    return [load_rig_log(path) for path in paths]
+
+
+def logs_band(logs: Sequence[RigLog], params: Parameters) -> Band:
     """The band of logs recorded on the rig when it was known good, predicted at ``params``."""
-    logs = [load_rig_log(path) for path in paths]  # every log checked before the work
     return Band.from_predictions(
-        [windowed_prediction([log], params) for log in logs], "the logs " + ", ".join(map(str, paths))
+        [windowed_prediction([log], params) for log in logs], "the logs " + ", ".join(str(g.path) for g in logs)
     )
 
 
