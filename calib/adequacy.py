@@ -17,13 +17,28 @@ window boundary is not a lag):
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["MAX_LAG", "ChannelAdequacy", "channel_adequacy"]
+__all__ = ["MAX_LAG", "ChannelAdequacy", "autocorrelation", "channel_adequacy"]
 
 MAX_LAG = 5
+
+
+def autocorrelation(segments: Sequence[np.ndarray], max_lag: int) -> np.ndarray:
+    """The normalized autocorrelation of a residual made of separate segments (the windows), lags 0…max_lag:
+    r(τ) = Σ e(t)·e(t+τ) / Σ e(t)², the products taken within each segment only (a window's end and the
+    next window's start are not neighbours in a prediction). The residual is not de-meaned: a bias is part of
+    the error and shows as correlation at every lag. White noise of N samples lies within ±1.96/√N."""
+    total = sum(float(np.dot(s, s)) for s in segments)
+    out = np.zeros(max_lag + 1)
+    if total == 0.0:
+        return out
+    for lag in range(max_lag + 1):
+        out[lag] = sum(float(np.dot(s[: s.size - lag], s[lag:])) for s in segments if s.size > lag) / total
+    return out
 
 
 @dataclass(frozen=True)
@@ -66,8 +81,5 @@ def channel_adequacy(
     n = int(e.size - bad.sum())
     power = float(np.sum(e * e))
     rms = math.sqrt(power / max(n, 1))
-    rho = tuple(
-        float(np.sum(e[:, :-lag] * e[:, lag:]) / power) if power > 0 and lag < e.shape[1] else 0.0
-        for lag in range(1, MAX_LAG + 1)
-    )
+    rho = tuple(float(r) for r in autocorrelation(list(e), MAX_LAG)[1:])
     return ChannelAdequacy(channel, unit, floor, rms, rho, 1.96 / math.sqrt(max(n, 1)), int(bad.sum()))

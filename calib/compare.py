@@ -38,6 +38,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import scipy.ndimage
 
+from calib.adequacy import autocorrelation
 from calib.identify import (
     OUTLIER_M,
     ROBUST_SCALE,
@@ -122,20 +123,6 @@ def fit_percent(y: np.ndarray, y_hat: np.ndarray) -> float:
     return 100.0 * (1.0 - error / spread)
 
 
-def autocorrelation(segments: Sequence[np.ndarray], max_lag: int = MAX_LAG) -> np.ndarray:
-    """The normalized autocorrelation of a residual made of separate segments (the windows), lags 0…max_lag:
-    r(τ) = Σ e(t)·e(t+τ) / Σ e(t)², the products taken within each segment only (a window's end and the
-    next window's start are not neighbours in a prediction). The residual is not de-meaned: a bias is part of
-    the error and shows as correlation at every lag. White noise of N samples lies within ±1.96/√N."""
-    total = sum(float(np.dot(s, s)) for s in segments)
-    out = np.zeros(max_lag + 1)
-    if total == 0.0:
-        return out
-    for lag in range(max_lag + 1):
-        out[lag] = sum(float(np.dot(s[: s.size - lag], s[lag:])) for s in segments if s.size > lag) / total
-    return out
-
-
 def _scatter(y: np.ndarray) -> float:
     """White noise on a reading smooth at 50 Hz from the second difference: its robust spread (1.4826·MAD)
     over √6 (the second difference of white noise of variance σ² has variance 6σ²)."""
@@ -200,7 +187,7 @@ def _score(
     ys, hats = np.concatenate(y), np.concatenate(y_hat)
     residual = [h - m for m, h in zip(y, y_hat, strict=True)]
     n = int(ys.size)
-    acf = autocorrelation(residual)
+    acf = autocorrelation(residual, MAX_LAG)
     band = 1.96 / math.sqrt(n) if n else math.inf
     return ChannelScore(
         channel=channel,
@@ -230,7 +217,9 @@ class LogWindows:
     dropout: np.ndarray  # (nw, W) bool: the ball channel's contact dropouts (left out of the ball's scores)
     horizon: int  # ticks predicted at the start of each window
     joined: np.ndarray  # (nw,) bool: the window has a predecessor to predict it from (False: fitted only)
-    dropped: list[DroppedWindow] = field(default_factory=list)  # windows the screen left out (railed, ball lost)
+    dropped: list[DroppedWindow] = field(
+        default_factory=list
+    )  # windows the screen left out (railed, ball lost)
 
 
 @dataclass

@@ -31,6 +31,8 @@ from twin.parameters import Parameters
 __all__ = [
     "EXPERIMENTS",
     "RECOMMENDED",
+    "STUDY_FIT",
+    "STUDY_START",
     "Experiment",
     "ExcitedController",
     "make_controller",
@@ -38,6 +40,16 @@ __all__ = [
 ]
 
 RECOMMENDED = "square"
+# What the calibration studies fit (tests/test_calib_*.py, scripts/calib_coverage.py, scripts/calib_long.py):
+# what drifts or is unknown on a rig — the motor, the beam, its bearing's viscous friction, the zeroing.
+STUDY_FIT = (
+    "motor.resistance_ohm",
+    "beam.inertia_pivot_kgm2",
+    "beam.pivot_damping_nm_s_per_rad",
+    "angle_sensor.zeroing_error_rad",
+)
+# Their start: the thesis's rig with 1e-3 N·m·s/rad of pivot damping (the thesis neglects it: 0, the bound).
+STUDY_START = {"beam.pivot_damping_nm_s_per_rad": 1e-3}
 
 
 @dataclass(frozen=True)

@@ -27,18 +27,17 @@ import scipy.stats
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
-from calib.experiments import run_experiment  # noqa: E402
+from calib.experiments import (  # noqa: E402
+    STUDY_FIT,
+    STUDY_START,
+    run_experiment,
+)
 from calib.identify import calibrate  # noqa: E402
 from calib.logs import RigLog, rig_log  # noqa: E402
 from twin.parameters import Parameters  # noqa: E402
 
-FIT = [
-    "motor.resistance_ohm",
-    "beam.inertia_pivot_kgm2",
-    "beam.pivot_damping_nm_s_per_rad",
-    "angle_sensor.zeroing_error_rad",
-]
-START = Parameters().with_overrides({"beam.pivot_damping_nm_s_per_rad": 1e-3})
+FIT = list(STUDY_FIT)
+START = Parameters().with_overrides(STUDY_START)
 
 
 def truth(seed: int) -> dict[str, float]:

@@ -21,20 +21,19 @@ import resource  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
 
-from calib.experiments import run_experiment  # noqa: E402
+from calib.experiments import (  # noqa: E402
+    STUDY_FIT,
+    STUDY_START,
+    run_experiment,
+)
 from calib.identify import calibrate  # noqa: E402
 from calib.logs import rig_log  # noqa: E402
 from twin.parameters import Parameters  # noqa: E402
 
-FIT = [
-    "motor.resistance_ohm",
-    "beam.inertia_pivot_kgm2",
-    "beam.pivot_damping_nm_s_per_rad",
-    "angle_sensor.zeroing_error_rad",
-]
+FIT = list(STUDY_FIT)
 # The rig: 5 % more resistance, 8 % less inertia, viscous pivot friction and a zeroing error (the start of
 # the fit is the thesis's rig with 1e-3 N·m·s/rad of pivot damping).
-START = Parameters().with_overrides({"beam.pivot_damping_nm_s_per_rad": 1e-3})
+START = Parameters().with_overrides(STUDY_START)
 TRUTH = {FIT[0]: 9.4 * 1.05, FIT[1]: 4e-3 * 0.92, FIT[2]: 1.2e-3, FIT[3]: 0.004}
 
 

@@ -10,7 +10,7 @@ import scipy.sparse
 from independent_rig import rig_log_of, simulate
 
 from calib.adequacy import channel_adequacy
-from calib.experiments import run_experiment
+from calib.experiments import STUDY_FIT, STUDY_START, run_experiment
 from calib.identify import (
     SIGMA_ANGLE_RAD,
     CalibrationError,
@@ -22,13 +22,8 @@ from calib.logs import rig_log
 from twin.app.cli import main
 from twin.parameters import Parameters
 
-FIT = [
-    "motor.resistance_ohm",
-    "beam.inertia_pivot_kgm2",
-    "beam.pivot_damping_nm_s_per_rad",
-    "angle_sensor.zeroing_error_rad",
-]
-NOMINAL = Parameters().with_overrides({"beam.pivot_damping_nm_s_per_rad": 1e-3})
+FIT = list(STUDY_FIT)
+NOMINAL = Parameters().with_overrides(STUDY_START)
 # The audit's rig (the independent simulator's seed-1 draw of test_calib_identify's recovery test).
 _rng = np.random.default_rng(201)
 _f = _rng.uniform(-0.2, 0.2, 3)

@@ -8,21 +8,16 @@ import numpy as np
 import pytest
 from independent_rig import simulate
 
-from calib.experiments import replay_rms, run_experiment
+from calib.experiments import STUDY_FIT, STUDY_START, replay_rms, run_experiment
 from calib.identify import FITTABLE, CalibrationError, calibrate
 from calib.logs import RigLog, rig_log
 from twin.app.cli import main
 from twin.log import save_mat
 from twin.parameters import Parameters
 
-FIT = [
-    "motor.resistance_ohm",
-    "beam.inertia_pivot_kgm2",
-    "beam.pivot_damping_nm_s_per_rad",
-    "angle_sensor.zeroing_error_rad",
-]
+FIT = list(STUDY_FIT)
 # A rig whose pivot bearing has noticeable viscous friction (the thesis neglects it: 0), the start of the fits.
-NOMINAL = Parameters().with_overrides({"beam.pivot_damping_nm_s_per_rad": 1e-3})
+NOMINAL = Parameters().with_overrides(STUDY_START)
 # Acceptance: resistance and inertia within 3 %, pivot damping within 15 %, zeroing error within 0.5 mrad.
 TOLERANCE = {FIT[0]: 0.03, FIT[1]: 0.03, FIT[2]: 0.15, FIT[3]: 0.5e-3}
 
