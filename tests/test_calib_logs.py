@@ -118,6 +118,7 @@ def test_a_twin_log_loads_without_its_truth(tmp_path: Path, twin_log_path: Path)
         "angle_v",
         "command_v",
         "period_s",
+        "whole",  # a whole log or a span of a stream (calib.shadow): a flag, no signal
     }
     for name in TRUTH_FIELDS:
         assert not hasattr(rig, name), name
