@@ -256,6 +256,11 @@ class Shadow:
         """Whether a drift alarm has been raised (latched)."""
         return bool(self.alarms)
 
+    @property
+    def threshold(self) -> float:
+        """The sums' alarm threshold h."""
+        return self.test.h
+
     def _reset_stream(self) -> None:
         self._first = 0  # the seq of the arrays' first element
         self._time: list[float] = []

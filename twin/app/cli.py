@@ -560,6 +560,7 @@ def _cmd_judge(args: argparse.Namespace) -> int:
 
 def _cmd_view(args: argparse.Namespace) -> int:
     from controllers import registry
+    from twin.app.shadow import view_monitor
     from twin.viewer import ViewerError, serve
 
     params = _load_params(args)
@@ -575,6 +576,7 @@ def _cmd_view(args: argparse.Namespace) -> int:
     try:
         stats = serve(
             catalogue,
+            monitor=view_monitor(),
             host=args.host,
             port=args.port,
             controller=controller,

@@ -39,6 +39,7 @@ __all__ = [
     "load_reference",
     "logs_band",
     "reference_band",
+    "view_monitor",
     "watch",
 ]
 
@@ -83,10 +84,29 @@ def load_reference(paths: Sequence[str | Path]) -> list[RigLog]:
     return [load_rig_log(path) for path in paths]
 
 
+def view_monitor(controller: str = REFERENCE_CONTROLLER) -> Callable[[Parameters], Shadow]:
+    """The live view's shadow (``twin.viewer.monitor.MonitorFactory``): a ``Shadow`` at the parameters it is
+    given, against the band of the twin's own runs of ``controller`` at them."""
+
+    def make(params: Parameters) -> Shadow:
+        from controllers import registry
+        from twin.interface import Controller
+
+        def build() -> Controller:
+            made = registry.make(controller, params)
+            assert isinstance(made, Controller)
+            return made
+
+        return Shadow(params, reference_band(params, build, name=controller))
+
+    return make
+
+
 def logs_band(logs: Sequence[RigLog], params: Parameters) -> Band:
     """The band of logs recorded on the rig when it was known good, predicted at ``params``."""
     return Band.from_predictions(
-        [windowed_prediction([log], params) for log in logs], "the logs " + ", ".join(str(g.path) for g in logs)
+        [windowed_prediction([log], params) for log in logs],
+        "the logs " + ", ".join(str(g.path) for g in logs),
     )
 
 

@@ -33,6 +33,9 @@ X0 = Slider(-0.3, 0.3, 0.01, "m")
 THETA0 = Slider(-0.7, 0.7, 0.01, "rad")
 SETPOINT = Slider(-0.2, 0.2, 0.01, "m")
 FLICK = Slider(0.02, 0.5, 0.01, "m/s")  # the flick's speed; the button gives its direction
+# The rig's motor resistance above the parameters' (%), from the next run: a warm motor for the shadow to catch
+# (copper's resistance rises 0.39 %/K: +15 % is a winding 40 K warmer).
+DRIFT = Slider(0.0, 50.0, 1.0, "%")
 SPEED_MIN, SPEED_MAX = SPEED.low, SPEED.high
 FLICK_DEFAULT_M_S = 0.1
 # Simulated time the pacing may owe the wall clock: one frame at the top speed plus one. Whatever the

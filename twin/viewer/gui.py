@@ -14,7 +14,7 @@ import viser
 import viser.uplot
 
 from twin.parameters import Parameters
-from twin.viewer.common import FLICK, SETPOINT, SPEED, THETA0, X0, _markdown_text, _show
+from twin.viewer.common import DRIFT, FLICK, SETPOINT, SPEED, THETA0, X0, _markdown_text, _show
 from twin.viewer.scene import CAMERAS, on_camera
 from twin.viewer.security import download_bytes_queued, send_uplot_data
 from twin.viewer.session import RECORD_LIMIT_S, LiveTwin, Refusal
@@ -50,6 +50,12 @@ PLOTS = (
         ),
     ),
     ("motor (V)", (("motor volts", "volts", "#d62728"),)),
+)
+# The shadow's tab: the last predicted spans (measured and predicted), and the drift test's sums against h.
+SHADOW_PLOTS = (
+    ("x (m)", (("measured", "#ff7f0e"), ("predicted", "#17becf"))),
+    ("θ (rad)", (("measured", "#ff7f0e"), ("predicted", "#17becf"))),
+    ("CUSUM (sd)", (("ball", "#1f77b4"), ("angle", "#d62728"), ("alarm at h", "#000000"))),
 )
 PLOT_AXIS_PX = 58  # room for a y value such as "−0.005" with its minus sign (uPlot's default clips it)
 PLOT_ASPECT = 3.4  # wide and low: all the plots fit the height of a 900 px window
@@ -150,6 +156,23 @@ class Panels:
             self.setpoint_note = gui.add_markdown(
                 "" if live.supports_reference else f"*{_markdown_text(live.setpoint_reason)}*"
             )
+        with gui.add_folder("Shadow (drift alarm)"):
+            shadow = gui.add_checkbox(
+                "Shadow the rig",
+                initial_value=False,
+                disabled=live.monitor_factory is None,
+                hint="The twin at these parameters predicts each second of the run and raises a drift alarm "
+                "when the rig stops behaving like it (ballbeam shadow; it takes a few seconds to start)",
+            )
+            drift = gui.add_slider(
+                "Rig drift: motor R (+%)",
+                min=DRIFT.low,
+                max=DRIFT.high,
+                step=DRIFT.step,
+                initial_value=live.drift_pct,
+                hint="A warm motor: the rig's resistance this much above the parameters' from the next Reset; "
+                "the shadow keeps the parameters it started with",
+            )
         with gui.add_folder("Record"):
             gui.add_markdown(
                 f"Each run is recorded from its start (Reset) for up to {RECORD_LIMIT_S / 60:g} min of "
@@ -176,6 +199,8 @@ class Panels:
             "flick_left": flick_left,
             "flick_right": flick_right,
             "setpoint": reference,
+            "shadow": shadow,
+            "drift": drift,
             "download_mat": download_mat,
             "download_csv": download_csv,
             **{f"camera_{name}": button for name, button in cameras.items()},
@@ -192,6 +217,8 @@ class Panels:
         flick_left.on_click(lambda _: live.enqueue("flick_left", kick.value))
         flick_right.on_click(lambda _: live.enqueue("flick_right", kick.value))
         reference.on_update(lambda _: live.enqueue("reference", reference.value))
+        shadow.on_update(lambda _: live.enqueue("shadow", shadow.value))
+        drift.on_update(lambda _: live.enqueue("drift", drift.value))
         download_mat.on_click(lambda event: self._download(event.client, "mat"))
         download_csv.on_click(lambda event: self._download(event.client, "csv"))
         for name, button in cameras.items():
@@ -217,6 +244,20 @@ class Panels:
                     data, tuple(series), aspect=PLOT_ASPECT, scales=scales, axes=axes, legend=legend
                 )
                 self.plots.append((handle, [key for _, key, _ in traces]))
+        self.shadow_plots = []
+        with self.plot_panel.add_tab("Shadow (predicted vs measured)"):
+            for shadow_label, shadow_traces in SHADOW_PLOTS:
+                series = [viser.uplot.Series(label="t (s)")] + [
+                    viser.uplot.Series(label=name, stroke=colour, width=1.5) for name, colour in shadow_traces
+                ]
+                axes = ({"size": 26}, {"size": PLOT_AXIS_PX, "label": shadow_label, "labelSize": 18})
+                data = tuple(np.zeros(2) for _ in series)
+                self.shadow_plots.append(
+                    gui.add_uplot(
+                        data, tuple(series), aspect=PLOT_ASPECT, scales=scales, axes=axes, legend=legend
+                    )
+                )
+        self._shadow_alarms = 0
         self.plot_panel.dock_left()
         gui.main_panel.dock_right()  # the view between the two: nothing covers the rig
         self.plot_panel.set_width(PLOT_PANEL_PX)
@@ -266,6 +307,8 @@ class Panels:
             "initial": (("x0", live.x0_m), ("theta0", live.theta0_rad)),
             "reference": (("setpoint", live.reference_x_m),),
             "flick_left": (("flick", live.flick_m_s),),
+            "shadow": (("shadow", live.shadow is not None),),
+            "drift": (("drift", live.drift_pct),),
             "flick_right": (("flick", live.flick_m_s),),
         }
         for name, value in values.get(action, ()):
@@ -298,6 +341,21 @@ class Panels:
                 self._lost_notices = self._notify("Ball lost", live.lost_text(), "red", seconds=None)
             self._lost_run = lost
 
+    def _update_shadow(self, snap: Any) -> None:
+        """The shadow's tab, and a notification for each new drift alarm."""
+        for handle, channel in zip(self.shadow_plots[:2], ("ball", "angle"), strict=True):
+            t, measured, predicted = shadow_series(snap.windows, channel)
+            if t.size >= 2:
+                send_uplot_data(handle, uplot_data(t, [measured, predicted]))
+        if snap.sums_t.size >= 2:
+            h = np.full(snap.sums_t.size, snap.threshold)
+            send_uplot_data(
+                self.shadow_plots[2], uplot_data(snap.sums_t, [snap.sums["ball"], snap.sums["angle"], h])
+            )
+        for channel, at in snap.alarms[self._shadow_alarms :]:
+            self._notify("Drift alarm", f"at {at:.2f} s: the {channel} no longer follows the twin", "red")
+        self._shadow_alarms = len(snap.alarms)
+
     def _notify(self, title: str, body: str, color: Any, seconds: float | None = 8.0) -> list[Any]:
         return [
             client.add_notification(title, body, auto_close_seconds=seconds, color=color)
@@ -313,6 +371,8 @@ class Panels:
             for handle, keys in self.plots:
                 send_uplot_data(handle, uplot_data(t, [h.array(key) for key in keys]))
         self.status.content = live.status_markdown()
+        if live.shadow is not None:
+            self._update_shadow(live.shadow.snapshot())
         # Only send what changed: re-sending a button's props re-renders it under the user's click.
         label = "Pause" if live.running else "Start"
         if self.run_button.label != label:
@@ -326,3 +386,16 @@ class Panels:
         if self.banner.content != banner:
             self.banner.content = banner
             self.banner.visible = bool(banner)
+
+
+def shadow_series(windows: Sequence[Any], channel: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The predicted spans of ``windows`` end to end, NaN between them (a gap: each is its own prediction):
+    (time, measured, predicted)."""
+    t, measured, predicted = [], [], []
+    for w in windows:
+        t += [w.t_s, [w.t_s[-1] + 1e-6]]
+        measured += [w.measured[channel], [math.nan]]
+        predicted += [w.predicted[channel], [math.nan]]
+    if not t:
+        return np.zeros(0), np.zeros(0), np.zeros(0)
+    return np.concatenate(t), np.concatenate(measured), np.concatenate(predicted)

@@ -27,6 +27,7 @@ from twin.viewer.common import (
     _log,
 )
 from twin.viewer.gui import Panels
+from twin.viewer.monitor import MonitorFactory
 from twin.viewer.scene import Scene, set_initial_camera
 from twin.viewer.security import (
     OriginPolicy,
@@ -203,6 +204,7 @@ def serve(
     on_ready: Callable[[Viewer], None] | None = None,
     wire: tuple[str, int] | None = None,
     rig_name: str = "ballbeam-twin",
+    monitor: MonitorFactory | None = None,
 ) -> dict[str, float]:
     """Start the live view and block until interrupted, ``stop`` is set or ``duration_s`` of wall time passed.
 
@@ -214,7 +216,8 @@ def serve(
 
     ``wire=(host, port)`` serves the twin on protocol 1 over UDP there (port 0: a free one) to a controller in
     any language (``ballbeam view --serve``): the menu's first entry, "wire client (udp://host:port)", the
-    one started unless ``controller`` names another (twin.viewer.wire); ``rig_name`` is CONFIG's rig."""
+    one started unless ``controller`` names another (twin.viewer.wire); ``rig_name`` is CONFIG's rig.
+    ``monitor`` builds the shadow (twin.viewer.monitor) when the panel's "Shadow the rig" is ticked."""
     if not (isinstance(speed, (int, float)) and math.isfinite(speed) and SPEED_MIN <= speed <= SPEED_MAX):
         raise ViewerError(
             f"--speed = {speed!r} must be within {SPEED_MIN:g} … {SPEED_MAX:g} (the speed slider)"
@@ -249,6 +252,7 @@ def serve(
             wait_for_client=wait_for_client,
             stop=stop,
             on_ready=on_ready,
+            monitor=monitor,
         )
     finally:
         if wire_server is not None:
@@ -274,6 +278,7 @@ def _serve(
     wait_for_client: bool,
     stop: threading.Event | None,
     on_ready: Callable[[Viewer], None] | None,
+    monitor: MonitorFactory | None,
 ) -> dict[str, float]:
     if controller is None:
         controller = catalogue.NAMES[0] if wire_server is not None else DEFAULT_CONTROLLER
@@ -288,6 +293,7 @@ def _serve(
         plant=plant,
         ideal_sensors=ideal_sensors,
         wait_for_client=wait_for_client,
+        monitor=monitor,
     )
     try:
         viewer = Viewer(live, host, port, allowed_origins, params_source)

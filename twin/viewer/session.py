@@ -30,6 +30,7 @@ from twin.physics import check_initial_state
 from twin.rig import PlantKind, make_rig
 from twin.verdict import Criteria, Verdict
 from twin.viewer.common import (
+    DRIFT,
     FLICK,
     FLICK_DEFAULT_M_S,
     FRAME_S,
@@ -46,6 +47,7 @@ from twin.viewer.common import (
     _printable,
     _show,
 )
+from twin.viewer.monitor import MonitorFactory, ShadowWorker
 from twin.viewer.wire import WireClient
 
 HISTORY_S = 10.0  # live plots show the last 10 s
@@ -58,7 +60,7 @@ MAX_ACTIONS_PER_FRAME = 64  # a flood of GUI messages cannot starve the simulati
 # Actions whose latest value is all that matters and whose applying costs (a new run is designed and built;
 # a new start re-places the held rig): a burst of one of them (Reset clicked 5000 times, a slider dragged)
 # waits in the queue as its last one.
-LATEST_WINS = frozenset({"reset", "controller", "x0", "theta0", "initial"})
+LATEST_WINS = frozenset({"reset", "controller", "x0", "theta0", "initial", "drift"})
 # Actions that start a new run: between two ticks only the last of them matters, so they are started once.
 STARTS_A_RUN = frozenset({"reset", "controller"})
 
@@ -155,8 +157,15 @@ class LiveTwin:
         ideal_sensors: bool = False,
         wait_for_client: bool = False,
         criteria: Criteria | None = None,
+        monitor: MonitorFactory | None = None,
     ) -> None:
         self.params = params
+        # The shadow (twin.viewer.monitor): off until asked for; it follows the runs at ``params``, while the
+        # drift (% of motor resistance, from the next run) changes only the rig.
+        self.monitor_factory = monitor
+        self.shadow: ShadowWorker | None = None
+        self.drift_pct = 0.0
+        self._shadow_seq = 0
         self.catalogue = catalogue
         self.seed = seed
         self.speed = speed
@@ -218,7 +227,7 @@ class LiveTwin:
         released. Built completely before anything is replaced: a failure leaves the current run as it was."""
         try:
             controller = self.catalogue.make(name, self.params)
-            params = self.params.with_overrides({"ball_sensor.noise_enabled": self.noise})
+            params = self.params.with_overrides({"ball_sensor.noise_enabled": self.noise, **self._drift()})
             rig = make_rig(params, plant=self.plant, ideal_sensors=self.ideal_sensors, seed=self.seed)
             rig.reset(self.x0_m, self.theta0_rad)
             limit = int(RECORD_LIMIT_S / rig.period_s) + 1
@@ -248,8 +257,33 @@ class LiveTwin:
             self._apply_reference()
             self.loop.start()
             self._record()
+            if self.shadow is not None:
+                self.shadow.new_session()
+                self._feed_shadow(self.rig.command_v, held=True)
         except Exception as exc:  # noqa: BLE001 - the run failed; the server goes on
             self._fail(exc)
+
+    def _drift(self) -> dict[str, float]:
+        """The rig's parameter overrides of the drift slider (none at 0 %)."""
+        if not self.drift_pct:
+            return {}
+        return {"motor.resistance_ohm": self.params.motor.resistance_ohm * (1.0 + self.drift_pct / 100.0)}
+
+    def _feed_shadow(self, dac_v: float, *, held: bool = False) -> None:
+        """The block just read, with the DAC volts held during it, to the shadow (seq 0: the run's first)."""
+        shadow, s = self.shadow, self.last_sample
+        if shadow is None or s is None:
+            return
+        seq = 0 if held else self._shadow_seq + 1
+        self._shadow_seq = seq
+        flags = (1 if held or self.rig.held else 0) | (2 if self.rig.ball_lost else 0)
+        shadow.feed(seq, s.time_s, s.ball_v, s.angle_v, flags, dac_v)
+
+    def _tick_once(self) -> None:
+        """One control period; the shadow gets its block and the command that was held during it."""
+        held_v = self.loop.command_v
+        self.loop.tick()
+        self._feed_shadow(held_v)
 
     @property
     def controller(self) -> Any:
@@ -487,6 +521,20 @@ class LiveTwin:
             self.rig.set_noise(noise)
             self.noise = noise
 
+    def _do_shadow(self, value: Any) -> None:
+        on, factory = _boolean("shadow", value), self.monitor_factory
+        if on and factory is None:
+            raise _Refused("this view was started without a shadow (the application gives none)")
+        if on and factory is not None and self.shadow is None:
+            self.shadow = ShadowWorker(factory, self.params)
+            self._feed_shadow(self.loop.command_v, held=True)  # its first session starts at this block
+        elif not on and self.shadow is not None:
+            self.shadow.stop()
+            self.shadow = None
+
+    def _do_drift(self, value: Any) -> None:
+        self.drift_pct = _on_slider("drift", value, DRIFT)
+
     def _do_speed(self, value: Any) -> None:
         self.speed = _on_slider("speed", value, SPEED)
 
@@ -506,6 +554,8 @@ class LiveTwin:
         "flick_left": _do_flick_left,
         "flick_right": _do_flick_right,
         "noise": _do_noise,
+        "shadow": _do_shadow,
+        "drift": _do_drift,
         "speed": _do_speed,
         "reference": _do_reference,
         "connected": _do_connected,
@@ -531,12 +581,12 @@ class LiveTwin:
                     n
                 ):  # a shorter period: its ticks' deadlines one period apart, the last at until
                     wire.deadline = until - (n - 1 - i) * self.rig.period_s
-                    self.loop.tick()
+                    self._tick_once()
                     if self.rig.ball_lost:
                         break  # its sample was the session's last
             else:
                 for _ in range(n):
-                    self.loop.tick()
+                    self._tick_once()
             self._record()
         except Exception as exc:  # noqa: BLE001 - a failing controller or rig fails the run, not the server
             self._fail(exc)
@@ -563,7 +613,9 @@ class LiveTwin:
             self._fail(exc)
 
     def close(self) -> None:
-        """The view shuts down: a wire client's session ends with STOP 4."""
+        """The view shuts down: a wire client's session ends with STOP 4; the shadow stops."""
+        if self.shadow is not None:
+            self.shadow.stop()
         wire = self.wire
         if wire is not None:
             wire.end(p.STOP_SHUTDOWN, "the view shut down: STOP 4")
@@ -621,6 +673,13 @@ class LiveTwin:
         if wire is not None:
             speed = "real time ×1 (the wire client)"
             error = f"  \n{wire.status_markdown()}{error}"
+        if self.shadow is not None:
+            error += f"  \n{self.shadow.snapshot().status}"
+        if self.drift_pct:
+            drifted = self.rig.params.motor.resistance_ohm != self.params.motor.resistance_ohm
+            error += f"  \nrig drift: motor resistance +{self.drift_pct:g} %" + (
+                "" if drifted else " (from the next Reset)"
+            )
         notice = ""
         if self.notice is not None and time.monotonic() - self.notice[0] < NOTICE_S:
             notice = f"  \n**refused**: {_markdown_text(self.notice[1])}"
