@@ -325,7 +325,13 @@ class _Group:
         ideal_sensors: bool,
         nthread: int,
         record: bool,
+        batch: mjbatch.Batch | None = None,
+        ids: np.ndarray | None = None,
+        plant_cache: dict[Parameters, Plant] | None = None,
     ) -> None:
+        """``batch``/``ids``: step these runs as rows ``ids`` of a batch shared with other groups (whose
+        models the owner sets), instead of a batch of their own. ``plant_cache``: plants already built, by
+        parameters (a group built for each episode need not compile its models again)."""
         p = self.p = params[0]
         self.n = n = len(params)
         self.ideal = ideal_sensors
@@ -339,7 +345,8 @@ class _Group:
         plants: dict[Parameters, Plant] = {}
         for q in params:
             if q not in plants:
-                plants[q] = Plant(q)
+                cached = None if plant_cache is None else plant_cache.get(q)
+                plants[q] = cached if cached is not None else Plant(q)
         self.plants = [plants[q] for q in params]
         self.distinct = list(plants.values())
         index = {q: k for k, q in enumerate(plants)}
@@ -351,10 +358,16 @@ class _Group:
             plant.reset(float(x0[i]), float(theta0[i]))  # the single run's reset (and its checks)
             mujoco.mj_getState(plant.model, plant.data, states[i], _INTEGRATION)
             mujoco.mj_getState(plant.model, plant.data, self.last_row[i], _FULL)
-        self.batch = mjbatch.Batch(self.distinct[0].model, n, nthread=nthread)
-        if len(self.distinct) > 1:
-            self.batch.set_models([plant.model for plant in self.plants])
-        self.batch.state[:] = states
+        if batch is None:
+            self.batch = mjbatch.Batch(self.distinct[0].model, n, nthread=nthread)
+            self.ids = np.arange(n)
+            if len(self.distinct) > 1:
+                self.batch.set_models([plant.model for plant in self.plants])
+        else:
+            assert ids is not None and len(ids) == n
+            self.batch, self.ids = batch, np.asarray(ids)
+            batch.warning[self.ids] = 0  # a row's counters are its run's (MjData's, reset with it)
+        self.batch.state[self.ids] = states
         # Each run's furthest physical beam angle (Plant._check_numerics): past it, a numerical failure.
         self.theta_limit_rad = np.array([q.beam.stop_angle_rad + stop_overshoot_bound_rad(q) for q in params])
         plant0 = self.distinct[0]
@@ -402,9 +415,15 @@ class _Group:
 
     def _advance(self, volts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Plant.advance for every live run: (times (m+1,), x, θ, on-track (live, m+1))."""
-        live, m = self.live, volts.shape[1]
         t0 = self.physics_time_s
-        out = self.batch.rollout(m, control=volts[:, :, None], record=(_FULL,), ids=live)[_FULL]
+        out = self.batch.rollout(
+            volts.shape[1], control=volts[:, :, None], record=(_FULL,), ids=self.ids[self.live]
+        )[_FULL]
+        return self._advanced(t0, out)
+
+    def _advanced(self, t0: float, out: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """``_advance`` once the live runs' physics has run from ``t0``: ``out`` their recorded states."""
+        live, m = self.live, out.shape[1]
         self._check_numerics(t0, out)
         last = out[:, -1]
         if not np.isfinite(last).all():
@@ -451,7 +470,8 @@ class _Group:
         (a simulation that warns stops stepping: its clock stops) or whose beam went past its stops further
         than they can yield."""
         live = self.live
-        warned = np.flatnonzero(self.batch.warning[live, :, 1].any(axis=1))  # (lastinfo, number) per warning
+        # (lastinfo, number) per warning
+        warned = np.flatnonzero(self.batch.warning[self.ids[live], :, 1].any(axis=1))
         theta = np.abs(out[:, :, self.theta_col])
         past = np.flatnonzero((theta > self.theta_limit_rad[live, None]).any(axis=1))
         if not (warned.size or past.size):
@@ -460,7 +480,7 @@ class _Group:
         if warned.size:
             j = int(warned[0])
             i = int(live[j])
-            counts = dict(enumerate(self.batch.warning[i, :, 1].tolist()))
+            counts = dict(enumerate(self.batch.warning[self.ids[i], :, 1].tolist()))
             error = numerical_failure(
                 self.plants[i].params, warning_text(counts), failure_time_s(np.r_[t0, out[j, :, 0]])
             )
@@ -473,7 +493,7 @@ class _Group:
 
     def read(self) -> BatchSamples:
         """SimRig._read for every live run: the same ``TickSchedule`` plan, the pieces as arrays over the runs."""
-        p, live = self.p, self.live
+        live = self.live
         plan = self.schedule.next_block()
         t_start = plan.start_step * self.dt if plan.start_step < 0 else self.physics_time_s
         if plan.free_steps:  # released before this block begins: run free up to it, unobserved
@@ -497,6 +517,31 @@ class _Group:
             xs.append(x[:, skip:])
             thetas.append(th[:, skip:])
             ons.append(on[:, skip:])
+        return self._sense(t_start, times, xs, thetas, ons)
+
+    def begin_observed(self) -> tuple[float, np.ndarray]:
+        """The first half of ``read`` when the next block is physics alone (``TickSchedule.next_is_observed``):
+        the schedule moves past it; (the physics clock, the live runs' volts per step (live, steps)) for
+        their rollout, which the caller runs (with other groups' rows) before ``end_observed``."""
+        plan = self.schedule.next_block()
+        assert plan.free_steps == 0 and plan.held_end_step is None and plan.observed_steps
+        return self.physics_time_s, self._step_volts(plan.observed_steps)
+
+    def end_observed(self, t0: float, out: np.ndarray) -> BatchSamples:
+        """The rest of ``read``: ``out`` the live runs' rollout of ``begin_observed``'s volts from ``t0``."""
+        t, x, th, on = self._advanced(t0, out)
+        return self._sense(t0, [t], [x], [th], [on])
+
+    def _sense(
+        self,
+        t_start: float,
+        times: list[np.ndarray],
+        xs: list[np.ndarray],
+        thetas: list[np.ndarray],
+        ons: list[np.ndarray],
+    ) -> BatchSamples:
+        """A block's pieces (as ``SimRig._read``'s) through the sensor chains or the ideal converters."""
+        p, live = self.p, self.live
         block_t = np.concatenate(times)
         block_x = np.concatenate(xs, axis=1)
         block_theta = np.concatenate(thetas, axis=1)

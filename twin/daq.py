@@ -203,6 +203,11 @@ class TickSchedule:
             self.next_end_step - self.steps_per_tick == self.steps_done >= 0 and self.switch_in_steps is None
         )
 
+    def next_is_observed(self) -> bool:
+        """Whether the next block is one control period of physics from where it stands, after release (a
+        command may switch within it): ``next_block`` then plans no free run and no held part."""
+        return self.next_end_step - self.steps_per_tick == self.steps_done >= 0
+
     def plain_block(self) -> None:
         """Move past a plain block (see ``next_is_plain``)."""
         self.steps_done = self.next_end_step

@@ -30,6 +30,7 @@ from twin.guard import Fault, Guard, describe, install_interrupt_handler, is_int
 from twin.interface import Controller, DaqSample, Telemetry
 from twin.log import THESIS_FIELDS, TRUTH_FIELDS, RunLog
 from twin.parameters import Daq, Parameters
+from twin.physics import PhysicsBlock
 from twin.rig import PlantKind, RigError, SimRig, make_rig, whole_steps
 from twin.verdict import Criteria, Verdict, evaluate
 
@@ -39,6 +40,7 @@ __all__ = [
     "ClosedLoop",
     "ControllerError",
     "RunResult",
+    "block_peak_abs_theta_rad",
     "StateLaw",
     "check_period_s",
     "checked_start",
@@ -252,6 +254,21 @@ _TRUE_STATE = slice(_COLUMNS.index("true_x_m"), _COLUMNS.index("true_thetadot_ra
 _FLUSH_TICKS = 1024
 
 
+def block_peak_abs_theta_rad(block: PhysicsBlock | None) -> float:
+    """The largest |θ| of a block over its steps with the ball on the track (0 when none, or no block): the
+    verdict's peak angle and stops test."""
+    if block is None:
+        return 0.0
+    if block.all_on_track and block.theta_range_rad is not None:  # the common case: the extremes
+        lo, hi = block.theta_range_rad
+        return max(abs(lo), abs(hi))
+    if block.on_track.all():
+        return float(np.max(np.abs(block.theta_rad)))
+    if block.on_track.any():
+        return float(np.max(np.abs(block.theta_rad[block.on_track])))
+    return 0.0
+
+
 class _Recorder:
     """The log's columns. A tick is appended as one tuple of Python floats (per tick, the cost is the number
     of numpy calls, and a tuple needs none) and written into the table when the columns are read
@@ -281,16 +298,7 @@ class _Recorder:
         else:  # the row holds the simulation clock and the state: both computed in ``flush``
             self._state_rows.append((self.n, state_row.copy()))
             time_s, state = math.nan, _NAN4
-        block = rig.last_block
-        peak = 0.0
-        if block is not None:
-            if block.all_on_track and block.theta_range_rad is not None:  # the common case: the extremes
-                lo, hi = block.theta_range_rad
-                peak = max(abs(lo), abs(hi))
-            elif block.on_track.all():
-                peak = float(np.max(np.abs(block.theta_rad)))
-            elif block.on_track.any():
-                peak = float(np.max(np.abs(block.theta_rad[block.on_track])))
+        peak = block_peak_abs_theta_rad(rig.last_block)
         # timem, datam1, datam2, aout, x1…x4, u, uhesap, true_time_s, true state, motor_volts_v (_COLUMNS),
         # then the lost flag and the peak |θ|
         self._ticks.append(

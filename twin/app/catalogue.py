@@ -43,8 +43,10 @@ def _what(fault: Fault) -> str:
     return fault_text(fault)
 
 
-def user_controller(spec: str, timeout_s: float | None = None) -> type[Controller] | None:
-    """The class named by ``MODULE:CLASS``, or None for a registry name (checked against the registry).
+def user_controller(spec: str, timeout_s: float | None = None) -> Callable[..., Controller] | None:
+    """The class named by ``MODULE:CLASS`` (a ``Controller`` subclass) or the function named by
+    ``MODULE:FUNCTION`` (one that builds a ``Controller``: a trained policy's ``PolicyController``, say), or
+    None for a registry name (checked against the registry).
     Whatever the import raises (``SystemExit`` included) or an import that does not return within
     ``twin.guard.first_call_budget_s(timeout_s)`` is a ``ParameterError``."""
     from twin.parameters import ParameterError
@@ -82,20 +84,28 @@ def user_controller(spec: str, timeout_s: float | None = None) -> type[Controlle
             obj = getattr(obj, part)
         except AttributeError:
             raise ParameterError(f"--controller {spec}: module {module_name} has no {qualname!r}") from None
-    if not (isinstance(obj, type) and issubclass(obj, Controller)):
+    if isinstance(obj, type):
+        if not issubclass(obj, Controller):
+            raise ParameterError(
+                f"--controller {spec}: {qualname} is not a subclass of twin.interface.Controller "
+                "(a hardware controller: raw blocks in, a DAC command out)"
+            )
+        return obj
+    if not callable(obj):
         raise ParameterError(
-            f"--controller {spec}: {qualname} is not a subclass of twin.interface.Controller "
-            "(a hardware controller: raw blocks in, a DAC command out)"
+            f"--controller {spec}: {qualname} is neither a twin.interface.Controller class nor a function "
+            "that builds one"
         )
     return obj
 
 
 def construct(
-    cls: type[Controller], spec: str, params: Parameters, timeout_s: float | None = None
+    cls: Callable[..., Controller], spec: str, params: Parameters, timeout_s: float | None = None
 ) -> Controller:
-    """``cls(software)`` if the constructor has a parameter ``software``, else ``cls()``; whatever it raises,
-    a constructor that does not return within ``twin.guard.first_call_budget_s(timeout_s)`` or a ``period_s``
-    that is not a positive number of seconds is a ``ParameterError``."""
+    """``cls(software)`` if the constructor (or factory function) has a parameter ``software``, else
+    ``cls()``; whatever it raises, a call that does not return within ``twin.guard.first_call_budget_s(
+    timeout_s)``, a factory's result that is not a ``Controller`` or a ``period_s`` that is not a positive
+    number of seconds is a ``ParameterError``."""
     from twin.guard import Fault
     from twin.parameters import ParameterError
 
@@ -103,20 +113,25 @@ def construct(
         software = inspect.signature(cls).parameters.get("software")
     except (TypeError, ValueError):  # no signature to read: call it without arguments
         software = None
-    call = f"{cls.__name__}({'' if software is None else 'software'})"
+    call = f"{getattr(cls, '__name__', 'the factory')}({'' if software is None else 'software'})"
     if software is None:
         make: Callable[[Any], Controller] = lambda _: cls()  # noqa: E731
     elif software.kind is inspect.Parameter.POSITIONAL_ONLY:
         make = cls
     else:
-        make = lambda sw: cls(software=sw)  # type: ignore[call-arg]  # noqa: E731
+        make = lambda sw: cls(software=sw)  # noqa: E731
     guard = _first_call_guard(timeout_s)
     try:
         controller = guard.call(make, params.software, guard.first_budget_s)
     except Fault as fault:
         raise ParameterError(f"--controller {spec}: {call} failed: {_what(fault)}") from None
     from twin.engine import ControllerError, check_period_s
+    from twin.interface import Controller
 
+    if not isinstance(controller, Controller):
+        raise ParameterError(
+            f"--controller {spec}: {call} returned {type(controller).__name__}, not a twin.interface.Controller"
+        )
     try:
         check_period_s(controller)
     except ControllerError as exc:
@@ -132,7 +147,7 @@ class WithUserController:
     ENTRIES: Mapping[str, CatalogueEntry]
 
     def __init__(
-        self, base: Catalogue, spec: str, cls: type[Controller], timeout_s: float | None = None
+        self, base: Catalogue, spec: str, cls: Callable[..., Controller], timeout_s: float | None = None
     ) -> None:
         self.base, self.spec, self.cls, self.timeout_s = base, spec, cls, timeout_s
         self.NAMES: tuple[str, ...] = (*base.NAMES, spec)

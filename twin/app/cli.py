@@ -390,7 +390,7 @@ def _remote_session(
     args: argparse.Namespace,
     rig: RemoteRig,
     params: Parameters,
-    user: type[Controller] | None,
+    user: Callable[..., Controller] | None,
     many: bool,
 ) -> tuple[bool, RemoteRun | None, dict[str, Any]] | None:
     """One session of ``run --rig`` on the open ``rig``: (held, the run or None if the controller failed,
