@@ -24,6 +24,8 @@ One run measures, on the same work (a 10 s episode from x0 = 0.2 m, θ0 = 0.3 ra
 - physics: µs per MuJoCo step, ms per 20 ms tick of the TwinRig;
 - wire: a lock-step session over loopback UDP (``ballbeam serve`` in its own process, ``RemoteRig`` here) per tick
   against the same appendix-sf episode in process (target ≤ 2×);
+- (f) vector env: 64 appendix-sf runs through ``BallBeamVectorEnv`` (replaying the batch engine's commands: the
+  same trajectories) per env-step against the batch engine's per run-tick (target ≤ 1.3×);
 - view: the live view's tick rate at speed 1.0 over the given wall time (target 50 Hz ± 1 %) and its CPU
   time per tick, headless.
 
@@ -284,6 +286,52 @@ def bench_batch(side: int = 41, duration_s: float = DURATION_S, nthread: int = 2
     }
 
 
+# --- (f): the vector environment against the batch engine ----------------------------------------------------
+def bench_vector_env(n: int = 64, duration_s: float = DURATION_S, repeats: int = 3) -> dict[str, float]:
+    """``n`` runs of appendix-sf (an 8 × 8 grid of the hardware box, noise on) through the batch engine, and the
+    same runs through ``BallBeamVectorEnv`` replaying the batch's DAC commands as actions (the same
+    trajectories: checked bit for bit): the cost per env-step against the batch's per run-tick. Interleaved
+    repeats; the best of each counts."""
+    from twin.app.envs import BallBeamVectorEnv
+
+    side = int(round(np.sqrt(n)))
+    x0, theta0 = (a.ravel() for a in np.meshgrid(np.linspace(-0.2, 0.2, side), np.linspace(-0.3, 0.3, side)))
+    n = len(x0)
+    seeds = np.arange(n) + 1000
+    kw: dict[str, Any] = dict(x0_m=x0, theta0_rad=theta0, seeds=seeds, duration_s=duration_s, nthread=2)
+    runs = run_batch(registry, "appendix-sf", **kw, stop_when_lost=False, record=True)
+    commands = np.array([r.log.aout for r in runs])  # row 0: the start block's (no command)
+    env = BallBeamVectorEnv(n, duration_s=duration_s, nthread=2)
+    steps = env.cfg.ticks
+    options = {"x0_m": x0, "theta0_rad": theta0, "noise_seed": seeds}
+
+    def batch() -> None:
+        run_batch(registry, "appendix-sf", **kw, stop_when_lost=False)
+
+    def vector() -> np.ndarray:
+        obs, _ = env.reset(seed=0, options=options)
+        for k in range(steps):
+            obs, *_ = env.step(commands[:, k + 1, None])
+        return obs
+
+    last = vector()
+    same = bool(np.array_equal(last[:, 0], [r.log.datam1[steps + 1] for r in runs]))  # the last ball volts
+    best_batch = best_vec = float("inf")
+    for _ in range(repeats):
+        best_batch = min(best_batch, _timed(batch)[0])
+        best_vec = min(best_vec, _timed(vector)[0])
+    ticks = len(runs[0].log.aout) - 1  # the batch's update ticks (its start block is not a tick)
+    per_tick = best_batch / (n * ticks)
+    per_step = best_vec / (n * steps)
+    return {
+        "envs": float(n),
+        "same_trajectories": float(same),
+        "batch_engine_us_per_run_tick": 1e6 * per_tick,
+        "vector_env_us_per_env_step": 1e6 * per_step,
+        "vector_env_over_batch_engine": per_step / per_tick,
+    }
+
+
 # --- (d): the peers a user would otherwise reach for ----------------------------------------------------
 def _sampled_state_feedback(
     integrate: Callable[[float, np.ndarray, float], np.ndarray], params: Parameters
@@ -432,6 +480,9 @@ def ratios(results: dict[str, Any]) -> dict[str, float]:
     wire = results.get("wire")
     if wire is not None:
         out["wire_lockstep_over_in_process"] = wire["lockstep_over_in_process"]
+    vector = results.get("vector_env")
+    if vector is not None:
+        out["f_vector_env_over_batch_engine"] = vector["vector_env_over_batch_engine"]
     return out
 
 
@@ -446,6 +497,8 @@ def main() -> None:
     parser.add_argument("--skip-peers", action="store_true")
     parser.add_argument("--skip-wire", action="store_true")
     parser.add_argument("--only-wire", action="store_true", help="measure the lock-step UDP session only")
+    parser.add_argument("--skip-vector-env", action="store_true")
+    parser.add_argument("--only-vector-env", action="store_true", help="measure (f) only")
     parser.add_argument("--batch-side", type=int, default=41, help="the batch grid's points per side")
     args = parser.parse_args()
     if args.only_wire:
@@ -455,6 +508,10 @@ def main() -> None:
             if args.json
             else "\n".join(f"{k:40s} {v:12.4f}" for k, v in only["wire"].items())
         )
+        return
+    if args.only_vector_env:
+        got = bench_vector_env()
+        print(json.dumps(got) if args.json else "\n".join(f"{k:40s} {v:12.4f}" for k, v in got.items()))
         return
     episodes = {name: bench_episode(name, max(1, args.repeats)) for name in EPISODES}
     results: dict[str, Any] = {"physics": bench_physics(), "episodes": episodes}
@@ -468,6 +525,8 @@ def main() -> None:
         results["view"] = bench_view(args.view_seconds)
     if not args.skip_wire:
         results["wire"] = bench_wire(max(1, args.repeats))
+    if not args.skip_vector_env:
+        results["vector_env"] = bench_vector_env()
     results["ratios"] = ratios(results)
     if args.json:
         print(json.dumps(results))

@@ -474,6 +474,18 @@ class NotAController:
 
 def function():
     pass
+
+
+def make_mine(software):
+    CALLS.append(("make_mine", software))
+    return WithSoftware(software)
+
+
+def raising_factory():
+    raise RuntimeError("no policy file")
+
+
+CONSTANT = 3
 '''
 
 
@@ -505,6 +517,18 @@ def test_run_a_user_controller_built_with_the_software_calibration(user_dir: Pat
     assert calls == [("WithSoftware", Parameters().software)]
 
 
+def test_run_a_controller_a_users_function_builds(user_dir: Path, capsys) -> None:
+    """``MODULE:FUNCTION``: a factory (a trained policy's, say) given the software calibration, as a class is."""
+    from twin.parameters import Parameters
+
+    spec = "my_controllers:make_mine"
+    rc = main(["run", "--controller", spec, "--x0", "0.14", "--theta0", "-0.2", "--duration", "4", "--json"])
+    out = json.loads(capsys.readouterr().out)
+    assert rc == (0 if out["held"] else 1) and out["controller"] == spec and not out["ball_lost"]
+    calls = sys.modules["my_controllers"].CALLS
+    assert calls[:2] == [("make_mine", Parameters().software), ("WithSoftware", Parameters().software)]
+
+
 def test_run_a_user_controller_built_without_arguments(user_dir: Path, capsys) -> None:
     rc = main(
         [
@@ -533,7 +557,9 @@ def test_run_a_user_controller_built_without_arguments(user_dir: Path, capsys) -
         ("broken_import:C", "RuntimeError: cannot talk to the card"),
         ("my_controllers:Missing", "has no 'Missing'"),
         ("my_controllers:NotAController", "not a subclass of twin.interface.Controller"),
-        ("my_controllers:function", "not a subclass of twin.interface.Controller"),
+        ("my_controllers:function", "function() returned NoneType, not a twin.interface.Controller"),
+        ("my_controllers:raising_factory", "raising_factory() failed: RuntimeError: no policy file"),
+        ("my_controllers:CONSTANT", "neither a twin.interface.Controller class nor a function"),
         ("my_controllers:Abstract", "Abstract() failed: TypeError"),
         ("my_controllers:Raising", "Raising() failed: ValueError: no rig here second line"),
         ("my_controllers:", "expected MODULE:CLASS"),

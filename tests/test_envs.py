@@ -277,3 +277,28 @@ def test_bad_actions_and_reset_options_are_refused() -> None:
     obs, *_ = env.step(np.array([99.0]))  # clipped to the DAC's 5 V, as the card would
     assert env.rig.command_v == 5.0
     assert env.observation_space.contains(obs)
+    short = BallBeamEnv(duration_s=0.04)
+    short.reset(seed=0)
+    assert short.step(np.array([2.5]))[3] is False and short.step(np.array([2.5]))[3] is True
+    with pytest.raises(RuntimeError, match="the episode has ended"):
+        short.step(np.array([2.5]))
+
+
+def test_vector_reset_options_set_each_env_as_the_single_envs_do() -> None:
+    x0, th0, seeds = np.array([0.1, -0.05, 0.2]), np.array([0.0, 0.1, -0.2]), np.array([5, 6, 7])
+    venv = BallBeamVectorEnv(3, duration_s=0.5)
+    obs, infos = venv.reset(
+        seed=1, options={"x0_m": x0, "theta0_rad": th0, "noise_seed": seeds, "setpoint_m": 0.02}
+    )
+    for i in range(3):
+        env = BallBeamEnv(duration_s=0.5)
+        o, info = env.reset(
+            seed=1 + i,
+            options={"x0_m": x0[i], "theta0_rad": th0[i], "noise_seed": seeds[i], "setpoint_m": 0.02},
+        )
+        assert np.array_equal(o, obs[i]) and np.array_equal(info["true_state"], infos["true_state"][i])
+        assert (
+            env.episode is not None and env.episode.noise_seed == seeds[i] and env.episode.setpoint_m == 0.02
+        )
+    with pytest.raises(ValueError, match="noise_seed = -1"):
+        venv.reset(seed=1, options={"noise_seed": -1})

@@ -14,7 +14,8 @@ Each reset draws, from the environment's generator in this order: the episode's 
 or calibration, about the base parameters: never about the last episode's), the initial state (uniform over
 ``x0_range_m`` × ``theta0_range_rad``, or one of ``starts``), the setpoint (uniform over
 ``setpoint_range_m``) and the sensor-noise seed. ``reset(options={"x0_m": …, "theta0_rad": …,
-"setpoint_m": …})`` sets them for that episode (the draws are still made: the stream does not shift).
+"setpoint_m": …, "noise_seed": …})`` sets them for that episode (the draws are still made: the stream does
+not shift); the vector env takes one value for all or an array of one per env.
 
 ``info`` is simulation only (``info["sim_only"]`` is True): the true state (x, θ, ẋ, θ̇), the simulated time,
 the motor volts, the lost ball and the stops; at an episode's end ``info["verdict"]``, the verdict of the
@@ -212,9 +213,16 @@ def draw_episode(cfg: EnvConfig, rng: np.random.Generator, options: Mapping[str,
     setpoint = float(rng.uniform(*cfg.setpoint_range_m))
     seed = int(rng.integers(_SEED_BOUND))
     opts = dict(options or {})
-    unknown = set(opts) - {"x0_m", "theta0_rad", "setpoint_m"}
+    unknown = set(opts) - {"x0_m", "theta0_rad", "setpoint_m", "noise_seed"}
     if unknown:
-        raise ValueError(f"reset options {sorted(unknown)}: known are x0_m, theta0_rad, setpoint_m")
+        raise ValueError(
+            f"reset options {sorted(unknown)}: known are x0_m, theta0_rad, setpoint_m, noise_seed"
+        )
+    if "noise_seed" in opts:
+        given = opts["noise_seed"]
+        if isinstance(given, (bool, np.bool_)) or not isinstance(given, (int, np.integer)) or given < 0:
+            raise ValueError(f"noise_seed = {given!r}: a whole number ≥ 0")
+        seed = int(given)
     x0 = _finite("x0_m", opts.get("x0_m", x0))
     th0 = _finite("theta0_rad", opts.get("theta0_rad", th0))
     setpoint = _finite("setpoint_m", opts.get("setpoint_m", setpoint))
@@ -320,6 +328,7 @@ class BallBeamEnv(gymnasium.Env[np.ndarray, np.ndarray]):
         self._ball = np.zeros(self.cfg.obs.stack)
         self._angle = np.zeros(self.cfg.obs.stack)
         self._steps = 0
+        self._ended = False
         self._rig_params: Parameters | None = None
 
     @property
@@ -350,7 +359,8 @@ class BallBeamEnv(gymnasium.Env[np.ndarray, np.ndarray]):
         self._record(one)
         self._ball[:] = first.ball_v
         self._angle[:] = first.angle_v
-        return self._after_block(rig.read(), one)[0], self._info(False)
+        self._steps, self._ended = 0, False
+        return self._after_block(rig.read(), one), self._info(False)
 
     def _record(self, one: np.ndarray) -> None:
         rig = self.rig
@@ -362,24 +372,27 @@ class BallBeamEnv(gymnasium.Env[np.ndarray, np.ndarray]):
             np.array([block_peak_abs_theta_rad(rig.last_block)]),
         )
 
-    def _after_block(self, sample: Any, one: np.ndarray) -> tuple[np.ndarray, None]:
+    def _after_block(self, sample: Any, one: np.ndarray) -> np.ndarray:
+        """The block just read: recorded for the verdict, shifted into the history; the observation."""
         self._record(one)
         self._ball[:-1], self._ball[-1] = self._ball[1:], sample.ball_v
         self._angle[:-1], self._angle[-1] = self._angle[1:], sample.angle_v
         assert self._episode is not None
         return observation(
             self.cfg.obs, self._ball, self._angle, self._episode.params, self._episode.setpoint_m
-        ), None
+        )
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         if self._episode is None:
             raise RuntimeError("call reset before step")
+        if self._ended:
+            raise RuntimeError("the episode has ended (terminated or truncated): call reset")
         ep, rig = self._episode, self.rig
         command = float(self.cfg.action.command_v(action, ep.params)[0])
         rig.write(command)
         one = np.zeros(1, dtype=np.int64)
-        obs, _ = self._after_block(rig.read(), one)
-        self._steps = int(self._trace.count[0]) - 2
+        obs = self._after_block(rig.read(), one)
+        self._steps += 1
         state = rig.true_state()[None, :]
         r, term, trunc, stops = _step_outcome(
             self.cfg,
@@ -393,6 +406,7 @@ class BallBeamEnv(gymnasium.Env[np.ndarray, np.ndarray]):
         )
         info = self._info(bool(stops[0]))
         if term[0] or trunc[0]:
+            self._ended = True
             info["verdict"] = self._trace.verdict(0, ep, rig.ball_lost_time_s, self.cfg.criteria)
         return obs, float(r[0]), bool(term[0]), bool(trunc[0]), info
 
@@ -550,11 +564,14 @@ class BallBeamVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         truncated = np.zeros(n, dtype=bool)
         self._at_stops[resetting] = False
         if going.size:
-            commands = np.empty(len(going))
-            for j, i in enumerate(going.tolist()):
-                ep = self._episodes[i]
-                assert ep is not None
-                commands[j] = cfg.action.command_v(a[i], ep.params)[0]
+            if cfg.spread is None:  # every episode's rig is the base's: one conversion for all
+                commands = cfg.action.command_v(a[going], cfg.params)
+            else:
+                commands = np.empty(len(going))
+                for j, i in enumerate(going.tolist()):
+                    ep = self._episodes[i]
+                    assert ep is not None
+                    commands[j] = cfg.action.command_v(a[i], ep.params)[0]
             b = self.rigs.step(going, commands)
             self._blocks_in(going, b)
             r, term, trunc, stops = _step_outcome(
