@@ -2,6 +2,7 @@
 
     python scripts/bench.py [--json] [--repeats 15] [--batch-side 41] [--skip-batch] [--skip-peers]
                             [--skip-calibration] [--skip-view] [--view-seconds 60] [--skip-wire] [--only-wire]
+                            [--skip-vector-env] [--only-vector-env] [--skip-sweep-command] [--only-sweep-command]
 
 One run measures, on the same work (a 10 s episode from x0 = 0.2 m, θ0 = 0.3 rad, noise on, seed 0):
 
@@ -14,7 +15,8 @@ One run measures, on the same work (a 10 s episode from x0 = 0.2 m, θ0 = 0.3 ra
   Every episode runs to the end (``stop_when_lost=False``);
 - (c) batch: a side × side grid (41 × 41 by default) of 10 s appendix-sf episodes (noise on) through the
   batch engine (``twin.batch``) on 2 threads, all to the end and as a sweep runs it (lost balls leave the
-  batch; its floor is the full floor scaled by the physics steps done), against (a) on 2 threads;
+  batch; its floor is the full floor scaled by the physics steps done), against (a) on 2 threads, interleaved
+  with it (the best of two of each);
 - (d) peers: the same episode on the analytic model (the nonlinear ``twin.reference`` equations, no sensor
   chain) with §5.2.1's state feedback (``controllers.thesis_numbers.SF_DISC_K``) on the true state at 50 Hz,
   held between samples and clamped to the amplifier's ±12 V, each 20 ms interval integrated with the held
@@ -24,10 +26,12 @@ One run measures, on the same work (a 10 s episode from x0 = 0.2 m, θ0 = 0.3 ra
 - physics: µs per MuJoCo step, ms per 20 ms tick of the TwinRig;
 - wire: a lock-step session over loopback UDP (``ballbeam serve`` in its own process, ``RemoteRig`` here) per tick
   against the same appendix-sf episode in process (target ≤ 2×);
+- (g) the whole command: ``ballbeam sweep`` of the (c) grid in a new process (start-up, corners, JSON and
+  map written) against the 2-thread floor of the sweep's steps, interleaved (target ≤ 1.2×);
 - (f) vector env: 64 appendix-sf runs through ``BallBeamVectorEnv`` (replaying the batch engine's commands: the
   same trajectories) per env-step against the batch engine's per run-tick (target ≤ 1.3×);
 - view: the live view's tick rate at speed 1.0 over the given wall time (target 50 Hz ± 1 %) and its CPU
-  time per tick, headless.
+  time per tick, with a client attached (a websocket speaking viser's protocol, draining every frame).
 
 (a) and (b) are the best of ``--repeats`` interleaved repeats (15 by default: the shared machine's bursts of
 load last seconds), wall time and CPU time (``process_time``, which other processes on a shared machine
@@ -43,6 +47,8 @@ import os
 import socket
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 # One BLAS thread: the batch's threads are MuJoCo's (set before numpy loads OpenBLAS).
@@ -216,8 +222,27 @@ def _raw_rollout_s(
     return elapsed, cpu, final
 
 
-def bench_batch(side: int = 41, duration_s: float = DURATION_S, nthread: int = 2) -> dict[str, float]:
-    """The side × side sweep of appendix-sf through the batch engine against raw rollout of the same physics."""
+@dataclass
+class _GridPhysics:
+    """The physics of a side × side appendix-sf grid (10 s, noise on) as one open-loop job: each run's motor
+    volts as the closed loop applied them, its initial state, and the share of its steps a sweep does (a
+    run stops at the end of the block in which its ball left the track)."""
+
+    x0: np.ndarray
+    theta0: np.ndarray
+    plant: Plant
+    initial: np.ndarray
+    control: np.ndarray
+    share: float
+    lost: int
+    full: list[RunResult]
+    sweep_s: float
+    sweep_cpu_s: float
+    full_s: float
+    full_cpu_s: float
+
+
+def _grid_physics(side: int, duration_s: float, nthread: int) -> _GridPhysics:
     params = Parameters()
     x0, theta0 = (
         a.ravel() for a in np.meshgrid(np.linspace(-0.32, 0.32, side), np.linspace(-0.7, 0.7, side))
@@ -226,12 +251,10 @@ def bench_batch(side: int = 41, duration_s: float = DURATION_S, nthread: int = 2
     kw: dict[str, Any] = dict(x0_m=x0, theta0_rad=theta0, seeds=seeds, duration_s=duration_s, nthread=nthread)
     start, start_cpu = time.perf_counter(), time.process_time()
     full = run_batch(registry, "appendix-sf", **kw, stop_when_lost=False, record=True)
-    batch_full_s, batch_full_cpu = time.perf_counter() - start, time.process_time() - start_cpu
+    full_s, full_cpu = time.perf_counter() - start, time.process_time() - start_cpu
     start, start_cpu = time.perf_counter(), time.process_time()
     sweep = run_batch(registry, "appendix-sf", **kw)
-    batch_sweep_s, batch_sweep_cpu = time.perf_counter() - start, time.process_time() - start_cpu
-
-    # The same physics open loop: each run's motor volts, held over the steps the closed loop held them.
+    sweep_s, sweep_cpu = time.perf_counter() - start, time.process_time() - start_cpu
     dt, period = params.physics.timestep_s, params.daq.period_s
     free = int(round(params.start.free_run_s / dt))
     per_tick = int(round(period / dt))
@@ -245,44 +268,99 @@ def bench_batch(side: int = 41, duration_s: float = DURATION_S, nthread: int = 2
     for i in range(len(x0)):
         plant.reset(float(x0[i]), float(theta0[i]))
         mujoco.mj_getState(plant.model, plant.data, initial[i], _FULL)
-    floor_s, floor_cpu, final = _raw_rollout_s(plant, initial, control, nthread)
-    # The open loop reproduces the closed loop's trajectories bit for bit (runs whose ball stayed on).
-    kept = np.array([not r.verdict.ball_lost for r in full])
-    end_x = np.array([r.log.true_x_m[-1] for r in full])
-    same = bool(np.array_equal(plant.row_states(final[kept])[:, 0], end_x[kept]))
-    # Physics steps the sweep did: a run stops at the end of the block in which its ball left the track.
     lost_steps = [
         int(round(r.verdict.ball_lost_time_s / dt)) for r in sweep if r.verdict.ball_lost_time_s is not None
     ]
     sweep_steps = sum(
         min(steps, free + per_tick * max(0, -(-(k - free) // per_tick))) for k in lost_steps
     ) + steps * (len(sweep) - len(lost_steps))
-    share = sweep_steps / (steps * len(x0))
-    sweep_floor_s = floor_s * share
+    return _GridPhysics(
+        x0,
+        theta0,
+        plant,
+        initial,
+        control,
+        sweep_steps / (steps * len(x0)),
+        len(lost_steps),
+        full,
+        sweep_s,
+        sweep_cpu,
+        full_s,
+        full_cpu,
+    )
 
-    def on_two_cores(cpu: float, floor: float) -> float:
-        # Wall ratio on two otherwise idle cores, from CPU times (which other processes do not inflate): the
-        # physics takes the floor's CPU on both threads; the rest of the batch runs on one.
-        return 1.0 + 2.0 * (cpu - floor) / floor
 
+def bench_batch(
+    side: int = 41, duration_s: float = DURATION_S, nthread: int = 2, repeats: int = 2
+) -> dict[str, float]:
+    """The side × side sweep of appendix-sf through the batch engine against raw rollout of the same physics,
+    interleaved (floor, batch to the end, batch as a sweep, …; the best of each)."""
+    g = _grid_physics(side, duration_s, nthread)
+    floor_s, floor_cpu, final = _raw_rollout_s(g.plant, g.initial, g.control, nthread)
+    seeds = np.arange(len(g.x0))
+    kw: dict[str, Any] = dict(
+        x0_m=g.x0, theta0_rad=g.theta0, seeds=seeds, duration_s=duration_s, nthread=nthread
+    )
+    for _ in range(repeats - 1):
+        f_s, f_cpu, _ = _raw_rollout_s(g.plant, g.initial, g.control, nthread)
+        floor_s, floor_cpu = min(floor_s, f_s), min(floor_cpu, f_cpu)
+        wall, cpu = _timed(lambda: run_batch(registry, "appendix-sf", **kw, stop_when_lost=False))
+        g.full_s, g.full_cpu_s = min(g.full_s, wall), min(g.full_cpu_s, cpu)
+        wall, cpu = _timed(lambda: run_batch(registry, "appendix-sf", **kw))
+        g.sweep_s, g.sweep_cpu_s = min(g.sweep_s, wall), min(g.sweep_cpu_s, cpu)
+    # The open loop reproduces the closed loop's trajectories bit for bit (runs whose ball stayed on).
+    kept = np.array([not r.verdict.ball_lost for r in g.full])
+    end_x = np.array([r.log.true_x_m[-1] for r in g.full])
+    same = bool(np.array_equal(g.plant.row_states(final[kept])[:, 0], end_x[kept]))
     return {
-        "runs": float(len(x0)),
+        "runs": float(len(g.x0)),
         "floor_2threads_s": floor_s,
         "open_loop_reproduces_closed_loop": float(same),
-        "batch_all_to_end_s": batch_full_s,
-        "batch_all_to_end_per_episode_s": batch_full_s / len(x0),
-        "batch_all_to_end_x_floor": batch_full_s / floor_s,
-        "sweep_stop_when_lost_s": batch_sweep_s,
-        "sweep_floor_scaled_s": sweep_floor_s,
-        "sweep_x_floor": batch_sweep_s / sweep_floor_s,
-        "sweep_lost": float(len(lost_steps)),
+        "batch_all_to_end_s": g.full_s,
+        "batch_all_to_end_per_episode_s": g.full_s / len(g.x0),
+        "batch_all_to_end_x_floor": g.full_s / floor_s,
+        "sweep_stop_when_lost_s": g.sweep_s,
+        "sweep_floor_scaled_s": floor_s * g.share,
+        "sweep_x_floor": g.sweep_s / (floor_s * g.share),
+        "sweep_lost": float(g.lost),
         "floor_cpu_s": floor_cpu,
-        "batch_all_to_end_cpu_s": batch_full_cpu,
-        "batch_all_to_end_cpu_x_floor": batch_full_cpu / floor_cpu,
-        "batch_all_to_end_x_floor_idle_2_cores": on_two_cores(batch_full_cpu, floor_cpu),
-        "sweep_cpu_s": batch_sweep_cpu,
-        "sweep_cpu_x_floor": batch_sweep_cpu / (floor_cpu * share),
-        "sweep_x_floor_idle_2_cores": on_two_cores(batch_sweep_cpu, floor_cpu * share),
+        "batch_all_to_end_cpu_x_floor": g.full_cpu_s / floor_cpu,
+        "sweep_cpu_x_floor": g.sweep_cpu_s / (floor_cpu * g.share),
+    }
+
+
+def bench_sweep_command(side: int = 41, repeats: int = 3, nthread: int = 2) -> dict[str, float]:
+    """``ballbeam sweep`` as a user runs it (a new process: start-up, the grid and the claims' corners, the
+    JSON and the map written) against the 2-thread rollout floor of the sweep's physics steps, interleaved:
+    floor, command, floor, command, …; the best of each counts."""
+    import subprocess
+    import sys
+    import tempfile
+
+    g = _grid_physics(side, DURATION_S, nthread)
+    out = Path(tempfile.mkdtemp(prefix="bench-sweep-"))
+    argv = [sys.executable, "-m", "twin.app.cli", "sweep", "--controller", "appendix-sf"]
+    argv += [
+        "--x0",
+        f"-0.32:0.32:{side}",
+        "--theta0",
+        f"-0.7:0.7:{side}",
+        "--out",
+        str(out / "s"),
+        "--overwrite",
+    ]
+    env = dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parents[1]))
+    floors, commands = [], []
+    for _ in range(repeats):
+        floors.append(_raw_rollout_s(g.plant, g.initial, g.control, nthread)[0] * g.share)
+        start = time.perf_counter()
+        subprocess.run(argv, check=True, capture_output=True, env=env)
+        commands.append(time.perf_counter() - start)
+    return {
+        "starts": float(len(g.x0)),
+        "sweep_floor_s": min(floors),
+        "sweep_command_s": min(commands),
+        "sweep_command_x_floor": min(commands) / min(floors),
     }
 
 
@@ -409,14 +487,71 @@ def bench_calibration() -> dict[str, float]:
 
 
 def bench_view(seconds: float) -> dict[str, float]:
-    from twin.viewer import serve
+    """The live view at speed 1.0 with a client attached (a websocket speaking viser's protocol from the
+    page's origin, draining every frame as a browser would; without one the view waits, paused): its tick
+    rate and CPU time per tick over ``seconds`` of wall time, and the frames the client received."""
+    import threading
+
+    import msgspec
+    import viser
+    import websockets.sync.client
+
+    from twin.viewer import Viewer, serve
 
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
-    stats = serve(registry, port=port, duration_s=seconds, speed=1.0, announce=False)
+    ready = threading.Event()
+    out: dict[str, Any] = {}
+
+    def on_ready(viewer: Viewer) -> None:
+        ready.set()
+
+    def run() -> None:
+        out["stats"] = serve(
+            registry, port=port, duration_s=seconds, speed=1.0, announce=False, on_ready=on_ready
+        )
+
+    server = threading.Thread(target=run, daemon=True)
+    server.start()
+    if not ready.wait(60):
+        raise RuntimeError("the view did not start")
+    ws = websockets.sync.client.connect(
+        f"ws://127.0.0.1:{port}",
+        origin=f"http://127.0.0.1:{port}",
+        subprotocols=[f"viser-v{viser.__version__}"],  # type: ignore[list-item]
+        max_size=None,
+        compression=None,
+    )
+    frames = [0]
+
+    def drain() -> None:
+        try:
+            for _ in ws:
+                frames[0] += 1
+        except websockets.exceptions.ConnectionClosed:
+            pass
+
+    threading.Thread(target=drain, daemon=True).start()
+    camera = {
+        "type": "ViewerCameraMessage",
+        "wxyz": [1.0, 0.0, 0.0, 0.0],
+        "position": [0.2, -0.72, 0.52],
+        "fov": 1.0,
+        "near": 0.01,
+        "far": 100.0,
+        "image_height": 900,
+        "image_width": 1400,
+        "look_at": [0.0, 0.0, 0.24],
+        "up_direction": [0.0, 0.0, 1.0],
+    }
+    ws.send(msgspec.msgpack.encode(camera))
+    server.join()
+    ws.close()
+    stats = out["stats"]
     stats["tick_rate_error_pct"] = 100.0 * (stats["tick_rate_hz"] / 50.0 - 1.0)
     stats["cpu_ms_per_tick"] = 1e3 * stats.pop("cpu_s_per_tick")
+    stats["client_messages"] = float(frames[0])
     return stats
 
 
@@ -480,6 +615,9 @@ def ratios(results: dict[str, Any]) -> dict[str, float]:
     wire = results.get("wire")
     if wire is not None:
         out["wire_lockstep_over_in_process"] = wire["lockstep_over_in_process"]
+    command = results.get("sweep_command")
+    if command is not None:
+        out["g_sweep_command_over_floor"] = command["sweep_command_x_floor"]
     vector = results.get("vector_env")
     if vector is not None:
         out["f_vector_env_over_batch_engine"] = vector["vector_env_over_batch_engine"]
@@ -498,6 +636,8 @@ def main() -> None:
     parser.add_argument("--skip-wire", action="store_true")
     parser.add_argument("--only-wire", action="store_true", help="measure the lock-step UDP session only")
     parser.add_argument("--skip-vector-env", action="store_true")
+    parser.add_argument("--skip-sweep-command", action="store_true")
+    parser.add_argument("--only-sweep-command", action="store_true", help="measure (g) only")
     parser.add_argument("--only-vector-env", action="store_true", help="measure (f) only")
     parser.add_argument("--batch-side", type=int, default=41, help="the batch grid's points per side")
     args = parser.parse_args()
@@ -508,6 +648,10 @@ def main() -> None:
             if args.json
             else "\n".join(f"{k:40s} {v:12.4f}" for k, v in only["wire"].items())
         )
+        return
+    if args.only_sweep_command:
+        got = bench_sweep_command(args.batch_side)
+        print(json.dumps(got) if args.json else "\n".join(f"{k:40s} {v:12.4f}" for k, v in got.items()))
         return
     if args.only_vector_env:
         got = bench_vector_env()
@@ -527,6 +671,8 @@ def main() -> None:
         results["wire"] = bench_wire(max(1, args.repeats))
     if not args.skip_vector_env:
         results["vector_env"] = bench_vector_env()
+    if not args.skip_sweep_command:
+        results["sweep_command"] = bench_sweep_command(args.batch_side)
     results["ratios"] = ratios(results)
     if args.json:
         print(json.dumps(results))

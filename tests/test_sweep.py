@@ -5,6 +5,7 @@ did, and the chapter 7 claims are judged from the map."""
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -21,6 +22,7 @@ from twin.app.sweep import (
     parse_range,
     point_seeds,
     run_sweep,
+    verdict_class,
     write_sweep,
 )
 from twin.app.sweep_render import render_map
@@ -71,6 +73,7 @@ def test_every_point_is_its_single_run() -> None:
 def test_chunks_and_workers_change_nothing(monkeypatch: pytest.MonkeyPatch) -> None:
     whole = run_sweep(SMALL).to_json()
     monkeypatch.setattr(fanout, "CHUNK_RUNS", 2)
+    monkeypatch.setattr(fanout, "IN_PROCESS_CHUNK_RUNS", 2)
     assert run_sweep(SMALL).to_json() == whole
     assert run_sweep(SMALL, workers=2).to_json() == whole
 
@@ -87,7 +90,7 @@ def test_a_dask_cluster_gives_the_local_result() -> None:
 
 
 def test_an_interrupted_sweep_keeps_the_points_done(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(fanout, "CHUNK_RUNS", 4)
+    monkeypatch.setattr(fanout, "IN_PROCESS_CHUNK_RUNS", 4)
     real = fanout.run_chunk
     calls = []
 
@@ -217,3 +220,56 @@ def test_a_failing_controller_fails_its_own_run_not_the_sweep(
     failed = [p for p in result.points if p["failed"]]
     assert len(failed) == 1 and "raised RuntimeError" in failed[0]["reason"] and not failed[0]["held"]
     assert result.to_json()["summary"]["failed"] == 1
+
+
+@pytest.mark.parametrize("controller", ["appendix-sf", "appendix-clp"])
+def test_a_refined_map_is_the_brute_force_map(controller: str) -> None:
+    """--refine runs a coarse grid and only the cells whose corners disagree: every start's class is brute
+    force's, every start it ran has brute force's record, at a fraction of the runs."""
+    grid = {"x0": Grid(-0.32, 0.32, 17), "theta0": Grid(-0.7, 0.7, 15), "duration_s": 10.0}
+    brute = run_sweep(SweepSettings(controller, **grid), nthread=2)  # type: ignore[arg-type]
+    refined = run_sweep(SweepSettings(controller, **grid, refine=4, audit=20), nthread=2)  # type: ignore[arg-type]
+    assert refined.complete and refined.refinement is not None
+    assert [verdict_class(p) for p in refined.points] == [verdict_class(p) for p in brute.points]
+    for b, r in zip(brute.points, refined.points, strict=True):
+        if not r.get("inferred"):
+            assert r == b
+    ref = refined.refinement
+    assert ref["run"] + ref["inferred"] == len(brute.points) and ref["run"] < len(brute.points)
+    assert ref["audit"]["checked"] == 20 and ref["audit"]["mismatches"] == []
+    assert refined.claims == brute.claims or [c["verdict"] for c in refined.claims] == [
+        c["verdict"] for c in brute.claims
+    ]
+
+
+def test_refinement_finds_an_island_on_a_cell_edge_and_audits_the_assumption(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A synthetic map (no physics), coarse step 4 on 17 × 17: a start of another class on the edge of an
+    agreeing cell, run for its refined neighbour, splits that cell too; an island inside an agreeing cell is
+    missed, as the README says, and the audit reports it (and runs it)."""
+    nt = 17
+    lost = {(8, 8), (6, 4), (12, 12)}  # (8, 8), (12, 12): coarse corners; (6, 4) on the edge j = 4
+    island = (10, 2)  # inside the cell [8:12] × [0:4], whose corners agree
+
+    def fake_run_starts(runs, starts, seeds, **kw):  # type: ignore[no-untyped-def]
+        out = []
+        for x0, th0 in starts.tolist():
+            i, j = round((x0 + 0.32) / 0.04), round((th0 + 0.32) / 0.04)
+            bad = (i, j) in lost or (i, j) == island
+            out.append({"x0_m": x0, "theta0_rad": th0, "held": not bad, "ball_lost": bad, "failed": False})
+        return out, True
+
+    monkeypatch.setattr("twin.app.sweep.run_starts", fake_run_starts)
+    settings = SweepSettings("lqr", Grid(-0.32, 0.32, 17), Grid(-0.32, 0.32, nt), refine=4)
+    result = run_sweep(settings)
+    classes = {(k // nt, k % nt): verdict_class(p) for k, p in enumerate(result.points)}
+    assert all(classes[c] == "lost" for c in lost)
+    assert not result.points[6 * nt + 4].get("inferred")  # run: the edge start that split its cell
+    assert classes[island] == "held" and result.points[island[0] * nt + island[1]]["inferred"]
+    audited = run_sweep(replace(settings, audit=1000))
+    assert audited.refinement is not None
+    mismatches = audited.refinement["audit"]["mismatches"]
+    assert [(m["inferred"], m["run"]) for m in mismatches] == [("held", "lost")]
+    assert verdict_class(audited.points[island[0] * nt + island[1]]) == "lost"
+    assert audited.refinement["inferred"] == 0  # every inferred start was audited

@@ -37,7 +37,6 @@ from pathlib import Path
 from typing import BinaryIO
 
 import numpy as np
-import scipy.io
 
 from twin.outputs import atomic_output
 
@@ -142,6 +141,8 @@ def write_mat(log: RunLog, fh: BinaryIO) -> None:
     for name in TRUTH_FIELDS:
         value = getattr(log, name)
         data[name] = value.astype(np.uint8) if name in _BOOL_FIELDS else value  # MATLAB: logical(ball_lost)
+    import scipy.io  # lazily: 0.12 s of import that a run without a .mat file does not need
+
     scipy.io.savemat(fh, data, format="5", oned_as="row", do_compression=False)
 
 
@@ -215,6 +216,8 @@ def load_mat(path: str | Path, *, variables: dict[str, np.ndarray] | None = None
         raise LogError(f"{path}: no such file")
     else:
         try:
+            import scipy.io
+
             raw = scipy.io.loadmat(path, appendmat=False)
         except NotImplementedError:  # scipy's answer to a v7.3 (HDF5) file
             raise LogError(

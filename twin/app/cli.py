@@ -757,7 +757,11 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
         plant=args.plant,
         ideal_sensors=bool(args.ideal_sensors or args.plant == "reference"),
         seed=args.seed,
+        refine=args.refine,
+        audit=args.audit,
     )
+    if args.audit and not args.refine:
+        raise ParameterError("--audit checks a refined map: give --refine too")
     points = settings.x0.n * settings.theta0.n
     if points > MAX_POINTS:  # refused before the grid is built (its arrays alone may not fit in memory)
         raise ParameterError(
@@ -785,6 +789,17 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
             f"{settings.controller}: {summary['done']} of {summary['points']} starts: held {summary['held']}, "
             f"not held {summary['not_held']}, lost {summary['lost']} ({result.wall_s:.1f} s)"
         )
+        if (ref := result.refinement) is not None:
+            audit = ref["audit"]
+            print(
+                f"refined from a step of {ref['coarse_step']}: {ref['run']} starts run "
+                f"({100 * ref['run_fraction']:.1f} %), {ref['inferred']} inferred"
+                + (
+                    f"; audit: {audit['checked']} inferred starts run, {len(audit['mismatches'])} differ"
+                    if audit["checked"]
+                    else ""
+                )
+            )
         for claim in result.claims:
             print(
                 f"claim ({claim['source']}): {claim['statement']}: {claim['verdict']} "
@@ -798,6 +813,15 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     if not result.complete:
         print("ballbeam sweep: interrupted: the starts done so far are kept", file=sys.stderr)
         return 130
+    if result.refinement is not None and (wrong := result.refinement["audit"]["mismatches"]):
+        first = wrong[0]
+        print(
+            f"ballbeam sweep: the refinement's assumption fails: {len(wrong)} audited starts differ from their "
+            f"inferred class (the first ({first['x0_m']:g}, {first['theta0_rad']:g}): inferred {first['inferred']}, "
+            f"run {first['run']}); run with a smaller --refine step or without it",
+            file=sys.stderr,
+        )
+        return 1
     return _controller_failures(result.points, "sweep")
 
 
@@ -1670,6 +1694,24 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="ADDRESS",
         help="a Dask distributed scheduler, e.g. tcp://10.0.0.5:8786, to fan the grid out to "
         "(pip install 'ballbeam-twin[distributed]'); results equal the local run's",
+    )
+    sweep.add_argument(
+        "--refine",
+        type=count(2, 1024),
+        nargs="?",
+        const=8,
+        default=0,
+        metavar="STEP",
+        help="boundary refinement: run a coarse grid (every STEP-th start, default 8), then only the cells whose "
+        "corners disagree, down to the grid; the other starts take their cell's class (no island smaller than "
+        "a coarse cell is assumed)",
+    )
+    sweep.add_argument(
+        "--audit",
+        type=count(0, 100_000),
+        default=0,
+        metavar="N",
+        help="with --refine: also run N inferred starts, at random, and report any that differ",
     )
     _add_served_options(sweep)
     sweep.add_argument("--out", metavar="DIR", help="write DIR/sweep.json and DIR/map.png")

@@ -1,10 +1,10 @@
 """Many closed-loop runs fanned out: in this process, in local worker processes, or on a Dask cluster.
 
 A job is a list of starts, each with its own seed (and, for Monte Carlo, its own parameters). It is cut
-into chunks of ``CHUNK_RUNS``; each chunk runs through the batch engine (``twin.batch.run_batch``) where it
-lands. Because every run's numbers depend only on its own start, seed and parameters, the result is the
-same however the job is chunked and wherever the chunks run. Ctrl-C stops handing out chunks and returns
-what came back (``complete`` false).
+into chunks (``chunk_runs``: one batch here when it fits, a few per worker elsewhere); each chunk runs
+through the batch engine (``twin.batch.run_batch``) where it lands. Because every run's numbers depend only
+on its own start, seed and parameters, the result is the same however the job is chunked and wherever the
+chunks run. Ctrl-C stops handing out chunks and returns what came back (``complete`` false).
 
 A served job (``Served``, ``run_served``) runs the same starts, seeds and parameters as sessions of the
 twin served on protocol 1, one after the other, to a controller in any language: each record is made from
@@ -31,9 +31,34 @@ if TYPE_CHECKING:
     from twin.serve import Server
     from twin.verdict import Verdict
 
-__all__ = ["CHUNK_RUNS", "Progress", "Runs", "Served", "Stages", "run_chunk", "run_served", "run_starts"]
+__all__ = [
+    "CHUNK_RUNS",
+    "IN_PROCESS_CHUNK_RUNS",
+    "chunk_runs",
+    "Progress",
+    "Runs",
+    "Served",
+    "Stages",
+    "run_chunk",
+    "run_served",
+    "run_starts",
+]
 
-CHUNK_RUNS = 64  # runs per batch: enough to keep rollout's threads busy (progress moves within a batch)
+CHUNK_RUNS = 64  # the fewest runs per batch sent to a worker process or a cluster (load balancing)
+# Runs per batch in this process: a batch pays its per-tick Python once for all its runs, so one batch is
+# fastest (41 × 41 of appendix-sf, 10 s: 49.5 s in chunks of 64, 40.4 s of 512, 37.5 s in one); the cap bounds
+# its memory (~16 KB a run) and what Ctrl-C loses (the batch running).
+IN_PROCESS_CHUNK_RUNS = 4096
+CHUNKS_PER_WORKER = 4  # with local workers: enough chunks that none waits long for the last
+
+
+def chunk_runs(n: int, workers: int, scheduler: str | None) -> int:
+    """Runs per chunk of a job of ``n`` runs: in this process as few batches as ``IN_PROCESS_CHUNK_RUNS``
+    allows; on workers or a cluster a few chunks per worker, never below ``CHUNK_RUNS``."""
+    if scheduler is None and workers <= 1:
+        return max(1, min(n, IN_PROCESS_CHUNK_RUNS))
+    per = -(-n // (CHUNKS_PER_WORKER * (workers if scheduler is None else 8)))
+    return max(1, min(IN_PROCESS_CHUNK_RUNS, max(CHUNK_RUNS, per)))
 
 
 class Progress(Protocol):
@@ -369,21 +394,22 @@ def run_starts(
             progress(now, n)
 
     here = progress is not None and scheduler is None and workers <= 1
+    size = chunk_runs(n, workers, scheduler)
     chunks = [
         (
             lo,
             _Chunk(
                 runs=runs,
-                x0_m=tuple(float(v) for v in starts[lo : lo + CHUNK_RUNS, 0]),
-                theta0_rad=tuple(float(v) for v in starts[lo : lo + CHUNK_RUNS, 1]),
-                seeds=tuple(int(v) for v in seeds[lo : lo + CHUNK_RUNS]),
-                params=tuple(params[lo : lo + CHUNK_RUNS]) if params is not None else None,
+                x0_m=tuple(float(v) for v in starts[lo : lo + size, 0]),
+                theta0_rad=tuple(float(v) for v in starts[lo : lo + size, 1]),
+                seeds=tuple(int(v) for v in seeds[lo : lo + size]),
+                params=tuple(params[lo : lo + size]) if params is not None else None,
                 nthread=threads,
                 controller_timeout_s=timeout_s,
                 report=within if here else None,
             ),
         )
-        for lo in range(0, n, CHUNK_RUNS)
+        for lo in range(0, n, size)
     ]
     results: list[dict[str, Any] | None] = [None] * n
     source = _dask(chunks, scheduler) if scheduler else _local(chunks, workers)

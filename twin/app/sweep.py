@@ -14,6 +14,7 @@ directory, atomically. Nothing here imports matplotlib.
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 import time
@@ -139,6 +140,8 @@ class SweepSettings:
     plant: str = "twin"
     ideal_sensors: bool = False
     seed: int = 0
+    refine: int = 0  # boundary refinement: the coarse grid's step in grid intervals (0: every start is run)
+    audit: int = 0  # with refine: inferred starts run anyway, at random, to check the assumption
 
 
 @dataclass
@@ -150,12 +153,14 @@ class SweepResult:
     claims: list[dict[str, Any]] = field(default_factory=list)
     wall_s: float = 0.0
     served: dict[str, Any] | None = None  # a served job: where, and the clients (fanout.Served.to_json)
+    refinement: dict[str, Any] | None = None  # what --refine ran, inferred and audited
 
     def to_json(self) -> dict[str, Any]:
         s = self.settings
         return {
             "settings": {**asdict(s), "x0": asdict(s.x0), "theta0": asdict(s.theta0)},
             **({"served": self.served} if self.served is not None else {}),
+            **({"refinement": self.refinement} if self.refinement is not None else {}),
             "complete": self.complete,
             "summary": summarize(self.points),
             "claims": self.claims,
@@ -166,6 +171,7 @@ class SweepResult:
 
 def summarize(points: Sequence[dict[str, Any]]) -> dict[str, int]:
     done = [p for p in points if p]
+    inferred = sum(bool(p.get("inferred")) for p in done)  # --refine: from a cell's agreeing corners
     return {
         "points": len(points),
         "done": len(done),
@@ -173,6 +179,7 @@ def summarize(points: Sequence[dict[str, Any]]) -> dict[str, int]:
         "lost": sum(bool(p["ball_lost"]) for p in done),
         "not_held": sum(not p["held"] and not p["ball_lost"] for p in done),
         "failed": sum(bool(p.get("failed")) for p in done),  # the controller raised or gave no command
+        **({"inferred": inferred} if inferred else {}),
     }
 
 
@@ -208,6 +215,12 @@ def run_sweep(
     corners = _corner_starts(settings.controller, p)
     starts = np.vstack([grid, np.array([c[:2] for c in corners], dtype=float).reshape(-1, 2)])
     seeds = point_seeds(settings.seed, len(starts))
+    if settings.refine:
+        if serve is not None:
+            raise ParameterError("--refine runs here or on workers, not as served sessions")
+        return _refined_sweep(
+            settings, p, grid, starts, seeds, corners, workers, scheduler, nthread, progress
+        )
     start = time.perf_counter()
     runs = Runs(
         controller=settings.controller,
@@ -234,6 +247,206 @@ def run_sweep(
     ]
     result = SweepResult(settings, points, complete, corner_records, wall_s=time.perf_counter() - start)
     result.served = serve.to_json() if serve is not None else None
+    result.claims = [_judge(claim, result, p) for claim in CLAIMS if settings.controller in claim.applies_to]
+    return result
+
+
+def verdict_class(record: dict[str, Any]) -> str:
+    """What a map shows of a start: 'failed' (the controller), 'lost', 'held' or 'kept' (not held)."""
+    if record.get("failed"):
+        return "failed"
+    if record["ball_lost"]:
+        return "lost"
+    return "held" if record["held"] else "kept"
+
+
+def _inferred(
+    x0_m: float, theta0_rad: float, seed: int, cls: str, cell: tuple[int, int, int, int]
+) -> dict[str, Any]:
+    """The record of a start --refine did not run: its class from the agreeing corners of its cell."""
+    from dataclasses import fields
+
+    from twin.verdict import Verdict
+
+    i0, i1, j0, j1 = cell
+    return {
+        "x0_m": x0_m,
+        "theta0_rad": theta0_rad,
+        "seed": seed,
+        "failed": False,
+        **{f.name: None for f in fields(Verdict)},
+        "held": cls == "held",
+        "ball_lost": cls == "lost",
+        "hit_stops": None,
+        "inferred": True,
+        "reason": f"inferred ({cls}): the corners of grid cell x0[{i0}:{i1}] × θ0[{j0}:{j1}] agree",
+    }
+
+
+def _refined_sweep(
+    settings: SweepSettings,
+    p: Parameters,
+    grid: np.ndarray,
+    starts: np.ndarray,
+    seeds: np.ndarray,
+    corners: list[tuple[float, float, str, str]],
+    workers: int,
+    scheduler: str | None,
+    nthread: int | None,
+    progress: Progress | None,
+) -> SweepResult:
+    """Boundary refinement: the coarse grid (every ``refine``-th start along each axis, and the last), then
+    only the cells whose corners disagree, split in halves, level after level, until every start is run or
+    lies in a cell whose four corners agree (it gets their class: ``_inferred``). Each start that runs has
+    its brute-force seed, so its record is the brute-force record. The assumption: no island of another
+    class inside a cell whose corners agree (smaller than the coarse cell). ``settings.audit`` inferred
+    starts (seeded) are run anyway and compared. Where two agreeing cells sharing an edge disagree, the
+    start on it is run."""
+    nx, nt = settings.x0.n, settings.theta0.n
+    step = settings.refine
+    if isinstance(step, bool) or not isinstance(step, int) or step < 2:
+        raise ParameterError(f"--refine {step!r}: the coarse step, a whole number of grid intervals ≥ 2")
+    runs = Runs(
+        controller=settings.controller,
+        params=p,
+        duration_s=settings.duration_s,
+        noise=settings.noise,
+        plant=settings.plant,
+        ideal_sensors=settings.ideal_sensors,
+    )
+    start = time.perf_counter()
+    known: dict[int, dict[str, Any]] = {}  # grid index (x0 outer, θ0 inner) → record
+    complete = True
+    ran = 0
+
+    def run(indices: list[int]) -> None:
+        nonlocal complete, ran
+        todo = sorted(set(indices) - set(known))
+        if not todo or not complete:
+            return
+        records, done = run_starts(
+            runs, starts[todo], seeds[todo], workers=workers, scheduler=scheduler, nthread=nthread
+        )
+        for k, r in zip(todo, records, strict=True):
+            if r is not None:
+                known[k] = r
+        ran += len(todo)
+        complete = complete and done
+        if progress is not None:
+            progress(len(known), nx * nt)
+
+    def lines(n: int) -> list[int]:
+        return sorted(set(range(0, n, step)) | {n - 1})
+
+    def at(i: int, j: int) -> int:
+        return i * nt + j
+
+    xi, tj = lines(nx), lines(nt)
+
+    def spans(v: list[int]) -> list[tuple[int, int]]:  # consecutive lines; one line: a cell of no width
+        return list(itertools.pairwise(v)) or [(v[0], v[0])]
+
+    cells = [(a, b, c, d) for a, b in spans(xi) for c, d in spans(tj)]
+    run([at(i, j) for i in xi for j in tj])
+    Cell = tuple[int, int, int, int]
+
+    def halves(cell: Cell) -> list[Cell]:
+        """The cell split in two along each axis it spans more than one interval of ([]: four neighbours)."""
+        i0, i1, j0, j1 = cell
+        im, jm = (i0 + i1) // 2, (j0 + j1) // 2
+        xs = [(i0, im), (im, i1)] if i1 - i0 > 1 else [(i0, i1)]
+        ts = [(j0, jm), (jm, j1)] if j1 - j0 > 1 else [(j0, j1)]
+        return [] if len(xs) == len(ts) == 1 else [(a, b, c, d) for a, b in xs for c, d in ts]
+
+    def members(cell: Cell) -> list[int]:
+        i0, i1, j0, j1 = cell
+        return [at(i, j) for i in range(i0, i1 + 1) for j in range(j0, j1 + 1)]
+
+    uniform: dict[Cell, str] = {}
+    levels = 0
+    while cells and complete:
+        levels += 1
+        split: list[Cell] = []
+        for cell in cells:
+            i0, i1, j0, j1 = cell
+            classes = {verdict_class(known[at(i, j)]) for i in (i0, i1) for j in (j0, j1)}
+            if len(classes) == 1:
+                uniform[cell] = classes.pop()
+            else:
+                split += halves(cell)
+        run([at(i, j) for a, b, c, d in split for i in (a, b) for j in (c, d)])
+        cells = split
+        if not cells and complete:
+            # A start run for a neighbour's sake (on a shared edge) that disagrees with an agreeing cell: the
+            # assumption fails there, so that cell is split too.
+            for cell, cls in list(uniform.items()):
+                if any(k in known and verdict_class(known[k]) != cls for k in members(cell)):
+                    del uniform[cell]
+                    cells += halves(cell)
+            run([at(i, j) for a, b, c, d in cells for i in (a, b) for j in (c, d)])
+    claims: dict[int, tuple[str, tuple[int, int, int, int]]] = {}
+    contested: set[int] = set()
+    for cell, cls in uniform.items():
+        for k in members(cell):
+            if k in known:
+                continue
+            if k in claims and claims[k][0] != cls:
+                contested.add(k)
+            claims.setdefault(k, (cls, cell))
+    run(sorted(contested))
+    inferred = [k for k in claims if k not in known]
+    audit: dict[str, Any] = {"checked": 0, "mismatches": []}
+    if settings.audit and inferred and complete:
+        rng = np.random.default_rng(np.random.SeedSequence([settings.seed, 0x415544]))  # "AUD"
+        picks = sorted(rng.choice(inferred, size=min(settings.audit, len(inferred)), replace=False).tolist())
+        before = dict(known)
+        run(picks)
+        for k in picks:
+            if k in known and k not in before:
+                audit["checked"] += 1
+                got = verdict_class(known[k])
+                if got != claims[k][0]:
+                    audit["mismatches"].append(
+                        {
+                            "x0_m": float(grid[k, 0]),
+                            "theta0_rad": float(grid[k, 1]),
+                            "inferred": claims[k][0],
+                            "run": got,
+                        }
+                    )
+    points: list[dict[str, Any]] = []
+    for k in range(nx * nt):
+        if k in known:
+            points.append(known[k])
+        elif k in claims:
+            cls, cell = claims[k]
+            points.append(_inferred(float(grid[k, 0]), float(grid[k, 1]), int(seeds[k]), cls, cell))
+        else:
+            points.append({})
+    corner_idx = list(range(nx * nt, len(starts)))
+    corner_records: list[dict[str, Any]] = []
+    if corner_idx and complete:
+        records, done = run_starts(
+            runs, starts[corner_idx], seeds[corner_idx], workers=workers, scheduler=scheduler, nthread=nthread
+        )
+        complete = complete and done
+        corner_records = [
+            {**(r or {}), "claim": claim, "note": note}
+            for r, (_, _, claim, note) in zip(records, corners, strict=True)
+        ]
+    result = SweepResult(
+        settings, points, complete and all(points), corner_records, wall_s=time.perf_counter() - start
+    )
+    result.refinement = {
+        "coarse_step": step,
+        "levels": levels,
+        "run": ran,
+        "inferred": sum(bool(q.get("inferred")) for q in points),
+        "run_fraction": round(ran / (nx * nt), 4),
+        "contested_run": len(contested),
+        "audit": audit,
+        "assumption": "no start of another class inside a grid cell whose four corners agree",
+    }
     result.claims = [_judge(claim, result, p) for claim in CLAIMS if settings.controller in claim.applies_to]
     return result
 

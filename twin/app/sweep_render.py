@@ -25,7 +25,8 @@ def render_map(result: SweepResult, path: Path) -> None:
     xs, ths = s.x0.values(), s.theta0.values()
     nx, nt = len(xs), len(ths)
     settle = np.full((nt, nx), np.nan)
-    background = np.full((nt, nx), np.nan)  # 0 lost, 1 kept but not held, 2 held without a settling time
+    # 0 lost, 1 kept but not held, 2 held without a settling time, 3 held as --refine inferred it (not run)
+    background = np.full((nt, nx), np.nan)
     for k, p in enumerate(result.points):
         if not p:
             continue
@@ -34,6 +35,8 @@ def render_map(result: SweepResult, path: Path) -> None:
             background[j, i] = 0
         elif not p["held"]:
             background[j, i] = 1
+        elif p.get("inferred"):
+            background[j, i] = 3
         elif p["settling_time_s"] is None:  # a limit cycle wider than the settling band (|x0| small)
             background[j, i] = 2
         else:
@@ -42,9 +45,9 @@ def render_map(result: SweepResult, path: Path) -> None:
     dt = (ths[1] - ths[0]) / 2 if nt > 1 else 0.01
     extent = (xs[0] - dx, xs[-1] + dx, ths[0] - dt, ths[-1] + dt)
     fig, ax = plt.subplots(figsize=(7.5, 6.6), dpi=120)
-    colours = ["#7f1d1d", "#c8c8c8", "#f2c4de"]
+    colours = ["#7f1d1d", "#c8c8c8", "#f2c4de", "#9fd8a8"]
     ax.imshow(
-        background, origin="lower", extent=extent, aspect="auto", cmap=ListedColormap(colours), vmin=0, vmax=2
+        background, origin="lower", extent=extent, aspect="auto", cmap=ListedColormap(colours), vmin=0, vmax=3
     )
     image = ax.imshow(settle, origin="lower", extent=extent, aspect="auto", cmap="viridis")
     fig.colorbar(image, ax=ax, label="settling time (s), held starts")
@@ -71,6 +74,11 @@ def render_map(result: SweepResult, path: Path) -> None:
         Patch(color=colours[0], label="ball lost"),
         Patch(color=colours[1], label="kept, not held (or the controller failed)"),
         Patch(color=colours[2], label="held, cycling wider than the settling band"),
+        *(
+            [Patch(color=colours[3], label="held (inferred by --refine, not run)")]
+            if result.refinement
+            else []
+        ),
         *ax.get_legend_handles_labels()[0],
     ]
     ax.legend(
