@@ -747,7 +747,13 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     from twin.parameters import ParameterError
 
     _check_served(args)
-    params = _load_params(args)
+    robust = args.rigs is not None or args.spread is not None or args.calibration is not None
+    if robust:
+        if args.rigs is None or (args.spread is None and args.calibration is None):
+            raise ParameterError("a robust map needs --rigs N and one of --spread FILE or --calibration DIR")
+        if args.serve is not None:
+            raise ParameterError("a robust map runs here or on workers, not as served sessions")
+    params, spread = _params_and_spread(args) if robust else (_load_params(args), None)
     settings = SweepSettings(
         controller=_job_name(args),
         x0=parse_range("--x0", args.x0) if args.x0 else DEFAULT_X0,
@@ -767,6 +773,8 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
         raise ParameterError(
             f"--x0 {settings.x0.n} × --theta0 {settings.theta0.n} = {points} starts: at most {MAX_POINTS}"
         )
+    if robust:
+        return _robust_sweep(args, settings, params, spread)
     _check_job(args, params, OUTPUT_FILES)
     with _served(args, params) as served:
         result = run_sweep(
@@ -823,6 +831,43 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
         )
         return 1
     return _controller_failures(result.points, "sweep")
+
+
+def _robust_sweep(args: argparse.Namespace, settings: Any, params: Parameters, spread: Any) -> int:
+    """``sweep --rigs N --spread|--calibration``: the nominal rig's map, then every start on N drawn rigs."""
+    from twin.app.robust import OUTPUT_FILES, run_robust, write_robust
+    from twin.app.sweep import run_sweep
+
+    _check_job(args, params, OUTPUT_FILES)
+    nominal = run_sweep(settings, params, workers=args.workers, scheduler=args.scheduler)
+    result = run_robust(
+        settings,
+        params,
+        spread,
+        args.rigs,
+        level=args.level,
+        nominal=nominal.points,
+        workers=args.workers,
+        scheduler=args.scheduler,
+        progress=_progress_bar("robust sweep"),
+    )
+    _write_out(args, write_robust, result)
+    if args.json:
+        print(json.dumps(result.to_json()))
+    else:
+        m = result.summary
+        print(
+            f"{settings.controller}: {m['starts']} starts on {result.rigs} rigs ({result.runs} runs, "
+            f"{result.wall_s:.1f} s): held by every rig {m['held_by_every_rig']}, lower bound ≥ {result.level:g}: "
+            f"{m['robust']} (the best bound {result.rigs} rigs give: {m['best_possible_lower_bound']:.3f}); the "
+            f"nominal rig holds {m['nominal_held']}"
+        )
+        if args.out is not None:
+            print(f"wrote {Path(args.out) / 'robust.json'} and {Path(args.out) / 'robust.png'}")
+    if not result.complete:
+        print("ballbeam sweep: interrupted: the starts done so far are kept", file=sys.stderr)
+        return 130
+    return 0
 
 
 def _cmd_montecarlo(args: argparse.Namespace) -> int:
@@ -1712,6 +1757,26 @@ def build_parser() -> argparse.ArgumentParser:
         default=0,
         metavar="N",
         help="with --refine: also run N inferred starts, at random, and report any that differ",
+    )
+    rigs = sweep.add_mutually_exclusive_group()
+    rigs.add_argument(
+        "--spread", metavar="FILE", help="robust map: rigs drawn from this spread file (with --rigs N)"
+    )
+    rigs.add_argument(
+        "--calibration", metavar="DIR", help="robust map: rigs drawn from this calibration (with --rigs N)"
+    )
+    sweep.add_argument(
+        "--rigs",
+        type=count(1, 1000),
+        metavar="N",
+        help="robust map: every start on N rigs drawn from --spread or --calibration (the same N everywhere); "
+        "per start the rigs that hold it and an exact lower bound; writes DIR/robust.json and DIR/robust.png",
+    )
+    sweep.add_argument(
+        "--level",
+        type=finite_float(0.0, 1.0),
+        default=0.95,
+        help="robust map: the share of rigs a start must be held by, as a 95 %% lower bound (default 0.95)",
     )
     _add_served_options(sweep)
     sweep.add_argument("--out", metavar="DIR", help="write DIR/sweep.json and DIR/map.png")

@@ -18,7 +18,7 @@ import itertools
 import json
 import math
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -283,6 +283,110 @@ def _inferred(
     }
 
 
+Cell = tuple[int, int, int, int]
+
+
+class Refinement:
+    """Boundary refinement of ``maps`` maps of one nx × nt grid at once (one map per rig of a robust sweep):
+    each level's starts of every map are one job (``run_job((map, index) pairs) → (records, complete)``), so
+    the batches stay large. ``known[m]``: the records run; ``claims[m]``: the inferred starts' (class, cell)."""
+
+    def __init__(
+        self,
+        nx: int,
+        nt: int,
+        step: int,
+        maps: int,
+        run_job: Callable[[list[tuple[int, int]]], tuple[list[dict[str, Any] | None], bool]],
+        progress: Progress | None = None,
+    ) -> None:
+        self.nx, self.nt, self.step, self.maps = nx, nt, step, maps
+        self.run_job, self.progress = run_job, progress
+        self.known: list[dict[int, dict[str, Any]]] = [{} for _ in range(maps)]
+        self.claims: list[dict[int, tuple[str, Cell]]] = [{} for _ in range(maps)]
+        self.complete = True
+        self.ran = self.levels = self.contested = 0
+
+    def run(self, requests: list[tuple[int, int]]) -> None:
+        todo = sorted({(m, k) for m, k in requests if k not in self.known[m]})
+        if not todo or not self.complete:
+            return
+        records, done = self.run_job(todo)
+        for (m, k), r in zip(todo, records, strict=True):
+            if r is not None:
+                self.known[m][k] = r
+        self.ran += len(todo)
+        self.complete = self.complete and done
+        if self.progress is not None:
+            self.progress(sum(map(len, self.known)), self.maps * self.nx * self.nt)
+
+    def _at(self, i: int, j: int) -> int:
+        return i * self.nt + j
+
+    def _corners(self, m: int, cell: Cell) -> list[tuple[int, int]]:
+        a, b, c, d = cell
+        return [(m, self._at(i, j)) for i in (a, b) for j in (c, d)]
+
+    def _members(self, cell: Cell) -> list[int]:
+        i0, i1, j0, j1 = cell
+        return [self._at(i, j) for i in range(i0, i1 + 1) for j in range(j0, j1 + 1)]
+
+    @staticmethod
+    def _halves(cell: Cell) -> list[Cell]:
+        """The cell split in two along each axis it spans more than one interval of ([]: four neighbours)."""
+        i0, i1, j0, j1 = cell
+        im, jm = (i0 + i1) // 2, (j0 + j1) // 2
+        xs = [(i0, im), (im, i1)] if i1 - i0 > 1 else [(i0, i1)]
+        ts = [(j0, jm), (jm, j1)] if j1 - j0 > 1 else [(j0, j1)]
+        return [] if len(xs) == len(ts) == 1 else [(a, b, c, d) for a, b in xs for c, d in ts]
+
+    def refine(self) -> None:
+        def lines(n: int) -> list[int]:
+            return sorted(set(range(0, n, self.step)) | {n - 1})
+
+        def spans(v: list[int]) -> list[tuple[int, int]]:  # consecutive lines; one line: a cell of no width
+            return list(itertools.pairwise(v)) or [(v[0], v[0])]
+
+        xi, tj = lines(self.nx), lines(self.nt)
+        coarse = [(a, b, c, d) for a, b in spans(xi) for c, d in spans(tj)]
+        cells = [(m, cell) for m in range(self.maps) for cell in coarse]
+        self.run([(m, self._at(i, j)) for m in range(self.maps) for i in xi for j in tj])
+        uniform: list[dict[Cell, str]] = [{} for _ in range(self.maps)]
+        while cells and self.complete:
+            self.levels += 1
+            split: list[tuple[int, Cell]] = []
+            for m, cell in cells:
+                classes = {verdict_class(self.known[m][k]) for _, k in self._corners(m, cell)}
+                if len(classes) == 1:
+                    uniform[m][cell] = classes.pop()
+                else:
+                    split += [(m, half) for half in self._halves(cell)]
+            self.run([pair for m, cell in split for pair in self._corners(m, cell)])
+            cells = split
+            if not cells and self.complete:
+                # A start run for a neighbour's sake (on a shared edge) that disagrees with an agreeing cell:
+                # the assumption fails there, so that cell is split too.
+                for m in range(self.maps):
+                    known = self.known[m]
+                    for cell, cls in list(uniform[m].items()):
+                        if any(k in known and verdict_class(known[k]) != cls for k in self._members(cell)):
+                            del uniform[m][cell]
+                            cells += [(m, half) for half in self._halves(cell)]
+                self.run([pair for m, cell in cells for pair in self._corners(m, cell)])
+        contested: list[tuple[int, int]] = []
+        for m in range(self.maps):
+            claims, known = self.claims[m], self.known[m]
+            for cell, cls in uniform[m].items():
+                for k in self._members(cell):
+                    if k in known:
+                        continue
+                    if k in claims and claims[k][0] != cls:
+                        contested.append((m, k))
+                    claims.setdefault(k, (cls, cell))
+        self.contested = len(contested)
+        self.run(contested)
+
+
 def _refined_sweep(
     settings: SweepSettings,
     p: Parameters,
@@ -315,85 +419,21 @@ def _refined_sweep(
         ideal_sensors=settings.ideal_sensors,
     )
     start = time.perf_counter()
-    known: dict[int, dict[str, Any]] = {}  # grid index (x0 outer, θ0 inner) → record
-    complete = True
-    ran = 0
 
-    def run(indices: list[int]) -> None:
-        nonlocal complete, ran
-        todo = sorted(set(indices) - set(known))
-        if not todo or not complete:
-            return
+    def run_job(requests: list[tuple[int, int]]) -> tuple[list[dict[str, Any] | None], bool]:
+        todo = [k for _, k in requests]
         records, done = run_starts(
             runs, starts[todo], seeds[todo], workers=workers, scheduler=scheduler, nthread=nthread
         )
-        for k, r in zip(todo, records, strict=True):
-            if r is not None:
-                known[k] = r
-        ran += len(todo)
-        complete = complete and done
-        if progress is not None:
-            progress(len(known), nx * nt)
+        return records, done
 
-    def lines(n: int) -> list[int]:
-        return sorted(set(range(0, n, step)) | {n - 1})
+    ref = Refinement(nx, nt, step, 1, run_job, progress)
+    ref.refine()
+    known, claims, complete = ref.known[0], ref.claims[0], ref.complete
 
-    def at(i: int, j: int) -> int:
-        return i * nt + j
+    def run(indices: list[int]) -> None:
+        ref.run([(0, k) for k in indices])
 
-    xi, tj = lines(nx), lines(nt)
-
-    def spans(v: list[int]) -> list[tuple[int, int]]:  # consecutive lines; one line: a cell of no width
-        return list(itertools.pairwise(v)) or [(v[0], v[0])]
-
-    cells = [(a, b, c, d) for a, b in spans(xi) for c, d in spans(tj)]
-    run([at(i, j) for i in xi for j in tj])
-    Cell = tuple[int, int, int, int]
-
-    def halves(cell: Cell) -> list[Cell]:
-        """The cell split in two along each axis it spans more than one interval of ([]: four neighbours)."""
-        i0, i1, j0, j1 = cell
-        im, jm = (i0 + i1) // 2, (j0 + j1) // 2
-        xs = [(i0, im), (im, i1)] if i1 - i0 > 1 else [(i0, i1)]
-        ts = [(j0, jm), (jm, j1)] if j1 - j0 > 1 else [(j0, j1)]
-        return [] if len(xs) == len(ts) == 1 else [(a, b, c, d) for a, b in xs for c, d in ts]
-
-    def members(cell: Cell) -> list[int]:
-        i0, i1, j0, j1 = cell
-        return [at(i, j) for i in range(i0, i1 + 1) for j in range(j0, j1 + 1)]
-
-    uniform: dict[Cell, str] = {}
-    levels = 0
-    while cells and complete:
-        levels += 1
-        split: list[Cell] = []
-        for cell in cells:
-            i0, i1, j0, j1 = cell
-            classes = {verdict_class(known[at(i, j)]) for i in (i0, i1) for j in (j0, j1)}
-            if len(classes) == 1:
-                uniform[cell] = classes.pop()
-            else:
-                split += halves(cell)
-        run([at(i, j) for a, b, c, d in split for i in (a, b) for j in (c, d)])
-        cells = split
-        if not cells and complete:
-            # A start run for a neighbour's sake (on a shared edge) that disagrees with an agreeing cell: the
-            # assumption fails there, so that cell is split too.
-            for cell, cls in list(uniform.items()):
-                if any(k in known and verdict_class(known[k]) != cls for k in members(cell)):
-                    del uniform[cell]
-                    cells += halves(cell)
-            run([at(i, j) for a, b, c, d in cells for i in (a, b) for j in (c, d)])
-    claims: dict[int, tuple[str, tuple[int, int, int, int]]] = {}
-    contested: set[int] = set()
-    for cell, cls in uniform.items():
-        for k in members(cell):
-            if k in known:
-                continue
-            if k in claims and claims[k][0] != cls:
-                contested.add(k)
-            claims.setdefault(k, (cls, cell))
-    run(sorted(contested))
     inferred = [k for k in claims if k not in known]
     audit: dict[str, Any] = {"checked": 0, "mismatches": []}
     if settings.audit and inferred and complete:
@@ -401,6 +441,7 @@ def _refined_sweep(
         picks = sorted(rng.choice(inferred, size=min(settings.audit, len(inferred)), replace=False).tolist())
         before = dict(known)
         run(picks)
+        complete = ref.complete
         for k in picks:
             if k in known and k not in before:
                 audit["checked"] += 1
@@ -439,11 +480,11 @@ def _refined_sweep(
     )
     result.refinement = {
         "coarse_step": step,
-        "levels": levels,
-        "run": ran,
+        "levels": ref.levels,
+        "run": ref.ran,
         "inferred": sum(bool(q.get("inferred")) for q in points),
-        "run_fraction": round(ran / (nx * nt), 4),
-        "contested_run": len(contested),
+        "run_fraction": round(ref.ran / (nx * nt), 4),
+        "contested_run": ref.contested,
         "audit": audit,
         "assumption": "no start of another class inside a grid cell whose four corners agree",
     }

@@ -1,0 +1,102 @@
+"""The robust region of attraction: every start on the same N drawn rigs, counted against single runs, its
+exact bound, refinement per rig equal to brute force, the cluster equal to here, and clear refusals."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import pytest
+from cli_checks import refused
+
+from controllers import registry
+from twin.app.montecarlo import load_spread, sample_parameters
+from twin.app.robust import lower_bound, rig_point_seeds, run_robust
+from twin.app.sweep import Grid, SweepSettings
+from twin.engine import run_closed_loop
+from twin.parameters import Parameters
+
+ROOT = Path(__file__).resolve().parents[1]
+SPREAD = ROOT / "docs" / "examples" / "spread.toml"
+SMALL = SweepSettings("appendix-sf", Grid(-0.3, 0.3, 3), Grid(-0.6, 0.6, 3), duration_s=2.0, seed=4)
+
+
+def test_every_count_is_the_single_runs_of_the_drawn_rigs() -> None:
+    base = Parameters()
+    spread = load_spread(SPREAD, base)
+    result = run_robust(SMALL, base, spread, 3, nthread=2)
+    rigs, _ = sample_parameters(base, spread, 3, SMALL.seed)  # the same rigs montecarlo would draw
+    assert result.complete and len(result.rig_values) == 3
+    assert result.rig_values[1]["motor.resistance_ohm"] == rigs[1].motor.resistance_ohm
+    for k, point in enumerate(result.points):
+        held = lost = 0
+        for m, params in enumerate(rigs):
+            verdict = run_closed_loop(
+                registry.make("appendix-sf", params),
+                x0_m=point["x0_m"],
+                theta0_rad=point["theta0_rad"],
+                duration_s=SMALL.duration_s,
+                seed=int(rig_point_seeds(SMALL.seed, m, len(result.points))[k]),
+                params=params,
+            ).verdict
+            held += verdict.held
+            lost += verdict.ball_lost
+        assert (point["held"], point["lost"], point["rigs"]) == (held, lost, 3)
+        assert point["lower_bound"] == pytest.approx(lower_bound(held, 3, 0.95), abs=1e-6)
+
+
+def test_the_bound_is_clopper_pearsons() -> None:
+    # k = n: the bound solves p^n = 1 − confidence; k = 0: 0; and it rises with k.
+    assert lower_bound(59, 59, 0.95) == pytest.approx(0.05 ** (1 / 59))
+    assert lower_bound(59, 59, 0.95) >= 0.95 > lower_bound(58, 58, 0.95)
+    assert lower_bound(0, 10, 0.95) == 0.0
+    assert lower_bound(5, 10, 0.95) < lower_bound(6, 10, 0.95) < 0.6
+
+
+def test_a_refined_robust_map_is_the_brute_force_one() -> None:
+    base = Parameters()
+    spread = load_spread(SPREAD, base)
+    settings = SweepSettings("appendix-sf", Grid(-0.32, 0.32, 9), Grid(-0.7, 0.7, 9), duration_s=5.0)
+    brute = run_robust(settings, base, spread, 3, nthread=2)
+    refined = run_robust(replace(settings, refine=4), base, spread, 3, nthread=2)
+    assert [(p["held"], p["lost"]) for p in refined.points] == [(p["held"], p["lost"]) for p in brute.points]
+    assert refined.refinement is not None and refined.runs < brute.runs == 3 * 81
+
+
+@pytest.mark.slow
+def test_a_dask_cluster_gives_the_local_robust_map() -> None:
+    distributed = pytest.importorskip("distributed")
+    base = Parameters()
+    spread = load_spread(SPREAD, base)
+    local = run_robust(SMALL, base, spread, 4).to_json()
+    with distributed.LocalCluster(
+        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None
+    ) as cluster:
+        remote = run_robust(SMALL, base, spread, 4, scheduler=cluster.scheduler_address).to_json()
+    for doc in (local, remote):
+        doc.pop("wall_s")
+    assert remote == local
+
+
+def test_the_command_writes_the_map_and_refuses_half_a_request(tmp_path: Path, capsys) -> None:
+    from twin.app.cli import main
+
+    out = tmp_path / "r"
+    argv = [
+        "sweep",
+        "--controller",
+        "appendix-sf",
+        "--x0=-0.2:0.2:2",
+        "--theta0=-0.2:0.2:2",
+        "--duration",
+        "1",
+    ]
+    assert main([*argv, "--spread", str(SPREAD), "--rigs", "2", "--out", str(out)]) == 0
+    doc = json.loads((out / "robust.json").read_text())
+    assert doc["rigs"] == 2 and len(doc["points"]) == 4 and (out / "robust.png").stat().st_size > 0
+    assert doc["summary"]["nominal_held"] is not None
+    capsys.readouterr()
+    refused(capsys, [*argv, "--rigs", "3"], "--rigs N and one of --spread FILE or --calibration DIR")
+    refused(capsys, [*argv, "--spread", str(SPREAD)], "--rigs N")
+    refused(capsys, [*argv, "--spread", "no/such.toml", "--rigs", "2"], "no/such.toml")

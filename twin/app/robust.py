@@ -1,0 +1,254 @@
+"""The robust region of attraction: from which starts does the ball stay held for (nearly) every plausible rig?
+
+``ballbeam sweep --spread FILE | --calibration DIR --rigs N``: N rigs drawn from the spread (as ``montecarlo``
+draws them, seeded: the same N rigs for every start, so the map is coherent), every start of the grid run on
+each, and per start the number of rigs that hold it with its exact one-sided lower bound (Clopper–Pearson at
+``confidence``). The robust region is the starts whose lower bound reaches ``level``; since k of N held
+bounds the rate below by (1 − confidence)^(1/N) at best, a level of 0.95 at 95 % confidence needs N ≥ 59
+rigs — with fewer, the region is reported empty and the starts all N rigs hold are reported beside it.
+
+With ``--refine`` every rig's map is refined (``twin.app.sweep.Refinement``), all rigs' starts of a level
+run as one job. Run i of rig m has the noise seed ``rig_point_seeds(seed, m)[i]``: a function of the seed,
+the rig and the start alone, so the result is the same in this process, on workers and on a cluster.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from twin.app.fanout import Progress, Runs, run_starts
+from twin.app.sweep import Refinement, SweepSettings, verdict_class
+from twin.outputs import JobFiles, atomic_directory
+from twin.parameters import ParameterError, Parameters
+
+__all__ = ["OUTPUT_FILES", "RobustResult", "lower_bound", "rig_point_seeds", "run_robust", "write_robust"]
+
+OUTPUT_FILES = JobFiles("robust-sweep", ("robust.json", "robust.png"))
+MAX_RIGS = 1000
+
+
+def rig_point_seeds(seed: int, rig: int, n: int) -> np.ndarray:
+    """The noise seed of start i on rig ``rig``: a function of (seed, rig, i) only."""
+    return np.array(
+        [
+            int(np.random.SeedSequence([seed, rig + 1, i]).generate_state(1, dtype=np.uint32)[0])
+            for i in range(n)
+        ],
+        dtype=np.int64,
+    )
+
+
+def lower_bound(held: int, n: int, confidence: float) -> float:
+    """The exact one-sided lower bound of the success rate at ``confidence`` (Clopper–Pearson)."""
+    if held == 0:
+        return 0.0
+    import scipy.stats
+
+    return float(scipy.stats.beta.ppf(1.0 - confidence, held, n - held + 1))
+
+
+@dataclass
+class RobustResult:
+    settings: SweepSettings
+    rigs: int
+    level: float
+    confidence: float
+    source: str
+    rig_values: list[dict[str, float]]
+    points: list[dict[str, Any]]  # per start: x0_m, theta0_rad, held (rigs), lost, rigs, rate, lower_bound
+    complete: bool
+    wall_s: float = 0.0
+    runs: int = 0
+    refinement: dict[str, Any] | None = None
+    nominal_held: int | None = None
+    summary: dict[str, Any] = field(default_factory=dict)
+
+    def to_json(self) -> dict[str, Any]:
+        s = self.settings
+        return {
+            "settings": {**asdict(s), "x0": asdict(s.x0), "theta0": asdict(s.theta0)},
+            "rigs": self.rigs,
+            "level": self.level,
+            "confidence": self.confidence,
+            "spread": self.source,
+            "complete": self.complete,
+            "runs": self.runs,
+            "wall_s": round(self.wall_s, 1),
+            **({"refinement": self.refinement} if self.refinement is not None else {}),
+            "summary": self.summary,
+            "rig_parameters": self.rig_values,
+            "points": self.points,
+        }
+
+
+def run_robust(
+    settings: SweepSettings,
+    base: Parameters,
+    spread: Any,
+    rigs: int,
+    *,
+    level: float = 0.95,
+    confidence: float = 0.95,
+    nominal: list[dict[str, Any]] | None = None,
+    workers: int = 1,
+    scheduler: str | None = None,
+    nthread: int | None = None,
+    progress: Progress | None = None,
+) -> RobustResult:
+    """Every start of ``settings``' grid on each of ``rigs`` rigs drawn from ``spread`` about ``base``.
+    ``nominal``: the nominal rig's sweep points, for the area it holds (optional)."""
+    from twin.app.montecarlo import sample_parameters
+
+    if isinstance(rigs, bool) or not isinstance(rigs, int) or not 1 <= rigs <= MAX_RIGS:
+        raise ParameterError(f"--rigs {rigs!r}: 1…{MAX_RIGS} rigs")
+    if not 0 < level <= 1 or not 0 < confidence < 1:
+        raise ParameterError(f"level {level!r} in (0, 1], confidence {confidence!r} in (0, 1)")
+    sets, values = sample_parameters(base, spread, rigs, settings.seed)
+    xs, ths = settings.x0.values(), settings.theta0.values()
+    grid = np.array([(x, th) for x in xs for th in ths], dtype=float)
+    n = len(grid)
+    seeds = [rig_point_seeds(settings.seed, m, n) for m in range(rigs)]
+    runs = Runs(
+        controller=settings.controller,
+        params=base,
+        duration_s=settings.duration_s,
+        noise=settings.noise,
+        plant=settings.plant,
+        ideal_sensors=settings.ideal_sensors,
+    )
+    start = time.perf_counter()
+
+    def run_job(requests: list[tuple[int, int]]) -> tuple[list[dict[str, Any] | None], bool]:
+        idx = np.array([k for _, k in requests], dtype=np.int64)
+        run_seeds = np.array([seeds[m][k] for m, k in requests], dtype=np.int64)
+        return run_starts(
+            runs,
+            grid[idx],
+            run_seeds,
+            params=[sets[m] for m, _ in requests],
+            workers=workers,
+            scheduler=scheduler,
+            nthread=nthread,
+        )
+
+    ref = Refinement(settings.x0.n, settings.theta0.n, settings.refine, rigs, run_job, progress)
+    if settings.refine:
+        ref.refine()
+    else:
+        ref.run([(m, k) for m in range(rigs) for k in range(n)])
+    points: list[dict[str, Any]] = []
+    complete = ref.complete
+    for k in range(n):
+        classes = []
+        for m in range(rigs):
+            if k in ref.known[m]:
+                classes.append(verdict_class(ref.known[m][k]))
+            elif k in ref.claims[m]:
+                classes.append(ref.claims[m][k][0])
+        if len(classes) < rigs:
+            complete = False
+        held = classes.count("held")
+        bound = lower_bound(held, len(classes), confidence) if classes else 0.0
+        points.append(
+            {
+                "x0_m": float(grid[k, 0]),
+                "theta0_rad": float(grid[k, 1]),
+                "rigs": len(classes),
+                "held": held,
+                "lost": classes.count("lost"),
+                "rate": round(held / len(classes), 6) if classes else None,
+                "lower_bound": round(bound, 6),
+                "robust": bool(classes) and bound >= level,
+            }
+        )
+    names = spread.names
+    result = RobustResult(
+        settings=settings,
+        rigs=rigs,
+        level=level,
+        confidence=confidence,
+        source=spread.source,
+        rig_values=[dict(zip(names, (float(v) for v in row), strict=True)) for row in values],
+        points=points,
+        complete=complete,
+        wall_s=time.perf_counter() - start,
+        runs=ref.ran,
+    )
+    if settings.refine:
+        result.refinement = {
+            "coarse_step": settings.refine,
+            "levels": ref.levels,
+            "run": ref.ran,
+            "run_fraction": round(ref.ran / (rigs * n), 4),
+            "assumption": "on each rig, no start of another class inside a grid cell whose four corners agree",
+        }
+    nominal_held = sum(bool(p and p["held"]) for p in nominal) if nominal is not None else None
+    result.nominal_held = nominal_held
+    result.summary = {
+        "starts": n,
+        "robust": sum(p["robust"] for p in points),
+        "held_by_every_rig": sum(p["held"] == rigs for p in points),
+        "rate_at_least_level": sum(p["rate"] is not None and p["rate"] >= level for p in points),
+        "best_possible_lower_bound": round(lower_bound(rigs, rigs, confidence), 6),
+        **({"nominal_held": nominal_held} if nominal_held is not None else {}),
+    }
+    return result
+
+
+def write_robust(result: RobustResult, out_dir: str | Path, *, overwrite: bool = False) -> Path:
+    """``robust.json`` and ``robust.png`` into ``out_dir`` (atomically, as every job's folder)."""
+    with atomic_directory(out_dir, OUTPUT_FILES, overwrite=overwrite) as tmp:
+        (tmp / "robust.json").write_text(json.dumps(result.to_json(), indent=1) + "\n")
+        _render(result, tmp / "robust.png")
+    return Path(out_dir)
+
+
+def _render(result: RobustResult, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    s = result.settings
+    xs, ths = s.x0.values(), s.theta0.values()
+    nx, nt = len(xs), len(ths)
+    rate = np.full((nt, nx), np.nan)
+    robust = np.zeros((nt, nx))
+    for k, p in enumerate(result.points):
+        i, j = divmod(k, nt)
+        rate[j, i] = np.nan if p["rate"] is None else p["rate"]
+        robust[j, i] = 1.0 if p["robust"] else (0.5 if p["held"] == result.rigs else 0.0)
+    dx = (xs[1] - xs[0]) / 2 if nx > 1 else 0.01
+    dt = (ths[1] - ths[0]) / 2 if nt > 1 else 0.01
+    fig, ax = plt.subplots(figsize=(7.5, 6.6), dpi=120)
+    image = ax.imshow(
+        rate,
+        origin="lower",
+        extent=(xs[0] - dx, xs[-1] + dx, ths[0] - dt, ths[-1] + dt),
+        aspect="auto",
+        cmap="viridis",
+        vmin=0,
+        vmax=1,
+    )
+    fig.colorbar(image, ax=ax, label=f"share of the {result.rigs} rigs that hold the start")
+    if nx > 1 and nt > 1:
+        ax.contour(xs, ths, robust, levels=[0.25, 0.75], colors=["white", "red"], linewidths=[1.0, 2.0])
+    m = result.summary
+    ax.set_title(
+        f"{s.controller}: {result.rigs} rigs from {Path(result.source).name}\n"
+        f"held by every rig {m['held_by_every_rig']} of {m['starts']} (white); lower bound ≥ {result.level:g} "
+        f"at {result.confidence:g}: {m['robust']} (red)"
+        + (f"; nominal rig holds {m['nominal_held']}" if "nominal_held" in m else ""),
+        fontsize=9,
+    )
+    ax.set_xlabel("initial ball position x0 (m)")
+    ax.set_ylabel("initial beam angle θ0 (rad)")
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
