@@ -492,9 +492,7 @@ def bench_view(seconds: float) -> dict[str, float]:
     rate and CPU time per tick over ``seconds`` of wall time, and the frames the client received."""
     import threading
 
-    import msgspec
-    import viser
-    import websockets.sync.client
+    from viewer_client import ViewerClient
 
     from twin.viewer import Viewer, serve
 
@@ -516,42 +514,13 @@ def bench_view(seconds: float) -> dict[str, float]:
     server.start()
     if not ready.wait(60):
         raise RuntimeError("the view did not start")
-    ws = websockets.sync.client.connect(
-        f"ws://127.0.0.1:{port}",
-        origin=f"http://127.0.0.1:{port}",
-        subprotocols=[f"viser-v{viser.__version__}"],  # type: ignore[list-item]
-        max_size=None,
-        compression=None,
-    )
-    frames = [0]
-
-    def drain() -> None:
-        try:
-            for _ in ws:
-                frames[0] += 1
-        except websockets.exceptions.ConnectionClosed:
-            pass
-
-    threading.Thread(target=drain, daemon=True).start()
-    camera = {
-        "type": "ViewerCameraMessage",
-        "wxyz": [1.0, 0.0, 0.0, 0.0],
-        "position": [0.2, -0.72, 0.52],
-        "fov": 1.0,
-        "near": 0.01,
-        "far": 100.0,
-        "image_height": 900,
-        "image_width": 1400,
-        "look_at": [0.0, 0.0, 0.24],
-        "up_direction": [0.0, 0.0, 1.0],
-    }
-    ws.send(msgspec.msgpack.encode(camera))
+    client = ViewerClient(port)
     server.join()
-    ws.close()
+    client.close()
     stats = out["stats"]
     stats["tick_rate_error_pct"] = 100.0 * (stats["tick_rate_hz"] / 50.0 - 1.0)
     stats["cpu_ms_per_tick"] = 1e3 * stats.pop("cpu_s_per_tick")
-    stats["client_messages"] = float(frames[0])
+    stats["client_messages"] = float(client.frames)
     return stats
 
 

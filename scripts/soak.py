@@ -17,26 +17,11 @@ import time
 from pathlib import Path
 from typing import Any
 
-import msgspec
-import viser
-import websockets.sync.client
+from viewer_client import ViewerClient
 
 from controllers import registry
 from twin.viewer import FRAME_S, Viewer, serve
 from twin.viewer.security import control_uuid
-
-CAMERA = {
-    "type": "ViewerCameraMessage",
-    "wxyz": [1.0, 0.0, 0.0, 0.0],
-    "position": [0.2, -0.72, 0.52],
-    "fov": 1.0,
-    "near": 0.01,
-    "far": 100.0,
-    "image_height": 900,
-    "image_width": 1400,
-    "look_at": [0.0, 0.0, 0.24],
-    "up_direction": [0.0, 0.0, 1.0],
-}
 
 
 def rss_mib() -> float:
@@ -75,32 +60,11 @@ def main() -> None:
     if not ready.wait(60):
         raise SystemExit("soak: the viewer did not start")
     viewer: Viewer = holder["viewer"]
-    ws = websockets.sync.client.connect(
-        f"ws://127.0.0.1:{args.port}",
-        origin=f"http://127.0.0.1:{args.port}",
-        subprotocols=[f"viser-v{viser.__version__}"],  # type: ignore[list-item]
-        max_size=None,
-        compression=None,
-    )
-    frames = [0]
-
-    def drain() -> None:
-        try:
-            for _ in ws:
-                frames[0] += 1
-        except websockets.exceptions.ConnectionClosed:
-            pass
-
-    threading.Thread(target=drain, daemon=True).start()
-    ws.send(msgspec.msgpack.encode(CAMERA))
+    client = ViewerClient(args.port)
 
     def click(control: str) -> None:
         uuid = control_uuid(viewer.controls[control])
-        message = {"type": "GuiUpdateMessage", "uuid": uuid, "updates": {"value": True}}
-        try:
-            ws.send(msgspec.msgpack.encode(message))
-        except websockets.exceptions.ConnectionClosed:  # the server stopped at the end of the soak
-            pass
+        client.send({"type": "GuiUpdateMessage", "uuid": uuid, "updates": {"value": True}})
 
     live = viewer.live
     start = time.perf_counter()
@@ -118,14 +82,14 @@ def main() -> None:
                 "rss_mib": round(rss_mib(), 1),
                 "runs": live.runs,
                 "sim_time_s": round(live.rig.time_s, 2),
-                "frames_received": frames[0],
+                "frames_received": client.frames,
                 "ball_lost": live.rig.ball_lost,
                 "error": live.error,
             }
             samples.append(sample)
             print(json.dumps(sample), flush=True)
     server.join()
-    ws.close()
+    client.close()
     stats = holder.get("stats", {})
     wall = stats.get("wall_s", float("nan"))
     asked = wall * args.speed / FRAME_S  # ticks the wall clock asked for at this speed

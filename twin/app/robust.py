@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from twin.app.fanout import Progress, Runs, run_starts
+from twin.app.fanout import Progress, run_starts
 from twin.app.sweep import Refinement, SweepSettings, verdict_class
 from twin.outputs import JobFiles, atomic_directory
 from twin.parameters import ParameterError, Parameters
@@ -114,14 +114,7 @@ def run_robust(
     grid = np.array([(x, th) for x in xs for th in ths], dtype=float)
     n = len(grid)
     seeds = [rig_point_seeds(settings.seed, m, n) for m in range(rigs)]
-    runs = Runs(
-        controller=settings.controller,
-        params=base,
-        duration_s=settings.duration_s,
-        noise=settings.noise,
-        plant=settings.plant,
-        ideal_sensors=settings.ideal_sensors,
-    )
+    runs = settings.runs(base)
     start = time.perf_counter()
 
     def run_job(requests: list[tuple[int, int]]) -> tuple[list[dict[str, Any] | None], bool]:

@@ -143,6 +143,17 @@ class SweepSettings:
     refine: int = 0  # boundary refinement: the coarse grid's step in grid intervals (0: every start is run)
     audit: int = 0  # with refine: inferred starts run anyway, at random, to check the assumption
 
+    def runs(self, params: Parameters) -> Runs:
+        """The job every start of this sweep is a run of (``fanout.Runs``), on the rig of ``params``."""
+        return Runs(
+            controller=self.controller,
+            params=params,
+            duration_s=self.duration_s,
+            noise=self.noise,
+            plant=self.plant,
+            ideal_sensors=self.ideal_sensors,
+        )
+
 
 @dataclass
 class SweepResult:
@@ -222,14 +233,7 @@ def run_sweep(
             settings, p, grid, starts, seeds, corners, workers, scheduler, nthread, progress
         )
     start = time.perf_counter()
-    runs = Runs(
-        controller=settings.controller,
-        params=p,
-        duration_s=settings.duration_s,
-        noise=settings.noise,
-        plant=settings.plant,
-        ideal_sensors=settings.ideal_sensors,
-    )
+    runs = settings.runs(p)
     results, complete = run_starts(
         runs,
         starts,
@@ -410,14 +414,7 @@ def _refined_sweep(
     step = settings.refine
     if isinstance(step, bool) or not isinstance(step, int) or step < 2:
         raise ParameterError(f"--refine {step!r}: the coarse step, a whole number of grid intervals ≥ 2")
-    runs = Runs(
-        controller=settings.controller,
-        params=p,
-        duration_s=settings.duration_s,
-        noise=settings.noise,
-        plant=settings.plant,
-        ideal_sensors=settings.ideal_sensors,
-    )
+    runs = settings.runs(p)
     start = time.perf_counter()
 
     def run_job(requests: list[tuple[int, int]]) -> tuple[list[dict[str, Any] | None], bool]:
