@@ -858,7 +858,8 @@ def _robust_sweep(args: argparse.Namespace, settings: Any, params: Parameters, s
         m = result.summary
         print(
             f"{settings.controller}: {m['starts']} starts on {result.rigs} rigs ({result.runs} runs, "
-            f"{result.wall_s:.1f} s): held by every rig {m['held_by_every_rig']}, lower bound ≥ {result.level:g}: "
+            f"{result.wall_s:.1f} s): kept by every rig {m['kept_by_every_rig']}, held by every rig "
+            f"{m['held_by_every_rig']}, lower bound ≥ {result.level:g}: "
             f"{m['robust']} (the best bound {result.rigs} rigs give: {m['best_possible_lower_bound']:.3f}); the "
             f"nominal rig holds {m['nominal_held']}"
         )

@@ -187,6 +187,7 @@ def run_robust(
         "starts": n,
         "robust": sum(p["robust"] for p in points),
         "held_by_every_rig": sum(p["held"] == rigs for p in points),
+        "kept_by_every_rig": sum(p["lost"] == 0 and p["rigs"] == rigs for p in points),
         "rate_at_least_level": sum(p["rate"] is not None and p["rate"] >= level for p in points),
         "best_possible_lower_bound": round(lower_bound(rigs, rigs, confidence), 6),
         **({"nominal_held": nominal_held} if nominal_held is not None else {}),
