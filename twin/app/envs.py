@@ -461,7 +461,7 @@ class BallBeamVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         self._state = np.zeros((n, 4))
         self._time, self._motor, self._lost_time = np.zeros(n), np.zeros(n), np.full(n, np.nan)
         self._lost, self._at_stops = np.zeros(n, dtype=bool), np.zeros(n, dtype=bool)
-        self._noisy: dict[int, Parameters] = {}
+        self._noisy: dict[Parameters, Parameters] = {}
 
     def reset(
         self, *, seed: int | Sequence[int | None] | None = None, options: dict[str, Any] | None = None
@@ -487,12 +487,13 @@ class BallBeamVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
 
     def _rig_params(self, ep: Episode) -> Parameters:
         """The episode's parameters with the noise switched as configured (``make_rig``'s ``noise``)."""
-        key = id(ep.params)
-        got = self._noisy.get(key)
-        if got is None or len(self._noisy) > 4 * self.num_envs:
+        got = self._noisy.get(ep.params)  # by value: an id could be a freed episode's, reused
+        if got is None:
             if len(self._noisy) > 4 * self.num_envs:
                 self._noisy.clear()
-            got = self._noisy[key] = ep.params.with_overrides({"ball_sensor.noise_enabled": self.cfg.noise})
+            got = self._noisy[ep.params] = ep.params.with_overrides(
+                {"ball_sensor.noise_enabled": self.cfg.noise}
+            )
         return got
 
     def _reset_envs(self, rows: np.ndarray, options: Sequence[Mapping[str, Any] | None]) -> None:
