@@ -554,6 +554,11 @@ class _Group:
             ball_v = self.ball.advance(live, block_t, block_x, block_on)
         return BatchSamples(time_s=block_time_s(t_start, p.daq), ball_v=ball_v, angle_v=angle_v)
 
+    def block_peaks(self) -> np.ndarray:
+        """The largest |θ| of each live run's last block over its steps with the ball on the track (0 when
+        none: |θ| ≥ 0, so the steps off the track can count as 0)."""
+        return np.max(np.abs(np.where(self.block_on, self.block_theta, 0.0)), axis=1)
+
     @property
     def held_now(self) -> bool:
         return self.schedule.held
@@ -601,9 +606,7 @@ class _Group:
             c["true_xdot_m_s"][k, live] = state[:, 2]
             c["true_thetadot_rad_s"][k, live] = state[:, 3]
         cols.lost[k, live] = self.lost[live]
-        # The largest |θ| of the block over the steps with the ball on the track (0 when none): |θ| ≥ 0, so
-        # the steps off the track can count as 0.
-        cols.peak_theta[k, live] = np.max(np.abs(np.where(self.block_on, self.block_theta, 0.0)), axis=1)
+        cols.peak_theta[k, live] = self.block_peaks()
 
     def run(
         self,

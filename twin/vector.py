@@ -59,7 +59,6 @@ class VectorRig:
             raise ValueError(f"n = {n!r}: a vector of at least one rig")
         self.n = n
         self.ideal_sensors = bool(ideal_sensors)
-        self.params = params
         self.schedule_key = _steps_key(params)
         self._plants: dict[Parameters, Plant] = {}
         first = self._plant(params)
@@ -112,14 +111,15 @@ class VectorRig:
         groups: dict[tuple, list[int]] = {}
         for j, q in enumerate(params):
             groups.setdefault(_io_key(q), []).append(j)
+        for j, r in enumerate(rows.tolist()):
+            self.rig_params[r] = params[j]  # in use from now: kept in the cache
+            self.models[r] = self._plant(params[j]).model
+        self.batch.set_models(self.models)
         starts, firsts = _Blocks(len(rows)), _Blocks(len(rows))
         for listed in groups.values():
             members = sorted(listed, key=lambda j: int(rows[j]))  # a rollout takes its rows in order
             ids = rows[members]
             qs = [params[j] for j in members]
-            for q, r in zip(qs, ids.tolist(), strict=True):
-                self.models[r] = self._plant(q).model
-            self.batch.set_models(self.models)
             cohort = _Group(
                 qs,
                 np.asarray(x0_m, dtype=float)[members],
@@ -133,10 +133,9 @@ class VectorRig:
                 plant_cache=self._plants,
             )
             self.cohorts.append(cohort)
-            for k, (r, q) in enumerate(zip(ids.tolist(), qs, strict=True)):
+            for k, r in enumerate(ids.tolist()):
                 self.cohort_of[r] = cohort
                 self.row_in[r] = k
-                self.rig_params[r] = q
             at = np.asarray(members)
             starts.fill(at, cohort, cohort.read())
             firsts.fill(at, cohort, cohort.read())
@@ -232,7 +231,7 @@ class _Blocks:
         self.angle_v[at] = samples.angle_v
         self.state[at] = cohort.true_state()
         self.motor_v[at] = cohort.applied_v[live]
-        self.peak[at] = np.max(np.abs(np.where(cohort.block_on, cohort.block_theta, 0.0)), axis=1)
+        self.peak[at] = cohort.block_peaks()
         self.lost[at] = cohort.lost[live]
         self.true_time_s[at] = cohort.time_s
         if cohort.lost[live].any():
