@@ -1455,6 +1455,19 @@ _SERVED_CONTROLLER = (
 )
 
 
+def _add_spread_options(parser: argparse.ArgumentParser, use: str) -> None:
+    """``--spread FILE`` or ``--calibration DIR`` (one of them): what rigs are drawn from, for ``use``."""
+    what = parser.add_mutually_exclusive_group()
+    what.add_argument(
+        "--spread", metavar="FILE", help=f"each parameter's uncertainty (TOML/JSON; see the README), {use}"
+    )
+    what.add_argument(
+        "--calibration",
+        metavar="DIR",
+        help=f"a calibration's values, uncertainties and correlations (calibrate --out), {use}",
+    )
+
+
 def _add_served_options(parser: argparse.ArgumentParser) -> None:
     """A many-run job served over the wire to a controller in any language (sweep, montecarlo, validate)."""
     parser.add_argument(
@@ -1759,13 +1772,7 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="N",
         help="with --refine: also run N inferred starts, at random, and report any that differ",
     )
-    rigs = sweep.add_mutually_exclusive_group()
-    rigs.add_argument(
-        "--spread", metavar="FILE", help="robust map: rigs drawn from this spread file (with --rigs N)"
-    )
-    rigs.add_argument(
-        "--calibration", metavar="DIR", help="robust map: rigs drawn from this calibration (with --rigs N)"
-    )
+    _add_spread_options(sweep, "for the robust map's rigs (with --rigs N)")
     sweep.add_argument(
         "--rigs",
         type=count(1, 1000),
@@ -1791,15 +1798,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     mc.add_argument("--controller", metavar="NAME|MODULE:CLASS", help=controller_help + _SERVED_CONTROLLER)
     mc.add_argument("--n", type=count(1, _mc_max_runs), default=200, help="runs (default 200)")
-    what = mc.add_mutually_exclusive_group()
-    what.add_argument(
-        "--spread", metavar="FILE", help="each parameter's uncertainty (TOML/JSON; see the README)"
-    )
-    what.add_argument(
-        "--calibration",
-        metavar="DIR",
-        help="a calibration's values, uncertainties and correlations (calibrate --out)",
-    )
+    _add_spread_options(mc, "for the perturbed rigs")
     mc.add_argument(
         "--x0", type=finite_float(), default=-0.2, metavar="M", help="initial ball position (default -0.2)"
     )
@@ -1829,11 +1828,7 @@ def build_parser() -> argparse.ArgumentParser:
         "Monte Carlo; one report, exit 0 pass / 1 fail",
     )
     val.add_argument("--controller", metavar="NAME|MODULE:CLASS", help=controller_help + _SERVED_CONTROLLER)
-    spread = val.add_mutually_exclusive_group()
-    spread.add_argument("--spread", metavar="FILE", help="parameter uncertainties for the Monte Carlo check")
-    spread.add_argument(
-        "--calibration", metavar="DIR", help="a calibration's uncertainties for the Monte Carlo check"
-    )
+    _add_spread_options(val, "for the Monte Carlo check")
     val.add_argument("--criteria", metavar="FILE", help="TOML overriding the pass criteria (see the report)")
     val.add_argument("--seed", type=seed(), default=0, help="base seed of every run's noise")
     _add_params_options(val)
