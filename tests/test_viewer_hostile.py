@@ -422,6 +422,9 @@ class Server:
         self.slopes.append(slope)
 
 
+STALLED_RCVBUF_BYTES = 256 * 1024
+
+
 class Client:
     """A websocket client that speaks viser's protocol: msgpack frames, the version subprotocol, a camera
     message first (viser runs GUI callbacks only for clients that sent one). It drains what the server sends
@@ -430,8 +433,16 @@ class Client:
     def __init__(self, server: Server, *, origin: str | None = None, read: bool = True) -> None:
         self.server = server
         origin = origin or f"http://127.0.0.1:{server.port}"
+        sock = None
+        if not read:
+            # A fixed receive buffer: Linux autotunes an unset one up to net.ipv4.tcp_rmem's maximum (32 MiB on
+            # some machines), which would take several files before the server saw a stalled browser.
+            sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, STALLED_RCVBUF_BYTES)
+            sock.connect(("127.0.0.1", server.port))
         self.ws = websockets.sync.client.connect(
             f"ws://127.0.0.1:{server.port}",
+            sock=sock,
             origin=origin,
             subprotocols=[PROTOCOL],
             proxy=None,
