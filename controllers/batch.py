@@ -10,9 +10,10 @@ What keeps the bits:
 * a matrix times a vector is ``twin.fixedorder``'s: ``matvec`` on floats alone, ``matvecs`` over the batch
   (the same products added left to right: no BLAS, whose kernel would choose the order).
 
-``appendix-sf``, ``appendix-clp`` and the ``LoopController``s with a state-feedback law in volts on a
-reduced-order observer or a Kalman filter (``lqr``, ``sf``, ``thesis-sf``) are batched; ``make_batch``
-returns None for the others, which the batch engine runs one scalar instance per run.
+``appendix-sf``, ``appendix-clp`` and the ``LoopController``s on a reduced-order observer or a Kalman filter
+with a state-feedback law in volts (``lqr``, ``sf``, ``thesis-sf``) or a control-law-partitioning or
+sliding-mode law in N·m (``clp``, ``thesis-clp``, ``smc``) are batched; ``make_batch`` returns None for the
+others (``lqi``'s integrator, a user's controller), which the batch engine runs one scalar instance per run.
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ from controllers.appendix import (
     control_law_step,
     state_feedback_step,
 )
-from controllers.laws import KalmanState, StateFeedbackLaw
+from controllers.laws import ClpLaw, KalmanState, SlidingModeLaw, StateFeedbackLaw
 from controllers.loop import LoopController, ObserverState
 from twin import fixedorder as fo
 from twin.batch import BatchSamples, BatchTelemetry
@@ -38,6 +39,7 @@ from twin.converters import (
     dac_command_v,
     motor_volts_from_command,
 )
+from twin.dcmotor import volts_for_torque_v
 from twin.interface import Controller
 from twin.parameters import SoftwareCalibration
 
@@ -109,12 +111,126 @@ class BatchAppendixControlLaw(_AppendixBatch):
         return adat
 
 
-class BatchLoopController:
-    """``LoopController`` with a ``StateFeedbackLaw`` in volts on an ``ObserverState`` or a ``KalmanState``,
-    over the batch (each run may have its own design: the matrices are then stacked per run)."""
+class _PerRun:
+    """Arrays a batch holds once when every run shares them (as the scalar controllers hold them) or stacked
+    on a leading axis, one entry per run; ``keep`` selects the runs that go on."""
+
+    def __init__(self) -> None:
+        self._per_run: list[str] = []
+
+    def _matrix(self, name: str, arrays: Sequence[np.ndarray | float]) -> None:
+        values = [np.asarray(a, dtype=float) for a in arrays]
+        first = values[0]
+        if all(np.array_equal(a, first) for a in values):
+            setattr(self, name, first)
+        else:
+            setattr(self, name, np.stack(values))
+            self._per_run.append(name)
+
+    def keep(self, runs: np.ndarray) -> None:
+        for name in self._per_run:
+            setattr(self, name, getattr(self, name)[runs])
+
+
+class _BatchStateFeedback(_PerRun):
+    """``StateFeedbackLaw.of_floats`` over the batch: u = −K·(x − x_ref)."""
+
+    gain: np.ndarray
+    ref: np.ndarray
+
+    def __init__(self, laws: Sequence[StateFeedbackLaw]) -> None:
+        super().__init__()
+        self._matrix("gain", [law.gain for law in laws])
+        self._matrix("ref", [np.array([law.ref_x_m, 0.0, 0.0, 0.0]) for law in laws])
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        return -(_mv(self.gain, x - self.ref)[:, 0])
+
+
+class _BatchClp(_PerRun):
+    """``ClpLaw.of_floats`` over the batch: τ = α·τ̄ + β, each sum and product in the scalar law's order."""
+
+    kp: np.ndarray
+    kv: np.ndarray
+    ref: np.ndarray
+    alpha_xdd: np.ndarray
+    alpha_thdd: np.ndarray
+    alpha_thdd_x2: np.ndarray
+    beta: np.ndarray
+    beta_thetadot: np.ndarray
+
+    def __init__(self, laws: Sequence[ClpLaw]) -> None:
+        super().__init__()
+        self._matrix("kp", [law.kp for law in laws])
+        self._matrix("kv", [law.kv for law in laws])
+        self._matrix("ref", [law.ref_x_m for law in laws])
+        for name in ("alpha_xdd", "alpha_thdd", "alpha_thdd_x2", "beta_thetadot"):
+            self._matrix(name, [getattr(law.terms, name) for law in laws])
+        self._matrix("beta", [np.array(law.terms.beta) for law in laws])
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        xm, th, xd, thd = x[:, 0], x[:, 1], x[:, 2], x[:, 3]
+        tau_bar = _mv(self.kp, np.stack([-(xm - self.ref), -th], axis=1)) - _mv(self.kv, x[:, 2:])
+        with np.errstate(over="ignore"):  # x², θ̇² overflow to inf, as ClpTerms takes them
+            x2, thd2 = np.float_power(xm, 2), np.float_power(thd, 2)
+        alpha_theta = self.alpha_thdd + self.alpha_thdd_x2 * x2
+        b1, b2, b3, b4 = (self.beta[..., i] for i in range(4))
+        beta = (
+            b1 * np.sin(th)
+            + b2 * xm * np.cos(th)
+            + b3 * xm * xd * thd
+            + b4 * xm * thd2
+            + self.beta_thetadot * thd
+        )
+        return (self.alpha_xdd * tau_bar[:, 0] + alpha_theta * tau_bar[:, 1]) + beta
+
+
+class _BatchSlidingMode(_PerRun):
+    """``SlidingModeLaw.of_floats`` over the batch: u = −K_eq·x + Σ kᵢxᵢ − η·sgn(s)."""
+
+    surface: np.ndarray
+    equivalent_gain: np.ndarray
+    k_minus: np.ndarray
+    k_plus: np.ndarray
+    eta: np.ndarray
+
+    def __init__(self, laws: Sequence[SlidingModeLaw]) -> None:
+        super().__init__()
+        self._matrix("surface", [np.asarray(law.surface, dtype=float)[0] for law in laws])
+        self._matrix("equivalent_gain", [np.asarray(law.equivalent_gain, dtype=float)[0] for law in laws])
+        for name in ("k_minus", "k_plus", "eta"):
+            self._matrix(name, [getattr(law, name) for law in laws])
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        s = fo.dots(x, self.surface)  # S̄·x (IEEE products commute: x·S̄ has the bits of S̄·x)
+        k = np.where(s[:, None] * x > 0, self.k_minus[..., None], self.k_plus[..., None])
+        equivalent = fo.dots(x, self.equivalent_gain)
+        # The scalar law's sign: 0.0 for ±0, NaN for NaN.
+        sign = np.where(s > 0, 1.0, np.where(s < 0, -1.0, np.where(s != s, s, 0.0)))
+        return -equivalent + fo.dots(k, x) - self.eta * sign
+
+
+_BatchLaw = _BatchStateFeedback | _BatchClp | _BatchSlidingMode
+_BATCH_LAWS: tuple[tuple[type, type[_BatchLaw], str], ...] = (
+    (StateFeedbackLaw, _BatchStateFeedback, "volts"),
+    (ClpLaw, _BatchClp, "torque"),
+    (SlidingModeLaw, _BatchSlidingMode, "torque"),
+)
+
+
+def _batch_law(laws: Sequence[object], u_kind: str) -> _BatchLaw | None:
+    for law_type, batch_type, kind in _BATCH_LAWS:
+        if kind == u_kind and all(type(law) is law_type for law in laws):
+            return batch_type(laws)  # type: ignore[arg-type]
+    return None
+
+
+class BatchLoopController(_PerRun):
+    """``LoopController`` on an ``ObserverState`` or a ``KalmanState`` with a state-feedback law in volts or
+    a control-law-partitioning or sliding-mode law in N·m (turned into volts by the design's motor inverse),
+    over the batch (each run may have its own design: the arrays are then stacked per run)."""
 
     # The design's arrays: shared (as the scalar controller holds them) or stacked per run.
-    gain: np.ndarray
     phi: np.ndarray
     gamma0: np.ndarray
     k_gain: np.ndarray
@@ -123,20 +239,28 @@ class BatchLoopController:
     ga: np.ndarray
     o_gain: np.ndarray
     h0: np.ndarray
+    torque_per_volt: np.ndarray
+    backemf_at_beam: np.ndarray
 
     def __init__(self, controllers: Sequence[LoopController]) -> None:
+        super().__init__()
         c0 = controllers[0]
         self.name = c0.name
         self.period_s = c0.period_s
         self.software = c0.software
         self.command_limits = c0.command_limits
+        self.u_kind = c0.u_kind
         self.feed_applied = c0.observer_input == "applied_volts"
-        laws = [c.law for c in controllers if isinstance(c.law, StateFeedbackLaw)]
-        if len(laws) != len(controllers):
-            raise TypeError(f"{self.name}: BatchLoopController takes state-feedback laws only")
-        self._per_run = ["ref"]  # the arrays with one entry per run (``keep`` selects from them)
-        self.ref = np.array([[law.ref_x_m, 0.0, 0.0, 0.0] for law in laws])
-        self._matrix("gain", [law.gain for law in laws])
+        law = _batch_law([c.law for c in controllers], c0.u_kind)
+        if law is None or any(
+            c.u_kind != c0.u_kind or c.observer_input != c0.observer_input for c in controllers
+        ):
+            raise TypeError(f"{self.name}: BatchLoopController takes one kind of batched law")
+        self.law = law
+        if self.u_kind == "torque":
+            motors = [c.motor for c in controllers]
+            self._matrix("torque_per_volt", [m.torque_per_volt for m in motors if m is not None])
+            self._matrix("backemf_at_beam", [m.backemf_at_beam for m in motors if m is not None])
         states = [c.state for c in controllers]
         self.kalman = isinstance(states[0], KalmanState)
         if self.kalman:
@@ -153,22 +277,17 @@ class BatchLoopController:
             self._matrix("h0", [o.h[:, 0] for o in obs])
         self.telemetry = BatchTelemetry(np.empty((0, 4)), np.empty(0), np.empty(0))
 
-    def _matrix(self, name: str, arrays: Sequence[np.ndarray]) -> None:
-        """One array for all runs when they share it, else one per run stacked on a leading axis."""
-        first = arrays[0]
-        if all(a is first or np.array_equal(a, first) for a in arrays):
-            setattr(self, name, first)
-        else:
-            setattr(self, name, np.stack(arrays))
-            self._per_run.append(name)
-
     @staticmethod
     def supports(controller: object) -> bool:
-        return (
-            isinstance(controller, LoopController)
-            and isinstance(controller.law, StateFeedbackLaw)
-            and controller.u_kind == "volts"
-            and isinstance(controller.state, KalmanState | ObserverState)
+        if not isinstance(controller, LoopController) or not isinstance(
+            controller.state, KalmanState | ObserverState
+        ):
+            return False
+        if controller.u_kind == "torque" and controller.motor is None:
+            return False
+        return any(
+            type(controller.law) is law_type and controller.u_kind == kind
+            for law_type, _, kind in _BATCH_LAWS
         )
 
     def _xa(self, samples: BatchSamples) -> np.ndarray:
@@ -184,8 +303,8 @@ class BatchLoopController:
 
     def keep(self, runs: np.ndarray) -> None:
         self._x, self._u_prev = self._x[runs], self._u_prev[runs]
-        for name in self._per_run:
-            setattr(self, name, getattr(self, name)[runs])
+        super().keep(runs)
+        self.law.keep(runs)
 
     def update(self, samples: BatchSamples) -> np.ndarray:
         sw = self.software
@@ -199,16 +318,24 @@ class BatchLoopController:
             xb = _mv(self.f, xb) + _mv(self.ga, xa_prev) + _mv(self.o_gain, xa) + self.h0 * u_prev
             x = np.concatenate([xa, xb], axis=1)
         self._x = x
-        u = -(_mv(self.gain, x - self.ref)[:, 0])  # StateFeedbackLaw
-        if not np.isfinite(u).all():
+        u = self.law(x)
+        if not np.isfinite(u).all():  # LoopController's _volts
             j = int(np.flatnonzero(~np.isfinite(u))[0])
-            raise FloatingPointError(f"{self.name}: control law returned {u[j]!r} for state {x[j].tolist()}")
-        command = dac_command_v(u, sw)
+            raise FloatingPointError(
+                f"{self.name}: control law returned {float(u[j])!r} for state {x[j].tolist()}"
+            )
+        torque = self.u_kind == "torque"
+        volts = (
+            np.asarray(volts_for_torque_v(u, x[:, 3], self.torque_per_volt, self.backemf_at_beam))
+            if torque
+            else u
+        )
+        command = dac_command_v(volts, sw)
         if self.command_limits:
             command = clip_command_v(command, sw)
         applied = motor_volts_from_command(command, sw)
         self._u_prev = applied if self.feed_applied else u
-        self.telemetry = BatchTelemetry(x.copy(), applied, u)
+        self.telemetry = BatchTelemetry(x.copy(), u if torque else applied, u)
         return command
 
 

@@ -391,6 +391,7 @@ _TABLE: tuple[_Row, ...] = (
         "thesis-clp",
         _thesis_clp,
         "§5.2.2 control law partitioning + observer G as printed, 50 Hz",
+        batched=True,
         setpoint=True,
     ),
     _Row(
@@ -417,6 +418,7 @@ _TABLE: tuple[_Row, ...] = (
         _clp,
         "§5.2.2 procedure re-run: four poles at z = 0.9608 (ω_n = 2, ζ = 1), observer poles 0.2, on the "
         "reference model",
+        batched=True,
         setpoint=True,
     ),
     _Row(
@@ -424,6 +426,7 @@ _TABLE: tuple[_Row, ...] = (
         _smc,
         "§4.4 procedure re-run: sliding poles −2, −2, −10, k± = ±0.5, η = 0.001, at 50 Hz with the observer "
         "of clp",
+        batched=True,
     ),
     _Row("lqr", _lqr, _lqr_description, batched=True, setpoint=True),
     _Row(

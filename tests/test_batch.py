@@ -109,6 +109,9 @@ def _grid(seeds: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         pytest.param("appendix-clp", False, id="appendix-clp-scalar-loop", marks=pytest.mark.slow),
         pytest.param("lqr", True, id="lqr-vectorized", marks=pytest.mark.slow),
         pytest.param("lqr", False, id="lqr-scalar-loop", marks=pytest.mark.slow),
+        pytest.param("clp", True, id="clp-vectorized", marks=pytest.mark.slow),
+        pytest.param("smc", True, id="smc-vectorized", marks=pytest.mark.slow),
+        pytest.param("thesis-clp", True, id="thesis-clp-vectorized", marks=pytest.mark.slow),
     ],
 )
 def test_batch_equals_single_runs_bit_for_bit(name: str, vectorized: bool) -> None:
@@ -135,7 +138,12 @@ def test_per_run_parameters_each_run_its_own_physics() -> None:
     ]
     params[2] = params[1]
     params[3] = params[3].with_overrides({"angle_sensor.zeroing_error_rad": 0.002})
-    for name in ("lqr", "appendix-sf"):
+    for name in (
+        "lqr",
+        "appendix-sf",
+        "clp",
+        "smc",
+    ):  # clp, smc: each run its own design (terms, gains, motor)
         _check(registry, name, X0, THETA0, np.array([5, 6, 7, 8]), duration_s=1.5, params=params)
 
 
@@ -179,6 +187,7 @@ def test_start_timing_and_latency_as_single_runs(overrides: dict) -> None:
     [
         ("sf", {}),
         ("thesis-sf", {}),
+        ("thesis-clp", {}),
         ("clp", {}),
         ("smc", {}),
         ("appendix-clp", {"stop_when_lost": False}),
@@ -222,3 +231,35 @@ def test_the_single_rig_and_the_batch_follow_one_tick_schedule() -> None:
     assert held.next_block() == BlockPlan(-30, -10, 0, -10, 0)
     assert held.next_block() == BlockPlan(-10, 10, 0, 0, 10)
     assert held.command_written() is True and held.next_is_plain()
+
+
+def _extreme_states(rng: np.random.Generator) -> np.ndarray:
+    """Random states over many decades, with the edges a law's arithmetic has: ±0, a sliding surface at
+    exactly zero, x² and θ̇² overflowing, NaN."""
+    x = rng.standard_normal((400, 4)) * 10.0 ** rng.uniform(-8, 3, (400, 4))
+    x[:20] = 0.0
+    x[20:40] = -0.0
+    x[40:60, 0] = 1e200
+    x[60:80, 3] = -1e200
+    x[80:90, 2] = np.nan
+    return x
+
+
+@pytest.mark.parametrize("name", ["clp", "thesis-clp", "smc", "sf", "lqr"])
+def test_each_batched_law_gives_the_scalar_laws_bits_on_any_state(name: str) -> None:
+    """The batch's law on 400 states at once against the scalar law state by state (``of_floats``), bit for
+    bit, NaN where the scalar law gives NaN. A surface exactly zero: smc's states on S̄·x = 0."""
+    from controllers.batch import BatchLoopController
+
+    scalar = registry.make(name)
+    law = BatchLoopController([scalar]).law
+    x = _extreme_states(np.random.default_rng(sum(map(ord, name))))
+    if name == "smc":
+        surface = np.asarray(scalar.law.surface, dtype=float)[0]
+        x[100:110] = np.array([surface[1], -surface[0], 0.0, 0.0]) * 2.0 ** np.arange(10)[:, None]
+    with np.errstate(invalid="ignore", over="ignore"):
+        batched = law(x)
+    single = np.array([scalar.law.of_floats(*row) for row in x.tolist()])
+    assert batched.tobytes() == single.tobytes() or np.array_equal(batched, single, equal_nan=True)
+    assert np.signbit(batched).tolist() == np.signbit(single).tolist()
+    assert np.isfinite(single).sum() > 300  # the states are mostly ordinary ones

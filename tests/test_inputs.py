@@ -168,6 +168,8 @@ BAD_CRITERIA = [
     ("latencies_s = [-0.001]\n", "latencies_s = [-0.001]"),
     ("max_saturated_fraction = 1.5\n", "max_saturated_fraction = 1.5"),
     ("min_success_lower_bound = 0.97\n", "min_success_lower_bound = 0.97", "0.963783"),
+    ("robust_rigs = 0\n", "robust_rigs = 0"),
+    ("robust_rigs = 20\n", "robust_rigs = 20", "0.831567"),
 ]
 
 
@@ -205,10 +207,17 @@ def test_the_default_criteria_and_the_monte_carlo_bound_they_can_reach(params: P
 
     # The exact (Clopper–Pearson) 95 % lower bound of n held of n is 0.025^(1/n).
     assert best_success_lower_bound(100) == round(0.025 ** (1 / 100), 6) == 0.963783
-    assert ValidationCriteria(montecarlo_runs=100, min_success_lower_bound=0.963783).montecarlo_runs == 100
+    # (the robust region's rigs must reach the bound too)
+    assert (
+        ValidationCriteria(montecarlo_runs=100, robust_rigs=100, min_success_lower_bound=0.963783).robust_rigs
+        == 100
+    )
     with pytest.raises(ParameterError, match="montecarlo_runs = 10 even all runs held"):
         ValidationCriteria(montecarlo_runs=10)  # the default 0.9 needs at least 36 runs
     assert ValidationCriteria(montecarlo_runs=36).montecarlo_runs == 36
+    with pytest.raises(ParameterError, match="robust_rigs = 35 even all rigs keeping a start"):
+        ValidationCriteria(robust_rigs=35)  # the robust region's rigs: the same bound
+    assert ValidationCriteria(robust_rigs=36).robust_rigs == 36
 
 
 # --- parameter and spread files ------------------------------------------------------------------------

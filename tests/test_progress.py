@@ -74,7 +74,12 @@ def test_stages_count_over_the_whole_job() -> None:
 
 def test_validate_names_its_stages_and_counts_all_their_runs() -> None:
     c = dataclasses.replace(
-        QUICK, duration_s=1.0, region_duration_s=1.0, montecarlo_runs=3, min_success_lower_bound=0.25
+        QUICK,
+        duration_s=1.0,
+        region_duration_s=1.0,
+        montecarlo_runs=3,
+        robust_rigs=3,
+        min_success_lower_bound=0.25,
     )
     calls, progress = _recorder()
     report = validate(
@@ -83,17 +88,19 @@ def test_validate_names_its_stages_and_counts_all_their_runs() -> None:
     assert report.complete
     labels = list(dict.fromkeys(stage for _, _, stage in calls))
     assert labels == [
-        "nominal (stage 1 of 4)",
-        "region (stage 2 of 4)",
-        "sensitivity (stage 3 of 4)",
-        "monte carlo (stage 4 of 4)",
+        "nominal (stage 1 of 5)",
+        "region (stage 2 of 5)",
+        "sensitivity (stage 3 of 5)",
+        "robust region (stage 4 of 5)",
+        "monte carlo (stage 5 of 5)",
     ]
     done = [d for d, _, _ in calls]
     assert done == sorted(done)
     assert report.region is not None
     rows = {check.name: len(check.rows) for check in report.checks}
     sensitivity = sum(n for name, n in rows.items() if name.startswith("sensitivity"))
-    runs = rows["nominal"] + len(report.region.points) + len(report.region.corners) + sensitivity + 3
+    robust = 3 * rows["robust region"]  # every required start (all 9 of QUICK's grid) on 3 rigs
+    runs = rows["nominal"] + len(report.region.points) + len(report.region.corners) + sensitivity + robust + 3
     assert all(total == runs for _, total, stage in calls if not stage.startswith(("nominal", "region")))
     assert done[-1] == runs  # the count ends at every run of every stage
 

@@ -209,6 +209,7 @@ zeroing_counts = 1
 latencies_s = [0.0]
 free_runs_s = [0.04]
 montecarlo_runs = 3
+robust_rigs = 3
 min_success_lower_bound = 0.1
 """
 
@@ -234,7 +235,9 @@ def test_validate_served_to_run_rig_sessions_gives_the_in_process_report(tmp_pat
     theirs, ours = json.loads(ref.stdout), json.loads(out)
     assert same(ours["checks"], theirs["checks"]) and ours["passed"] == theirs["passed"]
     assert ours["controller"] == "ballbeam run appendix-sf"  # the client's HELLO: no --controller given
-    runs = 6 + 4 + 8 + 3  # nominal, region (no claim: no corner), sensitivity (4 cases × 2), Monte Carlo
+    # nominal, region (no claim: no corner), sensitivity (4 cases × 2), robust region (4 starts × 3 rigs), Monte
+    # Carlo
+    runs = 6 + 4 + 8 + 12 + 3
     assert ours["served"]["sessions"] == runs and ours["served"]["clients"] == ["ballbeam run appendix-sf"]
     sessions = [json.loads(line) for line in client.splitlines() if line.startswith("{")]
     assert [s["session"] for s in sessions] == list(range(1, runs + 1))

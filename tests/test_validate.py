@@ -4,6 +4,7 @@ data that a file can change, and the exit code is the verdict."""
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -56,8 +57,53 @@ def test_the_checks_come_from_the_runs() -> None:
     assert nominal.passed == (held == len(starts)) and nominal.measured == f"held {held} of {len(starts)}"
     worst = max(r["saturated_fraction"] for r in nominal.rows)
     assert report.checks[1].passed == (worst <= 0.2)
-    assert report.checks[-1].passed is None  # no spread: Monte Carlo not run, and it does not fail the report
+    # No spread: the robust region and Monte Carlo are not run, and they do not fail the report.
+    assert [c.passed for c in report.checks[-2:]] == [None, None]
+    assert [c.name for c in report.checks[-2:]] == ["robust region", "monte carlo"]
     assert report.passed == all(c.passed is not False for c in report.checks)
+
+
+@pytest.mark.slow
+def test_the_robust_region_is_each_required_start_on_the_spreads_rigs() -> None:
+    """With a spread: every required start of the region grid on the same rigs (twin.app.robust's draw and
+    seeds); each start's count of rigs keeping the ball equals single runs on those rigs, and its bound is
+    the exact binomial interval's low end, as Monte Carlo's."""
+    import scipy.stats
+
+    from twin.app.montecarlo import load_spread, sample_parameters
+    from twin.app.robust import rig_point_seeds
+
+    base = Parameters()
+    spread = load_spread(Path(__file__).parents[1] / "docs" / "examples" / "spread.toml", base)
+    criteria = replace(
+        QUICK,
+        region_x0=(-0.3, 0.3, 4),  # ±0.3, ±0.1: the required box (±0.2) holds the inner two
+        region_theta0=(-0.7, 0.7, 3),
+        robust_rigs=6,
+        montecarlo_runs=6,
+        min_success_lower_bound=0.5,
+    )
+    report = validate("appendix-sf", base, criteria, spread=spread)
+    check = next(c for c in report.checks if c.name == "robust region")
+    rows = sorted(check.rows, key=lambda r: (r["x0_m"], r["theta0_rad"]))
+    assert [(round(r["x0_m"], 6), r["theta0_rad"]) for r in rows] == [(-0.1, 0.0), (0.1, 0.0)]
+    rigs, _ = sample_parameters(base, spread, 6, 0)
+    for k, row in enumerate(rows):  # the grid's order: x0 by x0, θ0 within
+        kept = 0
+        for m, rig in enumerate(rigs):
+            seed = int(rig_point_seeds(0, m, len(rows))[k])
+            single = run_closed_loop(
+                registry.make("appendix-sf", rig),
+                x0_m=row["x0_m"],
+                theta0_rad=0.0,
+                duration_s=4.0,
+                seed=seed,
+                params=rig,
+            )
+            kept += not single.verdict.ball_lost
+        low = scipy.stats.binomtest(kept, 6).proportion_ci(0.95, method="exact").low
+        assert row["kept"] == kept and row["kept_lower_bound"] == pytest.approx(low, abs=1e-6)
+    assert check.passed == all(r["kept_lower_bound"] >= 0.5 for r in rows)
 
 
 def test_criteria_files(tmp_path: Path) -> None:

@@ -30,10 +30,11 @@ def torque_nm(
 def volts_for_torque_v(
     torque: float | np.ndarray,
     rate_rad_s: float | np.ndarray,
-    torque_per_volt: float,
-    backemf_v_s_per_rad: float,
+    torque_per_volt: float | np.ndarray,
+    backemf_v_s_per_rad: float | np.ndarray,
 ) -> float | np.ndarray:
-    """V = τ/k_τ + k_b·θ̇: the terminal volts that give torque τ at the beam at rate θ̇ (eq 3.3.1 inverted)."""
+    """V = τ/k_τ + k_b·θ̇: the terminal volts that give torque τ at the beam at rate θ̇ (eq 3.3.1 inverted;
+    arrays broadcast: a batch of runs, each with its design's constants)."""
     return torque / torque_per_volt + backemf_v_s_per_rad * rate_rad_s
 
 

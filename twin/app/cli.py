@@ -1828,7 +1828,7 @@ def build_parser() -> argparse.ArgumentParser:
         "Monte Carlo; one report, exit 0 pass / 1 fail",
     )
     val.add_argument("--controller", metavar="NAME|MODULE:CLASS", help=controller_help + _SERVED_CONTROLLER)
-    _add_spread_options(val, "for the Monte Carlo check")
+    _add_spread_options(val, "for the robust-region and Monte Carlo checks")
     val.add_argument("--criteria", metavar="FILE", help="TOML overriding the pass criteria (see the report)")
     val.add_argument("--seed", type=seed(), default=0, help="base seed of every run's noise")
     _add_params_options(val)

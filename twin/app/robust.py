@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from twin.app.fanout import Progress, run_starts
+from twin.app.fanout import Progress, Served, run_starts
 from twin.app.sweep import Refinement, SweepSettings, verdict_class
 from twin.outputs import JobFiles, atomic_directory
 from twin.parameters import ParameterError, Parameters
@@ -100,9 +100,11 @@ def run_robust(
     scheduler: str | None = None,
     nthread: int | None = None,
     progress: Progress | None = None,
+    serve: Served | None = None,
 ) -> RobustResult:
     """Every start of ``settings``' grid on each of ``rigs`` rigs drawn from ``spread`` about ``base``.
-    ``nominal``: the nominal rig's sweep points, for the area it holds (optional)."""
+    ``nominal``: the nominal rig's sweep points, for the area it holds (optional); ``serve``: every run a
+    session to a client over the wire (without refinement)."""
     from twin.app.montecarlo import sample_parameters
 
     if isinstance(rigs, bool) or not isinstance(rigs, int) or not 1 <= rigs <= MAX_RIGS:
@@ -128,8 +130,11 @@ def run_robust(
             workers=workers,
             scheduler=scheduler,
             nthread=nthread,
+            serve=serve,
         )
 
+    if serve is not None and settings.refine:
+        raise ParameterError("--refine runs here or on workers, not as served sessions")
     ref = Refinement(settings.x0.n, settings.theta0.n, settings.refine, rigs, run_job, progress)
     if settings.refine:
         ref.refine()

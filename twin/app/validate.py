@@ -8,6 +8,9 @@ verdict against stated criteria.
                   7.20), the output latency (up to most of a period) and the start's free-run time (the
                   unknown 0–40 ms between release and the first command): every run held
     saturation    the share of nominal ticks at the amplifier's rails stays below a bound
+    robust region (with --spread or --calibration) every required start of the region grid on N rigs drawn
+                  from the spread (``twin.app.robust``: the same rigs for every start): the share of rigs
+                  that keep the ball, its lower confidence bound at each start
     monte carlo   (with --spread or --calibration) the success rate's lower confidence bound
 
 Every bound is a field of ``ValidationCriteria`` with its reason; ``--criteria FILE`` (TOML) overrides
@@ -31,6 +34,7 @@ from controllers import thesis_numbers as T
 from twin.app.fanout import Progress, Runs, Served, Stages, run_starts
 from twin.app.montecarlo import MAX_RUNS, Distribution, MonteCarloSettings, run_montecarlo
 from twin.app.options import MAX_JOB_RUN_S
+from twin.app.robust import MAX_RIGS, run_robust
 from twin.app.sweep import MAX_POINTS, Grid, SweepResult, SweepSettings, point_seeds, run_sweep
 from twin.outputs import JobFiles, atomic_directory
 from twin.parameters import ParameterError, Parameters
@@ -69,9 +73,13 @@ class ValidationCriteria:
     # A controller that spends more than a fifth of its ticks at ±12 V has no authority left for a
     # disturbance.
     max_saturated_fraction: float = 0.2
-    # Monte Carlo: the 95 % lower bound of the success rate.
+    # Monte Carlo: the 95 % lower bound of the success rate (and, for the robust region, of the share of
+    # rigs that keep the ball from each required start).
     montecarlo_runs: int = 100
     min_success_lower_bound: float = 0.9
+    # The robust region's rigs: 40 keeping a start bound the share below by 0.912 (36 is the fewest that can
+    # reach 0.9), so every one of them must keep every required start.
+    robust_rigs: int = 40
 
     def __post_init__(self) -> None:
         """Refuse criteria without meaning (ParameterError naming the field and the value): a validation of
@@ -119,21 +127,29 @@ class ValidationCriteria:
             refuse("montecarlo_runs", f"1 … {MAX_RUNS} runs")
         if not 0 <= self.min_success_lower_bound <= 1:
             refuse("min_success_lower_bound", "a success rate, 0 … 1")
-        best = best_success_lower_bound(self.montecarlo_runs)
-        if self.min_success_lower_bound > best:
-            refuse(
-                "min_success_lower_bound",
-                f"unreachable: with montecarlo_runs = {self.montecarlo_runs} even all runs held give a 95 % "
-                f"lower bound of {best:.6g}",
-            )
+        if not 1 <= self.robust_rigs <= MAX_RIGS:
+            refuse("robust_rigs", f"1 … {MAX_RIGS} rigs")
+        for name, what in (("montecarlo_runs", "all runs held"), ("robust_rigs", "all rigs keeping a start")):
+            best = best_success_lower_bound(getattr(self, name))
+            if self.min_success_lower_bound > best:
+                refuse(
+                    "min_success_lower_bound",
+                    f"unreachable: with {name} = {getattr(self, name)} even {what} give a 95 % lower bound "
+                    f"of {best:.6g}",
+                )
+
+
+def success_lower_bound(successes: int, runs: int) -> float:
+    """The 95 % lower bound of a success rate, as the Monte Carlo check computes and rounds it
+    (twin.app.montecarlo: the low end of the exact binomial interval)."""
+    import scipy.stats
+
+    return round(float(scipy.stats.binomtest(successes, runs).proportion_ci(0.95, method="exact").low), 6)
 
 
 def best_success_lower_bound(runs: int) -> float:
-    """The 95 % lower bound of the success rate when all ``runs`` hold, as the Monte Carlo check computes
-    and rounds it (twin.app.montecarlo: the exact binomial interval)."""
-    import scipy.stats
-
-    return round(float(scipy.stats.binomtest(runs, runs).proportion_ci(0.95, method="exact").low), 6)
+    """``success_lower_bound`` when all ``runs`` succeed."""
+    return success_lower_bound(runs, runs)
 
 
 def _shown(value: Any) -> str:
@@ -301,6 +317,9 @@ def _validate(
             "nominal": len(starts) * c.nominal_seeds,
             "region": c.region_x0[2] * c.region_theta0[2],
             "sensitivity": len(cases) * len(T.CHAPTER4_STARTS),
+            "robust region": _required_grid(c)[0].n * _required_grid(c)[1].n * c.robust_rigs
+            if spread is not None
+            else 0,
             "monte carlo": c.montecarlo_runs if spread is not None else 0,
         },
     )
@@ -405,6 +424,55 @@ def _validate(
             )
         )
 
+    # The robust region: the required starts on rigs drawn from the spread.
+    if spread is None:
+        checks.append(
+            Check(
+                "robust region",
+                None,
+                f"every required start kept by a share of plausible rigs with a 95 % lower bound ≥ "
+                f"{c.min_success_lower_bound:g}",
+                "not run: give --spread FILE or --calibration DIR",
+            )
+        )
+    else:
+        x_grid, theta_grid = _required_grid(c)
+        robust = run_robust(
+            replace(settings, x0=x_grid, theta0=theta_grid),
+            params,
+            spread,
+            c.robust_rigs,
+            workers=workers,
+            progress=stages.stage("robust region"),
+            serve=serve,
+        )
+        if not robust.complete:
+            return ValidationReport(
+                controller, checks, region, time.perf_counter() - started, c, complete=False
+            )
+        kept_rows = [
+            {
+                **point,
+                "kept": point["rigs"] - point["lost"],
+                "kept_lower_bound": success_lower_bound(point["rigs"] - point["lost"], point["rigs"]),
+            }
+            for point in robust.points
+        ]
+        worst = min(kept_rows, key=lambda r: (r["kept_lower_bound"], r["kept"]))
+        short = [r for r in kept_rows if r["kept_lower_bound"] < c.min_success_lower_bound]
+        checks.append(
+            Check(
+                "robust region",
+                not short,
+                f"every required start ({len(kept_rows)}) kept by a share of {c.robust_rigs} rigs from "
+                f"{spread.source} with a 95 % lower bound ≥ {c.min_success_lower_bound:g}",
+                f"{len(kept_rows) - len(short)} of {len(kept_rows)} starts; worst ({worst['x0_m']:+.2f}, "
+                f"{worst['theta0_rad']:+.2f}): kept by {worst['kept']} of {worst['rigs']} rigs, held by "
+                f"{worst['held']}, bound {worst['kept_lower_bound']:.3f}",
+                sorted(kept_rows, key=lambda r: (r["kept_lower_bound"], r["kept"]))[:20],
+            )
+        )
+
     # Monte Carlo.
     if spread is None:
         checks.append(
@@ -442,6 +510,15 @@ def _validate(
             )
         )
     return ValidationReport(controller, checks, region, time.perf_counter() - started, c)
+
+
+def _required_grid(c: ValidationCriteria) -> tuple[Grid, Grid]:
+    """The region grid's starts inside the required box, as grids of their own."""
+    grids = []
+    for (lo, hi), region in ((c.required_x0_m, c.region_x0), (c.required_theta0_rad, c.region_theta0)):
+        inside = [float(v) for v in Grid(*region).values() if lo <= v <= hi]
+        grids.append(Grid(inside[0], inside[-1], len(inside)) if inside else Grid(lo, lo, 1))
+    return grids[0], grids[1]
 
 
 # What write_validation puts into its folder (checked before the battery runs).
