@@ -3,6 +3,7 @@
     python scripts/bench.py [--json] [--repeats 15] [--batch-side 41] [--skip-batch] [--skip-peers]
                             [--skip-calibration] [--skip-view] [--view-seconds 60] [--skip-wire] [--only-wire]
                             [--skip-vector-env] [--only-vector-env] [--skip-sweep-command] [--only-sweep-command]
+                            [--skip-batched-laws] [--only-batched-laws]
 
 One run measures, on the same work (a 10 s episode from x0 = 0.2 m, θ0 = 0.3 rad, noise on, seed 0):
 
@@ -30,6 +31,9 @@ One run measures, on the same work (a 10 s episode from x0 = 0.2 m, θ0 = 0.3 ra
   map written) against the 2-thread floor of the sweep's steps, interleaved (target ≤ 1.2×);
 - (f) vector env: 64 appendix-sf runs through ``BallBeamVectorEnv`` (replaying the batch engine's commands: the
   same trajectories) per env-step against the batch engine's per run-tick (target ≤ 1.3×);
+- (h) batched laws: a 16 × 16 grid of 10 s runs (noise on) of clp, thesis-clp and smc through the batch engine
+  on 2 threads, their controllers in numpy (``controllers.batch``) against one scalar controller per run
+  (``vectorized=False``: the same bits), interleaved, the best of two;
 - view: the live view's tick rate at speed 1.0 over the given wall time (target 50 Hz ± 1 %) and its CPU
   time per tick, with a client attached (a websocket speaking viser's protocol, draining every frame).
 
@@ -42,6 +46,7 @@ inflate less); compare ratios within one run. Ratios printed: (b)/(a),
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import os
 import socket
@@ -562,6 +567,32 @@ def bench_wire(repeats: int) -> dict[str, float]:
     }
 
 
+BATCHED_LAWS = ("clp", "thesis-clp", "smc")
+
+
+def bench_batched_laws(side: int = 16, repeats: int = 2, nthread: int = 2) -> dict[str, float]:
+    """(h): each of ``BATCHED_LAWS`` over a side × side grid, batched controller against the scalar loop."""
+    x0, theta0 = np.meshgrid(np.linspace(-0.3, 0.3, side), np.linspace(-0.6, 0.6, side))
+    kw: dict[str, Any] = dict(
+        x0_m=x0.ravel(),
+        theta0_rad=theta0.ravel(),
+        seeds=np.arange(side * side),
+        duration_s=DURATION_S,
+        nthread=nthread,
+    )
+    out: dict[str, float] = {"runs": float(side * side)}
+    for name in BATCHED_LAWS:
+        best = {True: np.inf, False: np.inf}
+        for _ in range(repeats):
+            for vectorized in (True, False):
+                wall, _ = _timed(functools.partial(run_batch, registry, name, **kw, vectorized=vectorized))
+                best[vectorized] = min(best[vectorized], wall)
+        out[f"{name}_batched_s"] = best[True]
+        out[f"{name}_scalar_loop_s"] = best[False]
+        out[f"{name}_scalar_loop_over_batched"] = best[False] / best[True]
+    return out
+
+
 def ratios(results: dict[str, Any]) -> dict[str, float]:
     """(b)/(a), (c)/(a, 2 threads), (d)/(b) and (d)/(c per episode), wall time (CPU time where noted)."""
     episode = results["episodes"]["appendix-sf"]
@@ -590,6 +621,10 @@ def ratios(results: dict[str, Any]) -> dict[str, float]:
     vector = results.get("vector_env")
     if vector is not None:
         out["f_vector_env_over_batch_engine"] = vector["vector_env_over_batch_engine"]
+    laws = results.get("batched_laws")
+    if laws is not None:
+        for name in BATCHED_LAWS:
+            out[f"h_{name}_scalar_loop_over_batched"] = laws[f"{name}_scalar_loop_over_batched"]
     return out
 
 
@@ -608,6 +643,8 @@ def main() -> None:
     parser.add_argument("--skip-sweep-command", action="store_true")
     parser.add_argument("--only-sweep-command", action="store_true", help="measure (g) only")
     parser.add_argument("--only-vector-env", action="store_true", help="measure (f) only")
+    parser.add_argument("--skip-batched-laws", action="store_true")
+    parser.add_argument("--only-batched-laws", action="store_true", help="measure (h) only")
     parser.add_argument("--batch-side", type=int, default=41, help="the batch grid's points per side")
     args = parser.parse_args()
     if args.only_wire:
@@ -620,6 +657,10 @@ def main() -> None:
         return
     if args.only_sweep_command:
         got = bench_sweep_command(args.batch_side)
+        print(json.dumps(got) if args.json else "\n".join(f"{k:40s} {v:12.4f}" for k, v in got.items()))
+        return
+    if args.only_batched_laws:
+        got = bench_batched_laws()
         print(json.dumps(got) if args.json else "\n".join(f"{k:40s} {v:12.4f}" for k, v in got.items()))
         return
     if args.only_vector_env:
@@ -642,6 +683,8 @@ def main() -> None:
         results["vector_env"] = bench_vector_env()
     if not args.skip_sweep_command:
         results["sweep_command"] = bench_sweep_command(args.batch_side)
+    if not args.skip_batched_laws:
+        results["batched_laws"] = bench_batched_laws()
     results["ratios"] = ratios(results)
     if args.json:
         print(json.dumps(results))

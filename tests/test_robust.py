@@ -12,7 +12,7 @@ from cli_checks import refused
 
 from controllers import registry
 from twin.app.montecarlo import load_spread, sample_parameters
-from twin.app.robust import lower_bound, rig_point_seeds, run_robust
+from twin.app.robust import lower_bound, refinement_costs, rig_point_seeds, run_robust
 from twin.app.sweep import Grid, SweepSettings
 from twin.engine import run_closed_loop
 from twin.parameters import Parameters
@@ -100,3 +100,39 @@ def test_the_command_writes_the_map_and_refuses_half_a_request(tmp_path: Path, c
     refused(capsys, [*argv, "--rigs", "3"], "--rigs N and one of --spread FILE or --calibration DIR")
     refused(capsys, [*argv, "--spread", str(SPREAD)], "--rigs N")
     refused(capsys, [*argv, "--spread", "no/such.toml", "--rigs", "2"], "no/such.toml")
+
+
+def _ellipse_maps(rigs: int, nx: int, nt: int, seed: int) -> list[str]:
+    """Each rig holds an ellipse of starts, its centre and axes drawn about the map's middle."""
+    import numpy as np
+
+    rng = np.random.default_rng(seed)
+    xs, ts = np.linspace(-1, 1, nx), np.linspace(-1, 1, nt)
+    maps = []
+    for _ in range(rigs):
+        cx, ct = rng.normal(0, 0.1, 2)
+        a, b = 0.7 * (1 + 0.1 * rng.standard_normal(2))
+        maps.append(
+            "".join("h" if ((x - cx) / a) ** 2 + ((t - ct) / b) ** 2 < 1 else "l" for x in xs for t in ts)
+        )
+    return maps
+
+
+def test_refining_each_rig_costs_less_than_refining_the_probability_contour_for_the_same_counts() -> None:
+    """The design's choice, on maps alone: per rig, a cell is split only for the rigs whose corners disagree;
+    on the contour (jointly, or on the held count) every rig runs every split cell's corners. Per rig is
+    the cheapest of the three for identical counts; the held count can even miss a strip no corner shows."""
+    costs = refinement_costs(_ellipse_maps(12, 33, 33, 0), 33, 33, 8)
+    assert all(way["counts_equal"] for way in (costs["per_rig"], costs["joint"], costs["held_count"]))
+    assert (
+        costs["per_rig"]["runs"]
+        < min(costs["joint"]["runs"], costs["held_count"]["runs"])
+        < costs["brute_force"]
+    )
+    # Two rigs on a 9 × 3 grid, one holding columns 0–4, the other 6–8: every corner of the one coarse cell
+    # counts one rig, column 5 none.
+    left = "".join("h" if i <= 4 else "l" for i in range(9) for _ in range(3))
+    right = "".join("h" if i >= 6 else "l" for i in range(9) for _ in range(3))
+    crossing = refinement_costs([left, right], 9, 3, 8)
+    assert crossing["per_rig"]["counts_equal"] and crossing["joint"]["counts_equal"]
+    assert not crossing["held_count"]["counts_equal"]

@@ -31,6 +31,8 @@ __all__ = ["OUTPUT_FILES", "RobustResult", "lower_bound", "rig_point_seeds", "ru
 
 OUTPUT_FILES = JobFiles("robust-sweep", ("robust.json", "robust.png"))
 MAX_RIGS = 1000
+# Each rig's map in the JSON: one letter per start (twin.app.sweep.verdict_class).
+CLASS_LETTERS = {"held": "h", "kept": "k", "lost": "l", "failed": "f"}
 
 
 def rig_point_seeds(seed: int, rig: int, n: int) -> np.ndarray:
@@ -61,6 +63,7 @@ class RobustResult:
     confidence: float
     source: str
     rig_values: list[dict[str, float]]
+    rig_classes: list[str]  # per rig, one letter per start in the points' order (CLASS_LETTERS; "?": not run)
     points: list[dict[str, Any]]  # per start: x0_m, theta0_rad, held (rigs), lost, rigs, rate, lower_bound
     complete: bool
     wall_s: float = 0.0
@@ -83,6 +86,8 @@ class RobustResult:
             **({"refinement": self.refinement} if self.refinement is not None else {}),
             "summary": self.summary,
             "rig_parameters": self.rig_values,
+            "rig_classes": self.rig_classes,
+            "rig_class_letters": {letter: name for name, letter in CLASS_LETTERS.items()},
             "points": self.points,
         }
 
@@ -142,6 +147,7 @@ def run_robust(
         ref.run([(m, k) for m in range(rigs) for k in range(n)])
     points: list[dict[str, Any]] = []
     complete = ref.complete
+    letters = [["?"] * n for _ in range(rigs)]
     for k in range(n):
         classes = []
         for m in range(rigs):
@@ -149,6 +155,9 @@ def run_robust(
                 classes.append(verdict_class(ref.known[m][k]))
             elif k in ref.claims[m]:
                 classes.append(ref.claims[m][k][0])
+            else:
+                continue
+            letters[m][k] = CLASS_LETTERS[classes[-1]]
         if len(classes) < rigs:
             complete = False
         held = classes.count("held")
@@ -173,6 +182,7 @@ def run_robust(
         confidence=confidence,
         source=spread.source,
         rig_values=[dict(zip(names, (float(v) for v in row), strict=True)) for row in values],
+        rig_classes=["".join(row) for row in letters],
         points=points,
         complete=complete,
         wall_s=time.perf_counter() - start,
@@ -251,3 +261,52 @@ def _render(result: RobustResult, path: Path) -> None:
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)
+
+
+def refinement_costs(rig_classes: list[str], nx: int, nt: int, step: int) -> dict[str, Any]:
+    """What refining these rigs' maps (one letter per start each, no "?") costs in runs, three ways, on the
+    maps alone (no physics): per rig (what ``run_robust`` does), jointly on every rig's class (a cell is split
+    where any rig's corners disagree, and every rig runs its starts), and on the held count (the probability
+    contour: split where the corners' counts differ). Each way's per-start held counts against the maps'."""
+    rigs, n = len(rig_classes), nx * nt
+    if any(len(row) != n or "?" in row for row in rig_classes):
+        raise ValueError(f"refinement_costs: each rig's map needs {n} known starts")
+
+    def counts_of(classes: list[list[Any]]) -> list[int]:
+        return [sum(classes[m][k] == "h" for m in range(rigs)) for k in range(n)]
+
+    truth = counts_of([list(row) for row in rig_classes])
+
+    def refined(maps: int, record: Any, classify: Any) -> tuple[Refinement, list[dict[int, Any]]]:
+        def run_job(requests: list[tuple[int, int]]) -> tuple[list[dict[str, Any] | None], bool]:
+            return [{"c": record(m, k)} for m, k in requests], True
+
+        ref = Refinement(nx, nt, step, maps, run_job, classify=classify)
+        ref.refine()
+        tables = [
+            {k: classify(ref.known[m][k]) if k in ref.known[m] else ref.claims[m][k][0] for k in range(n)}
+            for m in range(maps)
+        ]
+        return ref, tables
+
+    def c_of(r: dict[str, Any]) -> Any:
+        return r["c"]
+
+    per_rig, tables = refined(rigs, lambda m, k: rig_classes[m][k], c_of)
+    joint, joint_tables = refined(1, lambda m, k: tuple(row[k] for row in rig_classes), c_of)
+    counted, count_tables = refined(1, lambda m, k: truth[k], c_of)
+    return {
+        "brute_force": rigs * n,
+        "per_rig": {
+            "runs": per_rig.ran,
+            "counts_equal": counts_of([[t[k] for k in range(n)] for t in tables]) == truth,
+        },
+        "joint": {
+            "runs": rigs * joint.ran,
+            "counts_equal": [sum(c == "h" for c in joint_tables[0][k]) for k in range(n)] == truth,
+        },
+        "held_count": {
+            "runs": rigs * counted.ran,
+            "counts_equal": [count_tables[0][k] for k in range(n)] == truth,
+        },
+    }

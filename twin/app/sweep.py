@@ -18,7 +18,7 @@ import itertools
 import json
 import math
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Hashable, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -293,7 +293,8 @@ Cell = tuple[int, int, int, int]
 class Refinement:
     """Boundary refinement of ``maps`` maps of one nx × nt grid at once (one map per rig of a robust sweep):
     each level's starts of every map are one job (``run_job((map, index) pairs) → (records, complete)``), so
-    the batches stay large. ``known[m]``: the records run; ``claims[m]``: the inferred starts' (class, cell)."""
+    the batches stay large. ``known[m]``: the records run; ``claims[m]``: the inferred starts' (class, cell).
+    ``classify``: what must agree at a cell's corners (a map's class, ``verdict_class``)."""
 
     def __init__(
         self,
@@ -303,11 +304,12 @@ class Refinement:
         maps: int,
         run_job: Callable[[list[tuple[int, int]]], tuple[list[dict[str, Any] | None], bool]],
         progress: Progress | None = None,
+        classify: Callable[[dict[str, Any]], Hashable] = verdict_class,
     ) -> None:
         self.nx, self.nt, self.step, self.maps = nx, nt, step, maps
-        self.run_job, self.progress = run_job, progress
+        self.run_job, self.progress, self.classify = run_job, progress, classify
         self.known: list[dict[int, dict[str, Any]]] = [{} for _ in range(maps)]
-        self.claims: list[dict[int, tuple[str, Cell]]] = [{} for _ in range(maps)]
+        self.claims: list[dict[int, tuple[Any, Cell]]] = [{} for _ in range(maps)]
         self.complete = True
         self.ran = self.levels = self.contested = 0
 
@@ -355,12 +357,12 @@ class Refinement:
         coarse = [(a, b, c, d) for a, b in spans(xi) for c, d in spans(tj)]
         cells = [(m, cell) for m in range(self.maps) for cell in coarse]
         self.run([(m, self._at(i, j)) for m in range(self.maps) for i in xi for j in tj])
-        uniform: list[dict[Cell, str]] = [{} for _ in range(self.maps)]
+        uniform: list[dict[Cell, Hashable]] = [{} for _ in range(self.maps)]
         while cells and self.complete:
             self.levels += 1
             split: list[tuple[int, Cell]] = []
             for m, cell in cells:
-                classes = {verdict_class(self.known[m][k]) for _, k in self._corners(m, cell)}
+                classes = {self.classify(self.known[m][k]) for _, k in self._corners(m, cell)}
                 if len(classes) == 1:
                     uniform[m][cell] = classes.pop()
                 else:
@@ -373,7 +375,7 @@ class Refinement:
                 for m in range(self.maps):
                     known = self.known[m]
                     for cell, cls in list(uniform[m].items()):
-                        if any(k in known and verdict_class(known[k]) != cls for k in self._members(cell)):
+                        if any(k in known and self.classify(known[k]) != cls for k in self._members(cell)):
                             del uniform[m][cell]
                             cells += [(m, half) for half in self._halves(cell)]
                 self.run([pair for m, cell in cells for pair in self._corners(m, cell)])
