@@ -242,34 +242,56 @@ def test_a_refined_map_is_the_brute_force_map(controller: str) -> None:
     ]
 
 
-def test_refinement_finds_an_island_on_a_cell_edge_and_audits_the_assumption(
-    monkeypatch: pytest.MonkeyPatch,
-) -> None:
-    """A synthetic map (no physics), coarse step 4 on 17 × 17: a start of another class on the edge of an
-    agreeing cell, run for its refined neighbour, splits that cell too; an island inside an agreeing cell is
-    missed, as the README says, and the audit reports it (and runs it)."""
-    nt = 17
-    lost = {(8, 8), (6, 4), (12, 12)}  # (8, 8), (12, 12): coarse corners; (6, 4) on the edge j = 4
-    island = (10, 2)  # inside the cell [8:12] × [0:4], whose corners agree
+def _synthetic_map(monkeypatch: pytest.MonkeyPatch, lost: set[tuple[int, int]]) -> None:
+    """run_starts on a map of no physics: grid start (i, j) of a 17 × 17 grid (4 cm steps) loses the ball
+    exactly where (i, j) is in ``lost``."""
 
     def fake_run_starts(runs, starts, seeds, **kw):  # type: ignore[no-untyped-def]
         out = []
         for x0, th0 in starts.tolist():
-            i, j = round((x0 + 0.32) / 0.04), round((th0 + 0.32) / 0.04)
-            bad = (i, j) in lost or (i, j) == island
+            bad = (round((x0 + 0.32) / 0.04), round((th0 + 0.32) / 0.04)) in lost
             out.append({"x0_m": x0, "theta0_rad": th0, "held": not bad, "ball_lost": bad, "failed": False})
         return out, True
 
     monkeypatch.setattr("twin.app.sweep.run_starts", fake_run_starts)
-    settings = SweepSettings("lqr", Grid(-0.32, 0.32, 17), Grid(-0.32, 0.32, nt), refine=4)
-    result = run_sweep(settings)
+
+
+SYNTHETIC = SweepSettings("lqr", Grid(-0.32, 0.32, 17), Grid(-0.32, 0.32, 17), refine=4)
+
+
+def test_refinement_follows_a_boundary_between_coarse_starts_and_audits_the_assumption(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Coarse step 4 on 17 × 17: a lost disc about the coarse start (8, 8) with a one-start-wide finger down
+    to the edge, which slips between the coarse starts (8, 4) and (12, 4), both held: the trace follows it
+    from the disc, every finger start run. An island between coarse starts is missed, as the README says,
+    and the audit reports it (and runs it)."""
+    nt = 17
+    disc = {(i, j) for i in range(17) for j in range(17) if (i - 8) ** 2 + (j - 8) ** 2 < 2.5**2}
+    finger = {(10, j) for j in range(9)}
+    island = (14, 2)  # between the coarse starts (12, 0), (16, 0), (12, 4), (16, 4), all held
+    _synthetic_map(monkeypatch, disc | finger | {island})
+    result = run_sweep(SYNTHETIC)
     classes = {(k // nt, k % nt): verdict_class(p) for k, p in enumerate(result.points)}
-    assert all(classes[c] == "lost" for c in lost)
-    assert not result.points[6 * nt + 4].get("inferred")  # run: the edge start that split its cell
+    assert all(classes[c] == "lost" and not result.points[c[0] * nt + c[1]].get("inferred") for c in finger)
+    assert {c for c, cls in classes.items() if cls == "lost"} == disc | finger  # all but the island
+    assert result.refinement is not None and result.refinement["run"] < 17 * 17 / 2
     assert classes[island] == "held" and result.points[island[0] * nt + island[1]]["inferred"]
-    audited = run_sweep(replace(settings, audit=1000))
+    assert "every start run around its region" in result.points[island[0] * nt + island[1]]["reason"]
+    audited = run_sweep(replace(SYNTHETIC, audit=1000))
     assert audited.refinement is not None
     mismatches = audited.refinement["audit"]["mismatches"]
     assert [(m["inferred"], m["run"]) for m in mismatches] == [("held", "lost")]
     assert verdict_class(audited.points[island[0] * nt + island[1]]) == "lost"
     assert audited.refinement["inferred"] == 0  # every inferred start was audited
+
+
+def test_a_region_whose_run_neighbours_disagree_has_its_rim_traced(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A lost blob on the map's corner whose boundary the bisection and the trace leave partly unseen: the
+    starts not run next to it border both classes, so their rim is traced until the map is exact."""
+    rows = {16: range(13, 15), 15: range(12, 16), 14: range(11, 17), 13: range(11, 17), 12: range(12, 16)}
+    blob = {(i, j) for j, xs in rows.items() for i in xs}
+    _synthetic_map(monkeypatch, blob)
+    result = run_sweep(SYNTHETIC)
+    assert {(k // 17, k % 17) for k, p in enumerate(result.points) if verdict_class(p) == "lost"} == blob
+    assert result.refinement is not None and result.refinement["rim_run"] > 0

@@ -28,7 +28,16 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, NoReturn
 
 from twin.app.catalogue import WithUserController, construct, one_line, user_controller
-from twin.app.options import MAX_JOB_RUN_S, GridType, NumberType, count, finite_float, seed, serve_address
+from twin.app.options import (
+    DEFAULT_REFINE_STEP,
+    MAX_JOB_RUN_S,
+    GridType,
+    NumberType,
+    count,
+    finite_float,
+    seed,
+    serve_address,
+)
 from twin.outputs import JobFiles, check_output_folder, check_outputs, writing
 
 if TYPE_CHECKING:
@@ -1758,12 +1767,13 @@ def build_parser() -> argparse.ArgumentParser:
         "--refine",
         type=count(2, 1024),
         nargs="?",
-        const=8,
+        const=DEFAULT_REFINE_STEP,
         default=0,
         metavar="STEP",
-        help="boundary refinement: run a coarse grid (every STEP-th start, default 8), then only the cells whose "
-        "corners disagree, down to the grid; the other starts take their cell's class (no island smaller than "
-        "a coarse cell is assumed)",
+        help=f"boundary refinement: run a coarse grid (every STEP-th start, default {DEFAULT_REFINE_STEP}), "
+        "bisect its lines where their classes change, then follow each boundary start by start; the other "
+        "starts take the class of the run starts around them (assumed: every boundary crosses a coarse line "
+        "between coarse starts of different classes)",
     )
     sweep.add_argument(
         "--audit",

@@ -21,6 +21,10 @@ Limit = float | Callable[[], float]
 # One run of a many-run job (sweep, Monte Carlo, validate): its verdict, not its log, is kept.
 MAX_JOB_RUN_S = 600.0
 
+# ``sweep --refine``'s coarse step: on random maps step 6 misses fewer boundaries than 8 at a little more
+# cost (docs/design.md, boundary refinement).
+DEFAULT_REFINE_STEP = 6
+
 # Seeds feed numpy's SeedSequence and are written to JSON reports and int64 arrays: a non-negative int64.
 SEED_MAX = 2**63 - 1
 

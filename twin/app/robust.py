@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from twin.app.fanout import Progress, Served, run_starts
-from twin.app.sweep import Refinement, SweepSettings, verdict_class
+from twin.app.sweep import ASSUMPTION, Refinement, SweepSettings, verdict_class
 from twin.outputs import JobFiles, atomic_directory
 from twin.parameters import ParameterError, Parameters
 
@@ -191,10 +191,10 @@ def run_robust(
     if settings.refine:
         result.refinement = {
             "coarse_step": settings.refine,
-            "levels": ref.levels,
+            "waves": ref.waves,
             "run": ref.ran,
             "run_fraction": round(ref.ran / (rigs * n), 4),
-            "assumption": "on each rig, no start of another class inside a grid cell whose four corners agree",
+            "assumption": f"on each rig: {ASSUMPTION}",
         }
     nominal_held = sum(bool(p and p["held"]) for p in nominal) if nominal is not None else None
     result.nominal_held = nominal_held

@@ -265,14 +265,15 @@ def verdict_class(record: dict[str, Any]) -> str:
 
 
 def _inferred(
-    x0_m: float, theta0_rad: float, seed: int, cls: str, cell: tuple[int, int, int, int]
+    x0_m: float, theta0_rad: float, seed: int, cls: str, box: tuple[int, int, int, int]
 ) -> dict[str, Any]:
-    """The record of a start --refine did not run: its class from the agreeing corners of its cell."""
+    """The record of a start --refine did not run: its class from the agreeing run starts around its region
+    of starts not run (``box``: the region's bounding box)."""
     from dataclasses import fields
 
     from twin.verdict import Verdict
 
-    i0, i1, j0, j1 = cell
+    i0, i1, j0, j1 = box
     return {
         "x0_m": x0_m,
         "theta0_rad": theta0_rad,
@@ -283,18 +284,40 @@ def _inferred(
         "ball_lost": cls == "lost",
         "hit_stops": None,
         "inferred": True,
-        "reason": f"inferred ({cls}): the corners of grid cell x0[{i0}:{i1}] × θ0[{j0}:{j1}] agree",
+        "reason": f"inferred ({cls}): every start run around its region (within x0[{i0}:{i1}] × θ0[{j0}:{j1}]) "
+        f"is {cls}",
     }
 
 
-Cell = tuple[int, int, int, int]
+# What --refine assumes, in the JSON and the README.
+ASSUMPTION = (
+    "every boundary between two classes crosses a coarse-grid line between coarse starts of different classes "
+    "(no island or inlet of another class slips between coarse starts)"
+)
+Box = tuple[int, int, int, int]  # i0, i1, j0, j1: grid indices, inclusive
+Point = tuple[int, int]  # (i, j): x0 index, θ0 index
+Job = Callable[[list[tuple[int, int]]], tuple[list[dict[str, Any] | None], bool]]
 
 
 class Refinement:
-    """Boundary refinement of ``maps`` maps of one nx × nt grid at once (one map per rig of a robust sweep):
-    each level's starts of every map are one job (``run_job((map, index) pairs) → (records, complete)``), so
-    the batches stay large. ``known[m]``: the records run; ``claims[m]``: the inferred starts' (class, cell).
-    ``classify``: what must agree at a cell's corners (a map's class, ``verdict_class``)."""
+    """Boundary refinement of ``maps`` maps of one nx × nt grid at once (one map per rig of a robust sweep),
+    by tracing each boundary at the grid's resolution:
+
+    1. the coarse grid: every ``step``-th start along each axis, and the last;
+    2. each coarse line's segments between coarse starts of different classes are bisected down to the two
+       neighbouring starts where the class changes;
+    3. from there the boundary is followed cell by cell (a cell: four neighbouring starts): a cell whose
+       corners disagree is crossed by a boundary, which leaves it through each edge whose two ends disagree,
+       so the cell across that edge is run next;
+    4. every start not run lies in a region of starts not run whose neighbours were all run: it takes their
+       class when they agree; where they do not (a boundary the trace missed), the region's rim is traced
+       too, until every region's neighbours agree.
+
+    Each wave of runs, all maps' together, is one job (``run_job((map, index) pairs) → (records,
+    complete)``), so the batches stay large. ``known[m]``: the records run; ``claims[m]``: the inferred
+    starts' (class, the bounding box of their region). ``classify``: the class that must agree
+    (``verdict_class``). The assumption: every boundary crosses a coarse line between coarse starts of
+    different classes (no island or inlet of another class that slips between coarse starts)."""
 
     def __init__(
         self,
@@ -302,16 +325,16 @@ class Refinement:
         nt: int,
         step: int,
         maps: int,
-        run_job: Callable[[list[tuple[int, int]]], tuple[list[dict[str, Any] | None], bool]],
+        run_job: Job,
         progress: Progress | None = None,
         classify: Callable[[dict[str, Any]], Hashable] = verdict_class,
     ) -> None:
         self.nx, self.nt, self.step, self.maps = nx, nt, step, maps
         self.run_job, self.progress, self.classify = run_job, progress, classify
         self.known: list[dict[int, dict[str, Any]]] = [{} for _ in range(maps)]
-        self.claims: list[dict[int, tuple[Any, Cell]]] = [{} for _ in range(maps)]
+        self.claims: list[dict[int, tuple[Any, Box]]] = [{} for _ in range(maps)]
         self.complete = True
-        self.ran = self.levels = self.contested = 0
+        self.ran = self.waves = self.rim_runs = 0
 
     def run(self, requests: list[tuple[int, int]]) -> None:
         todo = sorted({(m, k) for m, k in requests if k not in self.known[m]})
@@ -322,75 +345,130 @@ class Refinement:
             if r is not None:
                 self.known[m][k] = r
         self.ran += len(todo)
+        self.waves += 1
         self.complete = self.complete and done
         if self.progress is not None:
             self.progress(sum(map(len, self.known)), self.maps * self.nx * self.nt)
 
-    def _at(self, i: int, j: int) -> int:
-        return i * self.nt + j
+    def _at(self, p: Point) -> int:
+        return p[0] * self.nt + p[1]
 
-    def _corners(self, m: int, cell: Cell) -> list[tuple[int, int]]:
-        a, b, c, d = cell
-        return [(m, self._at(i, j)) for i in (a, b) for j in (c, d)]
-
-    def _members(self, cell: Cell) -> list[int]:
-        i0, i1, j0, j1 = cell
-        return [self._at(i, j) for i in range(i0, i1 + 1) for j in range(j0, j1 + 1)]
+    def _class(self, m: int, p: Point) -> Hashable:
+        return self.classify(self.known[m][self._at(p)])
 
     @staticmethod
-    def _halves(cell: Cell) -> list[Cell]:
-        """The cell split in two along each axis it spans more than one interval of ([]: four neighbours)."""
-        i0, i1, j0, j1 = cell
-        im, jm = (i0 + i1) // 2, (j0 + j1) // 2
-        xs = [(i0, im), (im, i1)] if i1 - i0 > 1 else [(i0, i1)]
-        ts = [(j0, jm), (jm, j1)] if j1 - j0 > 1 else [(j0, j1)]
-        return [] if len(xs) == len(ts) == 1 else [(a, b, c, d) for a, b in xs for c, d in ts]
+    def _corners(cell: Point) -> tuple[Point, Point, Point, Point]:
+        i, j = cell
+        return (i, j), (i + 1, j), (i, j + 1), (i + 1, j + 1)
+
+    def _cells_of_edge(self, p: Point, q: Point) -> list[Point]:
+        """The (one or two) cells that share the edge between neighbouring starts p and q."""
+        (i0, j0), (i1, j1) = sorted((p, q))
+        if i0 == i1:  # an edge along θ0
+            return [(i, j0) for i in (i0 - 1, i0) if 0 <= i < self.nx - 1]
+        return [(i0, j) for j in (j0 - 1, j0) if 0 <= j < self.nt - 1]
 
     def refine(self) -> None:
         def lines(n: int) -> list[int]:
             return sorted(set(range(0, n, self.step)) | {n - 1})
 
-        def spans(v: list[int]) -> list[tuple[int, int]]:  # consecutive lines; one line: a cell of no width
-            return list(itertools.pairwise(v)) or [(v[0], v[0])]
-
         xi, tj = lines(self.nx), lines(self.nt)
-        coarse = [(a, b, c, d) for a, b in spans(xi) for c, d in spans(tj)]
-        cells = [(m, cell) for m in range(self.maps) for cell in coarse]
-        self.run([(m, self._at(i, j)) for m in range(self.maps) for i in xi for j in tj])
-        uniform: list[dict[Cell, Hashable]] = [{} for _ in range(self.maps)]
-        while cells and self.complete:
-            self.levels += 1
-            split: list[tuple[int, Cell]] = []
-            for m, cell in cells:
-                classes = {self.classify(self.known[m][k]) for _, k in self._corners(m, cell)}
-                if len(classes) == 1:
-                    uniform[m][cell] = classes.pop()
-                else:
-                    split += [(m, half) for half in self._halves(cell)]
-            self.run([pair for m, cell in split for pair in self._corners(m, cell)])
-            cells = split
-            if not cells and self.complete:
-                # A start run for a neighbour's sake (on a shared edge) that disagrees with an agreeing cell:
-                # the assumption fails there, so that cell is split too.
-                for m in range(self.maps):
-                    known = self.known[m]
-                    for cell, cls in list(uniform[m].items()):
-                        if any(k in known and self.classify(known[k]) != cls for k in self._members(cell)):
-                            del uniform[m][cell]
-                            cells += [(m, half) for half in self._halves(cell)]
-                self.run([pair for m, cell in cells for pair in self._corners(m, cell)])
-        contested: list[tuple[int, int]] = []
-        for m in range(self.maps):
-            claims, known = self.claims[m], self.known[m]
-            for cell, cls in uniform[m].items():
-                for k in self._members(cell):
-                    if k in known:
-                        continue
-                    if k in claims and claims[k][0] != cls:
-                        contested.append((m, k))
-                    claims.setdefault(k, (cls, cell))
-        self.contested = len(contested)
-        self.run(contested)
+        maps = range(self.maps)
+        self.run([(m, self._at((i, j))) for m in maps for i in xi for j in tj])
+        segments = [(m, (a, j), (b, j)) for m in maps for j in tj for a, b in itertools.pairwise(xi)]
+        segments += [(m, (i, a), (i, b)) for m in maps for i in xi for a, b in itertools.pairwise(tj)]
+        edges: list[tuple[int, Point, Point]] = []
+        while segments and self.complete:  # bisection along the coarse lines
+            halves, middles = [], []
+            for m, p, q in segments:
+                if self._class(m, p) == self._class(m, q):
+                    continue
+                if abs(q[0] - p[0]) + abs(q[1] - p[1]) == 1:
+                    edges.append((m, p, q))
+                    continue
+                mid = ((p[0] + q[0]) // 2, (p[1] + q[1]) // 2)
+                middles.append((m, self._at(mid)))
+                halves += [(m, p, mid), (m, mid, q)]
+            self.run(middles)
+            segments = halves
+        seen: list[set[Point]] = [set() for _ in maps]
+        self._trace([(m, c) for m, p, q in edges for c in self._cells_of_edge(p, q)], seen)
+        for m in maps:
+            while self.complete:
+                rims = self._infer(m)
+                if not rims:
+                    break
+                before = self.ran
+                self._trace([(m, c) for c in rims], seen)
+                self.rim_runs += self.ran - before
+                if self.ran == before:  # nothing left to run (cannot happen: a rim cell has a corner not run)
+                    break
+
+    def _trace(self, start: list[tuple[int, Point]], seen: list[set[Point]]) -> None:
+        """Follow the boundaries from these cells: run a wave's corners, then the cells across each edge
+        of a disagreeing cell whose ends disagree."""
+        wave: list[tuple[int, Point]] = []
+
+        def push(m: int, cells: list[Point]) -> None:
+            for c in cells:
+                if c not in seen[m]:
+                    seen[m].add(c)
+                    wave.append((m, c))
+
+        for m, c in start:
+            push(m, [c])
+        while wave and self.complete:
+            cells, wave = wave, []
+            self.run([(m, self._at(p)) for m, c in cells for p in self._corners(c)])
+            if not self.complete:
+                return
+            for m, c in cells:
+                a, b, d, e = self._corners(c)  # (i, j), (i+1, j), (i, j+1), (i+1, j+1)
+                for p, q in ((a, b), (d, e), (a, d), (b, e)):
+                    if self._class(m, p) != self._class(m, q):
+                        push(m, self._cells_of_edge(p, q))
+
+    def _infer(self, m: int) -> list[Point]:
+        """Claim each region of starts not run (4-neighbours) whose run neighbours agree; return the rim
+        cells of the regions whose neighbours disagree (none: every start is run or claimed)."""
+        known, nx, nt = self.known[m], self.nx, self.nt
+        region_of: dict[int, int] = {}
+        claims: dict[int, tuple[Any, Box]] = {}
+        rims: list[Point] = []
+        for first in range(nx * nt):
+            if first in known or first in region_of:
+                continue
+            region_of[first] = first
+            members, frontier, around = [first], [first], set()
+            while frontier:
+                k = frontier.pop()
+                i, j = divmod(k, nt)
+                for a, b in ((i + 1, j), (i - 1, j), (i, j + 1), (i, j - 1)):
+                    if 0 <= a < nx and 0 <= b < nt:
+                        v = a * nt + b
+                        if v in known:
+                            around.add(v)
+                        elif v not in region_of:
+                            region_of[v] = first
+                            members.append(v)
+                            frontier.append(v)
+            classes = {self.classify(known[v]) for v in around}
+            if len(classes) == 1:
+                cls = classes.pop()
+                ii, jj = [k // nt for k in members], [k % nt for k in members]
+                box = (min(ii), max(ii), min(jj), max(jj))
+                claims.update((k, (cls, box)) for k in members)
+            else:  # a boundary runs through the region: trace from its rim
+                inside = set(members)
+                for k in members:
+                    i, j = divmod(k, nt)
+                    for c in ((i - 1, j - 1), (i, j - 1), (i - 1, j), (i, j)):
+                        if 0 <= c[0] < nx - 1 and 0 <= c[1] < nt - 1:
+                            if any(self._at(p) not in inside for p in self._corners(c)):
+                                rims.append(c)
+        if not rims:
+            self.claims[m] = claims
+        return rims
 
 
 def _refined_sweep(
@@ -405,13 +483,11 @@ def _refined_sweep(
     nthread: int | None,
     progress: Progress | None,
 ) -> SweepResult:
-    """Boundary refinement: the coarse grid (every ``refine``-th start along each axis, and the last), then
-    only the cells whose corners disagree, split in halves, level after level, until every start is run or
-    lies in a cell whose four corners agree (it gets their class: ``_inferred``). Each start that runs has
-    its brute-force seed, so its record is the brute-force record. The assumption: no island of another
-    class inside a cell whose corners agree (smaller than the coarse cell). ``settings.audit`` inferred
-    starts (seeded) are run anyway and compared. Where two agreeing cells sharing an edge disagree, the
-    start on it is run."""
+    """Boundary refinement (``Refinement``: the coarse grid, bisection along its lines, each boundary
+    traced cell by cell); every start not run takes the class of the run starts around its region
+    (``_inferred``). Each start that runs has its brute-force seed, so its record is the brute-force record.
+    The assumption: ``ASSUMPTION``. ``settings.audit`` inferred starts (seeded) are run anyway and
+    compared."""
     nx, nt = settings.x0.n, settings.theta0.n
     step = settings.refine
     if isinstance(step, bool) or not isinstance(step, int) or step < 2:
@@ -479,13 +555,13 @@ def _refined_sweep(
     )
     result.refinement = {
         "coarse_step": step,
-        "levels": ref.levels,
+        "waves": ref.waves,
         "run": ref.ran,
         "inferred": sum(bool(q.get("inferred")) for q in points),
         "run_fraction": round(ref.ran / (nx * nt), 4),
-        "contested_run": ref.contested,
+        "rim_run": ref.rim_runs,
         "audit": audit,
-        "assumption": "no start of another class inside a grid cell whose four corners agree",
+        "assumption": ASSUMPTION,
     }
     result.claims = [_judge(claim, result, p) for claim in CLAIMS if settings.controller in claim.applies_to]
     return result
