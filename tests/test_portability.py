@@ -39,9 +39,10 @@ from twin.batch import run_batch
 from threadpoolctl import threadpool_info
 
 digest = hashlib.sha256()
-for name in ("appendix-sf", "appendix-clp", "thesis-sf", "thesis-clp"):
+for name, vectorized in (("appendix-sf", True), ("appendix-clp", True), ("thesis-sf", True), ("thesis-clp", True),
+                         ("thesis-clp", False)):
     runs = run_batch(registry, name, x0_m=np.array([0.14, -0.13, 0.25]), theta0_rad=np.array([-0.2, 0.29, -0.7]),
-                     seeds=np.array([0, 1, 2]), duration_s=3.0, record=True, nthread=1)
+                     seeds=np.array([0, 1, 2]), duration_s=3.0, record=True, nthread=1, vectorized=vectorized)
     for run in runs:
         for value in vars(run.log).values():
             digest.update(np.ascontiguousarray(value).tobytes())
