@@ -7,7 +7,7 @@ each, and per start the number of rigs that hold it with its exact one-sided low
 bounds the rate below by (1 − confidence)^(1/N) at best, a level of 0.95 at 95 % confidence needs N ≥ 59
 rigs — with fewer, the region is reported empty and the starts all N rigs hold are reported beside it.
 
-With ``--refine`` every rig's map is refined (``twin.app.sweep.Refinement``), all rigs' starts of a level
+With ``--refine`` every rig's map is refined (``twin.app.sweep.Refinement``), all rigs' starts of a wave
 run as one job. Run i of rig m has the noise seed ``rig_point_seeds(seed, m)[i]``: a function of the seed,
 the rig and the start alone, so the result is the same in this process, on workers and on a cluster.
 """
@@ -117,8 +117,7 @@ def run_robust(
     if not 0 < level <= 1 or not 0 < confidence < 1:
         raise ParameterError(f"level {level!r} in (0, 1], confidence {confidence!r} in (0, 1)")
     sets, values = sample_parameters(base, spread, rigs, settings.seed)
-    xs, ths = settings.x0.values(), settings.theta0.values()
-    grid = np.array([(x, th) for x in xs for th in ths], dtype=float)
+    grid = settings.starts()
     n = len(grid)
     seeds = [rig_point_seeds(settings.seed, m, n) for m in range(rigs)]
     runs = settings.runs(base)

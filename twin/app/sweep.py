@@ -143,6 +143,11 @@ class SweepSettings:
     refine: int = 0  # boundary refinement: the coarse grid's step in grid intervals (0: every start is run)
     audit: int = 0  # with refine: inferred starts run anyway, at random, to check the assumption
 
+    def starts(self) -> np.ndarray:
+        """The grid's starts (n, 2: x0, θ0), x0 by x0 and θ0 within: start k is (k // nt, k % nt)."""
+        xs, ths = self.x0.values(), self.theta0.values()
+        return np.array([(x, th) for x in xs for th in ths], dtype=float)
+
     def runs(self, params: Parameters) -> Runs:
         """The job every start of this sweep is a run of (``fanout.Runs``), on the rig of ``params``."""
         return Runs(
@@ -209,8 +214,7 @@ def run_sweep(
     the cores, divided among the local workers); ``serve``: every start a session to a client over the
     wire (``fanout.run_served``; ``settings.controller`` names what the client runs)."""
     p = params or Parameters()
-    xs, ths = settings.x0.values(), settings.theta0.values()
-    grid = np.array([(x, th) for x in xs for th in ths], dtype=float)
+    grid = settings.starts()
     if len(grid) > MAX_POINTS:
         raise ParameterError(f"the grid has {len(grid)} points; at most {MAX_POINTS}")
     for x, th in (
