@@ -310,6 +310,7 @@ def _validate(
     checks: list[Check] = []
     starts = [*T.CHAPTER4_STARTS, *T.HARDWARE_STARTS.values()]
     cases = _sensitivity_cases(c, params)
+    x_required, theta_required = _required_grid(c)
     # One progress over the four stages' runs (the region's corner states join its count when it starts).
     stages = Stages(
         progress,
@@ -317,9 +318,7 @@ def _validate(
             "nominal": len(starts) * c.nominal_seeds,
             "region": c.region_x0[2] * c.region_theta0[2],
             "sensitivity": len(cases) * len(T.CHAPTER4_STARTS),
-            "robust region": _required_grid(c)[0].n * _required_grid(c)[1].n * c.robust_rigs
-            if spread is not None
-            else 0,
+            "robust region": x_required.n * theta_required.n * c.robust_rigs if spread is not None else 0,
             "monte carlo": c.montecarlo_runs if spread is not None else 0,
         },
     )
@@ -436,9 +435,8 @@ def _validate(
             )
         )
     else:
-        x_grid, theta_grid = _required_grid(c)
         robust = run_robust(
-            replace(settings, x0=x_grid, theta0=theta_grid),
+            replace(settings, x0=x_required, theta0=theta_required),
             params,
             spread,
             c.robust_rigs,
