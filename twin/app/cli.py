@@ -31,6 +31,7 @@ from twin.app.catalogue import WithUserController, construct, one_line, user_con
 from twin.app.options import (
     DEFAULT_REFINE_STEP,
     MAX_JOB_RUN_S,
+    MAX_RIGS,
     GridType,
     NumberType,
     count,
@@ -1785,7 +1786,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_spread_options(sweep, "for the robust map's rigs (with --rigs N)")
     sweep.add_argument(
         "--rigs",
-        type=count(1, 1000),
+        type=count(1, MAX_RIGS),
         metavar="N",
         help="robust map: every start on N rigs drawn from --spread or --calibration (the same N everywhere); "
         "per start the rigs that hold it and an exact lower bound; writes DIR/robust.json and DIR/robust.png",

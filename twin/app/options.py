@@ -25,6 +25,9 @@ MAX_JOB_RUN_S = 600.0
 # cost (docs/design.md, boundary refinement).
 DEFAULT_REFINE_STEP = 6
 
+# A robust map's rigs (sweep --rigs, validate's robust_rigs): past 1000 it is a typing error, not a study.
+MAX_RIGS = 1000
+
 # Seeds feed numpy's SeedSequence and are written to JSON reports and int64 arrays: a non-negative int64.
 SEED_MAX = 2**63 - 1
 

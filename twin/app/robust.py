@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from twin.app.fanout import Progress, Served, run_starts
+from twin.app.options import MAX_RIGS
 from twin.app.sweep import ASSUMPTION, Refinement, SweepSettings, verdict_class
 from twin.outputs import JobFiles, atomic_directory
 from twin.parameters import ParameterError, Parameters
@@ -30,7 +31,6 @@ from twin.parameters import ParameterError, Parameters
 __all__ = ["OUTPUT_FILES", "RobustResult", "lower_bound", "rig_point_seeds", "run_robust", "write_robust"]
 
 OUTPUT_FILES = JobFiles("robust-sweep", ("robust.json", "robust.png"))
-MAX_RIGS = 1000
 # Each rig's map in the JSON: one letter per start (twin.app.sweep.verdict_class).
 CLASS_LETTERS = {"held": "h", "kept": "k", "lost": "l", "failed": "f"}
 

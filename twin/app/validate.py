@@ -33,8 +33,8 @@ import numpy as np
 from controllers import thesis_numbers as T
 from twin.app.fanout import Progress, Runs, Served, Stages, run_starts
 from twin.app.montecarlo import MAX_RUNS, Distribution, MonteCarloSettings, run_montecarlo
-from twin.app.options import MAX_JOB_RUN_S
-from twin.app.robust import MAX_RIGS, run_robust
+from twin.app.options import MAX_JOB_RUN_S, MAX_RIGS
+from twin.app.robust import run_robust
 from twin.app.sweep import MAX_POINTS, Grid, SweepResult, SweepSettings, point_seeds, run_sweep
 from twin.outputs import JobFiles, atomic_directory
 from twin.parameters import ParameterError, Parameters
