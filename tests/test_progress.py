@@ -54,6 +54,24 @@ def test_a_monte_carlo_of_twenty_moves_before_it_ends() -> None:
     assert len([d for d in done if 0 < d < 20]) >= 10 and done[-1] == 20
 
 
+def test_a_robust_map_moves_within_its_one_wave() -> None:
+    """A brute-force robust map is one job of every start on every rig: its count moves before the job
+    ends (it sat at 0 until the end), never goes back, and changes no number."""
+    from twin.app.robust import run_robust
+    from twin.app.sweep import Grid, SweepSettings
+
+    settings = SweepSettings("appendix-sf", Grid(-0.2, 0.2, 3), Grid(0.0, 0.3, 2), duration_s=1.0)
+    spread = load_spread(SPREAD, Parameters())
+    calls, progress = _recorder()
+    result = run_robust(settings, Parameters(), spread, 2, progress=progress)  # type: ignore[arg-type]
+    assert result.to_json() | {"wall_s": 0} == run_robust(settings, Parameters(), spread, 2).to_json() | {
+        "wall_s": 0
+    }
+    done = [d for d, _, _ in calls]
+    assert done == sorted(done) and done[-1] == 12 and all(total == 12 for _, total, _ in calls)
+    assert len({d for d in done if 0 < d < 12}) >= 6
+
+
 def test_stages_count_over_the_whole_job() -> None:
     calls, progress = _recorder()
     stages = Stages(progress, {"nominal": 4, "region": 9, "monte carlo": 0})  # type: ignore[arg-type]

@@ -295,3 +295,96 @@ def test_a_region_whose_run_neighbours_disagree_has_its_rim_traced(monkeypatch: 
     result = run_sweep(SYNTHETIC)
     assert {(k // 17, k % 17) for k, p in enumerate(result.points) if verdict_class(p) == "lost"} == blob
     assert result.refinement is not None and result.refinement["rim_run"] > 0
+
+
+# --- --locate: the boundary to a fraction of a grid step ---------------------------------------------------
+EDGE_X0_M, EDGE_THETA0_RAD = 0.0517, 0.1333  # off the grid's starts and off every bisection point
+
+
+def _threshold_map(monkeypatch: pytest.MonkeyPatch) -> None:
+    """run_starts on a map of no physics: the ball is lost exactly where x0 > EDGE_X0_M or θ0 > EDGE_THETA0_RAD,
+    at any start, on the grid or off it."""
+
+    def fake_run_starts(runs, starts, seeds, **kw):  # type: ignore[no-untyped-def]
+        out = []
+        for x0, th0 in starts.tolist():
+            bad = x0 > EDGE_X0_M or th0 > EDGE_THETA0_RAD
+            out.append(
+                {"x0_m": x0, "theta0_rad": th0, "held": not bad, "ball_lost": bad, "failed": False}
+                | {"settling_time_s": None if bad else 3.0}
+            )
+        return out, True
+
+    monkeypatch.setattr("twin.app.sweep.run_starts", fake_run_starts)
+
+
+@pytest.mark.parametrize("refine", [0, 4])
+def test_locate_brackets_a_known_boundary_to_the_stated_fraction(
+    monkeypatch: pytest.MonkeyPatch, refine: int
+) -> None:
+    """A boundary at x0 = 0.0517 m (for θ0 below 0.1333 rad) and at θ0 = 0.1333 rad: on a 17 × 17 grid (4 cm
+    steps) --locate 4 brackets every crossing within 1/16 of a step (2.5 mm, 2.5 mrad) of where it is, with
+    4 runs per crossed edge, brute force or refined alike."""
+    _threshold_map(monkeypatch)
+    result = run_sweep(replace(SYNTHETIC, refine=refine, locate=4))
+    boundary = result.boundary
+    assert result.complete and boundary is not None
+    # Crossed edges: along x0 between 0.04 and 0.08 for the θ0 rows up to 0.12 (12 rows), along θ0 between
+    # 0.12 and 0.16 for the x0 columns up to 0.04 (10 columns).
+    assert boundary["edges"] == 12 + 10 and boundary["run"] == 4 * 22
+    assert boundary["resolution"] == pytest.approx({"x0_m": 0.04 / 16, "theta0_rad": 0.04 / 16})
+    for c in boundary["crossings"]:
+        axis, edge = (0, EDGE_X0_M) if c["along"] == "x0" else (1, EDGE_THETA0_RAD)
+        (a, b) = (c["between"][0][axis], c["between"][1][axis])
+        assert a <= edge < b and b - a == pytest.approx(0.04 / 16)
+        assert c["classes"] == ["held", "lost"] and abs(c["at"][axis] - edge) <= 0.04 / 32
+    if refine:
+        brute = run_sweep(replace(SYNTHETIC, refine=0, locate=4))
+        assert brute.boundary == boundary
+
+
+def test_locate_on_the_twin_nests_and_each_end_is_its_single_run() -> None:
+    """appendix-sf on a 9 × 7 grid, 10 s, noise on: a deeper --locate repeats the shallower one's runs (its
+    intervals lie inside), and the two ends of a located crossing are the single runs from those starts with
+    the seeds locate_seed gives."""
+    from fractions import Fraction
+
+    from twin.app.sweep import locate_seed
+
+    grid = SweepSettings("appendix-sf", Grid(-0.32, 0.32, 9), Grid(-0.7, 0.7, 7), duration_s=10.0)
+    two = run_sweep(replace(grid, locate=2), nthread=2)
+    three = run_sweep(replace(grid, locate=3), nthread=2)
+    assert two.boundary is not None and three.boundary is not None and two.boundary["edges"] > 0
+    assert two.points == three.points and two.boundary["edges"] == three.boundary["edges"]
+    for c2, c3 in zip(two.boundary["crossings"], three.boundary["crossings"], strict=True):
+        assert c2["grid_starts"] == c3["grid_starts"]
+        assert c2["t"][0] <= c3["t"][0] < c3["t"][1] <= c2["t"][1] and c3["t"][1] - c3["t"][0] == 1 / 8
+    c = next(c for c in three.boundary["crossings"] if 0 < c["t"][0] and c["t"][1] < 1)  # two off-grid ends
+    k, n = c["grid_starts"]
+    for (x, th), t, cls in zip(c["between"], c["t"], c["classes"], strict=True):
+        single = run_closed_loop(
+            registry.make("appendix-sf"),
+            x0_m=x,
+            theta0_rad=th,
+            duration_s=10.0,
+            seed=locate_seed(grid.seed, k, n, Fraction(t)),
+        )
+        record = {"failed": False, "held": single.verdict.held, "ball_lost": single.verdict.ball_lost}
+        assert verdict_class(record) == cls
+
+
+def test_locate_in_the_command(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    _threshold_map(monkeypatch)
+    args = ["sweep", "--controller", "lqr", "--x0", "-0.32:0.32:17", "--theta0", "-0.32:0.32:17"]
+    assert main([*args, "--locate", "3", "--out", str(tmp_path / "m")]) == 0
+    assert "boundary: 22 grid edges crossed, each located to 1/8 of a grid step (66 more runs)" in (
+        capsys.readouterr().out
+    )
+    data = json.loads((tmp_path / "m" / "sweep.json").read_text())
+    assert data["boundary"]["bisections"] == 3 and len(data["boundary"]["crossings"]) == 22
+    assert main([*args, "--locate", "13"]) == 2
+    assert "--locate" in capsys.readouterr().err
+    assert main([*args, "--locate", "2", "--rigs", "3", "--spread", "docs/examples/spread.toml"]) == 2
+    assert "not with a robust map" in capsys.readouterr().err

@@ -31,6 +31,7 @@ from twin.app.catalogue import WithUserController, construct, one_line, user_con
 from twin.app.options import (
     DEFAULT_REFINE_STEP,
     MAX_JOB_RUN_S,
+    MAX_LOCATE,
     MAX_RIGS,
     GridType,
     NumberType,
@@ -775,9 +776,12 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
         seed=args.seed,
         refine=args.refine,
         audit=args.audit,
+        locate=args.locate,
     )
     if args.audit and not args.refine:
         raise ParameterError("--audit checks a refined map: give --refine too")
+    if args.locate and robust:
+        raise ParameterError("--locate finds one rig's boundary: not with a robust map (--rigs)")
     points = settings.x0.n * settings.theta0.n
     if points > MAX_POINTS:  # refused before the grid is built (its arrays alone may not fit in memory)
         raise ParameterError(
@@ -818,6 +822,11 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
                     else ""
                 )
             )
+        if (boundary := result.boundary) is not None:
+            print(
+                f"boundary: {boundary['edges']} grid edges crossed, each located to 1/{2 ** boundary['bisections']} "
+                f"of a grid step ({boundary['run']} more runs)"
+            )
         for claim in result.claims:
             print(
                 f"claim ({claim['source']}): {claim['statement']}: {claim['verdict']} "
@@ -849,7 +858,13 @@ def _robust_sweep(args: argparse.Namespace, settings: Any, params: Parameters, s
     from twin.app.sweep import run_sweep
 
     _check_job(args, params, OUTPUT_FILES)
-    nominal = run_sweep(settings, params, workers=args.workers, scheduler=args.scheduler)
+    nominal = run_sweep(
+        settings,
+        params,
+        workers=args.workers,
+        scheduler=args.scheduler,
+        progress=_progress_bar("nominal map"),
+    )
     result = run_robust(
         settings,
         params,
@@ -1782,6 +1797,15 @@ def build_parser() -> argparse.ArgumentParser:
         default=0,
         metavar="N",
         help="with --refine: also run N inferred starts, at random, and report any that differ",
+    )
+    sweep.add_argument(
+        "--locate",
+        type=count(0, MAX_LOCATE),
+        default=0,
+        metavar="K",
+        help="bisect every grid edge the boundary crosses K times (off-grid starts, seeded), locating each "
+        "crossing to 1/2^K of a grid step: K more runs per crossed edge; in sweep.json's 'boundary' and on "
+        "the map",
     )
     _add_spread_options(sweep, "for the robust map's rigs (with --rigs N)")
     sweep.add_argument(

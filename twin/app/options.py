@@ -28,6 +28,10 @@ DEFAULT_REFINE_STEP = 6
 # A robust map's rigs (sweep --rigs, validate's robust_rigs): past 1000 it is a typing error, not a study.
 MAX_RIGS = 1000
 
+# ``sweep --locate``'s bisections of a grid step: 1/4096 of a step is far below what the ball sensor's noise
+# lets one start's verdict resolve.
+MAX_LOCATE = 12
+
 # Seeds feed numpy's SeedSequence and are written to JSON reports and int64 arrays: a non-negative int64.
 SEED_MAX = 2**63 - 1
 

@@ -123,7 +123,9 @@ def run_robust(
     runs = settings.runs(base)
     start = time.perf_counter()
 
-    def run_job(requests: list[tuple[int, int]]) -> tuple[list[dict[str, Any] | None], bool]:
+    def run_job(
+        requests: list[tuple[int, int]], within: Progress | None
+    ) -> tuple[list[dict[str, Any] | None], bool]:
         idx = np.array([k for _, k in requests], dtype=np.int64)
         run_seeds = np.array([seeds[m][k] for m, k in requests], dtype=np.int64)
         return run_starts(
@@ -134,6 +136,7 @@ def run_robust(
             workers=workers,
             scheduler=scheduler,
             nthread=nthread,
+            progress=within,
             serve=serve,
         )
 
@@ -277,7 +280,7 @@ def refinement_costs(rig_classes: list[str], nx: int, nt: int, step: int) -> dic
     truth = counts_of([list(row) for row in rig_classes])
 
     def refined(maps: int, record: Any, classify: Any) -> tuple[Refinement, list[dict[int, Any]]]:
-        def run_job(requests: list[tuple[int, int]]) -> tuple[list[dict[str, Any] | None], bool]:
+        def run_job(requests: list[tuple[int, int]], within: Any) -> tuple[list[dict[str, Any] | None], bool]:
             return [{"c": record(m, k)} for m, k in requests], True
 
         ref = Refinement(nx, nt, step, maps, run_job, classify=classify)

@@ -20,6 +20,7 @@ import math
 import time
 from collections.abc import Callable, Hashable, Sequence
 from dataclasses import asdict, dataclass, field
+from fractions import Fraction
 from pathlib import Path
 from typing import Any
 
@@ -27,6 +28,7 @@ import numpy as np
 
 from controllers import thesis_numbers as T
 from twin.app.fanout import Progress, Runs, Served, run_starts
+from twin.app.options import MAX_LOCATE
 from twin.outputs import JobFiles, atomic_directory
 from twin.parameters import ParameterError, Parameters
 from twin.physics import check_initial_state
@@ -142,6 +144,7 @@ class SweepSettings:
     seed: int = 0
     refine: int = 0  # boundary refinement: the coarse grid's step in grid intervals (0: every start is run)
     audit: int = 0  # with refine: inferred starts run anyway, at random, to check the assumption
+    locate: int = 0  # bisections of every grid edge the boundary crosses (0: the boundary to a grid step)
 
     def starts(self) -> np.ndarray:
         """The grid's starts (n, 2: x0, θ0), x0 by x0 and θ0 within: start k is (k // nt, k % nt)."""
@@ -170,6 +173,7 @@ class SweepResult:
     wall_s: float = 0.0
     served: dict[str, Any] | None = None  # a served job: where, and the clients (fanout.Served.to_json)
     refinement: dict[str, Any] | None = None  # what --refine ran, inferred and audited
+    boundary: dict[str, Any] | None = None  # --locate: each boundary crossing to a fraction of a grid step
 
     def to_json(self) -> dict[str, Any]:
         s = self.settings
@@ -177,6 +181,7 @@ class SweepResult:
             "settings": {**asdict(s), "x0": asdict(s.x0), "theta0": asdict(s.theta0)},
             **({"served": self.served} if self.served is not None else {}),
             **({"refinement": self.refinement} if self.refinement is not None else {}),
+            **({"boundary": self.boundary} if self.boundary is not None else {}),
             "complete": self.complete,
             "summary": summarize(self.points),
             "claims": self.claims,
@@ -230,14 +235,48 @@ def run_sweep(
     corners = _corner_starts(settings.controller, p)
     starts = np.vstack([grid, np.array([c[:2] for c in corners], dtype=float).reshape(-1, 2)])
     seeds = point_seeds(settings.seed, len(starts))
-    if settings.refine:
-        if serve is not None:
-            raise ParameterError("--refine runs here or on workers, not as served sessions")
-        return _refined_sweep(
-            settings, p, grid, starts, seeds, corners, workers, scheduler, nthread, progress
-        )
-    start = time.perf_counter()
+    if serve is not None and (settings.refine or settings.locate):
+        raise ParameterError("--refine and --locate run here or on workers, not as served sessions")
+    if not 0 <= settings.locate <= MAX_LOCATE:
+        raise ParameterError(f"--locate {settings.locate}: at most {MAX_LOCATE} bisections of a grid step")
     runs = settings.runs(p)
+
+    def run_batch(
+        batch: np.ndarray, batch_seeds: np.ndarray, progress: Progress | None = None
+    ) -> tuple[list[dict[str, Any] | None], bool]:
+        return run_starts(
+            runs, batch, batch_seeds, workers=workers, scheduler=scheduler, nthread=nthread, progress=progress
+        )
+
+    if settings.refine:
+        result = _refined_sweep(settings, p, grid, starts, seeds, corners, run_batch, progress)
+    else:
+        result = _brute_sweep(
+            settings, p, grid, starts, seeds, corners, runs, workers, scheduler, nthread, progress, serve
+        )
+    if settings.locate and result.complete:
+        start = time.perf_counter()
+        result.boundary, result.complete = locate_boundary(settings, grid, result.points, run_batch)
+        result.wall_s += time.perf_counter() - start
+    return result
+
+
+def _brute_sweep(
+    settings: SweepSettings,
+    p: Parameters,
+    grid: np.ndarray,
+    starts: np.ndarray,
+    seeds: np.ndarray,
+    corners: list[tuple[float, float, str, str]],
+    runs: Runs,
+    workers: int,
+    scheduler: str | None,
+    nthread: int | None,
+    progress: Progress | None,
+    serve: Served | None,
+) -> SweepResult:
+    """Every start of the grid run, and the claims' corner states."""
+    start = time.perf_counter()
     results, complete = run_starts(
         runs,
         starts,
@@ -300,7 +339,10 @@ ASSUMPTION = (
 )
 Box = tuple[int, int, int, int]  # i0, i1, j0, j1: grid indices, inclusive
 Point = tuple[int, int]  # (i, j): x0 index, θ0 index
-Job = Callable[[list[tuple[int, int]]], tuple[list[dict[str, Any] | None], bool]]
+# (map, start) pairs to run, and the wave's progress (runs done of these) → (records, complete).
+Job = Callable[[list[tuple[int, int]], Progress | None], tuple[list[dict[str, Any] | None], bool]]
+# Runs of these starts with these seeds → (records, complete): fanout.run_starts on the sweep's job.
+Batch = Callable[[np.ndarray, np.ndarray, Progress | None], tuple[list[dict[str, Any] | None], bool]]
 
 
 class Refinement:
@@ -317,11 +359,12 @@ class Refinement:
        class when they agree; where they do not (a boundary the trace missed), the region's rim is traced
        too, until every region's neighbours agree.
 
-    Each wave of runs, all maps' together, is one job (``run_job((map, index) pairs) → (records,
-    complete)``), so the batches stay large. ``known[m]``: the records run; ``claims[m]``: the inferred
-    starts' (class, the bounding box of their region). ``classify``: the class that must agree
-    (``verdict_class``). The assumption: every boundary crosses a coarse line between coarse starts of
-    different classes (no island or inlet of another class that slips between coarse starts)."""
+    Each wave of runs, all maps' together, is one job (``run_job((map, index) pairs, progress) → (records,
+    complete)``), so the batches stay large; ``progress`` is told the runs known, also within a wave.
+    ``known[m]``: the records run; ``claims[m]``: the inferred starts' (class, the bounding box of their
+    region). ``classify``: the class that must agree (``verdict_class``). The assumption: every boundary
+    crosses a coarse line between coarse starts of different classes (no island or inlet of another class
+    that slips between coarse starts)."""
 
     def __init__(
         self,
@@ -344,7 +387,13 @@ class Refinement:
         todo = sorted({(m, k) for m, k in requests if k not in self.known[m]})
         if not todo or not self.complete:
             return
-        records, done = self.run_job(todo)
+        progress, before, runs = self.progress, sum(map(len, self.known)), self.maps * self.nx * self.nt
+
+        def within(done: int, total: int, stage: str = "") -> None:
+            if progress is not None:
+                progress(before + done, runs)
+
+        records, done = self.run_job(todo, within if progress is not None else None)
         for (m, k), r in zip(todo, records, strict=True):
             if r is not None:
                 self.known[m][k] = r
@@ -482,9 +531,7 @@ def _refined_sweep(
     starts: np.ndarray,
     seeds: np.ndarray,
     corners: list[tuple[float, float, str, str]],
-    workers: int,
-    scheduler: str | None,
-    nthread: int | None,
+    run_batch: Batch,
     progress: Progress | None,
 ) -> SweepResult:
     """Boundary refinement (``Refinement``: the coarse grid, bisection along its lines, each boundary
@@ -496,15 +543,13 @@ def _refined_sweep(
     step = settings.refine
     if isinstance(step, bool) or not isinstance(step, int) or step < 2:
         raise ParameterError(f"--refine {step!r}: the coarse step, a whole number of grid intervals ≥ 2")
-    runs = settings.runs(p)
     start = time.perf_counter()
 
-    def run_job(requests: list[tuple[int, int]]) -> tuple[list[dict[str, Any] | None], bool]:
+    def run_job(
+        requests: list[tuple[int, int]], within: Progress | None
+    ) -> tuple[list[dict[str, Any] | None], bool]:
         todo = [k for _, k in requests]
-        records, done = run_starts(
-            runs, starts[todo], seeds[todo], workers=workers, scheduler=scheduler, nthread=nthread
-        )
-        return records, done
+        return run_batch(starts[todo], seeds[todo], within)
 
     ref = Refinement(nx, nt, step, 1, run_job, progress)
     ref.refine()
@@ -546,9 +591,7 @@ def _refined_sweep(
     corner_idx = list(range(nx * nt, len(starts)))
     corner_records: list[dict[str, Any]] = []
     if corner_idx and complete:
-        records, done = run_starts(
-            runs, starts[corner_idx], seeds[corner_idx], workers=workers, scheduler=scheduler, nthread=nthread
-        )
+        records, done = run_batch(starts[corner_idx], seeds[corner_idx], None)
         complete = complete and done
         corner_records = [
             {**(r or {}), "claim": claim, "note": note}
@@ -569,6 +612,86 @@ def _refined_sweep(
     }
     result.claims = [_judge(claim, result, p) for claim in CLAIMS if settings.controller in claim.applies_to]
     return result
+
+
+# --- the boundary to a fraction of a grid step (--locate) ------------------------------------------------
+
+
+def boundary_edges(points: Sequence[dict[str, Any]], nx: int, nt: int) -> list[tuple[int, int]]:
+    """The grid edges a boundary crosses: neighbouring starts (k, k + nt along x0; k, k + 1 along θ0) of
+    different classes (``verdict_class``), in start order."""
+    classes = [verdict_class(q) if q else None for q in points]
+    edges = []
+    for k in range(nx * nt):
+        i, j = divmod(k, nt)
+        for n in ([k + nt] if i + 1 < nx else []) + ([k + 1] if j + 1 < nt else []):
+            if classes[k] is not None and classes[n] is not None and classes[k] != classes[n]:
+                edges.append((k, n))
+    return edges
+
+
+def locate_seed(seed: int, k: int, n: int, t: Fraction) -> int:
+    """The noise seed of the start a fraction ``t`` of the way from grid start k to its neighbour n: a
+    function of (seed, edge, t) alone, so a deeper --locate repeats a shallower one's runs."""
+    state = np.random.SeedSequence([seed, 0x4C4F43, k, n, t.numerator, t.denominator])  # "LOC"
+    return int(state.generate_state(1, dtype=np.uint32)[0])
+
+
+def locate_boundary(
+    settings: SweepSettings, grid: np.ndarray, points: Sequence[dict[str, Any]], run_batch: Batch
+) -> tuple[dict[str, Any], bool]:
+    """Bisect every grid edge a boundary crosses ``settings.locate`` times, all edges' midpoints of a
+    bisection as one batch: each crossing is then known to 1/2^locate of a grid step. A midpoint whose class
+    differs from the edge's first end becomes the second end, else the first (with three classes on one
+    edge, it follows one of the changes). Returns the JSON's ``boundary`` and whether every run finished."""
+    nx, nt, depth = settings.x0.n, settings.theta0.n, settings.locate
+    edges = boundary_edges(points, nx, nt)
+    lo = [Fraction(0)] * len(edges)
+    hi = [Fraction(1)] * len(edges)
+    cls_lo = [verdict_class(points[k]) for k, _ in edges]
+    cls_hi = [verdict_class(points[n]) for _, n in edges]
+
+    def state(e: int, t: Fraction) -> np.ndarray:
+        k, n = edges[e]
+        return np.asarray(grid[k] + float(t) * (grid[n] - grid[k]))
+
+    complete, ran = True, 0
+    for _ in range(depth if edges else 0):
+        mids = [(a + b) / 2 for a, b in zip(lo, hi, strict=True)]
+        batch = np.array([state(e, t) for e, t in enumerate(mids)], dtype=float)
+        seeds = np.array(
+            [locate_seed(settings.seed, *edges[e], t) for e, t in enumerate(mids)], dtype=np.int64
+        )
+        records, complete = run_batch(batch, seeds, None)
+        if not complete:
+            break
+        ran += len(edges)
+        for e, (t, r) in enumerate(zip(mids, records, strict=True)):
+            assert r is not None
+            if verdict_class(r) != cls_lo[e]:
+                hi[e], cls_hi[e] = t, verdict_class(r)
+            else:
+                lo[e] = t
+    step_x = (settings.x0.hi - settings.x0.lo) / (nx - 1) if nx > 1 else 0.0
+    step_t = (settings.theta0.hi - settings.theta0.lo) / (nt - 1) if nt > 1 else 0.0
+    crossings = [
+        {
+            "along": "x0" if n - k == nt else "theta0",
+            "grid_starts": [k, n],
+            "classes": [cls_lo[e], cls_hi[e]],
+            "t": [float(lo[e]), float(hi[e])],
+            "between": [state(e, lo[e]).tolist(), state(e, hi[e]).tolist()],
+            "at": state(e, (lo[e] + hi[e]) / 2).tolist(),
+        }
+        for e, (k, n) in enumerate(edges)
+    ]
+    return {
+        "bisections": depth,
+        "resolution": {"x0_m": step_x / 2**depth, "theta0_rad": step_t / 2**depth},
+        "edges": len(edges),
+        "run": ran,
+        "crossings": crossings,
+    }, complete
 
 
 def _corner_starts(controller: str, params: Parameters) -> list[tuple[float, float, str, str]]:

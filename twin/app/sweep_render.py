@@ -20,7 +20,7 @@ __all__ = ["render_map"]
 
 def render_map(result: SweepResult, path: Path) -> None:
     """The map: settling time (colour) where held, grey where kept but not held, dark red where lost;
-    the claims' rectangles dashed, their corner states marked."""
+    the claims' rectangles dashed, their corner states marked; --locate's boundary crossings dotted."""
     s = result.settings
     xs, ths = s.x0.values(), s.theta0.values()
     nx, nt = len(xs), len(ths)
@@ -60,6 +60,18 @@ def render_map(result: SweepResult, path: Path) -> None:
         ax.add_patch(Rectangle(*rectangle, fill=False, ls="--", lw=1.0, ec="black", label="thesis's claim"))
         cx, ct = zip(*claim.corners, strict=True)
         ax.plot(cx, ct, "w*", ms=12, mec="black", label="thesis's corner states")
+    if result.boundary and result.boundary["crossings"]:
+        at = np.array([c["at"] for c in result.boundary["crossings"]])
+        ax.plot(
+            at[:, 0],
+            at[:, 1],
+            "o",
+            ms=2.2,
+            mfc="black",
+            mec="white",
+            mew=0.4,
+            label=f"boundary, to 1/{2 ** result.boundary['bisections']} of a grid step",
+        )
     summary = summarize(result.points)
     ax.set_title(
         f"{s.controller}: held {summary['held']}, not held {summary['not_held']}, lost {summary['lost']} "
