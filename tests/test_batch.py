@@ -147,6 +147,34 @@ def test_per_run_parameters_each_run_its_own_physics() -> None:
         _check(registry, name, X0, THETA0, np.array([5, 6, 7, 8]), duration_s=1.5, params=params)
 
 
+@pytest.mark.parametrize("stop_when_lost", [False, True])
+def test_many_sensor_groups_are_each_their_single_runs(stop_when_lost: bool) -> None:
+    """Six runs, each its own sensor group (a robust map's or a Monte Carlo's rigs): zeroing errors and free
+    runs of 0, 20 and 40 ms (groups of different tick counts), held and lost balls; with stop_when_lost a
+    group whose every ball is lost stops while the others go on. Each run is its single run, bit for bit."""
+    base = Parameters()
+    params = [
+        base.with_overrides(
+            {"angle_sensor.zeroing_error_rad": 0.0005 * i, "start.free_run_s": 0.02 * (i % 3)}
+        )
+        for i in range(6)
+    ]
+    x0 = np.array([-0.2, 0.3, 0.1, 0.32, -0.05, 0.31])
+    theta0 = np.array([0.3, 0.6, -0.2, 0.7, 0.0, -0.7])
+    runs = _check(
+        registry,
+        "appendix-sf",
+        x0,
+        theta0,
+        np.arange(11, 17),
+        duration_s=3.0,
+        params=params,
+        stop_when_lost=stop_when_lost,
+    )
+    lost = [r.verdict.ball_lost for r in runs]
+    assert any(lost) and not all(lost)
+
+
 def test_without_record_only_the_verdicts_are_kept() -> None:
     runs = run_batch(registry, "appendix-sf", x0_m=X0, theta0_rad=THETA0, seeds=np.arange(4), duration_s=1.0)
     single = run_closed_loop(registry.make("appendix-sf"), x0_m=0.14, theta0_rad=-0.2, duration_s=1.0, seed=0)
