@@ -245,15 +245,21 @@ def run_sweep(
         batch: np.ndarray, batch_seeds: np.ndarray, progress: Progress | None = None
     ) -> tuple[list[dict[str, Any] | None], bool]:
         return run_starts(
-            runs, batch, batch_seeds, workers=workers, scheduler=scheduler, nthread=nthread, progress=progress
+            runs,
+            batch,
+            batch_seeds,
+            workers=workers,
+            scheduler=scheduler,
+            nthread=nthread,
+            progress=progress,
+            serve=serve,  # None with --refine or --locate (refused above)
         )
 
     if settings.refine:
         result = _refined_sweep(settings, p, grid, starts, seeds, corners, run_batch, progress)
     else:
-        result = _brute_sweep(
-            settings, p, grid, starts, seeds, corners, runs, workers, scheduler, nthread, progress, serve
-        )
+        result = _brute_sweep(settings, p, grid, starts, seeds, corners, run_batch, progress)
+        result.served = serve.to_json() if serve is not None else None
     if settings.locate and result.complete:
         start = time.perf_counter()
         result.boundary, result.complete = locate_boundary(settings, grid, result.points, run_batch)
@@ -268,32 +274,18 @@ def _brute_sweep(
     starts: np.ndarray,
     seeds: np.ndarray,
     corners: list[tuple[float, float, str, str]],
-    runs: Runs,
-    workers: int,
-    scheduler: str | None,
-    nthread: int | None,
+    run_batch: Batch,
     progress: Progress | None,
-    serve: Served | None,
 ) -> SweepResult:
     """Every start of the grid run, and the claims' corner states."""
     start = time.perf_counter()
-    results, complete = run_starts(
-        runs,
-        starts,
-        seeds,
-        workers=workers,
-        scheduler=scheduler,
-        nthread=nthread,
-        progress=progress,
-        serve=serve,
-    )
+    results, complete = run_batch(starts, seeds, progress)
     points = [r or {} for r in results[: len(grid)]]
     corner_records = [
         {**(results[len(grid) + i] or {}), "claim": claim, "note": note}
         for i, (_, _, claim, note) in enumerate(corners)
     ]
     result = SweepResult(settings, points, complete, corner_records, wall_s=time.perf_counter() - start)
-    result.served = serve.to_json() if serve is not None else None
     result.claims = [_judge(claim, result, p) for claim in CLAIMS if settings.controller in claim.applies_to]
     return result
 
