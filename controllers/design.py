@@ -8,8 +8,8 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
-import control
 import numpy as np
 
 __all__ = [
@@ -34,6 +34,14 @@ __all__ = [
 Poles = np.ndarray | Sequence[complex]  # a pole set: numbers (real poles may be floats)
 
 
+def _control() -> Any:
+    """python-control, imported when a design is computed: it takes over a second to import, and a
+    controller built from fixed gains (the appendix's, a sweep's batch) needs none of it."""
+    import control
+
+    return control
+
+
 class DesignError(ValueError):
     """A design that cannot be done as asked (uncontrollable pair, poles not placeable, …)."""
 
@@ -56,9 +64,9 @@ def state_feedback_gain(a: np.ndarray, b: np.ndarray, poles: Poles) -> np.ndarra
     Single input: Ackermann's formula, which also places repeated poles (the thesis's −7.5, −7.5)."""
     a, b = np.atleast_2d(a), np.atleast_2d(b)
     poles = np.asarray(poles, dtype=complex)
-    if np.linalg.matrix_rank(control.ctrb(a, b)) < a.shape[0]:
+    if np.linalg.matrix_rank(_control().ctrb(a, b)) < a.shape[0]:
         raise DesignError("the pair (A, B) is not controllable: the poles cannot be placed")
-    k = np.real(control.acker(a, b, poles)) if b.shape[1] == 1 else np.real(control.place(a, b, poles))
+    k = np.real(_control().acker(a, b, poles)) if b.shape[1] == 1 else np.real(_control().place(a, b, poles))
     k = np.atleast_2d(k)
     _check_characteristic_polynomial(a - b @ k, poles)
     return k
@@ -110,12 +118,12 @@ def reduced_order_observer(
     na = n_measured
     pab, pbb = phi[:na, na:], phi[na:, na:]
     poles = np.asarray(poles, dtype=complex)
-    if np.linalg.matrix_rank(control.obsv(pbb, pab)) < pbb.shape[0]:
+    if np.linalg.matrix_rank(_control().obsv(pbb, pab)) < pbb.shape[0]:
         raise DesignError("(Φ_bb, Φ_ab) is not observable: the observer poles cannot be placed")
     if pab.shape[0] == 1:
-        g = np.real(control.acker(pbb.T, pab.T, poles)).T
+        g = np.real(_control().acker(pbb.T, pab.T, poles)).T
     else:
-        g = np.real(control.place(pbb.T, pab.T, poles)).T
+        g = np.real(_control().place(pbb.T, pab.T, poles)).T
     obs = ReducedObserver.from_gain(phi, gamma, g, na)
     _check_characteristic_polynomial(obs.f, poles)
     return obs
@@ -192,7 +200,7 @@ def _kalman_current_gain(
     qn = np.array([[input_noise_v**2]])
     # Each noise squared as given: numpy squares a float64, Python's ** calls pow (1 value in 1000 differs).
     rn = np.diag([s**2 for s in measurement_noise])
-    _, p_prior, _ = control.dlqe(phi, gamma, h, qn, rn)
+    _, p_prior, _ = _control().dlqe(phi, gamma, h, qn, rn)
     return p_prior @ h.T @ np.linalg.inv(h @ p_prior @ h.T + rn)
 
 
@@ -216,7 +224,7 @@ def lqr_design(
     """LQR with Bryson weights (``state_scale`` per state, ``input_scale_v``) and the Kalman gain for an input
     disturbance of ``input_noise_v`` (SD, V) and measurement noise ``measurement_noise`` (SD of x, θ)."""
     q, r = _bryson_weights(state_scale, input_scale_v)
-    gain, _, _ = control.dlqr(phi, gamma, q, r)
+    gain, _, _ = _control().dlqr(phi, gamma, q, r)
     return LqrDesign(np.atleast_2d(gain), _kalman_current_gain(phi, gamma, input_noise_v, measurement_noise))
 
 
@@ -252,7 +260,7 @@ def lqi_design(
     phi_a[n, n] = 1.0
     gamma_a = np.vstack([gamma, np.zeros((1, gamma.shape[1]))])
     q, r = _bryson_weights((*state_scale, integral_scale_m_s), input_scale_v)
-    gain_a, _, _ = control.dlqr(phi_a, gamma_a, q, r)
+    gain_a, _, _ = _control().dlqr(phi_a, gamma_a, q, r)
     gain_a = np.atleast_2d(gain_a)
     return LqiDesign(
         gain=gain_a[:, :n].copy(),

@@ -70,6 +70,25 @@ def test_importing_the_registry_loads_no_design_code() -> None:
     assert "AFTER ['numpy', 'control', 'scipy', 'mujoco', 'twin.engine', 'controllers.design']" in out, out
 
 
+def test_the_appendix_controllers_load_no_python_control() -> None:
+    """A sweep of a fixed-gain controller (the appendix's, one by one or in a batch) pays no python-control
+    import (1.6 s here); the first design computed loads it."""
+    code = (
+        "import sys\n"
+        "from controllers import registry as r\n"
+        "from twin.parameters import Parameters\n"
+        "for name in ('appendix-sf', 'appendix-clp'):\n"
+        "    r.make(name, Parameters()); r.make_batch(name, Parameters(), n=3)\n"
+        "print('FIXED', 'control' in sys.modules)\n"
+        "r.make('sf', Parameters())\n"
+        "print('DESIGNED', 'control' in sys.modules)\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=True
+    ).stdout
+    assert "FIXED False" in out and "DESIGNED True" in out, out
+
+
 def test_unknown_names_are_refused_by_every_reader() -> None:
     for call in (registry.make, registry.describe, registry.simulation_only):
         with pytest.raises(KeyError, match="unknown controller 'pid'"):

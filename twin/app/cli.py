@@ -696,13 +696,13 @@ def _serve_address(text: str) -> tuple[str, int]:
 def _served(args: argparse.Namespace, params: Parameters) -> Iterator[Served | None]:
     """With --serve: the job's server (one socket for all its sessions, bound before the work; its URL
     printed first), closed after the job; else None."""
+    if args.serve is None:
+        yield None
+        return
     from twin.app.fanout import Served
     from twin.parameters import ParameterError
     from twin.serve import DEFAULT_TIMEOUT_S, ServeError, Server, SessionSettings
 
-    if args.serve is None:
-        yield None
-        return
     host, port = _serve_address(args.serve)
     settings = SessionSettings(params=params, rig_name=f"ballbeam-twin {package_version()} {args.command}")
     try:
