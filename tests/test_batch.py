@@ -149,8 +149,8 @@ def test_per_run_parameters_each_run_its_own_physics() -> None:
 
 @pytest.mark.parametrize("stop_when_lost", [False, True])
 def test_many_sensor_groups_are_each_their_single_runs(stop_when_lost: bool) -> None:
-    """Six runs, each its own sensor group (a robust map's or a Monte Carlo's rigs): zeroing errors and free
-    runs of 0, 20 and 40 ms (groups of different tick counts), held and lost balls; with stop_when_lost a
+    """Six runs in three sensor groups: free runs of 0, 20 and 40 ms (groups of different tick counts), a
+    zeroing error of its own in each run (a group's arrays), held and lost balls; with stop_when_lost a
     group whose every ball is lost stops while the others go on. Each run is its single run, bit for bit."""
     base = Parameters()
     params = [
@@ -173,6 +173,66 @@ def test_many_sensor_groups_are_each_their_single_runs(stop_when_lost: bool) -> 
     )
     lost = [r.verdict.ball_lost for r in runs]
     assert any(lost) and not all(lost)
+
+
+@pytest.mark.parametrize("ideal_sensors", [False, True])
+def test_rigs_of_a_spread_share_one_group(monkeypatch, ideal_sensors: bool) -> None:
+    """Rigs that differ in their physics, amplifier gain, encoder zeroing, RC filter and dropout rate (a
+    robust map's, a Monte Carlo's) are one group of one track shape, its numpy stages paid once per tick for
+    all: each run is still its single run, bit for bit (the gains move the motor volts, the zeroing errors
+    of about a count the angle readings, the filters the ball readings)."""
+    from twin import batch
+
+    built: list[tuple[int, int, int]] = []  # per group: its runs, their models, their track shapes
+    init = batch._Group.__init__
+
+    def counting(self, params, *args, **kwargs):  # noqa: ANN001, ANN002, ANN003
+        init(self, params, *args, **kwargs)
+        built.append((len(params), len(self.distinct), len(self.shapes)))
+
+    monkeypatch.setattr(batch._Group, "__init__", counting)
+    step = 2 * np.pi / (256 * 7)  # one encoder count at the beam (eq 6.2.1)
+    params = [
+        Parameters().with_overrides(
+            {
+                "amplifier.gain_v_per_v": 9.6 * (0.98 + 0.01 * i),
+                "angle_sensor.zeroing_error_rad": step * (i - 2) * 0.7,
+                "motor.resistance_ohm": 9.4 + 0.1 * i,
+                "ball_sensor.rc_resistance_ohm": 147.0 * (0.95 + 0.025 * i),
+                "ball_sensor.rc_capacitance_f": 22e-6 * (0.8 + 0.1 * i),
+                "ball_sensor.dropout_rate_hz": 5.0 * i,
+            }
+        )
+        for i in range(5)
+    ]
+    x0 = np.array([-0.2, 0.3, 0.1, -0.05, 0.31])
+    theta0 = np.array([0.3, 0.6, -0.2, 0.0, -0.7])
+    runs = _check(
+        registry,
+        "appendix-sf",
+        x0,
+        theta0,
+        np.arange(21, 26),
+        duration_s=2.0,
+        params=params,
+        ideal_sensors=ideal_sensors,
+    )
+    assert built == [(5, 5, 1)]
+    # The gains and zeroing errors reach the runs: the same start on each rig reads and drives differently.
+    same = _check(
+        registry,
+        "appendix-sf",
+        np.full(5, 0.1),
+        np.full(5, 0.2),
+        np.full(5, 3),
+        duration_s=1.0,
+        params=params,
+        ideal_sensors=ideal_sensors,
+    )
+    assert len({r.log.datam2[0] for r in same}) > 1 and len({r.log.motor_volts_v[-1] for r in same}) == 5
+    if not ideal_sensors:
+        assert len({r.log.datam1[10] for r in same}) > 1
+    assert len(runs) == 5
 
 
 def test_without_record_only_the_verdicts_are_kept() -> None:

@@ -22,7 +22,7 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from typing import Protocol, runtime_checkable
 
 import mujoco
@@ -191,7 +191,8 @@ def run_batch(
     ``run_closed_loop(catalogue.make(name, params_i), x0_m=x0_m[i], …, seed=seeds[i], …)`` bit for bit.
 
     ``params``: one for every run or one per run (runs whose sensor, DAQ, amplifier, software and timing
-    parameters agree share one batch; each run's physics has its own MuJoCo model). ``nthread``: physics
+    parameters agree, but for ``PER_RUN_IO``, share one batch; each run's physics has its own MuJoCo
+    model). ``nthread``: physics
     threads (default: every CPU). ``record``: keep each run's log (17 arrays per run); without it a result's
     ``log`` is not kept (``RunResult.recorded`` is false) and only the verdict is. ``vectorized=False``
     calls one scalar controller per run even when the catalogue has a batched one (for tests).
@@ -281,15 +282,32 @@ def _group_progress(progress: Callable[[float], None], before: int, size: int) -
     return lambda k, ticks: progress(before + size * k / ticks)
 
 
+# The I/O parameters a group holds per run (arrays over its runs, or each run's own ball chain): a spread's
+# rigs differ in them, and a group per rig would pay the per-tick numpy once per rig.
+PER_RUN_IO = {
+    "amplifier": ("gain_v_per_v",),
+    "angle_sensor": ("zeroing_error_rad",),
+    "ball_sensor": ("rc_resistance_ohm", "rc_capacitance_f", "dropout_rate_hz"),
+}
+
+
 def _io_key(p: Parameters) -> tuple:
-    """What the numpy stages of a batch share: runs that differ only in their physics batch together."""
+    """What the numpy stages of a batch share: runs that differ only in their physics and in ``PER_RUN_IO``
+    batch together."""
+
+    def shared(section: str) -> tuple:
+        part = getattr(p, section)
+        return tuple(
+            (f.name, getattr(part, f.name)) for f in fields(part) if f.name not in PER_RUN_IO[section]
+        )
+
     return (
         p.daq,
         p.start,
-        p.amplifier,
+        shared("amplifier"),
         p.software,
-        p.angle_sensor,
-        p.ball_sensor,
+        shared("angle_sensor"),
+        shared("ball_sensor"),
         p.track,
         p.physics.timestep_s,
         p.motor.gear_ratio,
@@ -349,8 +367,14 @@ class _Group:
                 plants[q] = cached if cached is not None else Plant(q)
         self.plants = [plants[q] for q in params]
         self.distinct = list(plants.values())
-        index = {q: k for k, q in enumerate(plants)}
-        self.plant_of = np.array([index[q] for q in params])
+        # The numpy of the track's coordinates and the true state, once per track shape (Plant.frame_key)
+        # rather than once per plant: each run's rows through one plant of its shape.
+        shapes: dict[tuple, Plant] = {}
+        for plant in self.distinct:
+            shapes.setdefault(plant.frame_key, plant)
+        self.shapes = list(shapes.values())
+        shape_index = {key: k for k, key in enumerate(shapes)}
+        self.shape_of = np.array([shape_index[plants[q].frame_key] for q in params])
         states = np.empty((n, mujoco.mj_stateSize(self.distinct[0].model, _INTEGRATION)))
         nfull = mujoco.mj_stateSize(self.distinct[0].model, _FULL)
         self.last_row = np.empty((n, nfull))  # each run's state after its last step (MjData's, alone)
@@ -378,10 +402,13 @@ class _Group:
         self.held = np.stack([x0, theta0, np.zeros(n), np.zeros(n)], axis=1)
         self.physics_time_s = float(self.last_row[0, 0])
         chain_start = self.schedule.chain_start_step
-        self.ball = None if ideal_sensors else BallChainBatch(p, seeds, x0, chain_start * dt)
+        self.ball = None if ideal_sensors else BallChainBatch(params, seeds, x0, chain_start * dt)
         self.ideal_sensors = IdealSensors(p)
+        # Each run's own (the group shares the rest of its I/O parameters: _io_key).
+        self.gain_v_per_v = np.array([q.amplifier.gain_v_per_v for q in params])
+        self.zeroing_error_rad = np.array([q.angle_sensor.zeroing_error_rad for q in params])
         self.command_v = np.full(n, p.amplifier.zero_command_v)
-        self.applied_v = np.full(n, self._motor_volts_for(self.command_v))
+        self.applied_v = self._motor_volts_for(self.command_v, np.arange(n))
         self.pending_v = self.applied_v.copy()
         self.lost = np.zeros(n, dtype=bool)
         self.lost_time_s: list[float | None] = [None] * n
@@ -391,15 +418,17 @@ class _Group:
         self.block_on = np.ones((n, 2), dtype=bool)
 
     # --- the rig, over the live runs --------------------------------------------------------------------
-    def _motor_volts_for(self, command_v: np.ndarray) -> np.ndarray:
+    def _motor_volts_for(self, command_v: np.ndarray, rows: np.ndarray) -> np.ndarray:
+        """The motor volts of runs ``rows`` for their commands."""
+        gain = self.gain_v_per_v[rows]
         if self.ideal:
-            return np.asarray(ideal_motor_volts(command_v, self.p))
-        return np.asarray(motor_volts(command_v, self.p))
+            return np.asarray(ideal_motor_volts(command_v, self.p, gain))
+        return np.asarray(motor_volts(command_v, self.p, gain))
 
     def write(self, command_v: np.ndarray) -> None:
         live = self.live
         self.command_v[live] = command_v
-        volts = self._motor_volts_for(command_v)
+        volts = self._motor_volts_for(command_v, live)
         self.pending_v[live] = volts
         if self.schedule.command_written():
             self.applied_v[live] = volts
@@ -440,8 +469,8 @@ class _Group:
         xyz = np.concatenate([self.last_row[live, None, c : c + 3], out[:, :, c : c + 3]], axis=1)
         along = np.empty_like(theta)
         on = np.empty(theta.shape, dtype=bool)
-        which = self.plant_of[live]
-        for k, plant in enumerate(self.distinct):
+        which = self.shape_of[live]
+        for k, plant in enumerate(self.shapes):
             rows = which == k
             if rows.all():
                 along, on = plant.track_coordinates(theta, xyz)
@@ -548,9 +577,11 @@ class _Group:
         block_on = np.concatenate(ons, axis=1)
         self.block_theta, self.block_on = block_theta, block_on
         if self.ball is None:
-            ball_v, angle_v = self.ideal_sensors.read_v(block_x[:, -1], block_theta[:, -1])
+            ball_v, angle_v = self.ideal_sensors.read_v(
+                block_x[:, -1], block_theta[:, -1], self.zeroing_error_rad[live]
+            )
         else:
-            angle_v = angle_block_means_v(block_t, block_theta, p)
+            angle_v = angle_block_means_v(block_t, block_theta, p, self.zeroing_error_rad[live])
             ball_v = self.ball.advance(live, block_t, block_x, block_on)
         return BatchSamples(time_s=block_time_s(t_start, p.daq), ball_v=ball_v, angle_v=angle_v)
 
@@ -569,10 +600,12 @@ class _Group:
         if self.held_now:
             return self.held[live].copy()
         states = np.empty((len(live), 4))
-        which = self.plant_of[live]
-        for k, plant in enumerate(self.distinct):
+        which = self.shape_of[live]
+        for k, plant in enumerate(self.shapes):
             rows = which == k
-            if rows.any():
+            if rows.all():
+                states = plant.row_states(self.last_row[live])
+            elif rows.any():
                 states[rows] = plant.row_states(self.last_row[live[rows]])
         lost = self.lost[live]
         states[lost] = self.lost_state[live[lost]]  # Plant.state: the state at the step it left the track

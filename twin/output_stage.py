@@ -22,39 +22,50 @@ from twin.parameters import Amplifier, Parameters
 __all__ = ["amplifier_volts", "motor_volts", "motor_volts_of"]
 
 
-def amplifier_volts(dac_output_v: float | np.ndarray, amplifier: Amplifier) -> float | np.ndarray:
-    """Motor volts for the DAC's actual output: 9.6·(V − 2.5) clipped to ±12 V (§6.4)."""
+def amplifier_volts(
+    dac_output_v: float | np.ndarray, amplifier: Amplifier, gain_v_per_v: np.ndarray | None = None
+) -> float | np.ndarray:
+    """Motor volts for the DAC's actual output: 9.6·(V − 2.5) clipped to ±12 V (§6.4). ``gain_v_per_v``:
+    each run's gain in place of ``amplifier``'s, for a batch of runs (element by element, the same bits)."""
     if type(dac_output_v) is float and math.isfinite(dac_output_v):  # one command per tick: no numpy
         v: float | np.ndarray = dac_output_v
     else:
         v = finite_values(dac_output_v, "dac_output_v")
-    volts = amplifier.gain_v_per_v * (v - amplifier.zero_command_v)
+    gain = amplifier.gain_v_per_v if gain_v_per_v is None else gain_v_per_v
+    volts = gain * (v - amplifier.zero_command_v)
     if type(volts) is float:  # min/max is np.clip on a finite number, same bits
         return min(max(volts, -amplifier.rail_v), amplifier.rail_v)
     out = np.clip(volts, -amplifier.rail_v, amplifier.rail_v)
     return float(out) if np.ndim(dac_output_v) == 0 else out
 
 
-def motor_volts(command_v: float | np.ndarray, params: Parameters) -> float | np.ndarray:
-    """Motor volts for a command written to the DAC: DAC quantization and range, then the amplifier.
+def motor_volts(
+    command_v: float | np.ndarray, params: Parameters, gain_v_per_v: np.ndarray | None = None
+) -> float | np.ndarray:
+    """Motor volts for a command written to the DAC: DAC quantization and range, then the amplifier
+    (``gain_v_per_v``: as ``amplifier_volts``).
 
     NaN or infinite commands raise ValueError naming the value (the card cannot output them)."""
     c = finite_input(command_v, "command_v")
-    out = amplifier_volts(dac_quantize_v(c, params.daq), params.amplifier)
+    out = amplifier_volts(dac_quantize_v(c, params.daq), params.amplifier, gain_v_per_v)
     if type(out) is float:
         return out
     return float(out) if np.ndim(command_v) == 0 else out
 
 
-def ideal_motor_volts(command_v: float | np.ndarray, params: Parameters) -> float | np.ndarray:
+def ideal_motor_volts(
+    command_v: float | np.ndarray, params: Parameters, gain_v_per_v: np.ndarray | None = None
+) -> float | np.ndarray:
     """Motor volts for an exact DAC (the ideal converters): the card's range, no quantization, then the
-    amplifier; a float for a number, an array for an array (the batch)."""
+    amplifier (``gain_v_per_v``: as ``amplifier_volts``); a float for a number, an array for an array (the
+    batch)."""
     daq = params.daq
     if isinstance(command_v, (int, float)):
         return float(
             amplifier_volts(float(min(max(command_v, daq.dac_min_v), daq.dac_max_v)), params.amplifier)
         )
-    return np.asarray(amplifier_volts(np.clip(command_v, daq.dac_min_v, daq.dac_max_v), params.amplifier))
+    clipped = np.clip(command_v, daq.dac_min_v, daq.dac_max_v)
+    return np.asarray(amplifier_volts(clipped, params.amplifier, gain_v_per_v))
 
 
 def motor_volts_of(params: Parameters) -> Callable[[float], float]:

@@ -588,6 +588,23 @@ class Plant:
             & (np.abs(height - self._seat_height_m) < LOST_HEIGHT_TOLERANCE_M)
         )
 
+    @property
+    def frame_key(self) -> tuple:
+        """All that ``beam_frame``, ``on_track`` and ``row_states`` read of this plant: plants equal in it give
+        the same bits there (a batch calls them once for the rows of all such plants: a spread's rigs differ
+        in masses, motor and friction, not in where their track lies)."""
+        return (
+            self._pivot,
+            self._along_limit_m,
+            self._lateral_limit_m,
+            self._seat_height_m,
+            self._hinge_qpos,
+            self._hinge_dof,
+            self._ball_qpos,
+            self._ball_dof,
+            self.model.nq,
+        )
+
     def track_coordinates(self, theta_rad: np.ndarray, ball_xyz: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The ball's position along the beam and whether it sits on the track at each step (see
         ``beam_frame``)."""

@@ -236,8 +236,14 @@ def angle_block_mean_v(times_s: np.ndarray, theta_rad: np.ndarray, params: Param
     return _block_mean(_sample_positions(t, params.daq), u, _level_table(sensor, params.daq), params)
 
 
-def angle_block_means_v(times_s: np.ndarray, theta_rad: np.ndarray, params: Parameters) -> np.ndarray:
-    """``angle_block_mean_v`` for a batch of runs in step: the times shared (K,), θ one row per run (B, K).
+def angle_block_means_v(
+    times_s: np.ndarray,
+    theta_rad: np.ndarray,
+    params: Parameters,
+    zeroing_error_rad: np.ndarray | None = None,
+) -> np.ndarray:
+    """``angle_block_mean_v`` for a batch of runs in step: the times shared (K,), θ one row per run (B, K);
+    ``zeroing_error_rad``: each run's (B,) in place of ``params``'.
 
     A row whose count is the same at every knot reads that level (numpy over the batch); the others go
     through ``_block_mean`` one by one, exactly as a run alone does."""
@@ -246,7 +252,8 @@ def angle_block_means_v(times_s: np.ndarray, theta_rad: np.ndarray, params: Para
     _check_trajectory(t, theta[0] if len(theta) else t, "theta_rad")
     sensor = params.angle_sensor
     levels = _level_table(sensor, params.daq)
-    u = (theta - sensor.zeroing_error_rad) / angle_count_step_rad(params) + 0.5
+    zero_rad = sensor.zeroing_error_rad if zeroing_error_rad is None else zeroing_error_rad[:, None]
+    u = (theta - zero_rad) / angle_count_step_rad(params) + 0.5
     c = np.floor(u)
     still = c.min(axis=1) == c.max(axis=1)
     out = np.empty(len(theta))
@@ -699,13 +706,19 @@ class BallChainBatch:
     process (the next dropout is drawn there, so each run draws the same numbers in the same order as
     alone). Same bits as ``BallPositionChain`` run by run."""
 
-    def __init__(self, params: Parameters, seeds: np.ndarray, x_m: np.ndarray, t_s: float) -> None:
-        self.params = params
+    def __init__(
+        self, params: Parameters | Sequence[Parameters], seeds: np.ndarray, x_m: np.ndarray, t_s: float
+    ) -> None:
+        """``params``: one set for every run, or one per run that differ at most in the filter's R and C and
+        the dropout rate (``PER_RUN_BALL_SENSOR``; a run's dropouts are its own chain's)."""
+        run_params = [params] * len(seeds) if isinstance(params, Parameters) else list(params)
+        self.params = run_params[0]
         self.chains = []
-        for seed, x in zip(seeds.tolist(), x_m.tolist(), strict=True):
-            chain = BallPositionChain(params, int(seed), x_m=x)
+        for p, seed, x in zip(run_params, seeds.tolist(), x_m.tolist(), strict=True):
+            chain = BallPositionChain(p, int(seed), x_m=x)
             chain.reset(x, t_s, seed=int(seed))  # as SimRig.reset: the noise process from the seed
             self.chains.append(chain)
+        self.tau_s = np.array([c.tau_s for c in self.chains])
         self.time_s = float(t_s)
         self.filtered_v = np.array([c.filtered_v for c in self.chains])
         self._next_start_s = np.array([c._next_start_s for c in self.chains])
@@ -732,7 +745,8 @@ class BallChainBatch:
         y = np.empty(len(runs))
         if common.any():
             vk = chain0._wiper_v(x_m[common])
-            y[common] = rc_filter_uniform_end_v(vk, self.filtered_v[runs[common]], t_end - t0, chain0.tau_s)
+            rows = runs[common]
+            y[common] = rc_filter_uniform_end_v(vk, self.filtered_v[rows], t_end - t0, self.tau_s[rows])
         readings = np.empty(len(runs))
         if common.any():
             readings[common] = adc_quantize_v(y[common], self.params.daq)
@@ -786,7 +800,7 @@ def equally_spaced(times_s: np.ndarray) -> bool:
     return bool(steps.max() - steps.min() <= 1e-9 * (times_s[-1] - times_s[0]))
 
 
-@functools.lru_cache(maxsize=256)
+@functools.lru_cache(maxsize=4096)  # a handful of spans for each filter of a batch (a spread's rigs: 50)
 def _uniform_rc_weights(n: int, span_s: float, tau_s: float) -> tuple[float, np.ndarray, list[float], float]:
     """(decay, P, P as floats, ΣP) such that y_end = decay·y_0 + P·v for the RC filter driven by a wiper
     linear between n + 1 equally spaced knots over ``span_s`` (volts v_0 … v_n): ``rc_filter_end_v``'s sum
@@ -804,12 +818,22 @@ def _uniform_rc_weights(n: int, span_s: float, tau_s: float) -> tuple[float, np.
     return math.exp(-span_s / tau_s), weights, weights.tolist(), fo.total(weights.tolist())
 
 
-def rc_filter_uniform_end_v(v: np.ndarray, y0_v: np.ndarray, span_s: float, tau_s: float) -> np.ndarray:
+def rc_filter_uniform_end_v(
+    v: np.ndarray, y0_v: np.ndarray, span_s: float, tau_s: float | np.ndarray
+) -> np.ndarray:
     """The RC filter's output at the end of ``span_s`` for each row of ``v`` (B, n + 1): the wiper volts at
-    n + 1 equally spaced knots, linear in between, the capacitor at ``y0_v`` at the first. Equal to
-    ``rc_filter_end_v`` on those knots up to float rounding (~1e-16 V); each row is ``rc_end_v``'s, the bits
-    a run alone gets."""
-    decay, weights, _, _ = _uniform_rc_weights(v.shape[1] - 1, span_s, tau_s)
+    n + 1 equally spaced knots, linear in between, the capacitor at ``y0_v`` at the first; ``tau_s`` one
+    time constant or each row's (B,). Equal to ``rc_filter_end_v`` on those knots up to float rounding
+    (~1e-16 V); each row is ``rc_end_v``'s, the bits a run alone gets."""
+    n = v.shape[1] - 1
+    if isinstance(tau_s, np.ndarray):
+        taus, row_of = np.unique(tau_s, return_inverse=True)
+        if len(taus) > 1:
+            each = [_uniform_rc_weights(n, span_s, float(t)) for t in taus.tolist()]
+            decays = np.array([w[0] for w in each])[row_of]
+            return rc_end_v(y0_v, decays, v, np.stack([w[1] for w in each])[row_of])
+        tau_s = float(taus[0])
+    decay, weights, _, _ = _uniform_rc_weights(n, span_s, tau_s)
     return rc_end_v(y0_v, decay, v, weights)
 
 
@@ -828,17 +852,20 @@ def wiper_v(
 @overload
 def rc_end_v(y0_v: float, decay: float, drive_v: Sequence[float], weights: Sequence[float]) -> float: ...
 @overload
-def rc_end_v(y0_v: np.ndarray, decay: float, drive_v: np.ndarray, weights: np.ndarray) -> np.ndarray: ...
+def rc_end_v(
+    y0_v: np.ndarray, decay: float | np.ndarray, drive_v: np.ndarray, weights: np.ndarray
+) -> np.ndarray: ...
 def rc_end_v(
     y0_v: float | np.ndarray,
-    decay: float,
+    decay: float | np.ndarray,
     drive_v: Sequence[float] | np.ndarray,
     weights: Sequence[float] | np.ndarray,
 ) -> float | np.ndarray:
     """The RC filter's output at a block's end: decay·y₀ + Σ_k drive_k·weight_k, the sum left to right
     (``twin.fixedorder``): the one home of the ball chain's filter arithmetic (the piecewise filter's pieces,
     a rig block's knots, a constant wiper's gain). A float ``y0_v`` with sequences of floats gives a float;
-    ``y0_v`` (n,) with ``drive_v`` (n, K) gives (n,), each row the float form's bits."""
+    ``y0_v`` (n,) with ``drive_v`` (n, K) gives (n,), each row the float form's bits (``decay`` (n,) and
+    ``weights`` (n, K): each row's own)."""
     if isinstance(y0_v, np.ndarray):
         return decay * y0_v + fo.dots(np.asarray(drive_v), np.asarray(weights))
     assert not isinstance(drive_v, np.ndarray) and not isinstance(weights, np.ndarray), "floats: sequences"
@@ -860,14 +887,22 @@ class IdealSensors:
     @overload
     def read_v(self, x_m: float, theta_rad: float) -> tuple[float, float]: ...
     @overload
-    def read_v(self, x_m: np.ndarray, theta_rad: np.ndarray) -> tuple[np.ndarray, np.ndarray]: ...
     def read_v(
-        self, x_m: float | np.ndarray, theta_rad: float | np.ndarray
+        self, x_m: np.ndarray, theta_rad: np.ndarray, zeroing_error_rad: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray]: ...
+    def read_v(
+        self,
+        x_m: float | np.ndarray,
+        theta_rad: float | np.ndarray,
+        zeroing_error_rad: np.ndarray | None = None,
     ) -> tuple[float, float] | tuple[np.ndarray, np.ndarray]:
         """(ball volts, angle volts) for a ball at ``x_m`` and a beam at ``theta_rad``: floats, or arrays over
-        the runs of a batch (the same operations element by element)."""
+        the runs of a batch (the same operations element by element; ``zeroing_error_rad``: each run's)."""
         sw = self.params.software
-        angle = theta_rad - self.params.angle_sensor.zeroing_error_rad
+        zero_rad = (
+            self.params.angle_sensor.zeroing_error_rad if zeroing_error_rad is None else zeroing_error_rad
+        )
+        angle = theta_rad - zero_rad
         ball_v, angle_v = ball_volts_v(x_m, sw), angle_volts_v(angle, sw)
         if isinstance(x_m, np.ndarray):
             return np.asarray(ball_v), np.asarray(angle_v)
