@@ -1,4 +1,10 @@
-"""Shared fixtures: the default parameters and the analytic reference model."""
+"""Shared fixtures: the default parameters and the analytic reference model; a ``realtime`` test runs alone."""
+
+import fcntl
+import os
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
 
 import pytest
 
@@ -14,3 +20,28 @@ def params() -> Parameters:
 @pytest.fixture(scope="session")
 def reference(params: Parameters) -> ReferenceModel:
     return ReferenceModel(params)
+
+
+@pytest.fixture(autouse=True)
+def _realtime_runs_alone(request: pytest.FixtureRequest) -> Iterator[None]:
+    """Under pytest-xdist (the default run: two workers), a test marked ``realtime`` — one that asserts a
+    wall-clock pace: commands late or missing, a watchdog, jitter — waits for the other worker's test to end
+    and holds it off until it is done; the others share. A turnstile in front of a shared/exclusive lock
+    (flock) keeps new shared holders from starving the exclusive one."""
+    run = os.environ.get("PYTEST_XDIST_TESTRUNUID")
+    if run is None:  # one process: nothing else runs
+        yield
+        return
+    base = Path(tempfile.gettempdir()) / f"ballbeam-pytest-{run}"
+    alone = request.node.get_closest_marker("realtime") is not None
+    with open(f"{base}.turnstile", "a") as gate, open(f"{base}.lock", "a") as lock:
+        fcntl.flock(gate, fcntl.LOCK_EX if alone else fcntl.LOCK_SH)
+        fcntl.flock(lock, fcntl.LOCK_EX if alone else fcntl.LOCK_SH)
+        if not alone:
+            fcntl.flock(gate, fcntl.LOCK_UN)
+        try:
+            yield
+        finally:
+            fcntl.flock(lock, fcntl.LOCK_UN)
+            if alone:
+                fcntl.flock(gate, fcntl.LOCK_UN)

@@ -358,6 +358,7 @@ def test_baud_without_serial_is_refused(capsys: pytest.CaptureFixture[str]) -> N
     assert rc == 2 and "--baud" in err and "--serial" in err and len(err.strip().splitlines()) == 1
 
 
+@pytest.mark.realtime
 def test_real_time_over_a_pty_keeps_the_period_and_reports_the_timing() -> None:
     """Real time over the serial line: the server paces the ticks by the wall clock, the client's timing is
     reported as over UDP, and a session whose every command came in time is the in-process run."""

@@ -361,6 +361,7 @@ def test_run_rig_sessions_n_runs_n_and_a_job_without_a_client_stops(tmp_path: Pa
 
 
 @pytest.mark.slow
+@pytest.mark.study  # ~2 min of 302 sessions: the default run serves a small validation to run --rig instead
 def test_the_default_validation_served_to_bb_sf_gives_the_in_process_report(bb_sf: Path) -> None:
     """The whole default battery (no spread: 18 nominal, 255 + 1 region, 28 sensitivity runs) served to the C
     client: every check, with its rows, the in-process appendix-sf validation's."""

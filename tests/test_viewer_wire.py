@@ -104,6 +104,7 @@ def test_the_rig_is_held_until_a_client_says_hello() -> None:
         assert _markdown_text(f"waiting for a client on {server.url}") in live.status_markdown()
 
 
+@pytest.mark.realtime
 def test_a_client_balances_the_ball_from_a_hardware_start_and_reset_stops_it() -> None:
     seconds = 3.0
     with _wired() as (live, server):

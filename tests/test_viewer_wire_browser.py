@@ -58,6 +58,7 @@ def _wait_text(page, needle: str, timeout_ms: int = 30000) -> None:
 
 
 @pytest.mark.slow
+@pytest.mark.realtime
 def test_the_c_controller_balances_the_served_view_in_the_browser(bb_sf: Path, tmp_path: Path) -> None:
     udp, http = _free_port(socket.SOCK_DGRAM), _free_port(socket.SOCK_STREAM)
     log_path = tmp_path / "view.log"

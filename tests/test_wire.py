@@ -416,6 +416,7 @@ def test_a_reconnect_gets_a_new_session_and_the_old_ones_datagrams_are_dropped()
     )  # the same seed, the same run
 
 
+@pytest.mark.realtime
 def test_real_time_session_reports_the_client_timing() -> None:
     x0, th0 = STARTS[0]
     settings = SessionSettings(
