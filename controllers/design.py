@@ -64,9 +64,10 @@ def state_feedback_gain(a: np.ndarray, b: np.ndarray, poles: Poles) -> np.ndarra
     Single input: Ackermann's formula, which also places repeated poles (the thesis's −7.5, −7.5)."""
     a, b = np.atleast_2d(a), np.atleast_2d(b)
     poles = np.asarray(poles, dtype=complex)
-    if np.linalg.matrix_rank(_control().ctrb(a, b)) < a.shape[0]:
+    control = _control()
+    if np.linalg.matrix_rank(control.ctrb(a, b)) < a.shape[0]:
         raise DesignError("the pair (A, B) is not controllable: the poles cannot be placed")
-    k = np.real(_control().acker(a, b, poles)) if b.shape[1] == 1 else np.real(_control().place(a, b, poles))
+    k = np.real(control.acker(a, b, poles)) if b.shape[1] == 1 else np.real(control.place(a, b, poles))
     k = np.atleast_2d(k)
     _check_characteristic_polynomial(a - b @ k, poles)
     return k
@@ -118,12 +119,13 @@ def reduced_order_observer(
     na = n_measured
     pab, pbb = phi[:na, na:], phi[na:, na:]
     poles = np.asarray(poles, dtype=complex)
-    if np.linalg.matrix_rank(_control().obsv(pbb, pab)) < pbb.shape[0]:
+    control = _control()
+    if np.linalg.matrix_rank(control.obsv(pbb, pab)) < pbb.shape[0]:
         raise DesignError("(Φ_bb, Φ_ab) is not observable: the observer poles cannot be placed")
     if pab.shape[0] == 1:
-        g = np.real(_control().acker(pbb.T, pab.T, poles)).T
+        g = np.real(control.acker(pbb.T, pab.T, poles)).T
     else:
-        g = np.real(_control().place(pbb.T, pab.T, poles)).T
+        g = np.real(control.place(pbb.T, pab.T, poles)).T
     obs = ReducedObserver.from_gain(phi, gamma, g, na)
     _check_characteristic_polynomial(obs.f, poles)
     return obs

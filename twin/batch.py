@@ -192,10 +192,10 @@ def run_batch(
 
     ``params``: one for every run or one per run (runs whose sensor, DAQ, amplifier, software and timing
     parameters agree, but for ``PER_RUN_IO``, share one batch; each run's physics has its own MuJoCo
-    model). ``nthread``: physics
-    threads (default: every CPU). ``record``: keep each run's log (17 arrays per run); without it a result's
-    ``log`` is not kept (``RunResult.recorded`` is false) and only the verdict is. ``vectorized=False``
-    calls one scalar controller per run even when the catalogue has a batched one (for tests).
+    model). ``nthread``: physics threads (default: every CPU). ``record``: keep each run's log (17 arrays
+    per run); without it a result's ``log`` is not kept (``RunResult.recorded`` is false) and only the
+    verdict is. ``vectorized=False`` calls one scalar controller per run even when the catalogue has a
+    batched one (for tests).
     ``controller_timeout_s``: the watchdog's budget per call of a scalar controller (``twin.guard``). ``progress``
     is called as the runs advance with how many are done, a float: a group's runs advance together, so k of
     its T ticks count k/T of each (a job's progress moves before its batch ends; it changes no number)."""

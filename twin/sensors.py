@@ -710,7 +710,7 @@ class BallChainBatch:
         self, params: Parameters | Sequence[Parameters], seeds: np.ndarray, x_m: np.ndarray, t_s: float
     ) -> None:
         """``params``: one set for every run, or one per run that differ at most in the filter's R and C and
-        the dropout rate (``PER_RUN_BALL_SENSOR``; a run's dropouts are its own chain's)."""
+        the dropout rate (``twin.batch.PER_RUN_IO``; a run's dropouts are its own chain's)."""
         run_params = [params] * len(seeds) if isinstance(params, Parameters) else list(params)
         self.params = run_params[0]
         self.chains = []
@@ -719,6 +719,8 @@ class BallChainBatch:
             chain.reset(x, t_s, seed=int(seed))  # as SimRig.reset: the noise process from the seed
             self.chains.append(chain)
         self.tau_s = np.array([c.tau_s for c in self.chains])
+        taus = np.unique(self.tau_s)
+        self._one_tau_s = float(taus[0]) if len(taus) == 1 else None  # one filter: no per-tick gather
         self.time_s = float(t_s)
         self.filtered_v = np.array([c.filtered_v for c in self.chains])
         self._next_start_s = np.array([c._next_start_s for c in self.chains])
@@ -746,7 +748,8 @@ class BallChainBatch:
         if common.any():
             vk = chain0._wiper_v(x_m[common])
             rows = runs[common]
-            y[common] = rc_filter_uniform_end_v(vk, self.filtered_v[rows], t_end - t0, self.tau_s[rows])
+            tau = self.tau_s[rows] if self._one_tau_s is None else self._one_tau_s
+            y[common] = rc_filter_uniform_end_v(vk, self.filtered_v[rows], t_end - t0, tau)
         readings = np.empty(len(runs))
         if common.any():
             readings[common] = adc_quantize_v(y[common], self.params.daq)
