@@ -66,7 +66,7 @@ from mujoco import rollout
 from controllers import registry
 from controllers import thesis_numbers as T
 from twin.batch import run_batch
-from twin.engine import RunResult, StateLaw, run_closed_loop
+from twin.engine import RunResult, StateLaw, run_closed_loop, run_on_rig
 from twin.interface import Controller, Telemetry
 from twin.parameters import Parameters
 from twin.plant import Plant
@@ -531,12 +531,12 @@ def bench_view(seconds: float) -> dict[str, float]:
 
 def bench_wire(repeats: int) -> dict[str, float]:
     """Lock-step over loopback UDP per tick against the same episode in process (appendix-sf; target ≤ 2×),
-    best of ``repeats``: ``ballbeam serve`` in its own process, ``twin.remote.run_remote`` here, timed from
+    best of ``repeats``: ``ballbeam serve`` in its own process, ``twin.engine.run_on_rig`` here, timed from
     the handshake to the last sample (the server's start-up is not the session's cost)."""
     import subprocess
     import sys
 
-    from twin.remote import RemoteRig, parse_udp_url, run_remote
+    from twin.remote import RemoteRig, parse_udp_url
 
     serve = [sys.executable, "-m", "twin.app.cli", "serve", "--x0", str(X0_M), "--theta0", str(THETA0_RAD)]
     serve += ["--duration", str(DURATION_S), "--seed", "0", "--wait-client", "60", "--json"]
@@ -549,7 +549,7 @@ def bench_wire(repeats: int) -> dict[str, float]:
         with RemoteRig(host, port) as rig:
             controller = registry.make("appendix-sf", rig.parameters())
             assert isinstance(controller, Controller)
-            ticks = run_remote(controller, rig).log.timem.size
+            ticks = run_on_rig(controller, rig).log.timem.size
         elapsed = time.perf_counter() - start
         server.communicate(timeout=60)
         return elapsed, int(ticks)

@@ -20,6 +20,7 @@ from controllers import registry
 from controllers.thesis_numbers import HARDWARE_STARTS
 from twin import protocol as p
 from twin import serve
+from twin.engine import RunResult, run_on_rig
 from twin.interface import Controller, DaqSample
 from twin.log import THESIS_FIELDS, TRUTH_FIELDS, RunLog
 from twin.remote import (
@@ -28,10 +29,8 @@ from twin.remote import (
     ObserverEvent,
     Refused,
     RemoteRig,
-    RemoteRun,
     held_dac_v,
     open_observer,
-    run_remote,
 )
 from twin.rig import SimRig
 from twin.serve import Server, SessionResult, SessionSettings
@@ -48,12 +47,12 @@ def _same(a: np.ndarray, b: np.ndarray) -> bool:
     return a.shape == b.shape and a.tobytes() == b.tobytes()  # bit for bit
 
 
-def _control(server: Server) -> RemoteRun:
+def _control(server: Server) -> RunResult:
     """The controlling client: appendix-sf on the served rig, to the sample flagged last."""
     with RemoteRig("127.0.0.1", server.port) as rig:
         controller = registry.make("appendix-sf", rig.parameters())
         assert isinstance(controller, Controller)
-        run = run_remote(controller, rig)
+        run = run_on_rig(controller, rig)
     assert run.ended == "last sample"
     return run
 
@@ -296,7 +295,7 @@ def test_an_observer_config_is_the_controllers_but_its_role() -> None:
         with RemoteRig("127.0.0.1", server.port) as rig:
             controller = registry.make("appendix-sf", rig.parameters())
             assert isinstance(controller, Controller)
-            run_remote(controller, rig)
+            run_on_rig(controller, rig)
         assert observer.config is not None
         assert dataclasses.replace(observer.config, role=p.ROLE_CONTROL) == rig.config
         assert observer.until_stop()[-1] == p.Stop(p.STOP_DONE)

@@ -24,12 +24,12 @@ from serving import in_thread, session_of
 from controllers import registry
 from controllers.thesis_numbers import HARDWARE_STARTS
 from twin import protocol as p
-from twin.engine import RunResult, run_closed_loop, update_ticks
+from twin.engine import RunResult, run_closed_loop, run_on_rig, update_ticks
 from twin.interface import Controller
 from twin.links import SERIAL_PEER, SYNC, FrameReader, LinkError, SerialLink, open_link, parse_url
 from twin.log import THESIS_FIELDS, TRUTH_FIELDS, RunLog
 from twin.parameters import Parameters
-from twin.remote import RemoteError, open_remote, run_remote
+from twin.remote import RemoteError, open_remote
 from twin.serve import Server, SessionResult, SessionSettings
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -172,7 +172,7 @@ def _serve_on(
     with in_thread(server) as box:
         with open_remote(f"serial://{client_path}?baud=115200") as rig:
             assert rig.url == f"serial://{client_path}?baud=115200"
-            run = run_remote(_build(name, rig.parameters()), rig)
+            run = run_on_rig(_build(name, rig.parameters()), rig)
     served = session_of(box)
     assert run.ended == "last sample"
     return served, run.log
@@ -372,7 +372,7 @@ def test_real_time_over_a_pty_keeps_the_period_and_reports_the_timing() -> None:
         began = time.perf_counter()
         with in_thread(server) as box, open_remote(f"serial://{path}?baud=115200") as rig:
             assert rig.config.mode == p.MODE_REALTIME
-            run = run_remote(_build("appendix-sf", rig.parameters()), rig)
+            run = run_on_rig(_build("appendix-sf", rig.parameters()), rig)
         wall_s = time.perf_counter() - began
     served = session_of(box)
     n = served.result.log.timem.size

@@ -29,8 +29,9 @@ from twin.app.cli import _connect
 from twin.app.fanout import Runs, Served, run_starts
 from twin.app.montecarlo import MonteCarloSettings, load_spread, run_montecarlo
 from twin.app.sweep import Grid, SweepSettings, point_seeds, run_sweep
+from twin.engine import run_on_rig
 from twin.parameters import Parameters
-from twin.remote import RemoteError, run_remote
+from twin.remote import RemoteError
 from twin.serve import Server, SessionSettings
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -67,7 +68,7 @@ def python_client(
                 # no answer and no STOP: the server hears nothing more; the client starts again at once and is
                 # refused until the dead session has timed out, asking again as run --rig --sessions does
                 continue
-            run = run_remote(controller, rig)
+            run = run_on_rig(controller, rig)
             seen["ended"].append(run.ended)
             try:  # the server's STOP, so that the next HELLO meets the next session
                 while True:

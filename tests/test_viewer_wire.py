@@ -20,9 +20,9 @@ import pytest
 from controllers import registry
 from controllers.thesis_numbers import HARDWARE_STARTS
 from twin import protocol as p
-from twin.engine import run_closed_loop
+from twin.engine import RunResult, run_closed_loop, run_on_rig
 from twin.parameters import Parameters
-from twin.remote import RemoteRig, RemoteRun, run_remote
+from twin.remote import RemoteRig
 from twin.serve import Server, SessionSettings
 from twin.viewer import FRAME_S, LiveTwin
 from twin.viewer.common import _markdown_text
@@ -76,13 +76,13 @@ def _frames_until(live: LiveTwin, condition, limit: int = 250) -> int:  # type: 
 
 
 @contextmanager
-def _python_client(port: int) -> Iterator[dict[str, RemoteRun]]:
+def _python_client(port: int) -> Iterator[dict[str, RunResult]]:
     """``appendix-sf`` through ``RemoteRig`` in a thread (the ``run --rig`` path); its run after the block."""
-    box: dict[str, RemoteRun] = {}
+    box: dict[str, RunResult] = {}
 
     def client() -> None:
         with RemoteRig("127.0.0.1", port, client="pytest appendix-sf") as rig:
-            box["run"] = run_remote(registry.make("appendix-sf", rig.parameters()), rig)
+            box["run"] = run_on_rig(registry.make("appendix-sf", rig.parameters()), rig)
 
     thread = threading.Thread(target=client, daemon=True)
     thread.start()
@@ -305,11 +305,11 @@ def test_the_view_serves_with_a_warning_beyond_loopback_and_stops_its_client_at_
     from twin.viewer import serve
 
     udp = _free_port(socket.SOCK_DGRAM)
-    box: dict[str, RemoteRun] = {}
+    box: dict[str, RunResult] = {}
 
     def client() -> None:  # repeats HELLO until the view listens, then runs until the view's STOP
         with RemoteRig("127.0.0.1", udp, client="pytest", connect_timeout_s=20.0) as rig:
-            box["run"] = run_remote(registry.make("appendix-sf", rig.parameters()), rig)
+            box["run"] = run_on_rig(registry.make("appendix-sf", rig.parameters()), rig)
 
     thread = threading.Thread(target=client, daemon=True)
     thread.start()

@@ -25,11 +25,11 @@ from controllers import registry
 from controllers.thesis_numbers import HARDWARE_STARTS
 from twin import protocol as p
 from twin.converters import ball_position_m, beam_angle_rad, clip_command_v, dac_command_v
-from twin.engine import RunResult, run_closed_loop
+from twin.engine import RunResult, run_closed_loop, run_on_rig
 from twin.interface import Controller, DaqSample
 from twin.log import THESIS_FIELDS, TRUTH_FIELDS, RunLog
 from twin.parameters import Parameters
-from twin.remote import RemoteError, RemoteRig, run_remote
+from twin.remote import RemoteError, RemoteRig
 from twin.serve import ServeError, Server, SessionResult, SessionSettings
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -103,7 +103,7 @@ def _lockstep_case(name: str, x0: float, th0: float, seed: int, duration_s: floa
     settings = SessionSettings(x0_m=x0, theta0_rad=th0, seed=seed, duration_s=duration_s, wait_client_s=10.0)
     with _serving(settings) as (server, box), RemoteRig("127.0.0.1", server.port) as rig:
         assert rig.software == params.software
-        run = run_remote(_build(name, rig.parameters()), rig)
+        run = run_on_rig(_build(name, rig.parameters()), rig)
     served = _session(box)
     ref = run_closed_loop(_build(name, params), x0_m=x0, theta0_rad=th0, duration_s=duration_s, seed=seed)
     assert run.ended == "last sample"
@@ -258,7 +258,7 @@ def test_a_second_controlling_client_is_refused() -> None:
     with _serving(settings) as (server, box), RemoteRig("127.0.0.1", server.port) as rig:
         with pytest.raises(RemoteError, match="refused"):
             RemoteRig("127.0.0.1", server.port, connect_timeout_s=2.0)
-        run_remote(_build("appendix-sf", rig.parameters()), rig)
+        run_on_rig(_build("appendix-sf", rig.parameters()), rig)
     assert _session(box).counts.refused_clients == 1
 
 
@@ -404,7 +404,7 @@ def test_a_reconnect_gets_a_new_session_and_the_old_ones_datagrams_are_dropped()
             ids.append(rig.session)
             if len(ids) == 2:
                 rig.sock.send(p.encode(p.Command(1, 2.5), ids[0]))  # a late datagram of the first session
-            run = run_remote(_build("appendix-sf", rig.parameters()), rig)
+            run = run_on_rig(_build("appendix-sf", rig.parameters()), rig)
             assert run.ended == "last sample"
     thread.join(10.0)
     server.close()
@@ -424,7 +424,7 @@ def test_real_time_session_reports_the_client_timing() -> None:
     )
     began = time.perf_counter()
     with _serving(settings) as (server, box), RemoteRig("127.0.0.1", server.port) as rig:
-        run = run_remote(_build("appendix-sf", rig.parameters()), rig)
+        run = run_on_rig(_build("appendix-sf", rig.parameters()), rig)
     wall_s = time.perf_counter() - began
     served = _session(box)
     n = served.result.log.timem.size
@@ -497,7 +497,7 @@ def test_a_ten_second_flood_leaves_the_session_alive_and_its_state_unchanged() -
                 text=True,
             )
             began = time.monotonic()
-            run = run_remote(_Paced(_build("appendix-clp", rig.parameters()), rig.period_s), rig)
+            run = run_on_rig(_Paced(_build("appendix-clp", rig.parameters()), rig.period_s), rig)
             wall_s = time.monotonic() - began
         out, _ = flooder.communicate(timeout=30)
     flooded = int(out)

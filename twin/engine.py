@@ -20,32 +20,41 @@ from __future__ import annotations
 import itertools
 import math
 import sys
-from collections.abc import Callable, Mapping
+import time
+from array import array
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
 import numpy as np
 
 from twin.guard import Fault, Guard, describe, install_interrupt_handler, is_interrupt, safe_name
-from twin.interface import Controller, DaqSample, Telemetry
+from twin.interface import Controller, DaqSample, Rig, RigEnded, Telemetry
 from twin.log import THESIS_FIELDS, TRUTH_FIELDS, RunLog
 from twin.parameters import Daq, Parameters
 from twin.physics import PhysicsBlock
-from twin.rig import PlantKind, RigError, SimRig, make_rig, whole_steps
-from twin.verdict import Criteria, Verdict, evaluate
+from twin.realtime import TickTiming, tick_timing
+from twin.rig import PlantKind, RigError, make_rig, whole_steps
+from twin.verdict import Criteria, Verdict, evaluate, evaluate_measured
 
 __all__ = [
     "Catalogue",
     "CatalogueEntry",
     "ClosedLoop",
     "ControllerError",
+    "ENDED_BALL_LOST",
+    "ENDED_LAST_SAMPLE",
+    "ENDED_TICKS",
     "RunResult",
+    "TrueState",
+    "arrival_timing",
     "block_peak_abs_theta_rad",
     "StateLaw",
     "check_period_s",
     "checked_start",
     "checked_update",
     "run_closed_loop",
+    "run_on_rig",
     "update_ticks",
 ]
 
@@ -220,13 +229,50 @@ def _where(where: str | Callable[[], str]) -> str:
     return where if isinstance(where, str) else where()
 
 
-class RunResult:
-    """One run's verdict and, when it was recorded, its log (``twin.batch.run_batch`` may keep verdicts only)."""
+# How a run ended (``ClosedLoop.run``); otherwise it is the message of the rig that ended the session.
+ENDED_TICKS = "all ticks"
+ENDED_BALL_LOST = "ball lost"
+ENDED_LAST_SAMPLE = "last sample"
 
-    def __init__(self, controller: str, log: RunLog | None, verdict: Verdict) -> None:
+
+def arrival_timing(arrivals_s: Sequence[float], compute_s: Sequence[float], period_s: float) -> TickTiming:
+    """Tick timing from the wall-clock arrivals of the blocks after the first: jitter is an arrival's
+    lateness against the first's + k·period (negative: early), compute the controller's update and write."""
+    t = np.asarray(arrivals_s, dtype=float)
+    late_s = (t - t[0] - np.arange(t.size) * period_s).tolist() if t.size else []
+    return tick_timing(late_s, compute_s, period_s)
+
+
+class RunResult:
+    """One run: its verdict and, when it was recorded, its log (``twin.batch.run_batch`` may keep verdicts
+    only); how it ended (``ClosedLoop.run``) and, for a timed run on a remote rig, how it kept the period.
+    ``verdict`` may be given as a function, called when the verdict is first read (a run judged from its
+    measured volts pays for it only when asked)."""
+
+    def __init__(
+        self,
+        controller: str,
+        log: RunLog | None,
+        verdict: Verdict | Callable[[], Verdict],
+        *,
+        ended: str = ENDED_TICKS,
+        timing: TickTiming | None = None,
+    ) -> None:
         self.controller = controller
         self._log = log
-        self.verdict = verdict
+        self._verdict = verdict
+        self.ended = ended
+        self.timing = timing
+
+    @property
+    def verdict(self) -> Verdict:
+        if not isinstance(self._verdict, Verdict):
+            self._verdict = self._verdict()
+        return self._verdict
+
+    @verdict.setter
+    def verdict(self, value: Verdict) -> None:  # a verdict judged again (about a setpoint)
+        self._verdict = value
 
     @property
     def recorded(self) -> bool:
@@ -240,7 +286,8 @@ class RunResult:
 
     def __repr__(self) -> str:
         return (
-            f"RunResult(controller={self.controller!r}, recorded={self.recorded}, verdict={self.verdict!r})"
+            f"RunResult(controller={self.controller!r}, recorded={self.recorded}, ended={self.ended!r}, "
+            f"verdict={self.verdict!r})"
         )
 
 
@@ -269,15 +316,40 @@ def block_peak_abs_theta_rad(block: PhysicsBlock | None) -> float:
     return 0.0
 
 
+@runtime_checkable
+class TrueState(Protocol):
+    """What a simulated rig offers beyond the hardware contract (``twin.rig.SimRig`` does): the true state
+    for the log and the verdict. A rig without it (``RemoteRig``, a hardware backend) is judged from the
+    volts it measured (``twin.verdict.evaluate_measured``). Never passed to a controller."""
+
+    last_block: PhysicsBlock | None  # the physics of the block just read
+
+    @property
+    def time_s(self) -> float: ...
+
+    @property
+    def motor_volts_v(self) -> float: ...
+
+    @property
+    def ball_lost_time_s(self) -> float | None: ...
+
+    def true_state(self) -> np.ndarray: ...
+
+    def true_state_row(self) -> np.ndarray | None: ...
+
+    def true_states_of_rows(self, rows: np.ndarray) -> np.ndarray: ...
+
+
 class _Recorder:
     """The log's columns. A tick is appended as one tuple of Python floats (per tick, the cost is the number
     of numpy calls, and a tuple needs none) and written into the table when the columns are read
     (``flush``); ``cols`` are views of the table's columns. The true state of a tick on the MuJoCo plant is
     kept as a copy of its state row and computed for all such ticks at once in ``flush``: the same bits
-    (``SimRig.true_states_of_rows``), a fraction of the cost."""
+    (``SimRig.true_states_of_rows``), a fraction of the cost. Without ``truth`` (a rig that has none) the
+    truth columns stay empty in the log."""
 
-    def __init__(self, capacity: int, rig: SimRig) -> None:
-        self.rig = rig
+    def __init__(self, capacity: int, truth: TrueState | None) -> None:
+        self.truth = truth
         self.flushed = 0
         self.table = np.zeros((capacity, len(_COLUMNS)))
         self.cols = {name: self.table[:, j] for j, name in enumerate(_COLUMNS)}
@@ -291,14 +363,18 @@ class _Recorder:
         """Ticks recorded."""
         return self.flushed + len(self._ticks)
 
-    def add(self, sample: DaqSample, command_v: float, tel: Telemetry, rig: SimRig) -> None:
-        state_row = rig.true_state_row()
-        if state_row is None:
-            time_s, state = rig.time_s, rig.true_state().tolist()
-        else:  # the row holds the simulation clock and the state: both computed in ``flush``
-            self._state_rows.append((self.n, state_row.copy()))
-            time_s, state = math.nan, _NAN4
-        peak = block_peak_abs_theta_rad(rig.last_block)
+    def add(self, sample: DaqSample, command_v: float, tel: Telemetry, ball_lost: bool) -> None:
+        truth = self.truth
+        if truth is None:
+            time_s, state, motor_v, peak = math.nan, _NAN4, math.nan, 0.0
+        else:
+            state_row = truth.true_state_row()
+            if state_row is None:
+                time_s, state = truth.time_s, truth.true_state().tolist()
+            else:  # the row holds the simulation clock and the state: both computed in ``flush``
+                self._state_rows.append((self.n, state_row.copy()))
+                time_s, state = math.nan, _NAN4
+            motor_v, peak = truth.motor_volts_v, block_peak_abs_theta_rad(truth.last_block)
         # timem, datam1, datam2, aout, x1…x4, u, uhesap, true_time_s, true state, motor_volts_v (_COLUMNS),
         # then the lost flag and the peak |θ|
         self._ticks.append(
@@ -312,8 +388,8 @@ class _Recorder:
                 tel.u_computed,
                 time_s,
                 *state,
-                rig.motor_volts_v,
-                rig.ball_lost,
+                motor_v,
+                ball_lost,
                 peak,
             )
         )
@@ -337,9 +413,10 @@ class _Recorder:
         self.lost[start:stop] = values[:, -2] != 0.0
         self.peak_theta[start:stop] = values[:, -1]
         if self._state_rows:
+            assert self.truth is not None  # only a rig with the true state gives state rows
             ticks = [k for k, _ in self._state_rows]
             rows = np.array([row for _, row in self._state_rows])
-            self.table[ticks, _TRUE_STATE] = self.rig.true_states_of_rows(rows)
+            self.table[ticks, _TRUE_STATE] = self.truth.true_states_of_rows(rows)
             self.table[ticks, _TRUE_TIME] = rows[:, 0]  # the row's time is the simulation clock, ``time_s``
         self._ticks, self._state_rows = [], []
         self.flushed = stop
@@ -347,6 +424,8 @@ class _Recorder:
     def log(self) -> RunLog:
         self.flush()
         n = self.n
+        if self.truth is None:  # the rig software's log: what the rig measured and the controller logged
+            return RunLog(**{name: self.cols[name][:n].copy() for name in THESIS_FIELDS})
         return RunLog(
             **{name: col[:n].copy() for name, col in self.cols.items()}, ball_lost=self.lost[:n].copy()
         )
@@ -370,8 +449,9 @@ class _StateLawVolts:
     that takes them too (``motor_volts_of_floats``, as ``controllers.loop.TrueStateLaw``) gets them without an
     array."""
 
-    def __init__(self, loop: ClosedLoop) -> None:
+    def __init__(self, loop: ClosedLoop, truth: TrueState) -> None:
         self.loop = loop
+        self.truth = truth
         law = loop.controller
         self._motor_volts = law.motor_volts  # type: ignore[union-attr]
         self._motor_volts_of_floats = getattr(law, "motor_volts_of_floats", None)
@@ -386,49 +466,53 @@ class _StateLawVolts:
             else:
                 volts = float(self._motor_volts_of_floats(x_m, theta_rad, xdot_m_s, thetadot_rad_s))
         except BaseException as exc:  # noqa: BLE001 - only the process's own Ctrl-C passes
-            loop = self.loop
             if is_interrupt(exc):
                 raise
             raise ControllerError(
-                f"{loop.name} raised {type(exc).__name__} at t = {loop.rig.time_s:.3f} s: {exc}"
+                f"{self.loop.name} raised {type(exc).__name__} at t = {self.truth.time_s:.3f} s: {exc}"
             ) from exc
         if not math.isfinite(volts):
-            loop = self.loop
-            raise ControllerError(f"{loop.name} returned {volts!r} volts at t = {loop.rig.time_s:.3f} s")
+            raise ControllerError(
+                f"{self.loop.name} returned {volts!r} volts at t = {self.truth.time_s:.3f} s"
+            )
         return volts
 
 
 class ClosedLoop:
-    """One closed-loop run on a simulated rig, tick by tick (the rig must already be ``reset``)."""
+    """The closed loop: one controller on one rig, tick by tick, over the ``Rig`` contract only (the rig must
+    already be ``reset``). Every run goes through it: ``ballbeam run`` in process and on a remote rig, the
+    served twin, the live view (a tick per frame), the environment. The true state is recorded when the rig
+    offers it (``TrueState``); a state law needs it."""
 
     def __init__(
         self,
-        rig: SimRig,
+        rig: Rig,
         controller: Controller | StateLaw,
         *,
         record: bool = True,
         record_limit: int | None = None,
         controller_timeout_s: float | None = None,
+        params: Parameters | None = None,
+        timed: bool = False,
     ) -> None:
         """``record_limit``: the most ticks recorded (a long live session keeps its first ones and its
         memory bounded); ``None`` records every tick. ``controller_timeout_s``: a controller's update that
         does not return within it fails the run (default ``twin.guard.update_budget_s``; ``math.inf``:
-        no watchdog); its start gets at least ``twin.guard.FIRST_CALL_BUDGET_S``."""
+        no watchdog); its start gets at least ``twin.guard.FIRST_CALL_BUDGET_S``. ``params``: the rig's
+        description for the command's range check and a measured verdict (default ``rig.parameters()``).
+        ``timed``: the wall-clock arrival of each block and the controller's time are measured
+        (``arrival_timing``: a remote rig's real-time session)."""
         self.rig = rig
         self.controller = controller
+        self.params = params if params is not None else rig.parameters()
+        self.truth: TrueState | None = rig if isinstance(rig, TrueState) else None
         install_interrupt_handler()  # before any user code runs: its KeyboardInterrupt is not the Ctrl-C
         # (a Controller first: the protocol's check reads attributes, which user code may make raise)
         self.is_state_law = not isinstance(controller, Controller) and isinstance(controller, StateLaw)
         period_s = check_period_s(controller)
         self._name = safe_name(controller)  # read once: user code's property may raise
         if self.is_state_law:
-            law_steps = whole_steps(period_s, rig.params.physics.timestep_s, f"{self._name} period_s")
-            tick_steps = whole_steps(rig.period_s, rig.params.physics.timestep_s, "daq.period_s")
-            if law_steps < 1 or tick_steps % law_steps:
-                raise RigError(
-                    f"{self._name}: period_s = {period_s!r} s must divide daq.period_s = "
-                    f"{rig.period_s!r} s into whole physics steps"
-                )
+            self._check_state_law(period_s)
         elif abs(period_s - rig.period_s) > _PERIOD_TOLERANCE_S:
             raise RigError(
                 f"{self._name}: period_s = {period_s!r} s does not match the DAQ's "
@@ -436,11 +520,31 @@ class ClosedLoop:
                 f"file) or change the controller"
             )
         self.guard = None if self.is_state_law else Guard.for_period(rig.period_s, controller_timeout_s)
-        self.recorder = _Recorder(256, rig) if record else None
+        self.recorder = _Recorder(256, self.truth) if record else None
         self.record_limit = record_limit
         self.last_sample: DaqSample | None = None
         self.command_v = rig.command_v
         self.started = False
+        self.reads = 0  # blocks read: the tick k that messages name
+        self._arrivals: array[float] | None = array("d") if timed else None
+        self._compute: array[float] = array("d")
+
+    def _check_state_law(self, period_s: float) -> None:
+        read_with_state_law = getattr(self.rig, "read_with_state_law", None)
+        if self.truth is None or read_with_state_law is None:
+            raise RigError(
+                f"{self._name} is a law on the true state (simulation only): it cannot drive a rig"
+            )
+        dt = self.params.physics.timestep_s
+        law_steps = whole_steps(period_s, dt, f"{self._name} period_s")
+        tick_steps = whole_steps(self.rig.period_s, dt, "daq.period_s")
+        if law_steps < 1 or tick_steps % law_steps:
+            raise RigError(
+                f"{self._name}: period_s = {period_s!r} s must divide daq.period_s = "
+                f"{self.rig.period_s!r} s into whole physics steps"
+            )
+        self._read_with_law: Callable[..., DaqSample] = read_with_state_law
+        self._law_volts = _StateLawVolts(self, self.truth)
 
     @property
     def name(self) -> str:
@@ -452,9 +556,14 @@ class ClosedLoop:
         r = self.recorder
         return r is not None and (self.record_limit is None or r.n < self.record_limit)
 
+    def _read(self) -> DaqSample:
+        sample = self.rig.read()
+        self.reads += 1
+        return sample
+
     def start(self) -> None:
         """The software's Start/Clear Buffer phase: the held rig's block starts the controller."""
-        sample = self.rig.read()
+        sample = self._read()
         if self.is_state_law:
             try:
                 self.controller.reset()  # type: ignore[union-attr]
@@ -465,7 +574,7 @@ class ClosedLoop:
         self.last_sample = sample
         self.started = True
         if self.recorder is not None and self.recording:
-            self.recorder.add(sample, self.rig.command_v, self.controller.telemetry, self.rig)
+            self.recorder.add(sample, self.rig.command_v, self.controller.telemetry, self.rig.ball_lost)
 
     def tick(self) -> None:
         """One control period: read a block, run the controller, write its command."""
@@ -473,55 +582,109 @@ class ClosedLoop:
             self.start()
         rig = self.rig
         if self.is_state_law:
-            law = self.controller
-            if rig.ticks < 2:  # block 0 ends when the first command reaches the amplifier
-                sample = rig.read()
+            if self.reads < 2:  # block 0 ends when the first command reaches the amplifier
+                sample = self._read()
             else:
-                sample = rig.read_with_state_law(self._law_volts, law.period_s)
+                sample = self._read_with_law(self._law_volts, self.controller.period_s)
+                self.reads += 1
             command = rig.command_v
         else:
-            sample = rig.read()
+            sample = self._read()
+            arrivals = self._arrivals
+            if arrivals is not None:
+                arrivals.append(time.perf_counter())
             command = checked_update(
                 self.controller,  # type: ignore[arg-type]
                 sample,
-                lambda: f"at tick k = {rig.ticks} (t = {sample.time_s:.3f} s)",
+                lambda: f"at tick k = {self.reads} (t = {sample.time_s:.3f} s)",
                 self.guard,
-                rig.params.daq,
+                self.params.daq,
             )
             rig.write(command)
+            if arrivals is not None:
+                self._compute.append(time.perf_counter() - arrivals[-1])
         self.last_sample = sample
         self.command_v = float(command)
         if self.recorder is not None and self.recording:
-            self.recorder.add(sample, self.command_v, self.controller.telemetry, rig)
+            self.recorder.add(sample, self.command_v, self.controller.telemetry, rig.ball_lost)
 
-    @property
-    def _law_volts(self) -> _StateLawVolts:
-        """The state law's terminal volts as the rig asks for them (``SimRig.read_with_state_law``)."""
-        return _StateLawVolts(self)
+    def run(
+        self, ticks: int | None = None, *, pacer: Pacer | None = None, stop_when_lost: bool = True
+    ) -> str:
+        """The run from here: ``start`` when not started, then ``ticks`` ticks (``None``: until the rig's
+        last sample), each paced by ``pacer``; ``stop_when_lost`` ends it at the tick the rig reports the
+        ball lost. How it ended: ``ENDED_TICKS``, ``ENDED_BALL_LOST``, ``ENDED_LAST_SAMPLE`` or the message
+        of the rig that ended the session (``RigEnded``). A controller's failure is a ``ControllerError``."""
+        if not self.started:
+            self.start()
+        rig = self.rig
+        counter = itertools.count() if ticks is None else range(ticks)
+        try:
+            for k in counter:
+                if pacer is not None:
+                    pacer.wait(k)
+                self.tick()
+                if pacer is not None:
+                    pacer.done()
+                if stop_when_lost and rig.ball_lost:
+                    return ENDED_BALL_LOST
+                if rig.is_last:
+                    return ENDED_LAST_SAMPLE
+        except RigEnded as exc:
+            return str(exc)
+        return ENDED_TICKS
+
+    def arrival_timing(self) -> TickTiming | None:
+        """How the blocks kept the period on the wall clock (``timed`` loops; else ``None``)."""
+        if self._arrivals is None:
+            return None
+        return arrival_timing(self._arrivals, self._compute, self.rig.period_s)
 
     def log(self) -> RunLog:
         if self.recorder is None:
             raise RuntimeError("this closed loop was built with record=False")
         return self.recorder.log()
 
-    def verdict(self, x0_m: float, criteria: Criteria | None = None, *, x_ref_m: float = 0.0) -> Verdict:
-        """The verdict of the run so far (from the recorded true state), judged about the ball position
-        ``x_ref_m`` (a setpoint; the offsets and the settling band are measured from it)."""
+    def verdict(
+        self, x0_m: float | None = None, criteria: Criteria | None = None, *, x_ref_m: float = 0.0
+    ) -> Verdict:
+        """The verdict of the run so far, judged about the ball position ``x_ref_m`` (a setpoint; the offsets
+        and the settling band are measured from it): from the recorded true state when the rig gave it
+        (``x0_m`` default: the held state's), else from the measured volts through the rig's calibration
+        (``x0_m`` default: the first block's reading)."""
         if self.recorder is None:
             raise RuntimeError("this closed loop was built with record=False")
         r, n = self.recorder, self.recorder.n
         r.flush()
+        if self.truth is None:
+            return evaluate_measured(r.log(), self.params, x0_m=x0_m, x_ref_m=x_ref_m, criteria=criteria)
         return judge(
-            self.rig.params,
+            self.params,
             r.cols["true_time_s"][:n],
             r.cols["true_x_m"][:n],
             r.cols["true_theta_rad"][:n],
             r.cols["motor_volts_v"][:n],
             r.peak_theta[:n],
-            x0_m=x0_m,
-            ball_lost_time_s=self.rig.ball_lost_time_s,
+            x0_m=float(r.cols["true_x_m"][0]) if x0_m is None else x0_m,
+            ball_lost_time_s=self.truth.ball_lost_time_s,
             criteria=criteria,
             x_ref_m=x_ref_m,
+        )
+
+    def result(
+        self, ended: str = ENDED_TICKS, x0_m: float | None = None, criteria: Criteria | None = None
+    ) -> RunResult:
+        """The run's log, verdict (``verdict``), how it ended and, for a timed loop, its timing."""
+        log = self.log()
+        if self.truth is None:  # judged from the measured volts, when asked
+            params = self.params
+
+            def verdict() -> Verdict:
+                return evaluate_measured(log, params, x0_m=x0_m, criteria=criteria)
+
+            return RunResult(self.name, log, verdict, ended=ended, timing=self.arrival_timing())
+        return RunResult(
+            self.name, log, self.verdict(x0_m, criteria), ended=ended, timing=self.arrival_timing()
         )
 
 
@@ -588,13 +751,22 @@ def run_closed_loop(
     rig = make_rig(p, plant=plant, ideal_sensors=ideal_sensors, seed=seed, noise=noise)
     rig.reset(x0_m, theta0_rad)
     loop = ClosedLoop(rig, controller, controller_timeout_s=controller_timeout_s)
-    loop.start()
-    for k in range(update_ticks(duration_s, rig.params)):
-        if pacer is not None:
-            pacer.wait(k)
-        loop.tick()
-        if pacer is not None:
-            pacer.done()
-        if stop_when_lost and rig.ball_lost:
-            break
-    return RunResult(controller=loop.name, log=loop.log(), verdict=loop.verdict(x0_m, criteria))
+    ended = loop.run(update_ticks(duration_s, rig.params), pacer=pacer, stop_when_lost=stop_when_lost)
+    return loop.result(ended, x0_m, criteria)
+
+
+def run_on_rig(
+    controller: Controller,
+    rig: Rig,
+    *,
+    params: Parameters | None = None,
+    controller_timeout_s: float | None = None,
+) -> RunResult:
+    """``controller`` on a rig that runs its own session (a ``RemoteRig``: the served twin, a rig's firmware)
+    until the sample flagged last, a STOP or the rig going silent: the one loop, timed, judged from the
+    measured volts unless the rig gives the true state. ``params``: the rig's description (default
+    ``rig.parameters()``)."""
+    loop = ClosedLoop(rig, controller, params=params, controller_timeout_s=controller_timeout_s, timed=True)
+    # The rig ends the session (its last sample after a lost ball, when it stops on one): the loop follows.
+    ended = loop.run(None, stop_when_lost=False)
+    return loop.result(ended)

@@ -1,8 +1,9 @@
 """The two contracts of the rig, free of MuJoCo so that hardware code can import them alone.
 
 ``Rig`` is what a controller talks to: the I/O card (raw volts in, a DAC command out, one block per tick).
-``SimRig`` (twin.rig) implements it on the simulated rigs; a hardware backend implements the same three calls
-on the PCI-1712 (``getdata``/``putsample`` in the thesis's MATLAB software, appendix A).
+``SimRig`` (twin.rig) implements it on the simulated rigs, ``RemoteRig`` (twin.remote) over protocol 1; a
+hardware backend implements the same calls on the PCI-1712 (``getdata``/``putsample`` in the thesis's
+MATLAB software, appendix A). The one closed loop (``twin.engine.ClosedLoop``) needs nothing else of a rig.
 
 ``Controller`` is what runs at each tick: ``start`` once with the first block (the software's Start and
 Clear Buffer phase, which sets x1(1), x2(1)), then ``update`` with each block, returning the DAC command.
@@ -16,11 +17,14 @@ from __future__ import annotations
 import math
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
-from typing import Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
 import numpy as np
 
-__all__ = ["DaqSample", "Rig", "Controller", "Setpoint", "Telemetry"]
+if TYPE_CHECKING:  # the parameters are a plain-Python module, imported lazily to keep this one bare
+    from twin.parameters import Parameters
+
+__all__ = ["DaqSample", "Rig", "RigEnded", "Controller", "Setpoint", "Telemetry"]
 
 
 @dataclass(frozen=True)
@@ -32,8 +36,20 @@ class DaqSample:
     angle_v: float  # angle channel, mean of the block: mean(data(:,2)), ADC volts
 
 
+class RigEnded(Exception):
+    """Raised by a rig's ``read`` or ``write`` when the rig ends the session (it sent STOP, went silent): the
+    closed loop ends the run there and reports the message; nothing of the run is lost."""
+
+
 class Rig(ABC):
-    """The I/O card as a controller sees it, on the twin or on the hardware."""
+    """The I/O card as a controller sees it, on the twin or on the hardware.
+
+    What a new rig implements: ``period_s``, ``read``, ``write``, ``parameters`` and the attribute
+    ``command_v``; the flags ``held``, ``ball_lost`` and ``is_last`` when the rig reports them (they default
+    to False). A simulated rig may offer the true state besides (``twin.engine.TrueState``): the loop records
+    it when present, and judges from the measured volts when not."""
+
+    command_v: float  # the DAC's value as last set: the zero command until the first ``write``
 
     @property
     @abstractmethod
@@ -47,6 +63,26 @@ class Rig(ABC):
     @abstractmethod
     def write(self, command_v: float) -> None:
         """Set the analog output (0–5 V; the amplifier maps 1.25/2.5/3.75 V to −12/0/+12 V)."""
+
+    @abstractmethod
+    def parameters(self) -> Parameters:
+        """The rig as far as it describes itself: its period, DAC range and zero command, software
+        calibration (the guard's range check, the log and a verdict from the measured volts read them)."""
+
+    @property
+    def held(self) -> bool:
+        """Whether the block just read was taken while the rig was still held at its initial state."""
+        return False
+
+    @property
+    def ball_lost(self) -> bool:
+        """Whether the rig reports the ball lost (it left the track)."""
+        return False
+
+    @property
+    def is_last(self) -> bool:
+        """Whether the block just read is the session's last: the loop ends after answering it."""
+        return False
 
 
 def _nan4() -> np.ndarray:

@@ -1,6 +1,6 @@
 """``RemoteRig``: a ``Rig`` over protocol 1 (docs/protocol.md) on UDP or a serial line (``twin.links``) —
-the served twin or any rig whose firmware speaks it — and ``run_remote``, a controller's run on it with
-the log the rig software keeps.
+the served twin or any rig whose firmware speaks it. A controller runs on it in the one closed loop
+(``twin.engine.run_on_rig``), with the log the rig software keeps.
 
 The handshake repeats HELLO until CONFIG comes (bounded: ``connect_timeout_s``); ``read`` waits at most
 ``timeout_s`` for the next SAMPLE; a server that disappears is a ``RemoteError`` within that time, never a
@@ -15,8 +15,7 @@ import queue
 import socket
 import threading
 import time
-from array import array
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
 from urllib.parse import urlsplit
@@ -24,13 +23,9 @@ from urllib.parse import urlsplit
 import numpy as np
 
 from twin import protocol as p
-from twin.engine import checked_start, checked_update
-from twin.guard import Guard
-from twin.interface import Controller, DaqSample, Rig
+from twin.interface import DaqSample, Rig, RigEnded
 from twin.links import Link, LinkError, OverLink, UdpLink, open_link, parse_url
-from twin.log import RunLog
 from twin.parameters import Parameters, SoftwareCalibration
-from twin.realtime import TickTiming, tick_timing
 from twin.rig import RigError
 
 __all__ = [
@@ -40,23 +35,21 @@ __all__ = [
     "ObserverEvent",
     "RemoteError",
     "RemoteRig",
-    "RemoteRun",
     "Refused",
     "SessionEnded",
-    "arrival_timing",
     "block_dac_v",
     "held_dac_v",
     "open_observer",
     "open_remote",
     "parse_udp_url",
-    "run_remote",
 ]
 
 _HELLO_INTERVAL_S = 0.2  # the doc's HELLO repetition
 
 
-class RemoteError(RigError):
-    """The remote rig cannot be reached, refused us, or went silent; the message names it and the wait."""
+class RemoteError(RigError, RigEnded):
+    """The remote rig cannot be reached, refused us, or went silent; the message names it and the wait (in a
+    run: the session ended, ``twin.interface.RigEnded``)."""
 
 
 class Refused(RemoteError):
@@ -224,71 +217,6 @@ class RemoteRig(OverLink, Rig):
     @property
     def is_last(self) -> bool:
         return self._flag(p.FLAG_LAST)
-
-
-@dataclass
-class RemoteRun:
-    """A controller's run on a remote rig: the log the rig software keeps (no true state) and how it ended."""
-
-    controller: str
-    log: RunLog
-    ended: str  # "last sample", or the STOP / error that ended it
-    timing: TickTiming | None = None  # real time: how the samples kept the period, as ``run --realtime``
-
-
-_LOG_NAMES = ("timem", "datam1", "datam2", "aout", "x1", "x2", "x3", "x4", "u", "uhesap")
-_LOG_WIDTH = len(_LOG_NAMES)
-
-
-def arrival_timing(arrivals_s: Sequence[float], compute_s: Sequence[float], period_s: float) -> TickTiming:
-    """Tick timing from the wall-clock arrivals of the samples after the first: jitter is an arrival's
-    lateness against the first's + k·period (negative: early), compute the controller's update and write."""
-    t = np.asarray(arrivals_s, dtype=float)
-    late_s = (t - t[0] - np.arange(t.size) * period_s).tolist() if t.size else []
-    return tick_timing(late_s, compute_s, period_s)
-
-
-def run_remote(
-    controller: Controller, rig: RemoteRig, *, controller_timeout_s: float | None = None
-) -> RemoteRun:
-    """``controller`` on ``rig`` as the engine runs it (``start`` on the held block, then ``update`` and
-    ``write`` every block) until the sample flagged last, a STOP or the rig going silent."""
-    guard = Guard.for_period(rig.period_s, controller_timeout_s)
-    daq = rig.parameters().daq  # the command's range check of an in-process run, on the rig's DAC
-    # Flat arrays of doubles: a long real-time session costs 80 B of log and 16 B of timing per tick.
-    rows = array("d")
-
-    def add(sample: DaqSample, command_v: float) -> None:
-        tel = controller.telemetry
-        est = np.broadcast_to(np.asarray(tel.estimate, dtype=float), (4,)).tolist()
-        rows.extend((sample.time_s, sample.ball_v, sample.angle_v, command_v, *est, tel.u, tel.u_computed))
-
-    ended = "last sample"
-    arrivals = array("d")
-    compute = array("d")
-    sample = rig.read()
-    checked_start(controller, sample, guard=guard)
-    add(sample, rig.command_v)
-    try:
-        while True:
-            sample = rig.read()
-            arrivals.append(time.perf_counter())
-            k = len(rows) // _LOG_WIDTH
-            where = f"at tick k = {k} (t = {sample.time_s:.3f} s)"  # a string per tick: the network dominates
-            command = checked_update(controller, sample, where, guard, daq)
-            rig.write(command)
-            compute.append(time.perf_counter() - arrivals[-1])
-            add(sample, command)
-            if rig.is_last:
-                break
-    except RemoteError as exc:
-        ended = str(exc)
-    table = np.frombuffer(rows, dtype=float).reshape(-1, _LOG_WIDTH)
-    log = RunLog(**{name: table[:, j].copy() for j, name in enumerate(_LOG_NAMES)})
-    timing = arrival_timing(arrivals, compute, rig.period_s) if rig.config.mode == p.MODE_REALTIME else None
-    return RemoteRun(
-        controller=getattr(controller, "name", "controller"), log=log, ended=ended, timing=timing
-    )
 
 
 # --- an observer ---------------------------------------------------------------------------------------

@@ -116,6 +116,9 @@ class SimRig(Rig):
     def read(self) -> DaqSample:
         return self._read(None)
 
+    def parameters(self) -> Parameters:
+        return self.params
+
     def write(self, command_v: float) -> None:
         if not isinstance(command_v, (int, float, np.floating, np.integer)) or not math.isfinite(command_v):
             raise ValueError(f"command_v = {command_v!r}: the DAC command must be a finite number of volts")

@@ -34,7 +34,7 @@ from collections.abc import Callable, Hashable
 from dataclasses import asdict, dataclass, field
 
 from twin import protocol as p
-from twin.engine import ClosedLoop, ControllerError, RunResult, update_ticks
+from twin.engine import ENDED_BALL_LOST, ClosedLoop, ControllerError, RunResult, update_ticks
 from twin.interface import Controller, DaqSample
 from twin.links import Link, LinkError, OverLink, UdpLink
 from twin.parameters import Parameters
@@ -263,16 +263,8 @@ class Server(OverLink):
         reason, detail = p.STOP_DONE, ""
         try:
             try:
-                loop.start()
-                for k in range(self._n_ticks):  # run_closed_loop's sequence, tick for tick
-                    if pacer is not None:
-                        pacer.wait(k)
-                    loop.tick()
-                    if pacer is not None:
-                        pacer.done()
-                    if s.stop_when_lost and rig.ball_lost:
-                        reason = p.STOP_BALL_LOST
-                        break
+                if loop.run(self._n_ticks, pacer=pacer, stop_when_lost=s.stop_when_lost) == ENDED_BALL_LOST:
+                    reason = p.STOP_BALL_LOST
             except ControllerError:
                 if self._end is None:
                     raise
@@ -283,7 +275,7 @@ class Server(OverLink):
         self.stop_clients(reason)
         if not loop.started:  # nothing was logged: no session to report
             raise ServeError(f"the session ended before the client acknowledged the held sample: {detail}")
-        result = RunResult(controller=adapter.name, log=loop.log(), verdict=loop.verdict(s.x0_m))
+        result = loop.result(x0_m=s.x0_m)
         timing = pacer.timing() if pacer is not None else None
         return SessionResult(result, reason, detail, self.counts, self.client_name, timing)
 

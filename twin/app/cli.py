@@ -49,7 +49,7 @@ if TYPE_CHECKING:
     from twin.interface import Controller
     from twin.log import RunLog
     from twin.parameters import Parameters
-    from twin.remote import RemoteRig, RemoteRun
+    from twin.remote import RemoteRig
     from twin.verdict import Verdict
 
 CONTROLLER_HELP = (
@@ -403,14 +403,13 @@ def _remote_session(
     params: Parameters,
     user: Callable[..., Controller] | None,
     many: bool,
-) -> tuple[bool, RemoteRun | None, dict[str, Any]] | None:
+) -> tuple[bool, RunResult | None, dict[str, Any]] | None:
     """One session of ``run --rig`` on the open ``rig``: (held, the run or None if the controller failed,
     the summary); None when the controller cannot drive a rig (reported)."""
     from controllers import registry
-    from twin.engine import ControllerError
+    from twin.engine import ControllerError, run_on_rig
     from twin.interface import Controller
-    from twin.remote import RemoteError, run_remote
-    from twin.verdict import evaluate_measured
+    from twin.remote import RemoteError
 
     rig_params = rig.parameters(params)  # the rig's period, DAC and software calibration
     controller = (
@@ -426,7 +425,7 @@ def _remote_session(
         )
         return None
     try:
-        run = run_remote(controller, rig)
+        run = run_on_rig(controller, rig, params=rig_params)
     except ControllerError as exc:
         rig.stop()
         print(f"ballbeam run: the controller failed: {exc}", file=sys.stderr)
@@ -440,7 +439,7 @@ def _remote_session(
         except RemoteError:
             pass
     # A rig has no true state: the run is judged from what it measured, as a recorded log is.
-    verdict = evaluate_measured(run.log, rig_params)
+    verdict = run.verdict
     summary = {
         "controller": args.controller,
         "rig": args.rig,
