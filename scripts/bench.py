@@ -69,11 +69,10 @@ from twin.batch import run_batch
 from twin.engine import RunResult, StateLaw, run_closed_loop, run_on_rig
 from twin.interface import Controller, Telemetry
 from twin.parameters import Parameters
-from twin.plant import Plant
+from twin.plant import FULL_STATE, Plant
 from twin.reference import ReferenceModel
 from twin.rig import TwinRig
 
-_FULL = mujoco.mjtState.mjSTATE_FULLPHYSICS
 DURATION_S = 10.0
 X0_M, THETA0_RAD = 0.2, 0.3
 EPISODES = (
@@ -171,8 +170,8 @@ def bench_episode(name: str, repeats: int) -> dict[str, float]:
     control, result = _replay_control(name, params)
     plant = Plant(params)
     plant.reset(X0_M, THETA0_RAD)
-    initial = np.empty((1, mujoco.mj_stateSize(plant.model, _FULL)))
-    mujoco.mj_getState(plant.model, plant.data, initial[0], _FULL)
+    initial = np.empty((1, mujoco.mj_stateSize(plant.model, FULL_STATE)))
+    mujoco.mj_getState(plant.model, plant.data, initial[0], FULL_STATE)
     ctrl = control[None, :, None]
     states = np.empty((1, len(control), initial.shape[1]))  # allocated once: the floor is the stepping
     runner = rollout.Rollout(nthread=0)
@@ -269,10 +268,10 @@ def _grid_physics(side: int, duration_s: float, nthread: int) -> _GridPhysics:
     control[:, :free, 0] = volts[:, :1]
     control[:, free:, 0] = np.repeat(volts[:, 1:], per_tick, axis=1)[:, : steps - free]
     plant = Plant(params)
-    initial = np.empty((len(x0), mujoco.mj_stateSize(plant.model, _FULL)))
+    initial = np.empty((len(x0), mujoco.mj_stateSize(plant.model, FULL_STATE)))
     for i in range(len(x0)):
         plant.reset(float(x0[i]), float(theta0[i]))
-        mujoco.mj_getState(plant.model, plant.data, initial[i], _FULL)
+        mujoco.mj_getState(plant.model, plant.data, initial[i], FULL_STATE)
     lost_steps = [
         int(round(r.verdict.ball_lost_time_s / dt)) for r in sweep if r.verdict.ball_lost_time_s is not None
     ]

@@ -184,13 +184,13 @@ def test_rigs_of_a_spread_share_one_group(monkeypatch, ideal_sensors: bool) -> N
     from twin import batch
 
     built: list[tuple[int, int, int]] = []  # per group: its runs, their models, their track shapes
-    init = batch._Group.__init__
+    init = batch.BatchRig.__init__
 
     def counting(self, params, *args, **kwargs):  # noqa: ANN001, ANN002, ANN003
         init(self, params, *args, **kwargs)
         built.append((len(params), len(self.distinct), len(self.shapes)))
 
-    monkeypatch.setattr(batch._Group, "__init__", counting)
+    monkeypatch.setattr(batch.BatchRig, "__init__", counting)
     step = 2 * np.pi / (256 * 7)  # one encoder count at the beam (eq 6.2.1)
     params = [
         Parameters().with_overrides(

@@ -48,6 +48,7 @@ from twin.log import THESIS_FIELDS, TRUTH_FIELDS, RunLog
 from twin.output_stage import ideal_motor_volts, motor_volts
 from twin.parameters import Daq, Parameters
 from twin.plant import (
+    FULL_STATE,
     Plant,
     beyond_stops,
     failure_time_s,
@@ -61,14 +62,15 @@ from twin.verdict import Criteria
 
 __all__ = [
     "BatchCatalogue",
+    "BatchRig",
     "BatchController",
     "BatchSamples",
     "BatchTelemetry",
     "ScalarControllers",
+    "batch_key",
     "run_batch",
 ]
 
-_FULL = mujoco.mjtState.mjSTATE_FULLPHYSICS
 _INTEGRATION = mujoco.mjtState.mjSTATE_INTEGRATION
 # Two periods agree when they differ by less than this (as twin.engine).
 _PERIOD_TOLERANCE_S = 1e-12
@@ -247,7 +249,7 @@ def run_batch(
     for i, p in enumerate(run_params):
         if id(p) not in noisy:
             noisy[id(p)] = p.with_overrides({"ball_sensor.noise_enabled": bool(noise)})
-        groups.setdefault(_io_key(noisy[id(p)]), []).append(i)
+        groups.setdefault(batch_key(noisy[id(p)]), []).append(i)
     threads = (os.cpu_count() or 1) if nthread is None else int(nthread)
     runs_before = 0  # the runs of the groups already run (progress)
     for idx in groups.values():
@@ -261,7 +263,7 @@ def run_batch(
             if len(scalar) != len(made):
                 raise TypeError(f"{name}: the catalogue made something that is not a Controller")
             controller = ScalarControllers(scalar, controller_timeout_s, group_params[0].daq)
-        group = _Group(
+        group = BatchRig(
             [noisy[id(run_params[i])] for i in idx],
             x0[rows],
             th0[rows],
@@ -291,7 +293,7 @@ PER_RUN_IO = {
 }
 
 
-def _io_key(p: Parameters) -> tuple:
+def batch_key(p: Parameters) -> tuple:
     """What the numpy stages of a batch share: runs that differ only in their physics and in ``PER_RUN_IO``
     batch together."""
 
@@ -329,9 +331,11 @@ class _Columns:
         self.peak_theta = np.zeros((ticks, n))
 
 
-class _Group:
-    """Runs that share their sensor/DAQ/timing parameters, stepped together (the single rig's state as arrays
-    over the runs; the comments name the ``SimRig`` lines each step mirrors)."""
+class BatchRig:
+    """N simulated rigs that share their sensor/DAQ/timing parameters (``batch_key``), stepped together: the
+    single rig's (``SimRig``) state as arrays over the runs, each run its single rig bit for bit (the comments
+    name the ``SimRig`` lines each step mirrors). ``run_batch`` runs one per group of a batch's runs;
+    ``twin.vector.VectorRig`` one per cohort of rigs reset together."""
 
     def __init__(
         self,
@@ -376,12 +380,12 @@ class _Group:
         shape_index = {key: k for k, key in enumerate(shapes)}
         self.shape_of = np.array([shape_index[plants[q].frame_key] for q in params])
         states = np.empty((n, mujoco.mj_stateSize(self.distinct[0].model, _INTEGRATION)))
-        nfull = mujoco.mj_stateSize(self.distinct[0].model, _FULL)
+        nfull = mujoco.mj_stateSize(self.distinct[0].model, FULL_STATE)
         self.last_row = np.empty((n, nfull))  # each run's state after its last step (MjData's, alone)
         for i, plant in enumerate(self.plants):
             plant.reset(float(x0[i]), float(theta0[i]))  # the single run's reset (and its checks)
             mujoco.mj_getState(plant.model, plant.data, states[i], _INTEGRATION)
-            mujoco.mj_getState(plant.model, plant.data, self.last_row[i], _FULL)
+            mujoco.mj_getState(plant.model, plant.data, self.last_row[i], FULL_STATE)
         if batch is None:
             self.batch = mjbatch.Batch(self.distinct[0].model, n, nthread=nthread)
             self.ids = np.arange(n)
@@ -404,7 +408,7 @@ class _Group:
         chain_start = self.schedule.chain_start_step
         self.ball = None if ideal_sensors else BallChainBatch(params, seeds, x0, chain_start * dt)
         self.ideal_sensors = IdealSensors(p)
-        # Each run's own (the group shares the rest of its I/O parameters: _io_key).
+        # Each run's own (the group shares the rest of its I/O parameters: batch_key).
         self.gain_v_per_v = np.array([q.amplifier.gain_v_per_v for q in params])
         self.zeroing_error_rad = np.array([q.angle_sensor.zeroing_error_rad for q in params])
         self.command_v = np.full(n, p.amplifier.zero_command_v)
@@ -446,8 +450,8 @@ class _Group:
         """Plant.advance for every live run: (times (m+1,), x, θ, on-track (live, m+1))."""
         t0 = self.physics_time_s
         out = self.batch.rollout(
-            volts.shape[1], control=volts[:, :, None], record=(_FULL,), ids=self.ids[self.live]
-        )[_FULL]
+            volts.shape[1], control=volts[:, :, None], record=(FULL_STATE,), ids=self.ids[self.live]
+        )[FULL_STATE]
         return self._advanced(t0, out)
 
     def _advanced(self, t0: float, out: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

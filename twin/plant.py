@@ -25,6 +25,7 @@ from twin.parameters import ParameterError, Parameters
 from twin.physics import PhysicsBlock, check_initial_state
 
 __all__ = [
+    "FULL_STATE",
     "BallKinematics",
     "NumericalError",
     "Plant",
@@ -35,7 +36,7 @@ __all__ = [
     "warning_text",
 ]
 
-_FULL = mujoco.mjtState.mjSTATE_FULLPHYSICS
+FULL_STATE = mujoco.mjtState.mjSTATE_FULLPHYSICS  # a run's whole state: what a batch row carries
 _CTRL = mujoco.mjtState.mjSTATE_CTRL
 
 # MuJoCo's warnings, each a sign that the simulation (not the rig) failed: its step reset the state (BADQ*),
@@ -188,7 +189,7 @@ class Plant:
         mujoco.mj_kinematics(self.model, self.data)
         self._pivot = tuple(float(v) for v in self.data.xpos[self._beam])  # the beam body's origin is P
         self._pivot_0d = tuple(np.array(v) for v in self._pivot)
-        self._nstate = mujoco.mj_stateSize(m, _FULL)
+        self._nstate = mujoco.mj_stateSize(m, FULL_STATE)
         self._warmstart = np.empty((1, m.nv))
         self._rollout = rollout.Rollout(nthread=0)
         self._models, self._datas = [m], [self.data]  # rollout's arguments, built once
@@ -383,7 +384,7 @@ class Plant:
         if carried is not None and carried[0] == t0:  # MjData is in the state the last advance left
             rows[0] = carried
         else:
-            mujoco.mj_getState(m, d, rows[0], _FULL)
+            mujoco.mj_getState(m, d, rows[0], FULL_STATE)
         if n:
             self._warmstart[0] = d.qacc_warmstart
             self._rollout.rollout(
@@ -419,10 +420,10 @@ class Plant:
         m, d = self.model, self.data
         buf = self._step_buffers(n)
         rows = buf.rows
-        mujoco.mj_getState(m, d, rows[0], _FULL)
+        mujoco.mj_getState(m, d, rows[0], FULL_STATE)
         ctrl = d.ctrl
         step, get_state, cos, sin = mujoco.mj_step, mujoco.mj_getState, math.cos, math.sin
-        full = _FULL.value  # the spec as an int: pybind converts it faster than the enum
+        full = FULL_STATE.value  # the spec as an int: pybind converts it faster than the enum
         row_theta, q = self._row_theta, self._row_ball
         px, py, pz = self._pivot
         along_limit, lateral_limit = self._along_limit_m, self._lateral_limit_m

@@ -5,7 +5,7 @@ full I/O chain or ideal converters) bit for bit, whenever it was last reset, and
 of one ``mujoco.batch.Batch``.
 
 Runs reset together share their time base and their sensor, DAQ and timing parameters; such a cohort is a
-``twin.batch._Group`` (the batch engine's runs in step, its numpy stages over its rows) stepping rows
+``twin.batch.BatchRig`` (the batch engine's runs in step, its numpy stages over its rows) stepping rows
 ``ids`` of the shared batch. A reset makes a new cohort of the rigs reset (their start blocks, −1 and 0, are
 read at once: the held rig, the free run, release), and leaves them out of their old one; a cohort whose
 rigs were all reset is dropped. Every block after a rig's block 0 is one control period of physics, so a
@@ -24,9 +24,9 @@ import mujoco
 import numpy as np
 from mujoco import batch as mjbatch
 
-from twin.batch import _FULL, BatchSamples, _Group, _io_key
+from twin.batch import BatchRig, BatchSamples, batch_key
 from twin.parameters import Parameters
-from twin.plant import Plant
+from twin.plant import FULL_STATE, Plant
 from twin.rig import RigError, tick_schedule
 
 __all__ = ["VectorBlocks", "VectorRig"]
@@ -65,10 +65,10 @@ class VectorRig:
         threads = (os.cpu_count() or 1) if nthread is None else int(nthread)
         self.batch = mjbatch.Batch(first.model, n, nthread=threads)
         self.models: list[mujoco.MjModel] = [first.model] * n
-        self._nfull = mujoco.mj_stateSize(first.model, _FULL)
-        self.cohort_of: list[_Group | None] = [None] * n  # each rig's cohort
+        self._nfull = mujoco.mj_stateSize(first.model, FULL_STATE)
+        self.cohort_of: list[BatchRig | None] = [None] * n  # each rig's cohort
         self.row_in: np.ndarray = np.zeros(n, dtype=np.int64)  # its index within the cohort
-        self.cohorts: list[_Group] = []
+        self.cohorts: list[BatchRig] = []
         self.rig_params: list[Parameters | None] = [None] * n  # each rig's episode parameters
 
     def _plant(self, params: Parameters) -> Plant:
@@ -110,7 +110,7 @@ class VectorRig:
             self._leave(r)
         groups: dict[tuple, list[int]] = {}
         for j, q in enumerate(params):
-            groups.setdefault(_io_key(q), []).append(j)
+            groups.setdefault(batch_key(q), []).append(j)
         for j, r in enumerate(rows.tolist()):
             self.rig_params[r] = params[j]  # in use from now: kept in the cache
             self.models[r] = self._plant(params[j]).model
@@ -120,7 +120,7 @@ class VectorRig:
             members = sorted(listed, key=lambda j: int(rows[j]))  # a rollout takes its rows in order
             ids = rows[members]
             qs = [params[j] for j in members]
-            cohort = _Group(
+            cohort = BatchRig(
                 qs,
                 np.asarray(x0_m, dtype=float)[members],
                 np.asarray(theta0_rad, dtype=float)[members],
@@ -162,7 +162,7 @@ class VectorRig:
         if not len(rows):
             return result.done()
         which: dict[int, list[int]] = {}  # cohort (by id) → positions in rows
-        cohorts: dict[int, _Group] = {}
+        cohorts: dict[int, BatchRig] = {}
         for j, r in enumerate(rows.tolist()):
             cohort = self.cohort_of[r]
             if cohort is None:
@@ -191,15 +191,15 @@ class VectorRig:
         ids_all = np.concatenate([c.ids[c.live] for c, _, _, _ in plans])
         steps = volts_all.shape[1]
         if len(ids_all) < 2 or bool((np.diff(ids_all) > 0).all()):
-            out_all = self.batch.rollout(steps, control=volts_all[:, :, None], record=(_FULL,), ids=ids_all)[
-                _FULL
-            ]
+            out_all = self.batch.rollout(
+                steps, control=volts_all[:, :, None], record=(FULL_STATE,), ids=ids_all
+            )[FULL_STATE]
         else:  # a rollout takes its rows in order
             order = np.argsort(ids_all)
             out_all = np.empty((len(ids_all), steps, self._nfull))
             out_all[order] = self.batch.rollout(
-                steps, control=volts_all[order, :, None], record=(_FULL,), ids=ids_all[order]
-            )[_FULL]
+                steps, control=volts_all[order, :, None], record=(FULL_STATE,), ids=ids_all[order]
+            )[FULL_STATE]
         at = 0
         for cohort, positions, t0, volts in plans:
             m = len(volts)
@@ -222,8 +222,8 @@ class _Blocks:
         self.lost = np.zeros(n, dtype=bool)
         self.true_time_s, self.lost_time_s = np.empty(n), np.full(n, np.nan)
 
-    def fill(self, at: np.ndarray, cohort: _Group, samples: BatchSamples) -> None:
-        """Rows ``at``: the cohort's live rigs' block just read, with their true state (``_Group``'s, as the
+    def fill(self, at: np.ndarray, cohort: BatchRig, samples: BatchSamples) -> None:
+        """Rows ``at``: the cohort's live rigs' block just read, with their true state (``BatchRig``'s, as the
         batch engine logs it)."""
         live = cohort.live
         self.time_s[at] = samples.time_s
