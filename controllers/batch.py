@@ -1,4 +1,4 @@
-"""The named controllers over a batch of runs (``twin.batch.BatchController``): numpy over a leading batch
+"""The named controllers over a batch of runs (``twin.rigs.batch.BatchController``): numpy over a leading batch
 axis, each line the scalar controller's line with the same operations in the same order, so each run gets
 the bits its scalar controller computes alone (tests/test_batch.py checks every log array).
 
@@ -31,7 +31,6 @@ from controllers.appendix import (
 from controllers.laws import ClpLaw, KalmanState, SlidingModeLaw, StateFeedbackLaw
 from controllers.loop import LoopController, ObserverState
 from twin import fixedorder as fo
-from twin.batch import BatchSamples, BatchTelemetry
 from twin.converters import (
     ball_position_m,
     beam_angle_rad,
@@ -42,6 +41,7 @@ from twin.converters import (
 from twin.dcmotor import volts_for_torque_v
 from twin.interface import Controller
 from twin.parameters import SoftwareCalibration
+from twin.rigs.batch import BatchSamples, BatchTelemetry
 
 __all__ = ["BatchAppendixControlLaw", "BatchAppendixStateFeedback", "BatchLoopController", "batched"]
 

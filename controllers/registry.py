@@ -32,10 +32,10 @@ if TYPE_CHECKING:
     from controllers.design import LqrDesign, Poles, ReducedObserver
     from controllers.laws import ClpTerms
     from controllers.loop import MotorInverse, TrueStateLaw
-    from twin.batch import BatchController
     from twin.engine import CatalogueEntry
     from twin.interface import Controller
     from twin.parameters import Parameters
+    from twin.rigs.batch import BatchController
 
     AnyController = Controller | TrueStateLaw
 
@@ -493,7 +493,7 @@ def make(name: str, params: Parameters | None = None) -> AnyController:
 def make_batch(
     name: str, params: Parameters | Sequence[Parameters] | None = None, n: int | None = None
 ) -> BatchController | None:
-    """The controller ``name`` for a batch of runs in numpy (``twin.batch.BatchController``), each run's
+    """The controller ``name`` for a batch of runs in numpy (``twin.rigs.batch.BatchController``), each run's
     commands those of ``make(name, params_i)`` bit for bit; None when ``name`` has no batched version (the
     batch engine then runs one scalar instance per run). ``params``: one set for all ``n`` runs or one per
     run (each distinct set designs its own controller)."""

@@ -15,7 +15,7 @@ One run measures, on the same work (a 10 s episode from x0 = 0.2 m, θ0 = 0.3 ra
   state (thesis-sf/clp/smc-continuous: ≤ 3 × their floors), each against the floor of its own trajectory.
   Every episode runs to the end (``stop_when_lost=False``);
 - (c) batch: a side × side grid (41 × 41 by default) of 10 s appendix-sf episodes (noise on) through the
-  batch engine (``twin.batch``) on 2 threads, all to the end and as a sweep runs it (lost balls leave the
+  batch engine (``twin.rigs.batch``) on 2 threads, all to the end and as a sweep runs it (lost balls leave the
   batch; its floor is the full floor scaled by the physics steps done), against (a) on 2 threads, interleaved
   with it (the best of two of each);
 - (d) peers: the same episode on the analytic model (the nonlinear ``twin.reference`` equations, no sensor
@@ -65,13 +65,13 @@ from mujoco import rollout
 
 from controllers import registry
 from controllers import thesis_numbers as T
-from twin.batch import run_batch
 from twin.engine import RunResult, StateLaw, run_closed_loop, run_on_rig
 from twin.interface import Controller, Telemetry
 from twin.parameters import Parameters
 from twin.plant import FULL_STATE, Plant
 from twin.reference import ReferenceModel
-from twin.rig import TwinRig
+from twin.rigs.batch import run_batch
+from twin.rigs.sim import TwinRig
 
 DURATION_S = 10.0
 X0_M, THETA0_RAD = 0.2, 0.3
@@ -535,7 +535,7 @@ def bench_wire(repeats: int) -> dict[str, float]:
     import subprocess
     import sys
 
-    from twin.remote import RemoteRig, parse_udp_url
+    from twin.rigs.remote import RemoteRig, parse_udp_url
 
     serve = [sys.executable, "-m", "twin.app.cli", "serve", "--x0", str(X0_M), "--theta0", str(THETA0_RAD)]
     serve += ["--duration", str(DURATION_S), "--seed", "0", "--wait-client", "60", "--json"]

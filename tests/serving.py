@@ -1,4 +1,4 @@
-"""A served twin for the wire tests: ``twin.serve.Server.serve`` in a thread, its session or error kept."""
+"""A served twin for the wire tests: ``twin.wire.server.Server.serve`` in a thread, its session or error kept."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 
-from twin.serve import Server, SessionResult
+from twin.wire.server import Server, SessionResult
 
 
 @contextmanager

@@ -1,4 +1,4 @@
-"""The batch engine (twin.batch.run_batch): every run of a batch equals the same run alone, bit for bit —
+"""The batch engine (twin.rigs.batch.run_batch): every run of a batch equals the same run alone, bit for bit —
 every log array and the verdict — with the controllers vectorized or one scalar instance per run."""
 
 import json
@@ -9,11 +9,11 @@ import pytest
 
 from controllers import registry
 from twin import converters
-from twin.batch import run_batch
 from twin.engine import RunResult, run_closed_loop
 from twin.interface import Controller, DaqSample
 from twin.log import RunLog
 from twin.parameters import Parameters, SoftwareCalibration
+from twin.rigs.batch import run_batch
 
 # Hardware starts, a start that loses the ball quickly, and the origin.
 X0 = np.array([0.14, -0.13, 0.25, 0.0])
@@ -181,7 +181,7 @@ def test_rigs_of_a_spread_share_one_group(monkeypatch, ideal_sensors: bool) -> N
     robust map's, a Monte Carlo's) are one group of one track shape, its numpy stages paid once per tick for
     all: each run is still its single run, bit for bit (the gains move the motor volts, the zeroing errors
     of about a count the angle readings, the filters the ball readings)."""
-    from twin import batch
+    from twin.rigs import batch
 
     built: list[tuple[int, int, int]] = []  # per group: its runs, their models, their track shapes
     init = batch.BatchRig.__init__
@@ -299,10 +299,10 @@ def test_long_runs_as_single_runs(name: str) -> None:
 
 def test_the_single_rig_and_the_batch_follow_one_tick_schedule() -> None:
     """``twin.daq.TickSchedule`` is the one home of the start timing and the output latency, which SimRig
-    and the batch's groups both build with ``twin.rig.tick_schedule``: a 50 ms free run (longer than a
+    and the batch's groups both build with ``twin.rigs.sim.tick_schedule``: a 50 ms free run (longer than a
     period) with 5 ms latency, and the default 10 ms, in 1 ms steps."""
     from twin.daq import BlockPlan, TickSchedule
-    from twin.rig import tick_schedule
+    from twin.rigs.sim import tick_schedule
 
     params = Parameters().with_overrides({"start.free_run_s": 0.05, "daq.output_latency_s": 0.005})
     schedule = tick_schedule(params)

@@ -19,7 +19,7 @@ from twin.engine import ClosedLoop, ControllerError, RunResult, run_closed_loop,
 from twin.interface import Controller, DaqSample
 from twin.log import RunLog, load_csv, load_mat, save_csv, save_mat
 from twin.parameters import ParameterError, Parameters
-from twin.rig import RigError, TwinRig, make_rig
+from twin.rigs.sim import RigError, TwinRig, make_rig
 
 DATA = Path(__file__).parent / "data"
 

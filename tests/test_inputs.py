@@ -424,8 +424,8 @@ def test_mujoco_prints_nothing_of_its_own(tmp_path: Path) -> None:
 def test_the_batch_names_the_failing_run_and_the_job_records_it_as_numerical(params: Parameters) -> None:
     from controllers import registry
     from twin.app.fanout import Runs, run_starts
-    from twin.batch import run_batch
     from twin.plant import NumericalError
+    from twin.rigs.batch import run_batch
 
     bad = params.with_overrides(TINY_R)
     with pytest.raises(NumericalError, match=r"^run 1: numerical failure: MuJoCo reported .*BADQACC.*1e-09"):
@@ -484,13 +484,13 @@ def test_a_beam_past_what_the_stops_yield_is_numerical(
 ) -> None:
     """With the yield bound shrunk to 1 mrad, the same gain-1000 run (3.55 mrad past the stops) fails
     numerically, in the single run and in the batch: the check reads every step's angle."""
-    import twin.batch
     import twin.plant
+    import twin.rigs.batch
     from controllers import registry
     from twin.engine import run_closed_loop
     from twin.plant import NumericalError
 
-    for module in (twin.plant, twin.batch):
+    for module in (twin.plant, twin.rigs.batch):
         monkeypatch.setattr(module, "stop_overshoot_bound_rad", lambda p: 0.001)
     p = params.with_overrides({"amplifier.gain_v_per_v": 1000.0})
     pattern = r"numerical failure: the beam at 0\.7\d+ rad, past its stops \(0\.7575 rad\) by more than they can yield"
@@ -500,7 +500,7 @@ def test_a_beam_past_what_the_stops_yield_is_numerical(
                 registry.make("appendix-sf", p), x0_m=0.2, theta0_rad=0.3, duration_s=2.0, params=p
             )
         else:
-            twin.batch.run_batch(
+            twin.rigs.batch.run_batch(
                 registry, "appendix-sf", x0_m=np.array([0.2]), theta0_rad=np.array([0.3]), seeds=np.zeros(1),
                 duration_s=2.0, params=p, nthread=1,
             )  # fmt: skip

@@ -19,11 +19,11 @@ import numpy as np
 from twin.engine import ENDED_LAST_SAMPLE, ENDED_TICKS, ClosedLoop, run_closed_loop, run_on_rig
 from twin.interface import Controller, DaqSample, Rig
 from twin.parameters import Parameters
-from twin.rig import make_rig
+from twin.rigs.sim import make_rig
 
 ROOT = Path(__file__).resolve().parent.parent
 # The loop's home and the batch's: the only files that call a controller's update per tick.
-LOOP_FILES = {"twin/engine.py", "twin/batch.py"}
+LOOP_FILES = {"twin/engine.py", "twin/rigs/batch.py"}
 
 
 def _sources() -> list[Path]:

@@ -45,7 +45,7 @@ _BATCH_DIGEST = """
 import hashlib
 import numpy as np
 from controllers import registry
-from twin.batch import run_batch
+from twin.rigs.batch import run_batch
 from threadpoolctl import threadpool_info
 
 digest = hashlib.sha256()

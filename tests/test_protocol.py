@@ -9,8 +9,8 @@ import zlib
 
 import pytest
 
-from twin import protocol as p
 from twin.parameters import Parameters
+from twin.wire import protocol as p
 
 
 def _frame(kind: int, length: int, seq: int, session: int, fields: list[tuple[int, str, object]]) -> bytes:

@@ -31,8 +31,8 @@ from twin.app.montecarlo import MonteCarloSettings, load_spread, run_montecarlo
 from twin.app.sweep import Grid, SweepSettings, point_seeds, run_sweep
 from twin.engine import run_on_rig
 from twin.parameters import Parameters
-from twin.remote import RemoteError
-from twin.serve import Server, SessionSettings
+from twin.rigs.remote import RemoteError
+from twin.wire.server import Server, SessionSettings
 
 ROOT = Path(__file__).resolve().parent.parent
 ENV = {**os.environ, "PYTHONPATH": str(ROOT)}

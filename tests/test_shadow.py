@@ -22,12 +22,12 @@ from calib.logs import rig_log
 from calib.shadow import Band, Cusum, Shadow, WindowScore
 from controllers import registry
 from controllers.thesis_numbers import HARDWARE_STARTS
-from twin import protocol as p
 from twin.app.shadow import reference_band, watch
 from twin.engine import RunResult, run_closed_loop
 from twin.interface import Controller
 from twin.parameters import Parameters
-from twin.remote import Observer
+from twin.wire import protocol as p
+from twin.wire.observer import Observer
 
 ROOT = Path(__file__).resolve().parent.parent
 ENV = {**os.environ, "PYTHONPATH": str(ROOT)}

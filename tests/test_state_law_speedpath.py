@@ -15,7 +15,7 @@ from controllers.laws import ClpLaw, ClpTerms, SlidingModeLaw, StateFeedbackLaw
 from controllers.loop import MotorInverse, TrueStateLaw
 from twin.engine import ControllerError, run_closed_loop
 from twin.interface import Telemetry
-from twin.rig import TwinRig
+from twin.rigs.sim import TwinRig
 
 TERMS = ClpTerms(T.CLP_ALPHA_XDD, T.CLP_ALPHA_THDD, T.CLP_ALPHA_THDD_X2, T.CLP_BETA)
 

@@ -20,11 +20,11 @@ import numpy as np
 import pytest
 
 from twin import guard
-from twin.batch import run_batch
 from twin.engine import ClosedLoop, ControllerError, run_closed_loop
 from twin.interface import Controller, DaqSample
 from twin.parameters import Parameters
-from twin.rig import make_rig
+from twin.rigs.batch import run_batch
+from twin.rigs.sim import make_rig
 
 ROOT = Path(__file__).resolve().parents[1]
 

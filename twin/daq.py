@@ -165,7 +165,7 @@ class BlockPlan:
 class TickSchedule:
     """When the DAQ's blocks end and when a command reaches the motor, in physics steps from release: the one
     home of the start timing (held rig, free run, release) and the output latency, which the single rig
-    (``twin.rig.SimRig``) and the batch (``twin.batch``) both follow.
+    (``twin.rigs.sim.SimRig``) and the batch (``twin.rigs.batch``) both follow.
 
     After ``reset`` the rig is held; block k = −1 (the one ``Controller.start`` reads) ends at
     free_run − T, block k at free_run + k·T; the rig is released at step 0. A command written takes effect

@@ -1,6 +1,6 @@
 """The closed-loop engine: the one stepper that ``ballbeam run``, the live view and the reproduction use.
 
-A ``ClosedLoop`` couples a simulated rig (twin.rig: the MuJoCo twin with its I/O chain or with ideal
+A ``ClosedLoop`` couples a simulated rig (twin.rigs.sim: the MuJoCo twin with its I/O chain or with ideal
 converters, or the reference model) to either
 
 * a ``Controller`` (twin.interface): the hardware contract, raw blocks in and a DAC command out at the
@@ -9,7 +9,7 @@ converters, or the reference model) to either
   (the thesis's chapter 4 designs, which assume all four states are measured). It never passes through
   the hardware contract.
 
-Sequence (appendix A's buttons, twin.rig's start timing): ``start()`` reads the held rig's block and starts
+Sequence (appendix A's buttons, twin.rigs.sim's start timing): ``start()`` reads the held rig's block and starts
 the controller; each ``tick()`` reads the next block, runs the controller and writes its command. A tick
 records the row the rig software logs (twin.log) plus the true state; ``run_closed_loop`` runs a whole
 episode and computes the verdict (twin.verdict) once.
@@ -34,7 +34,7 @@ from twin.log import THESIS_FIELDS, TRUTH_FIELDS, RunLog
 from twin.parameters import Daq, Parameters
 from twin.physics import PhysicsBlock
 from twin.realtime import TickTiming, tick_timing
-from twin.rig import PlantKind, RigError, make_rig, whole_steps
+from twin.rigs.sim import PlantKind, RigError, make_rig, whole_steps
 from twin.verdict import Criteria, Verdict, evaluate, evaluate_measured
 
 __all__ = [
@@ -86,7 +86,7 @@ class CatalogueEntry:
     build: Callable[[Parameters], Controller | StateLaw]  # designs and builds one for the given rig
     description: str  # one line: what it is and where it comes from
     simulation_only: bool  # a law on the true state (chapter 4): it cannot drive the hardware
-    batched: bool  # has a vectorized version for the batch engine (twin.batch)
+    batched: bool  # has a vectorized version for the batch engine (twin.rigs.batch)
     setpoint: bool  # the built controller implements twin.interface.Setpoint
 
 
@@ -244,7 +244,7 @@ def arrival_timing(arrivals_s: Sequence[float], compute_s: Sequence[float], peri
 
 
 class RunResult:
-    """One run: its verdict and, when it was recorded, its log (``twin.batch.run_batch`` may keep verdicts
+    """One run: its verdict and, when it was recorded, its log (``twin.rigs.batch.run_batch`` may keep verdicts
     only); how it ended (``ClosedLoop.run``) and, for a timed run on a remote rig, how it kept the period.
     ``verdict`` may be given as a function, called when the verdict is first read (a run judged from its
     measured volts pays for it only when asked)."""
@@ -318,7 +318,7 @@ def block_peak_abs_theta_rad(block: PhysicsBlock | None) -> float:
 
 @runtime_checkable
 class TrueState(Protocol):
-    """What a simulated rig offers beyond the hardware contract (``twin.rig.SimRig`` does): the true state
+    """What a simulated rig offers beyond the hardware contract (``twin.rigs.sim.SimRig`` does): the true state
     for the log and the verdict. A rig without it (``RemoteRig``, a hardware backend) is judged from the
     volts it measured (``twin.verdict.evaluate_measured``). Never passed to a controller."""
 
@@ -742,7 +742,7 @@ def run_closed_loop(
     """Run ``controller`` on a fresh simulated rig from (x0, θ0) at rest for ``duration_s`` after release.
 
     The rig is held while the controller's ``start`` reads it, released at t = 0 and driven from
-    t = ``start.free_run_s`` on (twin.rig). Initial velocities are zero; the controller's observer starts
+    t = ``start.free_run_s`` on (twin.rigs.sim). Initial velocities are zero; the controller's observer starts
     from zero velocity, as on the rig. ``stop_when_lost`` ends the run at the tick the ball is lost.
     ``controller_timeout_s``: the watchdog's budget per update (``ClosedLoop``)."""
     if not (isinstance(duration_s, (int, float)) and math.isfinite(duration_s) and duration_s > 0):

@@ -1,7 +1,7 @@
 """The two contracts of the rig, free of MuJoCo so that hardware code can import them alone.
 
 ``Rig`` is what a controller talks to: the I/O card (raw volts in, a DAC command out, one block per tick).
-``SimRig`` (twin.rig) implements it on the simulated rigs, ``RemoteRig`` (twin.remote) over protocol 1; a
+``SimRig`` (twin.rigs.sim) implements it on the simulated rigs, ``RemoteRig`` (twin.rigs.remote) over protocol 1; a
 hardware backend implements the same calls on the PCI-1712 (``getdata``/``putsample`` in the thesis's
 MATLAB software, appendix A). The one closed loop (``twin.engine.ClosedLoop``) needs nothing else of a rig.
 

@@ -1,5 +1,5 @@
 """What a learned controller sees, does and is paid: the one home of the observation, action and reward that
-the Gymnasium environment (``twin.app.envs``), its vector form (``twin.vector``) and the runtime wrapper of a
+the Gymnasium environment (``twin.app.envs``), its vector form (``twin.rigs.vector``) and the runtime wrapper of a
 trained policy (``controllers.policy.PolicyController``) share, so that a policy meets on the rig exactly
 the inputs it was trained on.
 

@@ -28,7 +28,7 @@ from twin.output_stage import motor_volts
 from twin.parameters import Parameters
 from twin.plant import Plant
 from twin.reference import InputKind, ReferenceModel
-from twin.rig import TwinRig
+from twin.rigs.sim import TwinRig
 
 # One 20 ms block at the 1 ms physics step: the knots the angle and ball chains are advanced over.
 _BLOCK_KNOTS_S = np.arange(21) * 1e-3

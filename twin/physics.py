@@ -1,7 +1,7 @@
 """What the simulated rig needs from a physics backend, free of MuJoCo.
 
 Two backends implement ``Physics``: the MuJoCo twin (``twin.plant.Plant``) and the analytic reference model
-(``twin.reference.ReferencePlant``). The simulated rig (``twin.rig.SimRig``) drives either with the motor
+(``twin.reference.ReferencePlant``). The simulated rig (``twin.rigs.sim.SimRig``) drives either with the motor
 volts of each physics step of one control period and reads back a ``PhysicsBlock``: the ball position, the
 beam angle and the ball's contact with the track at every step, which the sensor chains turn into the
 block the I/O card delivers.

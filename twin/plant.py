@@ -329,7 +329,7 @@ class Plant:
     def row_states(self, rows: np.ndarray) -> np.ndarray:
         """(x, θ, ẋ, θ̇) for each full-physics state row (time, qpos, qvel), shape (n, 4): what ``state``
         computes from MjData, with the same elementwise operations in the same order (``_state_floats``),
-        so a run in a batch (``twin.batch``) or a deferred log row has the bits of ``state`` alone."""
+        so a run in a batch (``twin.rigs.batch``) or a deferred log row has the bits of ``state`` alone."""
         if self._hinge_qpos is None or self._hinge_dof is None:
             raise ValueError("row_states needs the beam's hinge (a rig built with hold_beam_rad has none)")
         nq = self.model.nq
@@ -575,7 +575,7 @@ class Plant:
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The ball centre's coordinates in the beam frame (along, lateral, height above P) from the beam
         angle and the ball centre's world position (``ball_xyz[..., 0:3]``) at each step: elementwise, so
-        the rows of a batch of runs (``twin.batch``) give the same bits as a run alone."""
+        the rows of a batch of runs (``twin.rigs.batch``) give the same bits as a run alone."""
         c, s = np.cos(theta_rad), np.sin(theta_rad)
         px, py, pz = self._pivot_0d  # 0-d arrays: numpy converts a Python float operand on every call
         dx, dz = ball_xyz[..., 0] - px, ball_xyz[..., 2] - pz

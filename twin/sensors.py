@@ -710,7 +710,7 @@ class BallChainBatch:
         self, params: Parameters | Sequence[Parameters], seeds: np.ndarray, x_m: np.ndarray, t_s: float
     ) -> None:
         """``params``: one set for every run, or one per run that differ at most in the filter's R and C and
-        the dropout rate (``twin.batch.PER_RUN_IO``; a run's dropouts are its own chain's)."""
+        the dropout rate (``twin.rigs.batch.PER_RUN_IO``; a run's dropouts are its own chain's)."""
         run_params = [params] * len(seeds) if isinstance(params, Parameters) else list(params)
         self.params = run_params[0]
         self.chains = []

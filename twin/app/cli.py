@@ -49,7 +49,7 @@ if TYPE_CHECKING:
     from twin.interface import Controller
     from twin.log import RunLog
     from twin.parameters import Parameters
-    from twin.remote import RemoteRig
+    from twin.rigs.remote import RemoteRig
     from twin.verdict import Verdict
 
 CONTROLLER_HELP = (
@@ -317,12 +317,12 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 def _run_on_remote_rig(args: argparse.Namespace, params: Parameters) -> int:
     """``run --rig udp://HOST:PORT`` (or ``serial:///dev/ttyX?baud=N``): the controller through
-    ``twin.remote.RemoteRig``. The rig's initial state, duration and noise are the server's; the verdict is
+    ``twin.rigs.remote.RemoteRig``. The rig's initial state, duration and noise are the server's; the verdict is
     judged from the measured signals (``ballbeam serve`` prints the true state's). ``--sessions N``: N
     sessions one after the other (0: until the server stops answering HELLO within ``--wait-server``), a
     fresh controller each, built from that session's CONFIG (a served job's runs, ``sweep --serve``)."""
-    from twin.links import parse_url
-    from twin.remote import RemoteError
+    from twin.rigs.remote import RemoteError
+    from twin.wire.links import parse_url
 
     try:
         parse_url(args.rig)
@@ -385,7 +385,7 @@ def _connect(url: str, client: str, wait_s: float, *, retry_refused: bool) -> Re
     e.g. a dead client's waiting out its timeout) is asked again until then."""
     import time
 
-    from twin.remote import Refused, open_remote
+    from twin.rigs.remote import Refused, open_remote
 
     deadline = time.monotonic() + wait_s
     while True:
@@ -409,7 +409,7 @@ def _remote_session(
     from controllers import registry
     from twin.engine import ControllerError, run_on_rig
     from twin.interface import Controller
-    from twin.remote import RemoteError
+    from twin.rigs.remote import RemoteError
 
     rig_params = rig.parameters(params)  # the rig's period, DAC and software calibration
     controller = (
@@ -455,11 +455,11 @@ def _remote_session(
 
 
 def _cmd_serve(args: argparse.Namespace) -> int:
-    from twin import protocol
     from twin.engine import ControllerError
-    from twin.links import DEFAULT_BAUD, LinkError, SerialLink
     from twin.plant import NumericalError
-    from twin.serve import ServeError, Server, SessionSettings
+    from twin.wire import protocol
+    from twin.wire.links import DEFAULT_BAUD, LinkError, SerialLink
+    from twin.wire.server import ServeError, Server, SessionSettings
 
     if args.serial is not None and (args.host != "127.0.0.1" or args.port != 0):
         print(
@@ -700,7 +700,7 @@ def _served(args: argparse.Namespace, params: Parameters) -> Iterator[Served | N
         return
     from twin.app.fanout import Served
     from twin.parameters import ParameterError
-    from twin.serve import DEFAULT_TIMEOUT_S, ServeError, Server, SessionSettings
+    from twin.wire.server import DEFAULT_TIMEOUT_S, ServeError, Server, SessionSettings
 
     host, port = _serve_address(args.serve)
     settings = SessionSettings(params=params, rig_name=f"ballbeam-twin {package_version()} {args.command}")
@@ -1157,7 +1157,8 @@ def _cmd_shadow(args: argparse.Namespace) -> int:
     from twin.app.shadow import REFERENCE_CONTROLLER, load_reference, logs_band, reference_band, watch
     from twin.outputs import atomic_output
     from twin.parameters import ParameterError
-    from twin.remote import RemoteError, open_observer
+    from twin.rigs.remote import RemoteError
+    from twin.wire.observer import open_observer
 
     if args.reference and args.reference_controller:
         raise ParameterError("--reference-controller runs the twin's reference: not with --reference logs")

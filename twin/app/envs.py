@@ -4,7 +4,7 @@
 which registers the id; Gymnasium 1.x loads no plugins by itself) or ``gymnasium.make_vec("twin.app.envs:
 BallBeam-v0", num_envs=N, vectorization_mode="vector_entry_point", **options)``.
 
-A step is one 20 ms tick of the rig the engine runs (``twin.rig.SimRig``, as ``ballbeam run``): the action
+A step is one 20 ms tick of the rig the engine runs (``twin.rigs.sim.SimRig``, as ``ballbeam run``): the action
 is written to the DAC, the next block is read. ``reset`` holds the rig at the episode's initial state and
 reads the start block (k = −1, what ``Controller.start`` reads) and block 0 (the first ``update``'s): the
 first action is the command computed from block 0, as on the rig. Observation, action and reward:
@@ -49,8 +49,8 @@ from twin.learning import (
 )
 from twin.parameters import Parameters
 from twin.physics import check_initial_state
-from twin.rig import PlantKind, make_rig
-from twin.vector import VectorBlocks, VectorRig
+from twin.rigs.sim import PlantKind, make_rig
+from twin.rigs.vector import VectorBlocks, VectorRig
 from twin.verdict import Criteria
 
 __all__ = ["ENV_ID", "BallBeamEnv", "BallBeamVectorEnv", "EnvConfig"]
@@ -423,7 +423,7 @@ class BallBeamEnv(gymnasium.Env[np.ndarray, np.ndarray]):
 
 
 class BallBeamVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
-    """``num_envs`` copies of ``BallBeam-v0`` stepped as one batch (``twin.vector.VectorRig``): sub-env i is
+    """``num_envs`` copies of ``BallBeam-v0`` stepped as one batch (``twin.rigs.vector.VectorRig``): sub-env i is
     the single env reset with seed + i (``reset(seed=…)``, as Gymnasium's ``SyncVectorEnv`` seeds) bit for
     bit — observations, rewards, terminations, truncations, infos — with next-step autoreset. The MuJoCo twin
     only (for the reference plant, ``SyncVectorEnv`` over ``BallBeam-v0``)."""

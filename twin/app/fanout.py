@@ -2,7 +2,7 @@
 
 A job is a list of starts, each with its own seed (and, for Monte Carlo, its own parameters). It is cut
 into chunks (``chunk_runs``: one batch here when it fits, a few per worker elsewhere); each chunk runs
-through the batch engine (``twin.batch.run_batch``) where it lands. Because every run's numbers depend only
+through the batch engine (``twin.rigs.batch.run_batch``) where it lands. Because every run's numbers depend only
 on its own start, seed and parameters, the result is the same however the job is chunked and wherever the
 chunks run. Ctrl-C stops handing out chunks and returns what came back (``complete`` false).
 
@@ -28,8 +28,8 @@ import numpy as np
 from twin.parameters import ParameterError, Parameters
 
 if TYPE_CHECKING:
-    from twin.serve import Server
     from twin.verdict import Verdict
+    from twin.wire.server import Server
 
 __all__ = [
     "CHUNK_RUNS",
@@ -154,7 +154,7 @@ def _records(
     chunk: _Chunk, runs: Sequence[int], report: Callable[[float], None] | None = None
 ) -> list[dict[str, Any]]:
     from twin.app.catalogue import catalogue_for
-    from twin.batch import run_batch
+    from twin.rigs.batch import run_batch
 
     r = chunk.runs
     pick = list(runs)
@@ -259,7 +259,7 @@ def _dask(
 
 @dataclass
 class Served:
-    """A served job: every run is one lock-step session of ``server`` (``twin.serve``), in order, to
+    """A served job: every run is one lock-step session of ``server`` (``twin.wire.server``), in order, to
     whatever controlling client says HELLO; nothing runs a controller here.
 
     ``first_wait_s``: how long the job's first session waits for a client (None: until one comes);
@@ -301,10 +301,10 @@ def run_served(
     closed loop), so its record is the in-process run's when the client computes what the in-process
     controller does. A client that quits or goes silent fails that run with the server's reason; Ctrl-C or
     no client within the wait ends the job with what came back (``complete`` false)."""
-    from twin import protocol
     from twin.engine import ControllerError
     from twin.plant import NumericalError
-    from twin.serve import ServeError, SessionSettings
+    from twin.wire import protocol
+    from twin.wire.server import ServeError, SessionSettings
 
     n = len(starts)
     results: list[dict[str, Any] | None] = [None] * n

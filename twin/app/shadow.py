@@ -1,8 +1,8 @@
 """``ballbeam shadow``: the twin watching a rig on the wire (``calib.shadow``), and the band it tests against.
 
-The shadow is an observer of the rig's sessions (``twin.remote.Observer``: the samples, and the commands the
+The shadow is an observer of the rig's sessions (``twin.wire.observer.Observer``: the samples, and the commands the
 rig applied, echoed to observers): it never writes to the rig. ``watch`` feeds each sample with the DAC volts
-of its block (``twin.remote.block_dac_v``) to a ``calib.shadow.Shadow`` and works off the complete windows
+of its block (``twin.wire.observer.block_dac_v``) to a ``calib.shadow.Shadow`` and works off the complete windows
 whenever no sample is waiting (a lock-step session outruns the shadow: its windows are worked off in
 batches, none lost).
 
@@ -25,8 +25,9 @@ from typing import TYPE_CHECKING
 from calib.compare import windowed_prediction
 from calib.logs import RigLog, load_rig_log, rig_log
 from calib.shadow import MAX_BATCH_WINDOWS, Band, Shadow, WindowScore
-from twin import protocol as p
-from twin.remote import Joined, Observer, RemoteError, block_dac_v
+from twin.rigs.remote import RemoteError
+from twin.wire import protocol as p
+from twin.wire.observer import Joined, Observer, block_dac_v
 
 if TYPE_CHECKING:
     from twin.interface import Controller
@@ -134,7 +135,7 @@ def watch(
     silent for ``idle_timeout_s`` after a session), the rig goes silent within a session, or Ctrl-C (the
     watch ends there, keeping what it saw). ``on_window`` gets each window as it is processed, ``on_session``
     each session's end (its number, the STOP in words)."""
-    from twin.serve import STOP_NAMES
+    from twin.wire.server import STOP_NAMES
 
     result = WatchResult()
     started = time.perf_counter()

@@ -13,11 +13,9 @@ from typing import Any
 
 import viser
 
-from twin import protocol as p
 from twin.engine import Catalogue
 from twin.parameters import Parameters
-from twin.rig import PlantKind
-from twin.serve import ServeError, Server, SessionSettings
+from twin.rigs.sim import PlantKind
 from twin.viewer.common import (
     DEFAULT_CONTROLLER,
     FRAME_S,
@@ -40,6 +38,8 @@ from twin.viewer.security import (
 )
 from twin.viewer.session import LiveTwin, owe
 from twin.viewer.wire import WIRE_MARGIN_S, WireCatalogue
+from twin.wire import protocol as p
+from twin.wire.server import ServeError, Server, SessionSettings
 
 PLOT_EVERY_FRAMES = 10  # plots and status at 5 Hz: enough for the eye, a tenth of the traffic
 MAX_CATCH_UP_S = 0.25  # after a stall longer than this the pacing restarts instead of racing to catch up

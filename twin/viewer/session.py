@@ -22,12 +22,11 @@ import numpy as np
 
 from twin import converters
 from twin import log as log_io
-from twin import protocol as p
 from twin.engine import Catalogue, ClosedLoop, ControllerError
 from twin.interface import DaqSample, Setpoint
 from twin.parameters import Parameters
 from twin.physics import check_initial_state
-from twin.rig import PlantKind, make_rig
+from twin.rigs.sim import PlantKind, make_rig
 from twin.verdict import Criteria, Verdict
 from twin.viewer.common import (
     DRIFT,
@@ -49,6 +48,7 @@ from twin.viewer.common import (
 )
 from twin.viewer.monitor import MonitorFactory, ShadowWorker
 from twin.viewer.wire import WireClient
+from twin.wire import protocol as p
 
 HISTORY_S = 10.0  # live plots show the last 10 s
 MAX_PENDING_ACTIONS = 1024  # beyond this, actions are dropped (a flood, not a user)

@@ -5,7 +5,7 @@ full I/O chain or ideal converters) bit for bit, whenever it was last reset, and
 of one ``mujoco.batch.Batch``.
 
 Runs reset together share their time base and their sensor, DAQ and timing parameters; such a cohort is a
-``twin.batch.BatchRig`` (the batch engine's runs in step, its numpy stages over its rows) stepping rows
+``twin.rigs.batch.BatchRig`` (the batch engine's runs in step, its numpy stages over its rows) stepping rows
 ``ids`` of the shared batch. A reset makes a new cohort of the rigs reset (their start blocks, −1 and 0, are
 read at once: the held rig, the free run, release), and leaves them out of their old one; a cohort whose
 rigs were all reset is dropped. Every block after a rig's block 0 is one control period of physics, so a
@@ -24,10 +24,10 @@ import mujoco
 import numpy as np
 from mujoco import batch as mjbatch
 
-from twin.batch import BatchRig, BatchSamples, batch_key
 from twin.parameters import Parameters
 from twin.plant import FULL_STATE, Plant
-from twin.rig import RigError, tick_schedule
+from twin.rigs.batch import BatchRig, BatchSamples, batch_key
+from twin.rigs.sim import RigError, tick_schedule
 
 __all__ = ["VectorBlocks", "VectorRig"]
 

@@ -1,5 +1,5 @@
 """The twin served as a virtual I/O card on protocol 1 (docs/protocol.md) over UDP or a serial line
-(``twin.links``): ``ballbeam serve``.
+(``twin.wire.links``): ``ballbeam serve``.
 
 One session per ``Server.serve()``: a client says HELLO and gets CONFIG; the server then runs the engine's
 own closed loop (``twin.engine.ClosedLoop``, the sequence of ``run_closed_loop``) with a ``Controller``
@@ -33,13 +33,13 @@ import time
 from collections.abc import Callable, Hashable
 from dataclasses import asdict, dataclass, field
 
-from twin import protocol as p
 from twin.engine import ENDED_BALL_LOST, ClosedLoop, ControllerError, RunResult, update_ticks
 from twin.interface import Controller, DaqSample
-from twin.links import Link, LinkError, OverLink, UdpLink
 from twin.parameters import Parameters
 from twin.realtime import TickTiming, WallClockPacer
-from twin.rig import PlantKind, SimRig, make_rig
+from twin.rigs.sim import PlantKind, SimRig, make_rig
+from twin.wire import protocol as p
+from twin.wire.links import Link, LinkError, OverLink, UdpLink
 
 __all__ = [
     "DEFAULT_TIMEOUT_S",
@@ -172,7 +172,7 @@ class _WireController(Controller):
 
 class Server(OverLink):
     """A UDP socket bound to ``host:port`` (port 0: any free one, see ``port``) serving sessions, or the
-    ``link`` given (``twin.links.SerialLink``: a serial line, whose one peer is the controller)."""
+    ``link`` given (``twin.wire.links.SerialLink``: a serial line, whose one peer is the controller)."""
 
     def __init__(
         self,

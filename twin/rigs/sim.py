@@ -17,7 +17,7 @@ initial state while the software reads it; it is released at t = 0 and runs at 0
 reaches the amplifier at t = ``start.free_run_s``. The DAQ's blocks end at t = free_run + k·T: block k = −1
 is the one ``Controller.start`` reads, block 0 the first ``update`` (its command acts from t = free_run).
 Blocks, or parts of blocks, before t = 0 see the held rig. The schedule (when blocks end, when a command
-takes effect) is ``twin.daq.TickSchedule``, which the batch (``twin.batch``) follows too.
+takes effect) is ``twin.daq.TickSchedule``, which the batch (``twin.rigs.batch``) follows too.
 """
 
 from __future__ import annotations

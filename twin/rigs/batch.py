@@ -56,7 +56,7 @@ from twin.plant import (
     stop_overshoot_bound_rad,
     warning_text,
 )
-from twin.rig import PlantKind, RigError, tick_schedule
+from twin.rigs.sim import PlantKind, RigError, tick_schedule
 from twin.sensors import BallChainBatch, IdealSensors, angle_block_means_v
 from twin.verdict import Criteria
 
@@ -335,7 +335,7 @@ class BatchRig:
     """N simulated rigs that share their sensor/DAQ/timing parameters (``batch_key``), stepped together: the
     single rig's (``SimRig``) state as arrays over the runs, each run its single rig bit for bit (the comments
     name the ``SimRig`` lines each step mirrors). ``run_batch`` runs one per group of a batch's runs;
-    ``twin.vector.VectorRig`` one per cohort of rigs reset together."""
+    ``twin.rigs.vector.VectorRig`` one per cohort of rigs reset together."""
 
     def __init__(
         self,

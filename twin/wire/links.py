@@ -24,7 +24,7 @@ from dataclasses import asdict, dataclass
 from typing import Any, Protocol, Self, cast
 from urllib.parse import parse_qs, urlsplit
 
-from twin import protocol as p
+from twin.wire import protocol as p
 
 __all__ = [
     "DEFAULT_BAUD",

@@ -7,7 +7,7 @@ from thesis_data import TABLE_6_3_POSITION_M, TABLE_6_3_VOLTAGE_V
 from twin import converters, measurements
 from twin.daq import adc_lsb_v
 from twin.parameters import Parameters
-from twin.rig import ReferenceRig, RigError, SimRig, TwinRig
+from twin.rigs.sim import ReferenceRig, RigError, SimRig, TwinRig
 
 SW = Parameters().software
 
