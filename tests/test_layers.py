@@ -97,7 +97,14 @@ def test_core_tests_use_no_application_layer(path: Path) -> None:
 
 def test_the_core_tests_are_found_and_the_rule_bites(tmp_path: Path) -> None:
     names = {p.name for p in _core_tests()}
-    assert {"test_sensors.py", "test_sim.py", "test_batch.py", "test_protocol.py", "test_log.py", "test_rolling.py"} <= names
+    assert {
+        "test_sensors.py",
+        "test_sim.py",
+        "test_batch.py",
+        "test_protocol.py",
+        "test_log.py",
+        "test_rolling.py",
+    } <= names
     assert "test_cli.py" not in names and "test_sweep.py" not in names
     bad = tmp_path / "test_sensors.py"
     bad.write_text("from twin.app import measurements\nfrom twin.app.cli import main\n")

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from twin.verdict import Criteria, evaluate, settling_time_s
+from twin.verdict import Criteria, Trace, evaluate, settling_time_s
 
 RAIL_V, STOP_RAD = 12.0, math.radians(43.4)
 T = np.round(np.arange(-0.02, 10.0 + 1e-9, 0.02), 10)  # the held row, then 50 Hz ticks from release
@@ -16,7 +16,7 @@ def _verdict(x, theta=None, volts=None, peaks=None, lost=None, x0=0.2, criteria=
     volts = np.zeros_like(T) if volts is None else volts
     peaks = np.abs(theta) if peaks is None else peaks
     return evaluate(
-        T, x, theta, volts, peaks, x0_m=x0, ball_lost_time_s=lost, rail_v=RAIL_V, stop_angle_rad=STOP_RAD,
+        Trace(T, x, theta, volts, peaks), x0_m=x0, ball_lost_time_s=lost, rail_v=RAIL_V, stop_angle_rad=STOP_RAD,
         criteria=criteria,
     )  # fmt: skip
 
@@ -73,7 +73,7 @@ def test_a_lost_ball_has_no_steady_state() -> None:
 
 def test_a_run_shorter_than_the_window_is_not_held() -> None:
     v = evaluate(
-        T[:60], np.zeros(60), np.zeros(60), np.zeros(60), np.zeros(60), x0_m=0.1, ball_lost_time_s=None,
+        Trace(T[:60], np.zeros(60), np.zeros(60), np.zeros(60), np.zeros(60)), x0_m=0.1, ball_lost_time_s=None,
         rail_v=RAIL_V, stop_angle_rad=STOP_RAD,
     )  # fmt: skip
     assert not v.held and "shorter than the final window" in v.reason

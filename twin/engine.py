@@ -23,7 +23,7 @@ import sys
 import time
 from array import array
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Protocol, runtime_checkable
 
 import numpy as np
@@ -35,7 +35,7 @@ from twin.parameters import Daq, Parameters
 from twin.physics import PhysicsBlock
 from twin.realtime import TickTiming, tick_timing
 from twin.rigs.sim import PlantKind, RigError, make_rig, whole_steps
-from twin.verdict import Criteria, Verdict, evaluate, evaluate_measured
+from twin.verdict import Criteria, Trace, Verdict, evaluate, evaluate_measured
 
 __all__ = [
     "Catalogue",
@@ -421,6 +421,15 @@ class _Recorder:
         self._ticks, self._state_rows = [], []
         self.flushed = stop
 
+    def trace(self) -> Trace:
+        """The recorded ticks as the verdict reads them (views of the table: flushed first)."""
+        self.flush()
+        n, c = self.n, self.cols
+        return Trace(
+            c["true_time_s"][:n], c["true_x_m"][:n], c["true_theta_rad"][:n], c["motor_volts_v"][:n],
+            self.peak_theta[:n],
+        )  # fmt: skip
+
     def log(self) -> RunLog:
         self.flush()
         n = self.n
@@ -654,18 +663,14 @@ class ClosedLoop:
         (``x0_m`` default: the first block's reading)."""
         if self.recorder is None:
             raise RuntimeError("this closed loop was built with record=False")
-        r, n = self.recorder, self.recorder.n
-        r.flush()
+        r = self.recorder
         if self.truth is None:
             return evaluate_measured(r.log(), self.params, x0_m=x0_m, x_ref_m=x_ref_m, criteria=criteria)
+        trace = r.trace()
         return judge(
             self.params,
-            r.cols["true_time_s"][:n],
-            r.cols["true_x_m"][:n],
-            r.cols["true_theta_rad"][:n],
-            r.cols["motor_volts_v"][:n],
-            r.peak_theta[:n],
-            x0_m=float(r.cols["true_x_m"][0]) if x0_m is None else x0_m,
+            trace,
+            x0_m=float(trace.x_m[0]) if x0_m is None else x0_m,
             ball_lost_time_s=self.truth.ball_lost_time_s,
             criteria=criteria,
             x_ref_m=x_ref_m,
@@ -690,11 +695,7 @@ class ClosedLoop:
 
 def judge(
     params: Parameters,
-    t_s: np.ndarray,
-    x_m: np.ndarray,
-    theta_rad: np.ndarray,
-    motor_volts_v: np.ndarray,
-    peak_abs_theta_rad: np.ndarray,
+    trace: Trace,
     *,
     x0_m: float,
     ball_lost_time_s: float | None,
@@ -703,12 +704,10 @@ def judge(
 ) -> Verdict:
     """A run's verdict from its recorded ticks on the rig of ``params`` (its rails and stops), judged about
     the ball position ``x_ref_m``: the single run's and the batch's one call of ``twin.verdict.evaluate``."""
+    if x_ref_m:
+        trace = replace(trace, x_m=trace.x_m - x_ref_m)
     return evaluate(
-        t_s,
-        x_m - x_ref_m,
-        theta_rad,
-        motor_volts_v,
-        peak_abs_theta_rad,
+        trace,
         x0_m=x0_m - x_ref_m,
         ball_lost_time_s=ball_lost_time_s,
         rail_v=params.amplifier.rail_v,

@@ -33,7 +33,15 @@ if TYPE_CHECKING:
     from twin.log import RunLog
     from twin.parameters import Parameters
 
-__all__ = ["Criteria", "Verdict", "ball_step_bound_m", "evaluate", "evaluate_measured", "settling_time_s"]
+__all__ = [
+    "Criteria",
+    "Trace",
+    "Verdict",
+    "ball_step_bound_m",
+    "evaluate",
+    "evaluate_measured",
+    "settling_time_s",
+]
 
 
 @dataclass(frozen=True)
@@ -124,12 +132,24 @@ def settling_time_s(
     return float(max(t_s[last + 1], 0.0))
 
 
+@dataclass(frozen=True)
+class Trace:
+    """What a verdict reads of a run, one value per tick: the one record that every holder of a run's
+    columns (the loop's recorder, the batch, the environments, a log judged from its volts) hands it.
+
+    ``t_s`` from release (the rows before release are the held rig); ``x_m`` the ball about the point the run
+    is judged about; ``peak_abs_theta_rad`` the largest |θ| over the physics steps of each tick while the
+    ball was on the track; ``motor_volts_v`` the volts across the motor at each tick."""
+
+    t_s: np.ndarray
+    x_m: np.ndarray
+    theta_rad: np.ndarray
+    motor_volts_v: np.ndarray
+    peak_abs_theta_rad: np.ndarray
+
+
 def evaluate(
-    t_s: np.ndarray,
-    x_m: np.ndarray,
-    theta_rad: np.ndarray,
-    motor_volts_v: np.ndarray,
-    peak_abs_theta_rad: np.ndarray,
+    trace: Trace,
     *,
     x0_m: float,
     ball_lost_time_s: float | None,
@@ -137,11 +157,10 @@ def evaluate(
     stop_angle_rad: float,
     criteria: Criteria | None = None,
 ) -> Verdict:
-    """The verdict from the ticks of one run (times from release; the rows before release are the held rig).
-
-    ``peak_abs_theta_rad`` is the largest |θ| over the physics steps of each tick while the ball was on the
-    track; ``motor_volts_v`` the volts across the motor at each tick."""
+    """The verdict from the ticks of one run (``Trace``)."""
     c = criteria or Criteria()
+    t_s, x_m, theta_rad = trace.t_s, trace.x_m, trace.theta_rad
+    motor_volts_v, peak_abs_theta_rad = trace.motor_volts_v, trace.peak_abs_theta_rad
     t = np.asarray(t_s, dtype=float)
     released = t >= 0.0
     volts = np.abs(np.asarray(motor_volts_v, dtype=float)[released])
@@ -310,11 +329,7 @@ def evaluate_measured(
     peak = np.abs(theta[kept])
     count_rad = angle_count_step_rad(params)
     verdict = evaluate(
-        t,
-        x - x_ref_m,
-        theta,
-        volts,
-        peak,
+        Trace(t, x - x_ref_m, theta, volts, peak),
         x0_m=(float(x[0]) if x0_m is None else x0_m) - x_ref_m,
         ball_lost_time_s=lost_s,
         rail_v=params.amplifier.rail_v,

@@ -212,15 +212,18 @@ def _verdict_about(result: RunResult, params: Parameters, x0_m: float, setpoint_
     import numpy as np
 
     from twin.engine import judge
+    from twin.verdict import Trace
 
     log, first = result.log, result.verdict
     return judge(
         params,
-        log.true_time_s,
-        log.true_x_m,
-        log.true_theta_rad,
-        log.motor_volts_v,
-        np.array([first.peak_theta_rad]),
+        Trace(
+            log.true_time_s,
+            log.true_x_m,
+            log.true_theta_rad,
+            log.motor_volts_v,
+            np.array([first.peak_theta_rad]),
+        ),
         x0_m=x0_m,
         ball_lost_time_s=first.ball_lost_time_s,
         x_ref_m=setpoint_m,

@@ -51,7 +51,7 @@ from twin.parameters import Parameters
 from twin.physics import check_initial_state
 from twin.rigs.sim import PlantKind, make_rig
 from twin.rigs.vector import VectorBlocks, VectorRig
-from twin.verdict import Criteria
+from twin.verdict import Criteria, Trace
 
 __all__ = ["ENV_ID", "BallBeamEnv", "BallBeamVectorEnv", "EnvConfig"]
 
@@ -274,11 +274,7 @@ class _Trace:
         t, x, th, v, peak = (self.cols[j, i, :n] for j in range(5))
         return judge(
             ep.params,
-            t,
-            x,
-            th,
-            v,
-            peak,
+            Trace(t, x, th, v, peak),
             x0_m=ep.x0_m,
             ball_lost_time_s=lost_time_s,
             criteria=criteria,

@@ -58,7 +58,7 @@ from twin.plant import (
 )
 from twin.rigs.sim import PlantKind, RigError, tick_schedule
 from twin.sensors import BallChainBatch, IdealSensors, angle_block_means_v
-from twin.verdict import Criteria
+from twin.verdict import Criteria, Trace
 
 __all__ = [
     "BatchCatalogue",
@@ -708,11 +708,13 @@ class BatchRig:
         c = cols.cols
         verdict = judge(
             self.p,
-            c["true_time_s"][:n, i],
-            c["true_x_m"][:n, i],
-            c["true_theta_rad"][:n, i],
-            c["motor_volts_v"][:n, i],
-            cols.peak_theta[:n, i],
+            Trace(
+                c["true_time_s"][:n, i],
+                c["true_x_m"][:n, i],
+                c["true_theta_rad"][:n, i],
+                c["motor_volts_v"][:n, i],
+                cols.peak_theta[:n, i],
+            ),  # fmt: skip
             x0_m=float(self.x0[i]),
             ball_lost_time_s=self.lost_time_s[i],
             criteria=criteria,
