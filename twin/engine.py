@@ -589,31 +589,52 @@ class ClosedLoop:
         """One control period: read a block, run the controller, write its command."""
         if not self.started:
             self.start()
-        rig = self.rig
         if self.is_state_law:
-            if self.reads < 2:  # block 0 ends when the first command reaches the amplifier
-                sample = self._read()
-            else:
-                sample = self._read_with_law(self._law_volts, self.controller.period_s)
-                self.reads += 1
-            command = rig.command_v
-        else:
-            sample = self._read()
-            arrivals = self._arrivals
-            if arrivals is not None:
-                arrivals.append(time.perf_counter())
-            command = checked_update(
+            self._state_law_tick()
+            return
+        sample = self.sense()
+        self.answer(
+            checked_update(
                 self.controller,  # type: ignore[arg-type]
                 sample,
                 lambda: f"at tick k = {self.reads} (t = {sample.time_s:.3f} s)",
                 self.guard,
                 self.params.daq,
             )
-            rig.write(command)
-            if arrivals is not None:
-                self._compute.append(time.perf_counter() - arrivals[-1])
+        )
+
+    def sense(self) -> DaqSample:
+        """A tick's first half: read the next block. ``tick`` then runs the controller; a host that answers
+        from outside the loop (an environment's agent, between its steps) calls ``answer`` itself."""
+        if not self.started:
+            self.start()
+        sample = self._read()
+        if self._arrivals is not None:
+            self._arrivals.append(time.perf_counter())
         self.last_sample = sample
-        self.command_v = float(command)
+        return sample
+
+    def answer(self, command_v: float) -> None:
+        """A tick's second half: write the command answering the block ``sense`` read, record the tick."""
+        rig = self.rig
+        rig.write(command_v)
+        if self._arrivals is not None:
+            self._compute.append(time.perf_counter() - self._arrivals[-1])
+        self.command_v = float(command_v)
+        if self.recorder is not None and self.recording:
+            assert self.last_sample is not None
+            self.recorder.add(self.last_sample, self.command_v, self.controller.telemetry, rig.ball_lost)
+
+    def _state_law_tick(self) -> None:
+        """A tick of a law on the true state: the rig recomputes the volts from the state within it."""
+        rig = self.rig
+        if self.reads < 2:  # block 0 ends when the first command reaches the amplifier
+            sample = self._read()
+        else:
+            sample = self._read_with_law(self._law_volts, self.controller.period_s)
+            self.reads += 1
+        self.last_sample = sample
+        self.command_v = float(rig.command_v)
         if self.recorder is not None and self.recording:
             self.recorder.add(sample, self.command_v, self.controller.telemetry, rig.ball_lost)
 

@@ -4,8 +4,9 @@
 which registers the id; Gymnasium 1.x loads no plugins by itself) or ``gymnasium.make_vec("twin.app.envs:
 BallBeam-v0", num_envs=N, vectorization_mode="vector_entry_point", **options)``.
 
-A step is one 20 ms tick of the rig the engine runs (``twin.rigs.sim.SimRig``, as ``ballbeam run``): the action
-is written to the DAC, the next block is read. ``reset`` holds the rig at the episode's initial state and
+A step is one 20 ms tick of the one loop (``twin.engine.ClosedLoop`` on ``twin.rigs.sim.SimRig``, as ``ballbeam
+run``) whose controller is the agent: the action answers the block last observed (``ClosedLoop.answer``), the
+next block is read (``ClosedLoop.sense``). ``reset`` holds the rig at the episode's initial state and
 reads the start block (k = −1, what ``Controller.start`` reads) and block 0 (the first ``update``'s): the
 first action is the command computed from block 0, as on the rig. Observation, action and reward:
 ``twin.learning`` (their one home, shared with ``controllers.policy.PolicyController``).
@@ -37,7 +38,8 @@ from gymnasium import spaces
 from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 
-from twin.engine import block_peak_abs_theta_rad, judge
+from twin.engine import ClosedLoop, block_peak_abs_theta_rad, judge
+from twin.interface import Controller, DaqSample
 from twin.learning import (
     ActionKind,
     ActionSpec,
@@ -301,6 +303,23 @@ def _step_outcome(
     return r, terminated, truncated, at_stops
 
 
+class _Agent(Controller):
+    """The environment's agent as the loop's controller: it answers each block from outside the loop, between
+    ``step`` calls (``ClosedLoop.answer``), never through ``update``."""
+
+    name = "agent"
+
+    def __init__(self, period_s: float) -> None:
+        super().__init__()
+        self.period_s = period_s
+
+    def start(self, sample: DaqSample) -> None:
+        """The start block is the first observation's history: nothing to initialise."""
+
+    def update(self, sample: DaqSample) -> float:
+        raise RuntimeError("the agent's commands arrive with step(action), not from update")
+
+
 class BallBeamEnv(gymnasium.Env[np.ndarray, np.ndarray]):
     """``BallBeam-v0``: the rig as a controller sees it, one 20 ms tick a step.
 
@@ -319,6 +338,7 @@ class BallBeamEnv(gymnasium.Env[np.ndarray, np.ndarray]):
         self.cfg = make_config(**options)
         self.observation_space, self.action_space = _spaces(self.cfg)
         self.rig: Any = None
+        self._loop: Any = None
         self._episode: Episode | None = None
         self._trace = _Trace(1, self.cfg.ticks)
         self._ball = np.zeros(self.cfg.obs.stack)
@@ -349,14 +369,18 @@ class BallBeamEnv(gymnasium.Env[np.ndarray, np.ndarray]):
             self._rig_params = ep.params
         rig = self.rig
         rig.reset(ep.x0_m, ep.theta0_rad, seed=ep.noise_seed)
+        # The one loop, its controller the agent: it reads the start block now, and each step answers a block.
+        loop = self._loop = ClosedLoop(rig, _Agent(rig.period_s), record=False, controller_timeout_s=math.inf)
         one = np.zeros(1, dtype=np.int64)
         self._trace.clear(one)
-        first = rig.read()
+        loop.start()
+        first = loop.last_sample
+        assert first is not None
         self._record(one)
         self._ball[:] = first.ball_v
         self._angle[:] = first.angle_v
         self._steps, self._ended = 0, False
-        return self._after_block(rig.read(), one), self._info(False)
+        return self._after_block(loop.sense(), one), self._info(False)
 
     def _record(self, one: np.ndarray) -> None:
         rig = self.rig
@@ -385,9 +409,9 @@ class BallBeamEnv(gymnasium.Env[np.ndarray, np.ndarray]):
             raise RuntimeError("the episode has ended (terminated or truncated): call reset")
         ep, rig = self._episode, self.rig
         command = float(self.cfg.action.command_v(action, ep.params)[0])
-        rig.write(command)
+        self._loop.answer(command)
         one = np.zeros(1, dtype=np.int64)
-        obs = self._after_block(rig.read(), one)
+        obs = self._after_block(self._loop.sense(), one)
         self._steps += 1
         state = rig.true_state()[None, :]
         r, term, trunc, stops = _step_outcome(
