@@ -25,12 +25,12 @@ from cli_checks import refused
 
 from controllers import registry
 from controllers.thesis_numbers import HARDWARE_STARTS
-from twin.app.cli import _connect
 from twin.app.fanout import Runs, Served, run_starts
 from twin.app.montecarlo import MonteCarloSettings, load_spread, run_montecarlo
 from twin.app.sweep import Grid, SweepSettings, point_seeds, run_sweep
 from twin.parameters import Parameters
 from twin.remote import RemoteError, run_remote
+from twin.remote_session import connect as _connect
 from twin.serve import Server, SessionSettings
 
 ROOT = Path(__file__).resolve().parent.parent
