@@ -31,14 +31,13 @@ from twin.app.commands.common import (
 )
 from twin.app.options import count, finite_float, seed
 
+HELP = "robustness: one start over many perturbed rigs and noise seeds; success rate with its interval"
+
 
 def _mc_max_runs() -> float:
     from twin.app.montecarlo import MAX_RUNS
 
     return MAX_RUNS
-
-
-HELP = "robustness: one start over many perturbed rigs and noise seeds; success rate with its interval"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -34,16 +34,17 @@ from twin.app.commands.common import (
 from twin.app.options import DEFAULT_REFINE_STEP, MAX_LOCATE, MAX_RIGS, GridType, count, finite_float, seed
 
 if TYPE_CHECKING:
+    from twin.app.sweep import SweepResult, SweepSettings
     from twin.parameters import Parameters
+
+
+HELP = "region of attraction: a grid of initial states, a map (PNG) and the verdict of every start (JSON)"
 
 
 def _sweep_max_points() -> float:
     from twin.app.sweep import MAX_POINTS
 
     return MAX_POINTS
-
-
-HELP = "region of attraction: a grid of initial states, a map (PNG) and the verdict of every start (JSON)"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -187,38 +188,10 @@ def run(args: argparse.Namespace) -> int:
     if (client := client_name(args, served)) is not None:
         result.settings = settings = replace(settings, controller=client)
     write_out(args, write_sweep, result)
-    report = result.to_json()
     if args.json:
-        print(json.dumps(report))
+        print(json.dumps(result.to_json()))
     else:
-        summary = report["summary"]
-        print(
-            f"{settings.controller}: {summary['done']} of {summary['points']} starts: held {summary['held']}, "
-            f"not held {summary['not_held']}, lost {summary['lost']} ({result.wall_s:.1f} s)"
-        )
-        if (ref := result.refinement) is not None:
-            audit = ref["audit"]
-            print(
-                f"refined from a step of {ref['coarse_step']}: {ref['run']} starts run "
-                f"({100 * ref['run_fraction']:.1f} %), {ref['inferred']} inferred"
-                + (
-                    f"; audit: {audit['checked']} inferred starts run, {len(audit['mismatches'])} differ"
-                    if audit["checked"]
-                    else ""
-                )
-            )
-        if (boundary := result.boundary) is not None:
-            print(
-                f"boundary: {boundary['edges']} grid edges crossed, each located to 1/{2 ** boundary['bisections']} "
-                f"of a grid step ({boundary['run']} more runs)"
-            )
-        for claim in result.claims:
-            print(
-                f"claim ({claim['source']}): {claim['statement']}: {claim['verdict']} "
-                f"({claim['kept']} of {claim['grid_points_inside']} grid starts keep the ball)"
-            )
-        if args.out is not None:
-            print(f"wrote {Path(args.out) / 'sweep.json'} and {Path(args.out) / 'map.png'}")
+        _print_sweep(args, settings, result)
     stopped = served_stopped(served, "sweep", sum(map(bool, result.points)), len(result.points))
     if stopped is not None:
         return stopped
@@ -235,6 +208,39 @@ def run(args: argparse.Namespace) -> int:
         )
         return 1
     return controller_failures(result.points, "sweep")
+
+
+def _print_sweep(args: argparse.Namespace, settings: SweepSettings, result: SweepResult) -> None:
+    """A map's summary in words: its classes, refinement, boundary and the region claims it judges."""
+    report = result.to_json()
+    summary = report["summary"]
+    print(
+        f"{settings.controller}: {summary['done']} of {summary['points']} starts: held {summary['held']}, "
+        f"not held {summary['not_held']}, lost {summary['lost']} ({result.wall_s:.1f} s)"
+    )
+    if (ref := result.refinement) is not None:
+        audit = ref["audit"]
+        print(
+            f"refined from a step of {ref['coarse_step']}: {ref['run']} starts run "
+            f"({100 * ref['run_fraction']:.1f} %), {ref['inferred']} inferred"
+            + (
+                f"; audit: {audit['checked']} inferred starts run, {len(audit['mismatches'])} differ"
+                if audit["checked"]
+                else ""
+            )
+        )
+    if (boundary := result.boundary) is not None:
+        print(
+            f"boundary: {boundary['edges']} grid edges crossed, each located to 1/{2 ** boundary['bisections']} "
+            f"of a grid step ({boundary['run']} more runs)"
+        )
+    for claim in result.claims:
+        print(
+            f"claim ({claim['source']}): {claim['statement']}: {claim['verdict']} "
+            f"({claim['kept']} of {claim['grid_points_inside']} grid starts keep the ball)"
+        )
+    if args.out is not None:
+        print(f"wrote {Path(args.out) / 'sweep.json'} and {Path(args.out) / 'map.png'}")
 
 
 def _robust_sweep(args: argparse.Namespace, settings: Any, params: Parameters, spread: Any) -> int:
