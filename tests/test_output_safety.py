@@ -340,6 +340,7 @@ def test_a_user_controllers_module_is_an_input(tmp_path: Path, monkeypatch: pyte
     """The module of ``--controller MODULE:CLASS`` is one of the job's inputs: an output never replaces it."""
     from twin.app import cli
     from twin.app.catalogue import user_controller
+    from twin.app.commands.common import inputs
 
     module = tmp_path / "myctl_outputs.py"
     module.write_text(
@@ -351,14 +352,14 @@ def test_a_user_controllers_module_is_an_input(tmp_path: Path, monkeypatch: pyte
     monkeypatch.syspath_prepend(str(tmp_path))
     user_controller("myctl_outputs:C")  # the command imports it before the output checks
     args = cli.build_parser().parse_args(["sweep", "--controller", "myctl_outputs:C"])
-    assert ("--controller", str(module)) in cli._inputs(args)
+    assert ("--controller", str(module)) in inputs(args)
     with pytest.raises(OutputError, match="is the input --controller"):
         outputs.check_output_folder(
             "--out",
             str(tmp_path),
             JobFiles("x", ("myctl_outputs.py",)),
             overwrite=True,
-            inputs=cli._inputs(args),
+            inputs=inputs(args),
         )
 
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from test_validate import QUICK
 
-from twin.app.cli import _progress_bar
+from twin.app.commands.common import progress_bar as _progress_bar
 from twin.app.fanout import Runs, Stages, run_starts
 from twin.app.montecarlo import MonteCarloSettings, load_spread, run_montecarlo
 from twin.app.sweep import point_seeds

@@ -25,13 +25,13 @@ from cli_checks import refused
 
 from controllers import registry
 from controllers.thesis_numbers import HARDWARE_STARTS
-from twin.app.cli import _connect
 from twin.app.fanout import Runs, Served, run_starts
 from twin.app.montecarlo import MonteCarloSettings, load_spread, run_montecarlo
 from twin.app.sweep import Grid, SweepSettings, point_seeds, run_sweep
 from twin.engine import run_on_rig
 from twin.parameters import Parameters
 from twin.rigs.remote import RemoteError
+from twin.rigs.session import connect as _connect
 from twin.wire.server import Server, SessionSettings
 
 ROOT = Path(__file__).resolve().parent.parent

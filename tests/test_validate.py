@@ -161,7 +161,7 @@ def test_ctrl_c_keeps_the_checks_done(tmp_path: Path, monkeypatch: pytest.Monkey
 
 
 def test_the_progress_bar_restarts_for_each_stage(capsys: pytest.CaptureFixture[str]) -> None:
-    from twin.app.cli import _progress_bar
+    from twin.app.commands.common import progress_bar as _progress_bar
 
     update = _progress_bar("validate")
     for done, total in [(0, 3), (2, 3), (3, 3), (0, 5), (5, 5), (0, 5), (4, 5)]:

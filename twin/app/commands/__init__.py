@@ -1,0 +1,56 @@
+"""The ``ballbeam`` subcommands, one module each: its help (``HELP``), its options (``add_arguments``) and
+its handler (``run``, returning the exit code). ``COMMANDS`` lists them once, in the order ``ballbeam --help``
+shows them; ``twin.app.cli`` builds its parser from it. What several commands share is in ``common``.
+
+Every module imports only light code at its top (``--help`` imports them all); a handler imports what it
+needs when it runs.
+"""
+
+from __future__ import annotations
+
+import argparse
+from typing import Protocol
+
+from twin.app.commands import (
+    calibrate,
+    calibrate_static,
+    compare,
+    experiment,
+    judge,
+    linearize,
+    montecarlo,
+    params,
+    run,
+    serve,
+    shadow,
+    sweep,
+    validate,
+    view,
+)
+
+
+class Command(Protocol):
+    """A command's module: its options and its handler (the exit code)."""
+
+    def add_arguments(self, parser: argparse.ArgumentParser) -> None: ...
+
+    def run(self, args: argparse.Namespace) -> int: ...
+
+
+# The subcommands in the order ``--help`` lists them: (name, module, help).
+COMMANDS: tuple[tuple[str, Command, str], ...] = (
+    ("linearize", linearize, linearize.HELP),
+    ("run", run, run.HELP),
+    ("serve", serve, serve.HELP),
+    ("shadow", shadow, shadow.HELP),
+    ("judge", judge, judge.HELP),
+    ("sweep", sweep, sweep.HELP),
+    ("montecarlo", montecarlo, montecarlo.HELP),
+    ("validate", validate, validate.HELP),
+    ("view", view, view.HELP),
+    ("calibrate", calibrate, calibrate.HELP),
+    ("compare", compare, compare.HELP),
+    ("calibrate-static", calibrate_static, calibrate_static.HELP),
+    ("experiment", experiment, experiment.HELP),
+    ("params", params, params.HELP),
+)

@@ -1,0 +1,82 @@
+"""``ballbeam calibrate``: fit the twin's parameters to logs recorded on a rig."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from twin.app.commands.common import add_params_options, inputs, load_params, progress_bar, write_out
+from twin.app.options import finite_float
+from twin.outputs import check_output_folder
+
+HELP = (
+    "fit the twin's parameters to logs recorded on a rig (exit 0 converged and adequate; 1 not "
+    "converged, model mismatch or weak excitation; 2 a log refused)"
+)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("logs", nargs="+", metavar="LOG", help="data_file.mat or .csv logs of the same rig")
+    parser.add_argument(
+        "--fit",
+        required=True,
+        metavar="NAME,NAME,…",
+        help="parameters to fit, e.g. motor.resistance_ohm,beam.inertia_pivot_kgm2 (see README)",
+    )
+    parser.add_argument("--out", metavar="DIR", help="write params.toml, calibration.json and report.md here")
+    parser.add_argument("--overwrite", action="store_true", help="replace its own files in an existing --out")
+    parser.add_argument(
+        "--window",
+        type=finite_float(0, unit="s"),  # its minimum, 2 ticks, follows from the logs' period
+        default=1.0,
+        metavar="S",
+        help="window length (default 1 s; at least 2 ticks of the logs)",
+    )
+    parser.add_argument("--json", action="store_true", help="print calibration.json")
+    add_params_options(parser)
+
+
+def run(args: argparse.Namespace) -> int:
+    from calib.identify import FITTABLE, calibrate
+    from calib.logs import load_rig_log
+    from calib.report import OUTPUT_FILES, write_report
+    from twin.parameters import ParameterError
+
+    start = load_params(args)
+    fit = [name.strip() for name in args.fit.split(",") if name.strip()]
+    unknown = [n for n in fit if n not in FITTABLE]
+    if not fit or unknown:
+        raise ParameterError(f"--fit {args.fit!r}: choose from {', '.join(FITTABLE)}")
+    if args.out is not None:
+        check_output_folder("--out", args.out, OUTPUT_FILES, overwrite=args.overwrite, inputs=inputs(args))
+    logs = [load_rig_log(path) for path in args.logs]
+    period_s = min(log.period_s for log in logs)
+    if args.window < 2 * period_s:  # a window is fitted from its ticks' differences: at least two
+        raise ParameterError(
+            f"--window = {args.window:g}: at least 2 ticks of the logs' {period_s * 1e3:g} ms period "
+            f"({2 * period_s:g} s)"
+        )
+
+    # A bar per stage over its evaluation budget: the ETA is an upper bound (a fit stops when it converges).
+    progress = None if args.json else progress_bar("calibrate", unit="evaluation")
+    cal = calibrate(logs, fit, start, window_s=args.window, progress=progress)
+    write_out(args, write_report, cal)
+    if args.json:
+        print(json.dumps(cal.to_json()))
+    else:
+        for name, v in cal.values.items():
+            print(
+                f"{name:<36} {v.value:12.6g}  [{v.ci_low:.6g}, {v.ci_high:.6g}]  (start {v.initial:.6g}) {v.unit}"
+            )
+        print(f"converged: {cal.converged} ({cal.message}); {cal.wall_s:.1f} s")
+        for warning in cal.warnings:
+            print(f"warning: {warning}")
+        if args.out is not None:
+            print(f"wrote {Path(args.out) / 'params.toml'}, calibration.json, report.md")
+    # A fit that did not converge, or whose residuals or information say it cannot be trusted (model
+    # mismatch, weak excitation), exits 1: its files are written for inspection, its message is on stderr.
+    for problem in cal.problems:
+        print(f"calibrate: {problem}", file=sys.stderr)
+    return 0 if cal.trustworthy else 1

@@ -1,0 +1,40 @@
+"""``ballbeam calibrate-static``: a sensor's static curve fitted from a measured table."""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+from twin.app.commands.common import add_params_options, inputs, load_params
+from twin.outputs import check_outputs, writing
+
+PARAMS_OUT_SUFFIXES = (".toml",)
+
+HELP = "fit a sensor's static curve from a measured table (CSV)"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "table", metavar="TABLE.csv", help="columns position_m,volts_v (ball) or di,volts_v (angle)"
+    )
+    parser.add_argument("--out", metavar="FILE.toml", help="write the fitted parameters as a parameter file")
+    parser.add_argument("--overwrite", action="store_true", help="replace an existing --out file")
+    parser.add_argument("--json", action="store_true", help="print JSON")
+    add_params_options(parser)
+
+
+def run(args: argparse.Namespace) -> int:
+    from calib.static import calibrate, load_table
+    from calib.static_render import render_lines, render_toml
+    from twin.outputs import atomic_output
+
+    params = load_params(args)
+    paths = check_outputs(
+        [("--out", args.out, PARAMS_OUT_SUFFIXES, 0)], overwrite=args.overwrite, inputs=inputs(args)
+    )
+    result = calibrate(load_table(args.table), params)
+    print(json.dumps(result.to_json(), indent=2) if args.json else "\n".join(render_lines(result)))
+    if "--out" in paths:
+        with writing("--out", args.out), atomic_output(paths["--out"], overwrite=args.overwrite) as fh:
+            fh.write(render_toml(result).encode("utf-8"))
+    return 0

@@ -1,0 +1,54 @@
+"""``ballbeam linearize``: the continuous-time A, B at the origin (the twin's or the reference model's)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+from twin.app.commands.common import add_params_options, load_params
+
+HELP = "continuous-time A, B at the origin"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--input", choices=("torque", "voltage"), default="torque")
+    parser.add_argument(
+        "--source",
+        choices=("twin", "reference"),
+        default="twin",
+        help="the MuJoCo twin (reduced to its 4 slow modes) or the analytic reference model",
+    )
+    add_params_options(parser)
+    parser.add_argument("--json", action="store_true", help="print JSON")
+
+
+def run(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from twin.reference import STATE_NAMES, ReferenceModel
+
+    params = load_params(args)
+    if args.source == "reference":
+        a, b = ReferenceModel(params).linearize(args.input)
+    else:
+        from twin.linearize import linearize_mujoco  # imports MuJoCo only when needed
+
+        a, b = linearize_mujoco(params, args.input)
+    result = {
+        "state": list(STATE_NAMES),
+        "input": args.input,
+        "source": args.source,
+        "A": a.tolist(),
+        "B": b.tolist(),
+    }
+    if args.json:
+        print(json.dumps(result))
+    else:
+        unit = "N·m" if args.input == "torque" else "V"
+        print(f"Continuous-time linearization at the origin ({args.source}, input: {args.input} [{unit}])")
+        print("state:", ", ".join(STATE_NAMES))
+        with np.printoptions(precision=6, suppress=True, linewidth=120):
+            print("A =\n", a)
+            print("B =\n", b)
+            print("eigenvalues of A:", np.linalg.eigvals(a))
+    return 0

@@ -1,0 +1,148 @@
+"""``ballbeam montecarlo``: one start over many perturbed rigs and noise seeds."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+from twin.app.commands.common import (
+    JOB_RUN_S,
+    SERVED_CONTROLLER,
+    WORKERS,
+    add_controller_timeout,
+    add_params_options,
+    add_plant_options,
+    add_served_options,
+    add_spread_options,
+    check_job,
+    check_served,
+    client_name,
+    controller_failures,
+    controller_help,
+    job_name,
+    params_and_spread,
+    progress_bar,
+    served_stopped,
+    serving,
+    write_out,
+)
+from twin.app.options import count, finite_float, seed
+
+HELP = "robustness: one start over many perturbed rigs and noise seeds; success rate with its interval"
+
+
+def _mc_max_runs() -> float:
+    from twin.app.montecarlo import MAX_RUNS
+
+    return MAX_RUNS
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--controller", metavar="NAME|MODULE:CLASS", help=controller_help() + SERVED_CONTROLLER
+    )
+    parser.add_argument("--n", type=count(1, _mc_max_runs), default=200, help="runs (default 200)")
+    add_spread_options(parser, "for the perturbed rigs")
+    parser.add_argument(
+        "--x0", type=finite_float(), default=-0.2, metavar="M", help="initial ball position (default -0.2)"
+    )
+    parser.add_argument(
+        "--theta0", type=finite_float(), default=0.3, metavar="RAD", help="initial beam angle (default 0.3)"
+    )
+    parser.add_argument(
+        "--duration", type=JOB_RUN_S, default=15.0, metavar="S", help="seconds per run (default 15)"
+    )
+    parser.add_argument("--seed", type=seed(), default=0, help="seed of the samples and of every run's noise")
+    parser.add_argument("--no-noise", action="store_true", help="switch the ball sensor's contact noise off")
+    add_plant_options(parser)
+    add_params_options(parser)
+    parser.add_argument(
+        "--workers", type=WORKERS, default=1, help="local processes (default 1: this process)"
+    )
+    parser.add_argument(
+        "--scheduler", metavar="ADDRESS", help="a Dask distributed scheduler to fan the runs out to"
+    )
+    add_served_options(parser)
+    parser.add_argument("--out", metavar="DIR", help="write DIR/montecarlo.json and DIR/distributions.png")
+    parser.add_argument("--overwrite", action="store_true", help="replace its own files in an existing --out")
+    parser.add_argument("--json", action="store_true", help="print the whole result as JSON")
+    add_controller_timeout(parser)
+
+
+def run(args: argparse.Namespace) -> int:
+    from twin.app.montecarlo import OUTPUT_FILES, MonteCarloSettings, run_montecarlo, write_montecarlo
+    from twin.parameters import ParameterError
+    from twin.physics import check_initial_state
+
+    check_served(args)
+    if (args.spread is None) == (args.calibration is None):
+        raise ParameterError(
+            "give one of --spread FILE or --calibration DIR (what to perturb, and by how much)"
+        )
+    base, spread = params_and_spread(args)
+    assert spread is not None
+    try:
+        check_initial_state(base, args.x0, args.theta0, 0.0, 0.0)
+    except ValueError as exc:
+        raise ParameterError(f"--x0/--theta0: {exc}") from None
+    check_job(args, base, OUTPUT_FILES)
+    settings = MonteCarloSettings(
+        controller=job_name(args),
+        n=args.n,
+        x0_m=args.x0,
+        theta0_rad=args.theta0,
+        duration_s=args.duration,
+        noise=not args.no_noise,
+        plant=args.plant,
+        ideal_sensors=bool(args.ideal_sensors or args.plant == "reference"),
+        seed=args.seed,
+    )
+    with serving(args, base) as served:
+        result = run_montecarlo(
+            settings,
+            base,
+            spread,
+            workers=args.workers,
+            scheduler=args.scheduler,
+            progress=progress_bar("montecarlo"),
+            serve=served,
+        )
+    if (client := client_name(args, served)) is not None:
+        result.settings = settings = replace(settings, controller=client)
+    write_out(args, write_montecarlo, result)
+    if args.json:
+        print(json.dumps(result.to_json()))
+    else:
+        s = result.summary
+        ci = s["success_ci"]
+        print(
+            f"{settings.controller} from ({args.x0:g} m, {args.theta0:g} rad): held {s['held']} of {s['runs']}"
+            + (
+                f" ({100 * s['success_rate']:.1f} %, 95 % CI {100 * ci[0]:.1f}–{100 * ci[1]:.1f} %)"
+                if ci
+                else ""
+            )
+            + f", lost {s['lost']} ({result.wall_s:.1f} s)"
+        )
+        for name, dist in (("settling time (s)", s["settling_time_s"]), ("steady x (m)", s["steady_x_m"])):
+            if dist:
+                print(
+                    f"  {name}: p5 {dist['p5']:g}, median {dist['p50']:g}, p95 {dist['p95']:g}, max {dist['max']:g}"
+                )
+        for run in s["worst"][:3]:
+            if run["held"]:
+                break
+            changed = ", ".join(f"{k} = {v:.6g}" for k, v in run["parameters"].items())
+            print(f"  worst: {run['reason']} (seed {run['seed']}): {changed}")
+        if args.out is not None:
+            print(f"wrote {Path(args.out) / 'montecarlo.json'} and {Path(args.out) / 'distributions.png'}")
+    stopped = served_stopped(served, "montecarlo", sum(map(bool, result.runs)), len(result.runs))
+    if stopped is not None:
+        return stopped
+    if not result.complete:
+        print("ballbeam montecarlo: interrupted: the runs done so far are kept", file=sys.stderr)
+        return 130
+    return controller_failures(result.runs, "montecarlo")

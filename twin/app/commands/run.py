@@ -1,0 +1,283 @@
+"""``ballbeam run``: a controller in closed loop on the twin, or on a rig over the wire (``--rig``)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from typing import TYPE_CHECKING, Any
+
+from twin.app.catalogue import construct, one_line, user_controller
+from twin.app.commands.common import (
+    LOG_SUFFIXES,
+    add_controller_timeout,
+    add_episode_options,
+    add_params_options,
+    add_plant_options,
+    controller_help,
+    inputs,
+    load_params,
+    log_bytes,
+    save_log,
+)
+from twin.app.options import count, finite_float
+from twin.outputs import check_outputs, writing
+
+if TYPE_CHECKING:
+    from twin.engine import RunResult
+    from twin.parameters import Parameters
+    from twin.verdict import Verdict
+
+PLOT_SUFFIXES = (".png",)
+_PLOT_BYTES = 20_000  # a lower bound of a plot's size, to refuse a disk without room before the run
+
+HELP = "run a controller in closed loop and report the verdict (exit 0 held, 1 lost or not held)"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--controller", required=True, metavar="NAME|MODULE:CLASS", help=controller_help())
+    parser.add_argument(
+        "--x0", type=finite_float(), metavar="M", help="initial ball position (m; required unless --rig)"
+    )
+    parser.add_argument(
+        "--theta0", type=finite_float(), metavar="RAD", help="initial beam angle (rad; required unless --rig)"
+    )
+    parser.add_argument(
+        "--rig",
+        metavar="URL",
+        help="udp://HOST:PORT or serial:///dev/ttyX?baud=N: run on a rig served over protocol 1 (ballbeam "
+        "serve, or firmware speaking docs/protocol.md); "
+        "its state and duration are the server's; the verdict is judged from the measured signals",
+    )
+    add_episode_options(parser)
+    parser.add_argument(
+        "--sessions",
+        type=count(0, 10_000_000),
+        default=1,
+        metavar="N",
+        help="with --rig: N sessions one after the other, each with a fresh controller and its verdict printed "
+        "(0: until the server answers no HELLO within --wait-server: a served job's every run, sweep --serve); "
+        "exit 0 only if every session held (default 1)",
+    )
+    parser.add_argument(
+        "--wait-server",
+        type=finite_float(0, 3600, lo_open=True, unit="s"),
+        metavar="S",
+        help="with --rig: how long HELLO is repeated before the server counts as gone (default 5)",
+    )
+    parser.add_argument(
+        "--setpoint",
+        type=finite_float(unit="m"),
+        metavar="M",
+        help="ball setpoint (m, on the track) for a controller that has one (twin.interface.Setpoint); the "
+        "verdict is then judged about it",
+    )
+    parser.add_argument(
+        "--realtime",
+        action="store_true",
+        help="pace the ticks to the wall clock (one every daq.period_s, as on the rig) and report the tick "
+        "jitter (p50/p99/max) and overruns",
+    )
+    add_plant_options(parser)
+    parser.add_argument(
+        "--log",
+        metavar="FILE",
+        help="save the run: .mat (thesis data_file format) or .csv (written atomically)",
+    )
+    parser.add_argument("--plot", metavar="FILE.png", help="save a PNG of the run")
+    parser.add_argument("--overwrite", action="store_true", help="replace existing --log/--plot files")
+    add_params_options(parser)
+    parser.add_argument("--json", action="store_true", help="print the verdict as JSON")
+    add_controller_timeout(parser)
+
+
+def run(args: argparse.Namespace) -> int:
+    from controllers import registry
+    from twin.engine import ControllerError, run_closed_loop
+    from twin.plant import NumericalError
+
+    params = load_params(args)
+    if args.rig is not None:
+        return _run_on_remote_rig(args, params)
+    if args.sessions != 1 or args.wait_server is not None:
+        print(
+            "ballbeam run: error: --sessions and --wait-server are a rig's: they need --rig", file=sys.stderr
+        )
+        return 2
+    if args.x0 is None or args.theta0 is None:
+        print(
+            "ballbeam run: error: --x0 and --theta0 are required (unless --rig: the server's)",
+            file=sys.stderr,
+        )
+        return 2
+    user = user_controller(args.controller)
+    paths = check_outputs(
+        [
+            ("--log", args.log, LOG_SUFFIXES, log_bytes(args.log, args.duration, params)),
+            ("--plot", args.plot, PLOT_SUFFIXES, _PLOT_BYTES),
+        ],
+        overwrite=args.overwrite,
+        inputs=inputs(args),
+    )
+    controller = (
+        registry.make(args.controller, params) if user is None else construct(user, args.controller, params)
+    )
+    if args.setpoint is not None:
+        _apply_setpoint(controller, args.controller, args.setpoint, params)
+    pacer = None
+    if args.realtime:
+        from twin.realtime import WallClockPacer
+
+        pacer = WallClockPacer(params.daq.period_s)
+    try:
+        result = run_closed_loop(
+            controller,
+            x0_m=args.x0,
+            theta0_rad=args.theta0,
+            duration_s=args.duration,
+            seed=args.seed,
+            noise=not args.no_noise,
+            params=params,
+            plant=args.plant,
+            ideal_sensors=args.ideal_sensors or args.plant == "reference",
+            pacer=pacer,
+        )
+    except ControllerError as exc:
+        print(f"ballbeam run: the controller failed: {exc}", file=sys.stderr)
+        return 1
+    except NumericalError as exc:  # the simulation failed: no physical verdict
+        print(f"ballbeam run: {one_line(exc)}", file=sys.stderr)
+        return 1
+    if args.setpoint is not None:
+        result.verdict = _verdict_about(result, params, args.x0, args.setpoint)
+    if "--log" in paths:
+        save_log(result.log, "--log", args.log, paths["--log"], args.overwrite)
+    if "--plot" in paths:
+        from twin.plots import plot_run
+
+        with writing("--plot", args.plot):
+            plot_run(result, paths["--plot"], overwrite=args.overwrite, software=params.software)
+    summary = {
+        "controller": args.controller,
+        "x0_m": args.x0,
+        "theta0_rad": args.theta0,
+        "seed": args.seed,
+        "noise": not args.no_noise,
+        "plant": args.plant,
+        "ideal_sensors": bool(args.ideal_sensors or args.plant == "reference"),
+        "free_run_s": params.start.free_run_s,
+        **({} if args.setpoint is None else {"setpoint_m": args.setpoint}),
+        **result.verdict.to_json(),
+    }
+    if pacer is not None:
+        summary["realtime"] = pacer.timing().to_json()
+    if args.json:
+        print(json.dumps(summary))
+    else:
+        for key, value in summary.items():
+            print(f"{key:<26} {value}")
+    return 0 if result.verdict.held else 1
+
+
+def _apply_setpoint(controller: object, spec: str, setpoint_m: float, params: Parameters) -> None:
+    """``--setpoint``: on the track, and only for a controller that declares one (twin.interface.Setpoint)."""
+    from twin.interface import Setpoint
+    from twin.parameters import ParameterError
+
+    half_m = params.track.half_length_m
+    if abs(setpoint_m) > half_m:
+        raise ParameterError(f"--setpoint = {setpoint_m!r} m is off the track (|x| ≤ {half_m:g} m)")
+    if not isinstance(controller, Setpoint):
+        from controllers import registry
+
+        named = ", ".join(name for name, entry in registry.ENTRIES.items() if entry.setpoint)
+        raise ParameterError(
+            f"--setpoint: {spec} has no ball setpoint (it regulates the ball to its own fixed point); "
+            f"named controllers with one: {named} (your own: implement twin.interface.Setpoint)"
+        )
+    controller.setpoint_m = setpoint_m
+
+
+def _verdict_about(result: RunResult, params: Parameters, x0_m: float, setpoint_m: float) -> Verdict:
+    """The run's verdict judged about the setpoint: ``twin.engine.judge`` on the logged true state. The
+    per-tick peak |θ| is not logged; only its maximum enters the verdict, and the run's verdict holds it."""
+    import numpy as np
+
+    from twin.engine import judge
+    from twin.verdict import Trace
+
+    log, first = result.log, result.verdict
+    return judge(
+        params,
+        Trace(
+            log.true_time_s,
+            log.true_x_m,
+            log.true_theta_rad,
+            log.motor_volts_v,
+            np.array([first.peak_theta_rad]),
+        ),
+        x0_m=x0_m,
+        ball_lost_time_s=first.ball_lost_time_s,
+        x_ref_m=setpoint_m,
+    )
+
+
+def _run_on_remote_rig(args: argparse.Namespace, params: Parameters) -> int:
+    """``run --rig udp://HOST:PORT`` (or ``serial:///dev/ttyX?baud=N``): the controller through
+    ``twin.rigs.remote.RemoteRig`` (``twin.rigs.session``). The rig's initial state, duration and noise are the
+    server's; the verdict is judged from the measured signals (``ballbeam serve`` prints the true state's).
+    ``--sessions N``: N sessions one after the other (0: until the server stops answering HELLO within
+    ``--wait-server``), a fresh controller each, built from that session's CONFIG (a served job's runs,
+    ``sweep --serve``)."""
+    from controllers import registry
+    from twin.rigs.session import run_on_remote_rig
+    from twin.wire.links import parse_url
+
+    try:
+        parse_url(args.rig)
+    except ValueError as exc:
+        raise ValueError(f"--rig {exc}") from None
+    if args.sessions != 1 and args.log is not None:
+        raise ValueError(
+            "--log keeps one session's log: with --sessions other than 1 the server keeps every run (its "
+            "job's report, or serve --log)"
+        )
+    user = user_controller(args.controller)
+    paths = check_outputs(
+        [("--log", args.log, LOG_SUFFIXES, log_bytes(args.log, args.duration, params))],
+        overwrite=args.overwrite,
+        inputs=inputs(args),
+    )
+    many = args.sessions != 1
+
+    def make_controller(rig_params: Parameters) -> object:
+        if user is None:
+            return registry.make(args.controller, rig_params)
+        return construct(user, args.controller, rig_params)
+
+    def on_run(done: int, run: RunResult, summary: dict[str, Any]) -> None:
+        if "--log" in paths:
+            save_log(run.log, "--log", args.log, paths["--log"], args.overwrite)
+        if many:
+            summary = {"session": done, **summary}
+        if args.json:
+            print(json.dumps(summary), flush=True)
+        elif many:
+            print(
+                f"session {done}: held {summary['held']}, ball_lost {summary['ball_lost']}, ticks "
+                f"{summary['ticks']}, settling_time_s {summary['settling_time_s']}, ended {summary['ended']}",
+                flush=True,
+            )
+        else:
+            for key, value in summary.items():
+                print(f"{key:<26} {value}")
+
+    return run_on_remote_rig(
+        args.rig,
+        params,
+        make_controller,
+        name=args.controller,
+        sessions=args.sessions,
+        wait_s=args.wait_server or 5.0,
+        on_run=on_run,
+    )

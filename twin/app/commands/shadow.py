@@ -1,0 +1,236 @@
+"""``ballbeam shadow``: watch a rig on the wire, predict each window with the twin, test for drift."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from twin.app.commands.common import add_params_options, compare_params, hardware_controller, inputs
+from twin.app.options import count, finite_float
+from twin.outputs import check_outputs
+
+if TYPE_CHECKING:
+    from calib.shadow import Band, Shadow
+    from twin.app.shadow import WatchResult
+    from twin.parameters import Parameters
+    from twin.wire.observer import Observer
+
+HELP = (
+    "watch a rig on the wire (never writing to it): each window predicted by the twin, a drift "
+    "alarm when the prediction error leaves its band (exit 0 no alarm, 1 alarm or rig lost, 2 bad input)"
+)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--rig",
+        required=True,
+        metavar="udp://HOST:PORT",
+        help="the rig (ballbeam serve, or firmware) to observe",
+    )
+    parser.add_argument(
+        "--calibration",
+        metavar="DIR",
+        help="the parameters of a calibration (its params.toml; not with --params)",
+    )
+    parser.add_argument(
+        "--reference",
+        nargs="+",
+        metavar="LOG",
+        help="the band from these logs of the rig when it was known good (e.g. its calibration's logs); "
+        "default: the twin's own runs at the parameters",
+    )
+    parser.add_argument(
+        "--reference-controller",
+        default=None,
+        metavar="NAME|MODULE:CLASS",
+        help="the hardware controller of the twin's reference runs (default appendix-sf; not with --reference)",
+    )
+    parser.add_argument(
+        "--sessions",
+        type=count(0, 10_000_000),
+        default=1,
+        metavar="N",
+        help="watch N sessions (0: until no session follows within --idle; default 1)",
+    )
+    parser.add_argument(
+        "--idle",
+        type=finite_float(0, lo_open=True, unit="s"),
+        default=5.0,
+        metavar="S",
+        help="the rig counts as gone after this long without a frame (default 5)",
+    )
+    parser.add_argument(
+        "--cusum-k",
+        type=finite_float(0, unit="sd"),
+        default=None,
+        metavar="K",
+        help="the CUSUM's reference value in band sd (default 1: half the 2-sd shift it detects fastest)",
+    )
+    parser.add_argument(
+        "--cusum-h",
+        type=finite_float(0, lo_open=True, unit="sd"),
+        default=None,
+        metavar="H",
+        help="the CUSUM's alarm threshold in band sd (default 7: see the README for its false-alarm rate)",
+    )
+    parser.add_argument(
+        "--log", metavar="FILE.jsonl", help="write every window and alarm as JSON lines (atomically)"
+    )
+    parser.add_argument("--overwrite", action="store_true", help="replace an existing --log file")
+    parser.add_argument(
+        "--quiet", action="store_true", help="print only the band, the alarms and the summary"
+    )
+    parser.add_argument("--json", action="store_true", help="print the summary as JSON")
+    add_params_options(parser)
+
+
+def run(args: argparse.Namespace) -> int:
+    """``ballbeam shadow --rig udp://HOST:PORT``: observe, predict each window, test for drift."""
+    from twin.app.shadow import REFERENCE_CONTROLLER, load_reference, logs_band, reference_band
+    from twin.parameters import ParameterError
+    from twin.rigs.remote import RemoteError
+    from twin.wire.observer import open_observer
+
+    if args.reference and args.reference_controller:
+        raise ParameterError("--reference-controller runs the twin's reference: not with --reference logs")
+    base, source = compare_params(args)
+    reference = args.reference_controller or REFERENCE_CONTROLLER
+    factory = None if args.reference else hardware_controller(reference, base)
+    paths = check_outputs(
+        [("--log", args.log, (".jsonl", ".json"), 1 << 20)], overwrite=args.overwrite, inputs=inputs(args)
+    )
+    reference_logs = load_reference(args.reference) if args.reference else None
+    try:
+        observer = open_observer(args.rig, client="ballbeam shadow", timeout_s=args.idle)
+    except RemoteError as exc:
+        print(f"ballbeam shadow: {exc}", file=sys.stderr)
+        return 1
+    with observer:
+        params = observer.parameters(base)  # the rig's period, DAC range and software calibration
+        # The samples queue in the observer meanwhile: none is lost while the band is measured.
+        band = logs_band(reference_logs, params) if reference_logs else None
+        if band is None:
+            assert factory is not None
+            band = reference_band(params, hardware_controller(reference, params), name=reference)
+        shadow, head = _start(args, observer.url, params, band, source)
+        result, summary = _watch(args, observer, shadow, head, paths.get("--log"))
+    if args.json:
+        print(json.dumps({**head, "summary": summary}))
+    else:
+        print(
+            f"{result.ended}; {shadow.scored} windows scored, {shadow.skipped} not; "
+            + (
+                f"{len(shadow.alarms)} drift alarm(s), the first at {shadow.alarms[0].time_s:.2f} s"
+                if shadow.alarms
+                else "no drift alarm"
+            )
+        )
+        if "--log" in paths:
+            print(f"wrote {paths['--log']}")
+    lost = result.sessions == 0 or result.ended.startswith("the rig went silent")
+    return 1 if shadow.alarmed or lost else 0
+
+
+def _start(
+    args: argparse.Namespace, url: str, params: Parameters, band: Band, source: str
+) -> tuple[Shadow, dict[str, Any]]:
+    """The shadow of the rig at ``url`` on ``band`` with its drift test (``--cusum-k``, ``--cusum-h``), and
+    the head of its report (printed unless ``--json``)."""
+    import math
+
+    from calib.shadow import Cusum, Shadow
+
+    default = Cusum()
+    test = Cusum(
+        k=default.k if args.cusum_k is None else args.cusum_k,
+        h=default.h if args.cusum_h is None else args.cusum_h,
+    )
+    shadow = Shadow(params, band, test)
+    p_hour = test.false_alarm_probability(band, int(round(3600.0 / shadow.window_s)))
+    head = {
+        "rig": url,
+        "parameters": source,
+        "band": band.to_json(),
+        "cusum": test.to_json(),
+        "false_alarm_probability_per_hour": p_hour,
+    }
+    if not args.json:
+        print(f"shadow of {url}: parameters {source}")
+        print(
+            f"band: {band.windows} windows of {band.source}; median error ball "
+            f"{1e3 * math.exp(band.mean['ball']):.3g} mm, angle {1e3 * math.exp(band.mean['angle']):.3g} mrad"
+        )
+        print(
+            f"drift test: CUSUM k = {test.k:g}, h = {test.h:g} (band sd) per channel; false alarms: "
+            f"{test.run_length_normal():.3g} windows on average for normal scores, probability "
+            f"{p_hour:.2%} per hour of windows by resampling the band"
+        )
+    return shadow, head
+
+
+def _watch(
+    args: argparse.Namespace, observer: Observer, shadow: Shadow, head: dict[str, Any], log: Path | None
+) -> tuple[WatchResult, dict[str, Any]]:
+    """Watch ``--sessions`` sessions: every window scored, its alarms (and unless ``--quiet`` its scores)
+    printed, every record written to ``log`` (JSON lines, atomically) if given; the result and summary."""
+    import contextlib
+    import math
+    from dataclasses import asdict
+
+    from calib.shadow import WindowScore
+    from twin.app.shadow import watch
+    from twin.outputs import atomic_output
+
+    band, test = shadow.band, shadow.test
+    out = atomic_output(log, overwrite=args.overwrite) if log is not None else contextlib.nullcontext(None)
+    with out as fh:
+
+        def line(record: dict[str, object]) -> None:
+            if fh is not None:
+                fh.write((json.dumps(record) + "\n").encode("utf-8"))
+
+        line({"shadow": head})
+
+        def on_window(w: WindowScore) -> None:
+            line({"session": shadow.session, **w.to_json()})
+            for a in w.alarms:
+                print(
+                    f"DRIFT ALARM at {a.time_s:.2f} s (session {shadow.session}, window {a.window}): the "
+                    f"{a.channel} prediction error {w.rms[a.channel] / math.exp(band.mean[a.channel]):.1f} × "
+                    f"the band's median, CUSUM {a.cusum:.1f} > {test.h:g}",
+                    flush=True,
+                )
+            if not args.quiet and not args.json and not w.skipped:
+                print(
+                    f"{w.end_s:8.2f} s  ball {1e3 * w.rms['ball']:7.3f} mm z {w.z['ball']:+5.2f}  angle "
+                    f"{1e3 * w.rms['angle']:7.3f} mrad z {w.z['angle']:+5.2f}  cusum "
+                    f"{w.cusum['ball']:4.1f} {w.cusum['angle']:4.1f}",
+                    flush=True,
+                )
+
+        def on_session(n: int, stop: str) -> None:
+            line({"session_end": n, "stop": stop})
+            if not args.json:
+                print(f"session {n} ended: {stop}", flush=True)
+
+        result = watch(
+            observer,
+            shadow,
+            sessions=args.sessions,
+            idle_timeout_s=args.idle,
+            on_window=on_window,
+            on_session=on_session,
+        )
+        summary = {
+            **shadow.summary(),
+            "sessions": result.sessions,
+            "ended": result.ended,
+            "wall_s": round(result.wall_s, 2),
+            "observer": asdict(observer.counts),
+        }
+        line({"summary": summary})
+    return result, summary

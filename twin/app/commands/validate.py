@@ -1,0 +1,105 @@
+"""``ballbeam validate``: the standard battery before hardware, one report."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from twin.app.commands.common import (
+    SERVED_CONTROLLER,
+    WORKERS,
+    add_controller_timeout,
+    add_params_options,
+    add_served_options,
+    add_spread_options,
+    check_job,
+    check_served,
+    client_name,
+    controller_help,
+    job_name,
+    params_and_spread,
+    progress_bar,
+    serving,
+    write_out,
+)
+from twin.app.options import seed
+
+HELP = (
+    "the standard battery before hardware: nominal starts, region, sensitivities, saturation, "
+    "Monte Carlo; one report, exit 0 pass / 1 fail"
+)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--controller", metavar="NAME|MODULE:CLASS", help=controller_help() + SERVED_CONTROLLER
+    )
+    add_spread_options(parser, "for the robust-region and Monte Carlo checks")
+    parser.add_argument(
+        "--criteria", metavar="FILE", help="TOML overriding the pass criteria (see the report)"
+    )
+    parser.add_argument("--seed", type=seed(), default=0, help="base seed of every run's noise")
+    add_params_options(parser)
+    parser.add_argument(
+        "--workers", type=WORKERS, default=1, help="local processes (default 1: this process)"
+    )
+    add_served_options(parser)
+    parser.add_argument(
+        "--out", metavar="DIR", help="write DIR/report.md, DIR/validation.json, DIR/region.png"
+    )
+    parser.add_argument("--overwrite", action="store_true", help="replace its own files in an existing --out")
+    parser.add_argument("--json", action="store_true", help="print the report as JSON")
+    add_controller_timeout(parser)
+
+
+def run(args: argparse.Namespace) -> int:
+    from twin.app.validate import (
+        OUTPUT_FILES,
+        ValidationCriteria,
+        check_criteria_for,
+        load_criteria,
+        validate,
+        write_validation,
+    )
+    from twin.parameters import ParameterError
+
+    check_served(args)
+    params, spread = params_and_spread(args)
+    criteria = load_criteria(args.criteria) if args.criteria else ValidationCriteria()
+    try:
+        check_criteria_for(criteria, params)
+    except ParameterError as exc:
+        raise ParameterError(f"{args.criteria or 'the default criteria'}: {exc}") from None
+    check_job(args, params, OUTPUT_FILES)
+    with serving(args, params) as served:
+        report = validate(
+            job_name(args),
+            params,
+            criteria,
+            spread=spread,
+            seed=args.seed,
+            workers=args.workers,
+            progress=progress_bar("validate"),
+            serve=served,
+        )
+    if (client := client_name(args, served)) is not None:
+        report.controller = client
+    write_out(args, write_validation, report)
+    if args.json:
+        print(json.dumps(report.to_json()))
+    else:
+        mark = {True: "pass", False: "FAIL", None: "not run"}
+        for check in report.checks:
+            print(f"{mark[check.passed]:<8} {check.name}: {check.measured}  [{check.criterion}]")
+        print(f"{report.controller}: {'PASS' if report.passed else 'FAIL'} ({report.wall_s:.0f} s)")
+        if args.out is not None:
+            print(f"wrote {Path(args.out) / 'report.md'}")
+    if served is not None and served.stopped:
+        print(f"ballbeam validate: {served.stopped}: the checks done so far are reported", file=sys.stderr)
+        return 1
+    if not report.complete:
+        print("ballbeam validate: interrupted: the checks done so far are reported", file=sys.stderr)
+        return 130
+    return 0 if report.passed else 1

@@ -1,0 +1,122 @@
+"""``ballbeam view``: the live 3D view of the twin in the browser."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from typing import TYPE_CHECKING
+
+from twin.app.catalogue import WithUserController, construct, user_controller
+from twin.app.commands.common import (
+    add_controller_timeout,
+    add_params_options,
+    add_plant_options,
+    controller_help,
+    load_params,
+    params_source,
+)
+from twin.app.options import count, finite_float, seed, serve_address
+
+if TYPE_CHECKING:
+    from twin.engine import Catalogue
+
+# The live view's speed slider (twin.viewer) runs from 0.1 to 4.
+SPEED_MIN, SPEED_MAX = 0.1, 4.0
+
+HELP = "live 3D view of the twin in the browser (viser)"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--allow-origin",
+        action="append",
+        metavar="ORIGIN",
+        help="also accept browser connections from this origin, e.g. http://lab-pc:8080 (repeatable; "
+        "by default only the page's own origin may drive the twin)",
+    )
+    parser.add_argument(
+        "--host", default="127.0.0.1", help="interface to serve on (default 127.0.0.1: this machine only)"
+    )
+    parser.add_argument(
+        "--port", type=count(1, 65535), default=8080, help="port (default 8080); a taken port is an error"
+    )
+    parser.add_argument(
+        "--controller",
+        metavar="NAME|MODULE:CLASS",
+        help=f"the controller to start with (default appendix-clp; with --serve the wire client): {controller_help()}",
+    )
+    parser.add_argument(
+        "--serve",
+        type=serve_address,
+        metavar="[HOST:]PORT",
+        help="serve the twin on protocol 1 over UDP there (host 127.0.0.1 unless given; port 0: a free one) "
+        "to a controller in any language, e.g. examples/c/bb_sf udp 127.0.0.1 PORT: the menu's wire client, "
+        "in real time (docs/protocol.md)",
+    )
+    parser.add_argument(
+        "--speed",
+        type=finite_float(
+            SPEED_MIN,
+            SPEED_MAX,
+            unit="simulated seconds per wall second",
+            why="the range of its speed slider",
+        ),
+        default=1.0,
+        help=f"simulated seconds per wall second, {SPEED_MIN:g}…{SPEED_MAX:g} (default 1.0)",
+    )
+    parser.add_argument("--seed", type=seed(), default=0, help="seed of the sensor noise (default 0)")
+    parser.add_argument(
+        "--no-noise", action="store_true", help="start with the ball sensor's contact noise off (the switch)"
+    )
+    parser.add_argument(
+        "--duration",
+        type=finite_float(0, lo_open=True, unit="s"),
+        metavar="S",
+        help="stop after S wall-clock seconds (headless runs)",
+    )
+    add_plant_options(parser)
+    add_params_options(parser)
+    add_controller_timeout(parser)
+
+
+def run(args: argparse.Namespace) -> int:
+    from controllers import registry
+    from twin.app.cli import package_version
+    from twin.app.shadow import view_monitor
+    from twin.viewer import ViewerError, serve
+
+    params = load_params(args)
+    if args.no_noise:  # the view's noise switch starts off
+        params = params.with_overrides({"ball_sensor.noise_enabled": False})
+    user = user_controller(args.controller) if args.controller is not None else None
+    catalogue: Catalogue = registry
+    if user is not None:
+        construct(user, args.controller, params)  # a failing constructor is refused here, not in the view
+        catalogue = WithUserController(registry, args.controller, user)
+    # With --serve the wire client starts unless --controller names another (both are in the menu).
+    controller = args.controller or (None if args.serve is not None else "appendix-clp")
+    try:
+        stats = serve(
+            catalogue,
+            monitor=view_monitor(),
+            host=args.host,
+            port=args.port,
+            controller=controller,
+            speed=args.speed,
+            seed=args.seed,
+            duration_s=args.duration,
+            params=params,
+            plant=args.plant,
+            ideal_sensors=args.ideal_sensors or args.plant == "reference",
+            allowed_origins=tuple(args.allow_origin or ()),
+            params_source=params_source(args),
+            wire=args.serve,
+            rig_name=f"ballbeam-twin {package_version()} {args.plant}",
+        )
+    except ViewerError as exc:
+        print(f"ballbeam view: error: {exc}", file=sys.stderr)
+        return 2
+    if args.duration is not None and stats:
+        print(json.dumps(stats))
+    return 0
