@@ -753,8 +753,8 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
         SweepSettings,
         parse_range,
         run_sweep,
-        write_sweep,
     )
+    from twin.app.sweep_render import write_sweep
     from twin.parameters import ParameterError
 
     _check_served(args)
@@ -854,7 +854,8 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
 
 def _robust_sweep(args: argparse.Namespace, settings: Any, params: Parameters, spread: Any) -> int:
     """``sweep --rigs N --spread|--calibration``: the nominal rig's map, then every start on N drawn rigs."""
-    from twin.app.robust import OUTPUT_FILES, run_robust, write_robust
+    from twin.app.robust import OUTPUT_FILES, run_robust
+    from twin.app.robust_render import write_robust
     from twin.app.sweep import run_sweep
 
     _check_job(args, params, OUTPUT_FILES)
@@ -897,7 +898,8 @@ def _robust_sweep(args: argparse.Namespace, settings: Any, params: Parameters, s
 
 
 def _cmd_montecarlo(args: argparse.Namespace) -> int:
-    from twin.app.montecarlo import OUTPUT_FILES, MonteCarloSettings, run_montecarlo, write_montecarlo
+    from twin.app.montecarlo import OUTPUT_FILES, MonteCarloSettings, run_montecarlo
+    from twin.app.montecarlo_render import write_montecarlo
     from twin.parameters import ParameterError
     from twin.physics import check_initial_state
 
@@ -979,8 +981,8 @@ def _cmd_validate(args: argparse.Namespace) -> int:
         check_criteria_for,
         load_criteria,
         validate,
-        write_validation,
     )
+    from twin.app.validate_render import write_validation
     from twin.parameters import ParameterError
 
     _check_served(args)
@@ -1275,7 +1277,8 @@ def _cmd_shadow(args: argparse.Namespace) -> int:
 
 
 def _cmd_compare(args: argparse.Namespace) -> int:
-    from calib.compare import OUTPUT_FILES, Criterion, compare, write_comparison
+    from calib.compare import OUTPUT_FILES, Criterion, compare
+    from calib.compare_render import write_comparison
     from calib.logs import read_log, rig_log
     from twin.engine import ControllerError
     from twin.parameters import ParameterError

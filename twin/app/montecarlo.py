@@ -34,7 +34,7 @@ import numpy as np
 
 from twin.app.fanout import Progress, Runs, Served, run_starts
 from twin.app.sweep import point_seeds
-from twin.outputs import JobFiles, atomic_directory
+from twin.outputs import JobFiles
 from twin.parameters import DuplicateKeyError, ParameterError, Parameters, load_json
 
 __all__ = [
@@ -46,11 +46,10 @@ __all__ = [
     "load_spread",
     "run_montecarlo",
     "sample_parameters",
-    "write_montecarlo",
 ]
 
 MAX_RUNS = 100_000
-# What write_montecarlo puts into its folder (checked before the runs).
+# What write_montecarlo (twin.app.montecarlo_render) puts into its folder (checked before the runs).
 OUTPUT_FILES = JobFiles("montecarlo", ("montecarlo.json", "distributions.png"))
 MAX_REDRAWS = 100  # a spread that puts a parameter outside its bounds this often is refused
 WORST_SHOWN = 10
@@ -337,14 +336,3 @@ def run_montecarlo(
     result.summary = summarize(out)
     result.served = serve.to_json() if serve is not None else None
     return result
-
-
-def write_montecarlo(result: MonteCarloResult, out_dir: str | Path, *, overwrite: bool = False) -> Path:
-    """``montecarlo.json`` and ``distributions.png`` (``twin.app.montecarlo_render``) into ``out_dir``,
-    atomically (``twin.outputs.atomic_directory``: the folder's other files are kept)."""
-    from twin.app.montecarlo_render import render_distributions
-
-    with atomic_directory(out_dir, OUTPUT_FILES, overwrite=overwrite) as tmp:
-        (tmp / "montecarlo.json").write_text(json.dumps(result.to_json(), indent=1) + "\n")
-        render_distributions(result, tmp / "distributions.png")
-    return Path(out_dir)
