@@ -251,7 +251,7 @@ def rk4_step(f: Any, x: Any, th: Any, xd: Any, thd: Any, u: Any, h: float) -> tu
 
 
 class ReferencePlant:
-    """The reference model as a physics backend (``twin.physics.Physics``): fixed-step RK4 at
+    """The reference model as a physics backend (``twin.physics.PhysicsBackend``): fixed-step RK4 at
     ``physics.timestep_s`` with the motor volts held over each step (eq 3.3.1 through the amplifier's rails).
 
     What the equations leave out is handled at the step boundary: the beam meets its stops inelastically
