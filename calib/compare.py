@@ -23,7 +23,8 @@ noise floor of a channel is the larger of the reading's quantization (the ADC st
 encoder count for the angle, each /√12) and the log's own tick-to-tick scatter (the robust spread of the
 second difference, /√6: white noise on a signal smooth at 50 Hz).
 
-Rendering (figures, Markdown) is in ``calib.compare_render``; ``write_comparison`` writes the folder.
+Rendering (figures, Markdown) and ``write_comparison``, which writes the folder, are in ``calib.compare_render``,
+which imports this module (never the other way round).
 """
 
 from __future__ import annotations
@@ -32,7 +33,6 @@ import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -52,7 +52,7 @@ from calib.identify import (
 )
 from calib.logs import RigLog
 from twin.converters import ball_position_m
-from twin.outputs import JobFiles, atomic_directory
+from twin.outputs import JobFiles
 from twin.parameters import Parameters
 
 if TYPE_CHECKING:
@@ -77,7 +77,6 @@ __all__ = [
     "fit_states",
     "noise_floor",
     "windowed_prediction",
-    "write_comparison",
 ]
 
 # The two channels the rig records, as the windows hold them: the ball by eq 6.3.1 (m); the beam as the
@@ -97,7 +96,8 @@ DEFAULT_HORIZON_S = 0.5
 # The fit of the window states: iterations at most (each two batched simulations of all windows).
 MAX_ITERATIONS = 100
 
-# What write_comparison puts into its folder (checked before the work); closed_loop.png only with a controller.
+# What write_comparison (calib.compare_render) puts into its folder (checked before the work); closed_loop.png
+# only with a controller.
 OUTPUT_FILES = JobFiles(
     "compare",
     (
@@ -783,19 +783,6 @@ def compare(
         failures=crit.judge(windowed),
         wall_s=time.perf_counter() - started,
     )
-
-
-def write_comparison(result: Comparison, out_dir: str | Path, *, overwrite: bool = False) -> Path:
-    """comparison.json, report.md and the figures into ``out_dir`` (atomically: ``twin.outputs``)."""
-    import json
-
-    from calib.compare_render import render_figures, render_markdown
-
-    with atomic_directory(out_dir, OUTPUT_FILES, overwrite=overwrite) as tmp:
-        (tmp / "comparison.json").write_text(json.dumps(result.to_json(), indent=2) + "\n")
-        render_figures(result, tmp)
-        (tmp / "report.md").write_text(render_markdown(result))
-    return Path(out_dir)
 
 
 def _json_safe(value: Any) -> Any:

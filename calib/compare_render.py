@@ -1,8 +1,9 @@
-"""The comparison's figures (matplotlib) and Markdown: rendering only, the numbers come from
-``calib.compare.Comparison``."""
+"""The comparison's figures (matplotlib), Markdown and folder: rendering and writing only, the numbers come
+from ``calib.compare.Comparison`` (imported here, never the other way round)."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import matplotlib
@@ -14,13 +15,15 @@ import numpy as np  # noqa: E402
 from calib.compare import (  # noqa: E402
     CHANNELS,
     MAX_LAG,
+    OUTPUT_FILES,
     ChannelScore,
     Comparison,
     LogWindows,
     WindowedPrediction,
 )
+from twin.outputs import atomic_directory  # noqa: E402
 
-__all__ = ["render_figures", "render_markdown"]
+__all__ = ["render_figures", "render_markdown", "write_comparison"]
 
 # Channel → (axis label, display scale from SI).
 _LABEL = {"ball": ("ball x (mm)", 1e3), "angle": ("beam θ (mrad)", 1e3)}
@@ -309,3 +312,12 @@ def render_markdown(result: Comparison) -> str:
                 )
         lines += ["", "![closed loop](closed_loop.png)", ""]
     return "\n".join(lines)
+
+
+def write_comparison(result: Comparison, out_dir: str | Path, *, overwrite: bool = False) -> Path:
+    """comparison.json, report.md and the figures into ``out_dir`` (atomically: ``twin.outputs``)."""
+    with atomic_directory(out_dir, OUTPUT_FILES, overwrite=overwrite) as tmp:
+        (tmp / "comparison.json").write_text(json.dumps(result.to_json(), indent=2) + "\n")
+        render_figures(result, tmp)
+        (tmp / "report.md").write_text(render_markdown(result))
+    return Path(out_dir)

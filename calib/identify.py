@@ -51,7 +51,7 @@ from calib.logs import DAC_STEP_V, RigLog
 from twin.converters import ball_position_m
 from twin.dcmotor import torque_nm
 from twin.output_stage import amplifier_volts
-from twin.parameters import Parameters
+from twin.parameters import READING, Parameters, declaration, within_bounds
 from twin.reference import EquationCoefficients, rk4_step
 from twin.sensors import angle_count_step_rad, angle_counter_mean, wiper_static_v
 
@@ -191,28 +191,40 @@ class CalibrationError(ValueError):
 
 @dataclass(frozen=True)
 class FitSpec:
-    """A parameter the fit can estimate, with its physical bounds and typical size."""
+    """A quantity the fit can estimate: the range the fit searches (``lower`` … ``upper``), its typical size
+    (``scale``) and its meaning. Its unit and physical bounds are the parameter's own declaration
+    (``twin.parameters.declaration``: the field's metadata; the ball reading's gain and offset, which are no
+    field, ``twin.parameters.READING``); the search range, narrower where the logs of a bench-top rig allow it,
+    lies within the physical bounds (checked here)."""
 
     name: str
-    unit: str
     lower: float
     upper: float
     scale: float
     meaning: str
 
+    def __post_init__(self) -> None:
+        outside = [v for v in (self.lower, self.upper) if not within_bounds(self.name, v)]
+        if outside or not self.lower < self.upper:
+            raise ValueError(
+                f"{self.name}: the search range [{self.lower!r}, {self.upper!r}] is not an interval within its "
+                "physical bounds (twin.parameters)"
+            )
+
+    @property
+    def unit(self) -> str:
+        return str(declaration(self.name)["unit"])
+
 
 FITTABLE: dict[str, FitSpec] = {
     s.name: s
     for s in (
-        FitSpec(
-            "motor.resistance_ohm", "Ω", 1.0, 50.0, 10.0, "armature resistance (drifts with temperature)"
-        ),
-        FitSpec("beam.inertia_pivot_kgm2", "kg·m²", 1e-3, 2e-2, 4e-3, "beam inertia about the pivot"),
-        FitSpec("beam.pivot_damping_nm_s_per_rad", "N·m·s/rad", 0.0, 0.05, 1e-3, "pivot viscous friction"),
-        FitSpec("beam.pivot_friction_nm", "N·m", 0.0, 0.05, 1e-3, "pivot Coulomb friction"),
+        FitSpec("motor.resistance_ohm", 1.0, 50.0, 10.0, "armature resistance (drifts with temperature)"),
+        FitSpec("beam.inertia_pivot_kgm2", 1e-3, 2e-2, 4e-3, "beam inertia about the pivot"),
+        FitSpec("beam.pivot_damping_nm_s_per_rad", 0.0, 0.05, 1e-3, "pivot viscous friction"),
+        FitSpec("beam.pivot_friction_nm", 0.0, 0.05, 1e-3, "pivot Coulomb friction"),
         FitSpec(
             "angle_sensor.zeroing_error_rad",
-            "rad",
             -0.1,
             0.1,
             0.01,
@@ -220,26 +232,21 @@ FITTABLE: dict[str, FitSpec] = {
         ),
         FitSpec(
             "track.contact_spacing_m",
-            "m",
             0.002,
             0.0166,
             0.01,
             "wire contact spacing d (sets r* = √(r² − d²/4))",
         ),
-        FitSpec("daq.output_latency_s", "s", 0.0, 0.018, 0.005, "delay from a block's end to the DAC update"),
-        FitSpec("ball_reading.gain", "-", 0.5, 1.5, 1.0, "ball reading's gain relative to the sensor curve"),
-        FitSpec(
-            "ball_reading.offset_m", "m", -0.05, 0.05, 0.005, "ball reading's offset relative to the curve"
-        ),
-        FitSpec("ball_sensor.dropout_rate_hz", "1/s", 0.0, 1000.0, 5.0, "contact losses of the ball's wiper"),
+        FitSpec("daq.output_latency_s", 0.0, 0.018, 0.005, "delay from a block's end to the DAC update"),
+        FitSpec("ball_reading.gain", 0.5, 1.5, 1.0, "ball reading's gain relative to the sensor curve"),
+        FitSpec("ball_reading.offset_m", -0.05, 0.05, 0.005, "ball reading's offset relative to the curve"),
+        FitSpec("ball_sensor.dropout_rate_hz", 0.0, 1000.0, 5.0, "contact losses of the ball's wiper"),
     )
 }
 # Estimated after the dynamic fit from the ball channel's outliers (it does not enter the smooth model).
 DROPOUT = "ball_sensor.dropout_rate_hz"
 # A ball reading this far from the fitted model is a contact-noise outlier (6 σ of the channel's noise).
 OUTLIER_M = 3e-3
-# Measurement-model parameters that are not twin parameters: they are folded into the sensor curve.
-_READING = ("ball_reading.gain", "ball_reading.offset_m")
 
 
 @dataclass(frozen=True)
@@ -339,21 +346,6 @@ def _get(params: Parameters, name: str) -> float:
     return float(getattr(getattr(params, group), field_name))
 
 
-def apply_values(base: Parameters, values: dict[str, float]) -> Parameters:
-    """``base`` with fitted values; a ball-reading gain/offset is folded into the sensor's curve so that the
-    software's eq 6.3.1 reads g·(what it read before) + b."""
-    plain = {k: v for k, v in values.items() if k not in _READING}
-    out = base.with_overrides(plain, origin="calibration") if plain else base
-    gain, offset = values.get("ball_reading.gain", 1.0), values.get("ball_reading.offset_m", 0.0)
-    if gain != 1.0 or offset != 0.0:
-        sw = out.software
-        volts = np.asarray(out.ball_sensor.curve_volts_v)
-        read = ball_position_m(volts, sw)
-        new_volts = ((gain * read + offset) - sw.ball_offset_m) / sw.ball_gain_m_per_v
-        out = out.with_overrides({"ball_sensor.curve_volts_v": new_volts.tolist()}, origin="calibration")
-    return out
-
-
 @dataclass(frozen=True)
 class _Windows:
     command_v: np.ndarray  # (nw, W): the command acting during each tick (written at the previous tick)
@@ -369,7 +361,7 @@ class _Windows:
 class _Batch:
     """The model's constants for a batch of parameter values, as (B, 1) columns."""
 
-    q: EquationCoefficients  # its fields are (B, 1) arrays here
+    q: EquationCoefficients[np.ndarray]
     k_tau: np.ndarray
     k_b: np.ndarray
     latency: np.ndarray  # (B,)
@@ -528,9 +520,7 @@ class WindowProblem:
 
     # --- the model --------------------------------------------------------------------------------------
     def parameters(self, z: np.ndarray) -> Parameters:
-        return apply_values(
-            self.base, dict(zip(self.fit, (float(v) for v in z[: self.n_global]), strict=True))
-        )
+        return self.base.with_values(dict(zip(self.fit, (float(v) for v in z[: self.n_global]), strict=True)))
 
     def predict(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Predicted (ball reading m, angle reading rad) of every tick of every window."""
@@ -542,7 +532,7 @@ class WindowProblem:
         rows = []
         for values in zg:
             named = dict(zip(self.fit, (float(v) for v in values), strict=True))
-            p = self.base.with_overrides({k: v for k, v in named.items() if k not in _READING}, origin="fit")
+            p = self.base.with_overrides({k: v for k, v in named.items() if k not in READING}, origin="fit")
             rows.append(
                 (
                     EquationCoefficients.from_params(p),
@@ -558,21 +548,8 @@ class WindowProblem:
         def column(values: list[float]) -> np.ndarray:
             return np.array(values, dtype=float)[:, None]
 
-        q0 = rows[0][0]
-        q = EquationCoefficients(
-            k1=column([r[0].k1 for r in rows]),  # type: ignore[arg-type]
-            k2=column([r[0].k2 for r in rows]),  # type: ignore[arg-type]
-            c=column([r[0].c for r in rows]),  # type: ignore[arg-type]
-            g=q0.g,
-            alpha_xdd=column([r[0].alpha_xdd for r in rows]),  # type: ignore[arg-type]
-            alpha_thdd=column([r[0].alpha_thdd for r in rows]),  # type: ignore[arg-type]
-            alpha_thdd_x2=column([r[0].alpha_thdd_x2 for r in rows]),  # type: ignore[arg-type]
-            beta=tuple(column([r[0].beta[i] for r in rows]) for i in range(4)),  # type: ignore[arg-type]
-            beta_thetadot=column([r[0].beta_thetadot for r in rows]),  # type: ignore[arg-type]
-            coulomb_nm=column([r[0].coulomb_nm for r in rows]),  # type: ignore[arg-type]
-        )
         return _Batch(
-            q=q,
+            q=EquationCoefficients.stack([r[0] for r in rows]),
             k_tau=column([r[1] for r in rows]),
             k_b=column([r[2] for r in rows]),
             latency=np.array([r[3] for r in rows]),

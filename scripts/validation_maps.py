@@ -15,7 +15,8 @@ import json
 import sys
 from pathlib import Path
 
-from twin.app.sweep import OUTPUT_FILES, SweepSettings, run_sweep, summarize, write_sweep
+from twin.app.sweep import OUTPUT_FILES, SweepSettings, run_sweep, summarize
+from twin.app.sweep_render import write_sweep
 from twin.outputs import write_atomic
 from twin.parameters import Parameters
 

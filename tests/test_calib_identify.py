@@ -107,13 +107,30 @@ def test_a_short_log_recovers_resistance_and_zeroing_error() -> None:
 
 
 def test_a_ball_reading_gain_is_folded_into_the_sensor_curve() -> None:
-    from calib.identify import apply_values
-
-    out = apply_values(Parameters(), {"ball_reading.gain": 1.1, "ball_reading.offset_m": 0.002})
+    out = Parameters().with_values({"ball_reading.gain": 1.1, "ball_reading.offset_m": 0.002})
     sw = out.software
     before = np.asarray(Parameters().ball_sensor.curve_volts_v) * sw.ball_gain_m_per_v + sw.ball_offset_m
     after = np.asarray(out.ball_sensor.curve_volts_v) * sw.ball_gain_m_per_v + sw.ball_offset_m
     np.testing.assert_allclose(after, 1.1 * before + 0.002, atol=1e-15)
+
+
+def test_the_fittable_units_and_bounds_are_the_parameters_own() -> None:
+    """FitSpec restates neither a unit nor a physical bound: both are the parameter's declaration, and the
+    range the fit searches lies within the physical bounds."""
+    from calib.identify import FitSpec
+    from twin.parameters import ParameterError, declaration, within_bounds
+
+    for name, spec in FITTABLE.items():
+        assert spec.unit == declaration(name)["unit"]
+        assert within_bounds(name, spec.lower) and within_bounds(name, spec.upper)
+    units = {
+        n: FITTABLE[n].unit for n in ("motor.resistance_ohm", "ball_reading.gain", "ball_reading.offset_m")
+    }
+    assert units == {"motor.resistance_ohm": "Ω", "ball_reading.gain": "-", "ball_reading.offset_m": "m"}
+    with pytest.raises(ValueError, match="motor.resistance_ohm: the search range \\[0.0, 50.0\\]"):
+        FitSpec("motor.resistance_ohm", 0.0, 50.0, 10.0, "beyond its physical bound (> 0)")
+    with pytest.raises(ParameterError, match="unknown parameter 'motor.mass'"):
+        FitSpec("motor.mass", 0.1, 1.0, 1.0, "no such parameter")
 
 
 def test_unknown_or_repeated_parameters_are_refused() -> None:

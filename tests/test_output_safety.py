@@ -441,6 +441,7 @@ COMPUTING = [
     "twin/app/sweep.py",
     "twin/app/montecarlo.py",
     "twin/app/validate.py",
+    "twin/app/robust.py",
     "calib/static.py",
 ]
 COMPUTING += ["calib/report.py", "calib/compare.py"]
@@ -448,7 +449,9 @@ COMPUTING += ["calib/report.py", "calib/compare.py"]
 
 @pytest.mark.parametrize("name", COMPUTING)
 def test_computation_modules_never_import_matplotlib(name: str) -> None:
-    """Rendering lives in the *_render modules, imported by a writer when it writes (never at import)."""
+    """Rendering lives in the *_render modules, with the writers of the jobs' folders; they import the
+    computation, never the other way round (tests/test_import_graph.py), and calib.report imports its renderer
+    only when it writes."""
     import ast
 
     tree = ast.parse((ROOT / name).read_text(encoding="utf-8"))
@@ -471,7 +474,7 @@ def test_importing_the_analyses_loads_no_matplotlib_and_outputs_loads_no_numpy()
         "import sys\n"
         "import twin.outputs\n"
         "assert 'numpy' not in sys.modules, 'twin.outputs loads numpy'\n"
-        "import twin.log, twin.app.sweep, twin.app.montecarlo, twin.app.validate\n"
+        "import twin.log, twin.app.sweep, twin.app.montecarlo, twin.app.validate, twin.app.robust\n"
         "print(sorted(m for m in sys.modules if m.split('.')[0] == 'matplotlib' or m.endswith('_render')))\n"
     )
     env = {**os.environ, "PYTHONPATH": str(ROOT)}

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from twin.parameters import MAX_FILE_BYTES, ParameterError, Parameters
+from twin.parameters import MAX_FILE_BYTES, READING, ParameterError, Parameters
 
 
 def test_derived_values_follow_the_thesis(params: Parameters) -> None:
@@ -52,6 +52,29 @@ def test_overrides_from_code_keep_everything_else(params: Parameters) -> None:
     assert heavier.motor.resistance_ohm == 10.0
     assert heavier.ball.radius_m == params.ball.radius_m
     assert params.ball.mass_kg == 18.848e-3  # the original is untouched
+
+
+def test_fitted_values_by_name_fold_the_ball_reading_into_the_curve(params: Parameters) -> None:
+    """``with_values``: the parameters' names as ``with_overrides``; the ball reading's gain and offset
+    (``READING``) change the sensor curve so that eq 6.3.1 reads g·(before) + b, bit for bit as numpy does it."""
+    import numpy as np
+
+    from twin.converters import ball_position_m
+
+    out = params.with_values(
+        {"motor.resistance_ohm": 10.0, "ball_reading.gain": 1.1, "ball_reading.offset_m": 0.002}
+    )
+    sw = params.software
+    read = ball_position_m(np.asarray(params.ball_sensor.curve_volts_v), sw)
+    expected = ((1.1 * read + 0.002) - sw.ball_offset_m) / sw.ball_gain_m_per_v
+    assert list(out.ball_sensor.curve_volts_v) == expected.tolist()
+    assert out.motor.resistance_ohm == 10.0 and out.software == sw
+    assert params.with_values({"ball_reading.gain": 1.0, "ball_reading.offset_m": 0.0}) == params
+    assert {"ball_reading.gain", "ball_reading.offset_m"} == set(READING)
+    with pytest.raises(ParameterError, match="calibration: unknown parameter 'ball_reading.gian'"):
+        params.with_values({"ball_reading.gian": 1.1})
+    with pytest.raises(ParameterError, match="fit: unknown parameter 'motor.resistnce_ohm'"):
+        params.with_values({"motor.resistnce_ohm": 10.0}, origin="fit")
 
 
 def test_files_round_trip_and_are_not_overwritten(tmp_path, params: Parameters) -> None:

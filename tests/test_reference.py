@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from twin.parameters import Parameters
-from twin.reference import ReferenceModel, discretize_zoh
+from twin.reference import EquationCoefficients, ReferenceModel, discretize_zoh
 
 
 def _thesis_residuals(
@@ -44,6 +44,25 @@ def test_nonlinear_dynamics_satisfy_the_thesis_equations(params: Parameters) -> 
         e26, e27 = _thesis_residuals(params, state, acc, torque)
         assert abs(e26) < 1e-9 * (1 + abs(acc[0]))
         assert abs(e27) < 1e-12 * (1 + abs(acc[1]))
+
+
+def test_stacked_coefficients_are_each_parameter_sets_columns_and_accelerate_each_row(
+    params: Parameters,
+) -> None:
+    """``EquationCoefficients.stack``: row b of every coefficient (and of each β) is parameter set b's, bit for
+    bit, and a batch's accelerations are each row's as the arrays compute them one set at a time."""
+    sets = [params, params.with_overrides({"ball.mass_kg": 0.03, "beam.pivot_friction_nm": 0.002})]
+    rows = [EquationCoefficients.from_params(p) for p in sets]
+    q = EquationCoefficients.stack(rows)
+    for b, row in enumerate(rows):
+        assert q.k1.shape == (2, 1) and all(c.shape == (2, 1) for c in q.beta)
+        assert [q.k1[b, 0], q.g[b, 0], q.coulomb_nm[b, 0]] == [row.k1, row.g, row.coulomb_nm]
+        assert [c[b, 0] for c in q.beta] == list(row.beta)
+    state = np.array([[0.1, -0.05, 0.2, 0.3], [-0.2, 0.1, -0.1, 0.4]]).T[:, :, None]  # (4, B = 2, 1)
+    xdd, thdd = q.accelerations(*state, np.full((2, 1), 0.01))
+    for b, row in enumerate(rows):
+        one = row.accelerations(*state[:, b : b + 1, 0], np.full(1, 0.01))
+        assert (xdd[b, 0], thdd[b, 0]) == (one[0][0], one[1][0])
 
 
 def test_linearization_equals_finite_differences_of_the_nonlinear_model(reference: ReferenceModel) -> None:

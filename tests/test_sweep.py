@@ -23,9 +23,8 @@ from twin.app.sweep import (
     point_seeds,
     run_sweep,
     verdict_class,
-    write_sweep,
 )
-from twin.app.sweep_render import render_map
+from twin.app.sweep_render import render_map, write_sweep
 from twin.engine import run_closed_loop
 from twin.parameters import ParameterError
 

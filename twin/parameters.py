@@ -17,6 +17,7 @@ import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 from pathlib import Path
+from types import MappingProxyType
 from typing import Any
 
 __all__ = [
@@ -33,6 +34,9 @@ __all__ = [
     "SoftwareCalibration",
     "Start",
     "Parameters",
+    "READING",
+    "declaration",
+    "within_bounds",
 ]
 
 
@@ -959,6 +963,11 @@ class Start:
         _check_fields(self, "start")
 
 
+# The ball reading's gain and offset relative to the sensor curve, with their units: what a calibration fits of
+# the ball channel beside the parameters; no field, folded into the curve (``Parameters.with_values``). Any
+# value that leaves the curve increasing is physical, so they declare no bounds of their own.
+READING: Mapping[str, str] = MappingProxyType({"ball_reading.gain": "-", "ball_reading.offset_m": "m"})
+
 _GROUPS: dict[str, type] = {
     "ball": Ball,
     "beam": Beam,
@@ -972,6 +981,26 @@ _GROUPS: dict[str, type] = {
     "software": SoftwareCalibration,
     "start": Start,
 }
+
+
+def declaration(name: str) -> Mapping[str, Any]:
+    """What the parameter ``group.field`` declares (``param``, ``curve``, ``flag``: its unit, source, physical
+    bounds ``gt``/``ge``/``lt``/``le`` and their reason); for the ball reading's names (``READING``) their unit.
+    An unknown name raises ``ParameterError`` naming it."""
+    if name in READING:
+        return MappingProxyType({"unit": READING[name]})
+    group, _, field_name = name.partition(".")
+    declared = {f.name: f.metadata for f in fields(_GROUPS[group])} if group in _GROUPS else {}
+    if field_name not in declared:
+        raise ParameterError(f"unknown parameter '{_clip(name)}'")
+    return declared[field_name]
+
+
+def within_bounds(name: str, value: float) -> bool:
+    """Whether ``value`` lies inside the physical bounds the parameter ``name`` declares (as a value is checked
+    when a parameter group is built; a name without bounds admits every value)."""
+    md = declaration(name)
+    return all(md.get(key) is None or ok(value, md[key]) for key, ok, _ in _BOUNDS)
 
 
 @dataclass(frozen=True)
@@ -1056,6 +1085,30 @@ class Parameters:
             return dataclasses.replace(self, **changes)
         except ParameterError as exc:
             raise ParameterError(f"{origin}: {exc}") from None
+
+    def with_values(self, values: Mapping[str, float], *, origin: str = "calibration") -> Parameters:
+        """A copy with values by dotted name as a calibration fits them (``calib.identify``) and a Monte Carlo
+        study samples them: the parameters' own names (through ``with_overrides``, which refuses an unknown
+        one) and the ball reading's gain g and offset b (``READING``: no field of their own, the identity
+        1 and 0), which are folded into the ball sensor's curve so that the software's eq 6.3.1 reads
+        g·(what it read before) + b."""
+        strange = [
+            k for k in values if isinstance(k, str) and k.startswith("ball_reading.") and k not in READING
+        ]
+        if strange:
+            raise ParameterError(
+                f"{origin}: unknown parameter '{_clip(strange[0])}' (known: {list(READING)})"
+            )
+        plain = {k: v for k, v in values.items() if k not in READING}
+        out = self.with_overrides(plain, origin=origin) if plain else self
+        gain, offset = values.get("ball_reading.gain", 1.0), values.get("ball_reading.offset_m", 0.0)
+        if gain != 1.0 or offset != 0.0:
+            k, c = out.software.ball_gain_m_per_v, out.software.ball_offset_m
+            # each curve point's reading by eq 6.3.1 (k·V + c, twin.converters.ball_position_m), times g plus b,
+            # turned back into volts by the inverse of eq 6.3.1
+            curve = [((gain * (k * v + c) + offset) - c) / k for v in out.ball_sensor.curve_volts_v]
+            out = out.with_overrides({"ball_sensor.curve_volts_v": curve}, origin=origin)
+        return out
 
     @classmethod
     def from_file(cls, path: str | Path) -> Parameters:

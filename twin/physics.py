@@ -1,7 +1,7 @@
 """What the simulated rig needs from a physics backend, free of MuJoCo.
 
-Two backends implement ``Physics``: the MuJoCo twin (``twin.plant.Plant``) and the analytic reference model
-(``twin.reference.ReferencePlant``). The simulated rig (``twin.rigs.sim.SimRig``) drives either with the motor
+Two backends implement ``PhysicsBackend``: the MuJoCo twin (``twin.plant.Plant``) and the analytic reference
+model (``twin.reference.ReferencePlant``). The simulated rig (``twin.rigs.sim.SimRig``) drives either with the motor
 volts of each physics step of one control period and reads back a ``PhysicsBlock``: the ball position, the
 beam angle and the ball's contact with the track at every step, which the sensor chains turn into the
 block the I/O card delivers.
@@ -16,7 +16,7 @@ import numpy as np
 
 from twin.parameters import Parameters
 
-__all__ = ["Physics", "PhysicsBlock", "check_initial_state"]
+__all__ = ["PhysicsBackend", "PhysicsBlock", "check_initial_state"]
 
 
 class PhysicsBlock(NamedTuple):
@@ -37,8 +37,8 @@ class PhysicsBlock(NamedTuple):
     )
 
 
-class Physics(Protocol):
-    """A physics backend of the simulated rig."""
+class PhysicsBackend(Protocol):
+    """A physics backend of the simulated rig (not ``twin.parameters.Physics``, the physics parameter group)."""
 
     params: Parameters
 

@@ -18,8 +18,9 @@ constraint too, and a fixed-step integrator cannot follow an exact sign function
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
-from typing import Any, Literal
+from collections.abc import Sequence
+from dataclasses import dataclass, fields
+from typing import Any, Generic, Literal, TypeVar
 
 import numpy as np
 
@@ -44,23 +45,46 @@ InputKind = Literal["torque", "voltage"]
 COULOMB_REGULARIZATION_RAD_S = 0.01
 
 
+# A coefficient: one parameter set's float, or a (B, 1) column of B parameter sets' values.
+C = TypeVar("C", float, np.ndarray)
+
+
 @dataclass(frozen=True)
-class EquationCoefficients:
-    """The coefficients of eq 3.1.26 and eq 3.1.27 for a parameter set (see the module docstring)."""
+class EquationCoefficients(Generic[C]):
+    """The coefficients of eq 3.1.26 and eq 3.1.27 for a parameter set (see the module docstring): floats
+    (``from_params``), or (B, 1) columns over B parameter sets (``stack``) for ``accelerations`` on a batch."""
 
-    k1: float  # 2r²/(5r*²)
-    k2: float  # 2r²/(5r*)  (m)
-    c: float  # h* + r*  (m)
-    g: float  # m/s²
-    alpha_xdd: float  # α₁ (kg·m)
-    alpha_thdd: float  # α₂ (kg·m²)
-    alpha_thdd_x2: float  # α₃ (kg)
-    beta: tuple[float, float, float, float]  # β₁ sin θ, β₂ x cos θ, β₃ x ẋ θ̇, β₄ x θ̇²
-    beta_thetadot: float  # β₅: viscous damping at the beam (N·m·s/rad)
-    coulomb_nm: float  # F: the pivot's dry friction (N·m)
+    k1: C  # 2r²/(5r*²)
+    k2: C  # 2r²/(5r*)  (m)
+    c: C  # h* + r*  (m)
+    g: C  # m/s²
+    alpha_xdd: C  # α₁ (kg·m)
+    alpha_thdd: C  # α₂ (kg·m²)
+    alpha_thdd_x2: C  # α₃ (kg)
+    beta: tuple[C, C, C, C]  # β₁ sin θ, β₂ x cos θ, β₃ x ẋ θ̇, β₄ x θ̇²
+    beta_thetadot: C  # β₅: viscous damping at the beam (N·m·s/rad)
+    coulomb_nm: C  # F: the pivot's dry friction (N·m)
 
-    @classmethod
-    def from_params(cls, params: Parameters, *, motor_inertia: bool = True) -> EquationCoefficients:
+    @staticmethod
+    def stack(rows: Sequence[EquationCoefficients[float]]) -> EquationCoefficients[np.ndarray]:
+        """Row b of every coefficient column is ``rows[b]``'s (each field, and each of ``beta``, a (B, 1)
+        float array), so that ``accelerations`` computes every parameter set's at once."""
+
+        def column(values: Sequence[float]) -> np.ndarray:
+            return np.array(values, dtype=float)[:, None]
+
+        columns: dict[str, Any] = {}
+        for f in fields(EquationCoefficients):
+            values = [getattr(row, f.name) for row in rows]
+            columns[f.name] = (
+                tuple(column(each) for each in zip(*values, strict=True))
+                if isinstance(values[0], tuple)
+                else column(values)
+            )
+        return EquationCoefficients(**columns)
+
+    @staticmethod
+    def from_params(params: Parameters, *, motor_inertia: bool = True) -> EquationCoefficients[float]:
         p = params
         m, r, rs, hs = p.ball.mass_kg, p.ball.radius_m, p.rolling_radius_m, p.track.contact_height_m
         g = p.physics.gravity_m_s2
@@ -70,7 +94,7 @@ class EquationCoefficients:
         k1 = 2 * r**2 / (5 * rs**2)
         k2 = 2 * r**2 / (5 * rs)
         c = p.ball_centre_height_m
-        return cls(
+        return EquationCoefficients(
             k1=k1,
             k2=k2,
             c=c,
@@ -128,7 +152,7 @@ class ReferenceModel:
     motor_inertia: bool = True
 
     @property
-    def coefficients(self) -> EquationCoefficients:
+    def coefficients(self) -> EquationCoefficients[float]:
         return EquationCoefficients.from_params(self.params, motor_inertia=self.motor_inertia)
 
     # --- nonlinear dynamics -------------------------------------------------------------------------
@@ -227,7 +251,7 @@ def rk4_step(f: Any, x: Any, th: Any, xd: Any, thd: Any, u: Any, h: float) -> tu
 
 
 class ReferencePlant:
-    """The reference model as a physics backend (``twin.physics.Physics``): fixed-step RK4 at
+    """The reference model as a physics backend (``twin.physics.PhysicsBackend``): fixed-step RK4 at
     ``physics.timestep_s`` with the motor volts held over each step (eq 3.3.1 through the amplifier's rails).
 
     What the equations leave out is handled at the step boundary: the beam meets its stops inelastically

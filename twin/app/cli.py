@@ -23,29 +23,12 @@ import argparse
 import re
 import sys
 from collections.abc import Sequence
-from pathlib import Path
 from typing import Any, NoReturn
 
 from twin.app.catalogue import one_line
 from twin.app.commands import COMMANDS
+from twin.app.commands.common import package_version
 from twin.app.options import GridType, NumberType
-
-
-def package_version() -> str:
-    """The installed package's version, or pyproject.toml's when the package is not installed."""
-    from importlib import metadata
-
-    try:
-        return metadata.version("ballbeam-twin")
-    except metadata.PackageNotFoundError:
-        pass
-    import tomllib
-
-    try:
-        with open(Path(__file__).resolve().parents[2] / "pyproject.toml", "rb") as fh:
-            return str(tomllib.load(fh)["project"]["version"])
-    except (OSError, KeyError, tomllib.TOMLDecodeError):
-        return "unknown"
 
 
 class _HelpFormatter(argparse.HelpFormatter):

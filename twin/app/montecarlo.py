@@ -34,8 +34,8 @@ import numpy as np
 
 from twin.app.fanout import Progress, Runs, Served, run_starts
 from twin.app.sweep import point_seeds
-from twin.outputs import JobFiles, atomic_directory
-from twin.parameters import DuplicateKeyError, ParameterError, Parameters, load_json
+from twin.outputs import JobFiles
+from twin.parameters import READING, DuplicateKeyError, ParameterError, Parameters, load_json
 
 __all__ = [
     "Distribution",
@@ -46,15 +46,13 @@ __all__ = [
     "load_spread",
     "run_montecarlo",
     "sample_parameters",
-    "write_montecarlo",
 ]
 
 MAX_RUNS = 100_000
-# What write_montecarlo puts into its folder (checked before the runs).
+# What write_montecarlo (twin.app.montecarlo_render) puts into its folder (checked before the runs).
 OUTPUT_FILES = JobFiles("montecarlo", ("montecarlo.json", "distributions.png"))
 MAX_REDRAWS = 100  # a spread that puts a parameter outside its bounds this often is refused
 WORST_SHOWN = 10
-_READING = ("ball_reading.gain", "ball_reading.offset_m")  # calibration's reading model (not twin fields)
 
 
 @dataclass(frozen=True)
@@ -186,18 +184,16 @@ def load_calibration_spread(directory: str | Path) -> tuple[Parameters, Distribu
 def _apply(
     base: Parameters, names: tuple[str, ...], values: np.ndarray, fitted: dict[str, float]
 ) -> Parameters:
-    plain = {n: float(v) for n, v in zip(names, values, strict=True) if n not in _READING}
+    plain = {n: float(v) for n, v in zip(names, values, strict=True) if n not in READING}
     out = base.with_overrides(plain, origin="Monte Carlo sample") if plain else base
-    reading = {n: float(v) for n, v in zip(names, values, strict=True) if n in _READING}
+    reading = {n: float(v) for n, v in zip(names, values, strict=True) if n in READING}
     if reading:
-        from calib.identify import apply_values
-
         # The base already reads g₀·r + b₀ (the calibration folded its fit into the curve): apply the
         # sample relative to it, g·r + b = (g/g₀)·(g₀·r + b₀) + (b − b₀·g/g₀).
         g0, b0 = fitted.get("ball_reading.gain", 1.0), fitted.get("ball_reading.offset_m", 0.0)
         g = reading.get("ball_reading.gain", g0) / g0
         b = reading.get("ball_reading.offset_m", b0) - b0 * g
-        out = apply_values(out, {"ball_reading.gain": g, "ball_reading.offset_m": b})
+        out = out.with_values({"ball_reading.gain": g, "ball_reading.offset_m": b})
     return out
 
 
@@ -337,14 +333,3 @@ def run_montecarlo(
     result.summary = summarize(out)
     result.served = serve.to_json() if serve is not None else None
     return result
-
-
-def write_montecarlo(result: MonteCarloResult, out_dir: str | Path, *, overwrite: bool = False) -> Path:
-    """``montecarlo.json`` and ``distributions.png`` (``twin.app.montecarlo_render``) into ``out_dir``,
-    atomically (``twin.outputs.atomic_directory``: the folder's other files are kept)."""
-    from twin.app.montecarlo_render import render_distributions
-
-    with atomic_directory(out_dir, OUTPUT_FILES, overwrite=overwrite) as tmp:
-        (tmp / "montecarlo.json").write_text(json.dumps(result.to_json(), indent=1) + "\n")
-        render_distributions(result, tmp / "distributions.png")
-    return Path(out_dir)

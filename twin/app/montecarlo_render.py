@@ -1,8 +1,9 @@
-"""The distributions of a Monte Carlo study (matplotlib): rendering only, the numbers come from
-``twin.app.montecarlo``."""
+"""The distributions of a Monte Carlo study (matplotlib) and the study's folder: rendering and writing only,
+the numbers come from ``twin.app.montecarlo`` (imported here, never the other way round)."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import matplotlib
@@ -10,9 +11,19 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
-from twin.app.montecarlo import MonteCarloResult  # noqa: E402
+from twin.app.montecarlo import OUTPUT_FILES, MonteCarloResult  # noqa: E402
+from twin.outputs import atomic_directory  # noqa: E402
 
-__all__ = ["render_distributions"]
+__all__ = ["render_distributions", "write_montecarlo"]
+
+
+def write_montecarlo(result: MonteCarloResult, out_dir: str | Path, *, overwrite: bool = False) -> Path:
+    """``montecarlo.json`` and ``distributions.png`` into ``out_dir``, atomically
+    (``twin.outputs.atomic_directory``: the folder's other files are kept)."""
+    with atomic_directory(out_dir, OUTPUT_FILES, overwrite=overwrite) as tmp:
+        (tmp / "montecarlo.json").write_text(json.dumps(result.to_json(), indent=1) + "\n")
+        render_distributions(result, tmp / "distributions.png")
+    return Path(out_dir)
 
 
 def render_distributions(result: MonteCarloResult, path: Path) -> None:

@@ -10,14 +10,15 @@ rigs — with fewer, the region is reported empty and the starts all N rigs hold
 With ``--refine`` every rig's map is refined (``twin.app.sweep.Refinement``), all rigs' starts of a wave
 run as one job. Run i of rig m has the noise seed ``rig_point_seeds(seed, m)[i]``: a function of the seed,
 the rig and the start alone, so the result is the same in this process, on workers and on a cluster.
+
+``twin.app.robust_render`` draws the map and writes the folder (``write_robust``); nothing here imports
+matplotlib.
 """
 
 from __future__ import annotations
 
-import json
 import time
 from dataclasses import asdict, dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -25,11 +26,12 @@ import numpy as np
 from twin.app.fanout import Progress, Served, run_starts
 from twin.app.options import MAX_RIGS
 from twin.app.sweep import ASSUMPTION, Refinement, SweepSettings, verdict_class
-from twin.outputs import JobFiles, atomic_directory
+from twin.outputs import JobFiles
 from twin.parameters import ParameterError, Parameters
 
-__all__ = ["OUTPUT_FILES", "RobustResult", "lower_bound", "rig_point_seeds", "run_robust", "write_robust"]
+__all__ = ["OUTPUT_FILES", "RobustResult", "lower_bound", "rig_point_seeds", "run_robust"]
 
+# What write_robust (twin.app.robust_render) puts into its folder (checked before the runs).
 OUTPUT_FILES = JobFiles("robust-sweep", ("robust.json", "robust.png"))
 # Each rig's map in the JSON: one letter per start (twin.app.sweep.verdict_class).
 CLASS_LETTERS = {"held": "h", "kept": "k", "lost": "l", "failed": "f"}
@@ -210,59 +212,6 @@ def run_robust(
         **({"nominal_held": nominal_held} if nominal_held is not None else {}),
     }
     return result
-
-
-def write_robust(result: RobustResult, out_dir: str | Path, *, overwrite: bool = False) -> Path:
-    """``robust.json`` and ``robust.png`` into ``out_dir`` (atomically, as every job's folder)."""
-    with atomic_directory(out_dir, OUTPUT_FILES, overwrite=overwrite) as tmp:
-        (tmp / "robust.json").write_text(json.dumps(result.to_json(), indent=1) + "\n")
-        _render(result, tmp / "robust.png")
-    return Path(out_dir)
-
-
-def _render(result: RobustResult, path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    s = result.settings
-    xs, ths = s.x0.values(), s.theta0.values()
-    nx, nt = len(xs), len(ths)
-    rate = np.full((nt, nx), np.nan)
-    robust = np.zeros((nt, nx))
-    for k, p in enumerate(result.points):
-        i, j = divmod(k, nt)
-        rate[j, i] = np.nan if p["rate"] is None else p["rate"]
-        robust[j, i] = 1.0 if p["robust"] else (0.5 if p["held"] == result.rigs else 0.0)
-    dx = (xs[1] - xs[0]) / 2 if nx > 1 else 0.01
-    dt = (ths[1] - ths[0]) / 2 if nt > 1 else 0.01
-    fig, ax = plt.subplots(figsize=(7.5, 6.6), dpi=120)
-    image = ax.imshow(
-        rate,
-        origin="lower",
-        extent=(xs[0] - dx, xs[-1] + dx, ths[0] - dt, ths[-1] + dt),
-        aspect="auto",
-        cmap="viridis",
-        vmin=0,
-        vmax=1,
-    )
-    fig.colorbar(image, ax=ax, label=f"share of the {result.rigs} rigs that hold the start")
-    if nx > 1 and nt > 1:
-        ax.contour(xs, ths, robust, levels=[0.25, 0.75], colors=["white", "red"], linewidths=[1.0, 2.0])
-    m = result.summary
-    ax.set_title(
-        f"{s.controller}: {result.rigs} rigs from {Path(result.source).name}\n"
-        f"held by every rig {m['held_by_every_rig']} of {m['starts']} (white); lower bound ≥ {result.level:g} "
-        f"at {result.confidence:g}: {m['robust']} (red)"
-        + (f"; nominal rig holds {m['nominal_held']}" if "nominal_held" in m else ""),
-        fontsize=9,
-    )
-    ax.set_xlabel("initial ball position x0 (m)")
-    ax.set_ylabel("initial beam angle θ0 (rad)")
-    fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
 
 
 def refinement_costs(rig_classes: list[str], nx: int, nt: int, step: int) -> dict[str, Any]:

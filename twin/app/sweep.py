@@ -7,21 +7,19 @@ result does not depend on how the grid is chunked or where a chunk runs: a sweep
 with workers and on a cluster. Ctrl-C stops the sweep and keeps the points already done (the result says
 it is incomplete).
 
-``write_sweep`` writes ``sweep.json`` (one record per point: ``x0_m``, ``theta0_rad``, ``seed`` and every
-field of the verdict; the claims; the settings) and ``map.png`` (``twin.app.sweep_render``) into a
-directory, atomically. Nothing here imports matplotlib.
+``twin.app.sweep_render.write_sweep`` writes ``sweep.json`` (one record per point: ``x0_m``, ``theta0_rad``,
+``seed`` and every field of the verdict; the claims; the settings) and ``map.png`` into a directory,
+atomically. Nothing here imports matplotlib or the renderer: the renderer imports this module.
 """
 
 from __future__ import annotations
 
 import itertools
-import json
 import math
 import time
 from collections.abc import Callable, Hashable, Sequence
 from dataclasses import asdict, dataclass, field
 from fractions import Fraction
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -29,7 +27,7 @@ import numpy as np
 from controllers import thesis_numbers as T
 from twin.app.fanout import Progress, Runs, Served, run_starts
 from twin.app.options import MAX_LOCATE
-from twin.outputs import JobFiles, atomic_directory
+from twin.outputs import JobFiles
 from twin.parameters import ParameterError, Parameters
 from twin.physics import check_initial_state
 
@@ -43,7 +41,6 @@ __all__ = [
     "parse_range",
     "point_seeds",
     "run_sweep",
-    "write_sweep",
 ]
 
 
@@ -59,7 +56,7 @@ class Grid:
         return np.linspace(self.lo, self.hi, self.n) if self.n > 1 else np.array([self.lo])
 
 
-# What write_sweep puts into its folder (checked before the sweep runs).
+# What write_sweep (twin.app.sweep_render) puts into its folder (checked before the sweep runs).
 OUTPUT_FILES = JobFiles("sweep", ("sweep.json", "map.png"))
 # The thesis's chapter 7 grid: the whole track (|x| ≤ 0.323 m) and nearly the whole stroke (|θ| ≤ 43.4°).
 DEFAULT_X0 = Grid(-0.32, 0.32, 41)
@@ -742,15 +739,3 @@ def _judge(claim: RegionClaim, result: SweepResult, params: Parameters) -> dict[
         "corners": corners,
         "verdict": verdict,
     }
-
-
-# --- writing ----------------------------------------------------------------------------------------------
-def write_sweep(result: SweepResult, out_dir: str | Path, *, overwrite: bool = False) -> Path:
-    """``sweep.json`` and ``map.png`` into ``out_dir`` (``twin.outputs.atomic_directory``: a failure leaves
-    the old ones; the folder's other files are kept)."""
-    from twin.app.sweep_render import render_map
-
-    with atomic_directory(out_dir, OUTPUT_FILES, overwrite=overwrite) as tmp:
-        (tmp / "sweep.json").write_text(json.dumps(result.to_json(), indent=1) + "\n")
-        render_map(result, tmp / "map.png")
-    return Path(out_dir)

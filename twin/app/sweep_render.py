@@ -1,8 +1,13 @@
-"""The region-of-attraction map of a sweep (matplotlib): rendering only, the numbers come from
-``twin.app.sweep``."""
+"""The region-of-attraction map of a sweep (matplotlib) and the sweep's folder: rendering and writing only,
+the numbers come from ``twin.app.sweep``.
+
+``write_sweep`` writes ``sweep.json`` (one record per point: ``x0_m``, ``theta0_rad``, ``seed`` and every
+field of the verdict; the claims; the settings) and ``map.png`` into a directory, atomically. This module
+imports the sweep's types, never the other way round (tests/test_import_graph.py)."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import matplotlib
@@ -13,9 +18,19 @@ import numpy as np  # noqa: E402
 from matplotlib.colors import ListedColormap  # noqa: E402
 from matplotlib.patches import Patch, Rectangle  # noqa: E402
 
-from twin.app.sweep import CLAIMS, SweepResult, summarize  # noqa: E402
+from twin.app.sweep import CLAIMS, OUTPUT_FILES, SweepResult, summarize  # noqa: E402
+from twin.outputs import atomic_directory  # noqa: E402
 
-__all__ = ["render_map"]
+__all__ = ["render_map", "write_sweep"]
+
+
+def write_sweep(result: SweepResult, out_dir: str | Path, *, overwrite: bool = False) -> Path:
+    """``sweep.json`` and ``map.png`` into ``out_dir`` (``twin.outputs.atomic_directory``: a failure leaves
+    the old ones; the folder's other files are kept)."""
+    with atomic_directory(out_dir, OUTPUT_FILES, overwrite=overwrite) as tmp:
+        (tmp / "sweep.json").write_text(json.dumps(result.to_json(), indent=1) + "\n")
+        render_map(result, tmp / "map.png")
+    return Path(out_dir)
 
 
 def render_map(result: SweepResult, path: Path) -> None:

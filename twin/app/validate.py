@@ -20,7 +20,6 @@ formatted from the runs' verdicts.
 
 from __future__ import annotations
 
-import json
 import math
 import time
 import tomllib
@@ -36,12 +35,12 @@ from twin.app.montecarlo import MAX_RUNS, Distribution, MonteCarloSettings, run_
 from twin.app.options import MAX_JOB_RUN_S, MAX_RIGS
 from twin.app.robust import run_robust
 from twin.app.sweep import MAX_POINTS, Grid, SweepResult, SweepSettings, point_seeds, run_sweep
-from twin.outputs import JobFiles, atomic_directory
+from twin.outputs import JobFiles
 from twin.parameters import ParameterError, Parameters
 from twin.physics import check_initial_state
 from twin.sensors import angle_count_step_rad
 
-__all__ = ["ValidationCriteria", "ValidationReport", "load_criteria", "validate", "write_validation"]
+__all__ = ["ValidationCriteria", "ValidationReport", "load_criteria", "validate"]
 
 
 # A validation runs 6 starts × nominal_seeds nominal runs; past 1000 seeds it is a typing error, not a study.
@@ -519,20 +518,5 @@ def _required_grid(c: ValidationCriteria) -> tuple[Grid, Grid]:
     return grids[0], grids[1]
 
 
-# What write_validation puts into its folder (checked before the battery runs).
+# What write_validation (twin.app.validate_render) puts into its folder (checked before the battery runs).
 OUTPUT_FILES = JobFiles("validate", ("validation.json", "region.png", "report.md"))
-
-
-def write_validation(report: ValidationReport, out_dir: str | Path, *, overwrite: bool = False) -> Path:
-    """``report.md``, ``validation.json`` and ``region.png`` (``twin.app.validate_render``,
-    ``twin.app.sweep_render``) into ``out_dir``, atomically (``twin.outputs.atomic_directory``: the folder's
-    other files are kept)."""
-    from twin.app.sweep_render import render_map
-    from twin.app.validate_render import render_markdown
-
-    with atomic_directory(out_dir, OUTPUT_FILES, overwrite=overwrite) as tmp:
-        (tmp / "validation.json").write_text(json.dumps(report.to_json(), indent=1) + "\n")
-        if report.region is not None:
-            render_map(report.region, tmp / "region.png")
-        (tmp / "report.md").write_text(render_markdown(report))
-    return Path(out_dir)

@@ -1,13 +1,28 @@
-"""The validation report as Markdown: rendering only, every figure formatted from ``twin.app.validate``'s
-runs."""
+"""The validation report as Markdown and the validation's folder: rendering and writing only, every figure
+formatted from ``twin.app.validate``'s runs (imported here, never the other way round)."""
 
 from __future__ import annotations
 
+import json
 from dataclasses import asdict
+from pathlib import Path
 
-from twin.app.validate import ValidationReport
+from twin.app.sweep_render import render_map
+from twin.app.validate import OUTPUT_FILES, ValidationReport
+from twin.outputs import atomic_directory
 
-__all__ = ["render_markdown"]
+__all__ = ["render_markdown", "write_validation"]
+
+
+def write_validation(report: ValidationReport, out_dir: str | Path, *, overwrite: bool = False) -> Path:
+    """``report.md``, ``validation.json`` and ``region.png`` (``twin.app.sweep_render``) into ``out_dir``,
+    atomically (``twin.outputs.atomic_directory``: the folder's other files are kept)."""
+    with atomic_directory(out_dir, OUTPUT_FILES, overwrite=overwrite) as tmp:
+        (tmp / "validation.json").write_text(json.dumps(report.to_json(), indent=1) + "\n")
+        if report.region is not None:
+            render_map(report.region, tmp / "region.png")
+        (tmp / "report.md").write_text(render_markdown(report))
+    return Path(out_dir)
 
 
 def render_markdown(report: ValidationReport) -> str:

@@ -31,7 +31,7 @@ from twin.daq import TickSchedule, block_span_s
 from twin.interface import DaqSample, Rig
 from twin.output_stage import ideal_motor_volts, motor_volts_of
 from twin.parameters import Parameters
-from twin.physics import Physics, PhysicsBlock
+from twin.physics import PhysicsBackend, PhysicsBlock
 from twin.plant import Plant
 from twin.reference import ReferencePlant
 from twin.sensors import AngleChain, BallPositionChain, IdealSensors
@@ -98,7 +98,7 @@ class SimRig(Rig):
         self.ideal_sensors = bool(ideal_sensors)
         self._schedule = tick_schedule(p)
         self._steps_per_tick = self._schedule.steps_per_tick
-        self.physics: Physics = Plant(p) if plant == "twin" else ReferencePlant(p)
+        self.physics: PhysicsBackend = Plant(p) if plant == "twin" else ReferencePlant(p)
         self._chains = not self.ideal_sensors  # the sensor chains read each block (else ideal converters)
         self._motor_volts = motor_volts_of(p)
         self._block_span_s = block_span_s(p.daq)

@@ -299,7 +299,6 @@ def serving(args: argparse.Namespace, params: Parameters) -> Iterator[Served | N
     if args.serve is None:
         yield None
         return
-    from twin.app.cli import package_version
     from twin.app.fanout import Served
     from twin.parameters import ParameterError
     from twin.wire.server import DEFAULT_TIMEOUT_S, ServeError, Server, SessionSettings
@@ -438,3 +437,20 @@ def hardware_controller(spec: str, params: Parameters) -> Callable[[], Controlle
         return construct(user, spec, params)
 
     return own
+
+
+def package_version() -> str:
+    """The installed package's version, or pyproject.toml's when the package is not installed."""
+    from importlib import metadata
+
+    try:
+        return metadata.version("ballbeam-twin")
+    except metadata.PackageNotFoundError:
+        pass
+    import tomllib
+
+    try:
+        with open(Path(__file__).resolve().parents[3] / "pyproject.toml", "rb") as fh:
+            return str(tomllib.load(fh)["project"]["version"])
+    except (OSError, KeyError, tomllib.TOMLDecodeError):
+        return "unknown"

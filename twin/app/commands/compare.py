@@ -82,7 +82,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from calib.compare import OUTPUT_FILES, Criterion, compare, write_comparison
+    from calib.compare import OUTPUT_FILES, Criterion, compare
     from calib.logs import read_log, rig_log
     from twin.engine import ControllerError
     from twin.parameters import ParameterError
@@ -124,6 +124,8 @@ def run(args: argparse.Namespace) -> int:
     except NumericalError as exc:
         print(f"ballbeam compare: {one_line(exc)}", file=sys.stderr)
         return 1
+    from calib.compare_render import write_comparison  # matplotlib: after the run
+
     write_out(args, write_comparison, result)
     if args.json:
         print(json.dumps(result.to_json()))

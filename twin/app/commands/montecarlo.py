@@ -73,7 +73,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from twin.app.montecarlo import OUTPUT_FILES, MonteCarloSettings, run_montecarlo, write_montecarlo
+    from twin.app.montecarlo import OUTPUT_FILES, MonteCarloSettings, run_montecarlo
     from twin.parameters import ParameterError
     from twin.physics import check_initial_state
 
@@ -112,6 +112,8 @@ def run(args: argparse.Namespace) -> int:
         )
     if (client := client_name(args, served)) is not None:
         result.settings = settings = replace(settings, controller=client)
+    from twin.app.montecarlo_render import write_montecarlo  # matplotlib: after the runs
+
     write_out(args, write_montecarlo, result)
     if args.json:
         print(json.dumps(result.to_json()))

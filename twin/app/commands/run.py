@@ -153,7 +153,7 @@ def run(args: argparse.Namespace) -> int:
     if "--log" in paths:
         save_log(result.log, "--log", args.log, paths["--log"], args.overwrite)
     if "--plot" in paths:
-        from twin.plots import plot_run
+        from twin.app.plots import plot_run
 
         with writing("--plot", args.plot):
             plot_run(result, paths["--plot"], overwrite=args.overwrite, software=params.software)

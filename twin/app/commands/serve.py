@@ -80,7 +80,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from twin.app.cli import package_version
+    from twin.app.commands.common import package_version
     from twin.engine import ControllerError
     from twin.plant import NumericalError
     from twin.wire import protocol

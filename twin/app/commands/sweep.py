@@ -139,7 +139,6 @@ def run(args: argparse.Namespace) -> int:
         SweepSettings,
         parse_range,
         run_sweep,
-        write_sweep,
     )
     from twin.parameters import ParameterError
 
@@ -187,6 +186,8 @@ def run(args: argparse.Namespace) -> int:
         )
     if (client := client_name(args, served)) is not None:
         result.settings = settings = replace(settings, controller=client)
+    from twin.app.sweep_render import write_sweep  # matplotlib: after the runs
+
     write_out(args, write_sweep, result)
     if args.json:
         print(json.dumps(result.to_json()))
@@ -245,7 +246,7 @@ def _print_sweep(args: argparse.Namespace, settings: SweepSettings, result: Swee
 
 def _robust_sweep(args: argparse.Namespace, settings: Any, params: Parameters, spread: Any) -> int:
     """``sweep --rigs N --spread|--calibration``: the nominal rig's map, then every start on N drawn rigs."""
-    from twin.app.robust import OUTPUT_FILES, run_robust, write_robust
+    from twin.app.robust import OUTPUT_FILES, run_robust
     from twin.app.sweep import run_sweep
 
     check_job(args, params, OUTPUT_FILES)
@@ -267,6 +268,8 @@ def _robust_sweep(args: argparse.Namespace, settings: Any, params: Parameters, s
         scheduler=args.scheduler,
         progress=progress_bar("robust sweep"),
     )
+    from twin.app.robust_render import write_robust  # matplotlib: after the runs
+
     write_out(args, write_robust, result)
     if args.json:
         print(json.dumps(result.to_json()))

@@ -61,7 +61,6 @@ def run(args: argparse.Namespace) -> int:
         check_criteria_for,
         load_criteria,
         validate,
-        write_validation,
     )
     from twin.parameters import ParameterError
 
@@ -86,6 +85,8 @@ def run(args: argparse.Namespace) -> int:
         )
     if (client := client_name(args, served)) is not None:
         report.controller = client
+    from twin.app.validate_render import write_validation  # matplotlib: after the runs
+
     write_out(args, write_validation, report)
     if args.json:
         print(json.dumps(report.to_json()))

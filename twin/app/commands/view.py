@@ -82,7 +82,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from controllers import registry
-    from twin.app.cli import package_version
+    from twin.app.commands.common import package_version
     from twin.app.shadow import view_monitor
     from twin.viewer import ViewerError, serve
 

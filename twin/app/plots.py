@@ -1,4 +1,5 @@
-"""Figures of a closed-loop run (matplotlib, no display needed)."""
+"""Figures of a closed-loop run (matplotlib, no display needed): rendering, in the application layer (the
+core computes the run, ``twin.engine.RunResult``, and draws nothing)."""
 
 from __future__ import annotations
 
