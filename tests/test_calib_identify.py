@@ -106,6 +106,7 @@ def test_a_short_log_recovers_resistance_and_zeroing_error() -> None:
     assert cal.params.motor.resistance_ohm == cal.values["motor.resistance_ohm"].value
 
 
+@pytest.mark.quick
 def test_a_ball_reading_gain_is_folded_into_the_sensor_curve() -> None:
     from calib.identify import apply_values
 
@@ -116,6 +117,7 @@ def test_a_ball_reading_gain_is_folded_into_the_sensor_curve() -> None:
     np.testing.assert_allclose(after, 1.1 * before + 0.002, atol=1e-15)
 
 
+@pytest.mark.quick
 def test_unknown_or_repeated_parameters_are_refused() -> None:
     run = run_experiment("dither", NOMINAL, duration_s=6.0, seed=1)
     with pytest.raises(CalibrationError, match="cannot fit \\['motor.mass'\\]"):

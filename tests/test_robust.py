@@ -46,6 +46,7 @@ def test_every_count_is_the_single_runs_of_the_drawn_rigs() -> None:
         assert point["lower_bound"] == pytest.approx(lower_bound(held, 3, 0.95), abs=1e-6)
 
 
+@pytest.mark.quick
 def test_the_bound_is_clopper_pearsons() -> None:
     # k = n: the bound solves p^n = 1 − confidence; k = 0: 0; and it rises with k.
     assert lower_bound(59, 59, 0.95) == pytest.approx(0.05 ** (1 / 59))
@@ -118,6 +119,7 @@ def _ellipse_maps(rigs: int, nx: int, nt: int, seed: int) -> list[str]:
     return maps
 
 
+@pytest.mark.quick
 def test_refining_each_rig_costs_less_than_refining_the_probability_contour_for_the_same_counts() -> None:
     """The design's choice, on maps alone: per rig, a cell is split only for the rigs whose corners disagree;
     on the contour (jointly, or on the held count) every rig runs every split cell's corners. Per rig is

@@ -284,6 +284,7 @@ def test_bb_sf_sessions_run_a_served_job_of_the_hardware_starts_as_the_python_po
     assert err.strip().splitlines()[-1] == "bb_sf: 4 sessions, each as the server said"
 
 
+@pytest.mark.quick
 def test_bb_sf_sessions_usage(bb_sf: Path) -> None:
     proc = subprocess.run(
         [str(bb_sf), "pipe", "--sessions", "-1"], capture_output=True, text=True, timeout=10
@@ -295,6 +296,7 @@ def test_bb_sf_sessions_usage(bb_sf: Path) -> None:
 # --- refusals ------------------------------------------------------------------------------------------------
 
 
+@pytest.mark.quick
 @pytest.mark.parametrize(
     ("argv", "needles"),
     [
