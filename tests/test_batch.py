@@ -235,6 +235,7 @@ def test_rigs_of_a_spread_share_one_group(monkeypatch, ideal_sensors: bool) -> N
     assert len(runs) == 5
 
 
+@pytest.mark.quick
 def test_without_record_only_the_verdicts_are_kept() -> None:
     runs = run_batch(registry, "appendix-sf", x0_m=X0, theta0_rad=THETA0, seeds=np.arange(4), duration_s=1.0)
     single = run_closed_loop(registry.make("appendix-sf"), x0_m=0.14, theta0_rad=-0.2, duration_s=1.0, seed=0)
@@ -244,6 +245,7 @@ def test_without_record_only_the_verdicts_are_kept() -> None:
         runs[0].log  # noqa: B018
 
 
+@pytest.mark.quick
 def test_bad_inputs_are_refused() -> None:
     with pytest.raises(ValueError, match="one value per run"):
         run_batch(registry, "lqr", x0_m=X0, theta0_rad=THETA0[:2], seeds=np.arange(4))
@@ -297,6 +299,7 @@ def test_long_runs_as_single_runs(name: str) -> None:
     _check(registry, name, x0, theta0, seeds, duration_s=10.0)
 
 
+@pytest.mark.quick
 def test_the_single_rig_and_the_batch_follow_one_tick_schedule() -> None:
     """``twin.daq.TickSchedule`` is the one home of the start timing and the output latency, which SimRig
     and the batch's groups both build with ``twin.rigs.sim.tick_schedule``: a 50 ms free run (longer than a
@@ -333,6 +336,7 @@ def _extreme_states(rng: np.random.Generator) -> np.ndarray:
     return x
 
 
+@pytest.mark.quick
 @pytest.mark.parametrize("name", ["clp", "thesis-clp", "smc", "sf", "lqr"])
 def test_each_batched_law_gives_the_scalar_laws_bits_on_any_state(name: str) -> None:
     """The batch's law on 400 states at once against the scalar law state by state (``of_floats``), bit for

@@ -43,6 +43,7 @@ def _error(name: str, fitted: float, true: float) -> float:
 
 
 # --- the adequacy statistics and the covariance ------------------------------------------------------------
+@pytest.mark.quick
 def test_white_residuals_stay_in_the_band_and_coloured_ones_do_not() -> None:
     rng = np.random.default_rng(0)
     white = rng.normal(0.0, 0.5e-3, (60, 50))
@@ -65,6 +66,7 @@ def test_white_residuals_stay_in_the_band_and_coloured_ones_do_not() -> None:
     assert c.outliers == 9 and c.rms == pytest.approx(a.rms, rel=0.01)
 
 
+@pytest.mark.quick
 def test_the_sparse_sandwich_is_the_dense_one() -> None:
     """The globals' block of H⁻¹·meat·H⁻¹ from a sparse LU equals the dense pinv formula it replaced."""
     run = run_experiment("square", NOMINAL, duration_s=12.0, seed=2)

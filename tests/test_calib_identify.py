@@ -106,6 +106,7 @@ def test_a_short_log_recovers_resistance_and_zeroing_error() -> None:
     assert cal.params.motor.resistance_ohm == cal.values["motor.resistance_ohm"].value
 
 
+@pytest.mark.quick
 def test_a_ball_reading_gain_is_folded_into_the_sensor_curve() -> None:
     out = Parameters().with_values({"ball_reading.gain": 1.1, "ball_reading.offset_m": 0.002})
     sw = out.software
@@ -133,6 +134,7 @@ def test_the_fittable_units_and_bounds_are_the_parameters_own() -> None:
         FitSpec("motor.mass", 0.1, 1.0, 1.0, "no such parameter")
 
 
+@pytest.mark.quick
 def test_unknown_or_repeated_parameters_are_refused() -> None:
     run = run_experiment("dither", NOMINAL, duration_s=6.0, seed=1)
     with pytest.raises(CalibrationError, match="cannot fit \\['motor.mass'\\]"):

@@ -76,6 +76,7 @@ def refused(path: Path, *parts: str) -> str:
 # --- Good logs ---
 
 
+@pytest.mark.quick
 @pytest.mark.parametrize("fmt", ["mat", "csv"])
 def test_a_rig_log_round_trips(tmp_path: Path, fmt: str) -> None:
     rows = rig_rows()
@@ -97,6 +98,7 @@ def test_a_rig_log_round_trips(tmp_path: Path, fmt: str) -> None:
         rig.period_s = 1.0  # type: ignore[misc]
 
 
+@pytest.mark.quick
 def test_the_rig_file_as_saved_with_every_variable(tmp_path: Path) -> None:
     """The full ``save 'data_file' …`` list, uhesap never written (an empty matrix): the same RigLog."""
     rows = rig_rows()
@@ -138,6 +140,7 @@ def twin_log_path(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return path
 
 
+@pytest.mark.quick
 def test_a_twin_csv_gives_the_same_rig_log(twin_log_path: Path) -> None:
     a, b = load_rig_log(twin_log_path), load_rig_log(twin_log_path.with_suffix(".csv"))
     for name in ("time_s", "ball_v", "angle_v", "command_v", "period_s"):
@@ -163,6 +166,7 @@ def test_loading_never_modifies_the_file(tmp_path: Path, fmt: str) -> None:
     assert (bad.read_bytes(), bad.stat().st_mtime_ns) == bad_before
 
 
+@pytest.mark.quick
 def test_the_thresholds_are_the_io_cards_steps() -> None:
     daq = Parameters().daq
     assert DAC_STEP_V == dac_lsb_v(daq) and ADC_STEP_V == adc_lsb_v(daq)
@@ -177,6 +181,7 @@ def write(tmp_path: Path, fmt: str, rows: dict[str, np.ndarray]) -> Path:
     )
 
 
+@pytest.mark.quick
 @pytest.mark.parametrize("fmt", ["mat", "csv"])
 @pytest.mark.parametrize(("name", "value"), [("datam1", math.nan), ("aout", math.inf), ("timem", -math.inf)])
 def test_not_finite(tmp_path: Path, fmt: str, name: str, value: float) -> None:
@@ -225,6 +230,7 @@ def test_irregular_tick_spacing(tmp_path: Path, fmt: str) -> None:
     refused(write(tmp_path, fmt, rows), "'timem' (time_s)", "index 151", "1.5 × the median period")
 
 
+@pytest.mark.quick
 @pytest.mark.parametrize("fmt", ["mat", "csv"])
 def test_too_short(tmp_path: Path, fmt: str) -> None:
     rows = {name: v[:201] for name, v in rig_rows().items()}  # 200 ticks: 3.98 s
@@ -273,6 +279,7 @@ def test_a_channel_outside_the_adc_range_is_refused(
     refused(write(tmp_path, fmt, rows), f"'{name}' ({field})", "index 41", "outside the ADC's -5…5 V")
 
 
+@pytest.mark.quick
 @pytest.mark.parametrize(("name", "shown"), [("data_file.txt", "suffix '.txt'"), ("data_file", "no suffix")])
 def test_unknown_suffix(tmp_path: Path, name: str, shown: str) -> None:
     path = write_rig_mat(tmp_path / "x.mat", rig_rows()).rename(tmp_path / name)

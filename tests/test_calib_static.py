@@ -39,6 +39,7 @@ def dac() -> DacCalibration:
 # --- the example tables ---------------------------------------------------------------------------------
 
 
+@pytest.mark.quick
 def test_shipped_tables_are_the_thesis_numbers():
     t = load_table(TABLES_DIR / "table_6_3.csv")
     assert t.kind == "ball" and t.columns == ("position_m", "volts_v")
@@ -54,6 +55,7 @@ def test_shipped_tables_are_the_thesis_numbers():
 # --- which fit is eq 6.3.1 --------------------------------------------------------------------------------
 
 
+@pytest.mark.quick
 def test_least_squares_over_the_21_interior_points_reproduces_eq_6_3_1(ball: BallCalibration):
     # Independently: x on V and V on x (inverted) over the 21 interior points, and over all 23.
     gain, offset = np.polyfit(V[1:-1], X[1:-1], 1)
@@ -79,6 +81,7 @@ def test_least_squares_over_the_21_interior_points_reproduces_eq_6_3_1(ball: Bal
     assert (ball.line.regression, ball.line.points) == ("x_on_v", "interior")
 
 
+@pytest.mark.quick
 def test_residuals_of_eq_6_3_1_and_of_the_refit(ball: BallCalibration):
     eq_6_3_1 = 0.0693 * V + 0.0018 - X
     np.testing.assert_allclose(ball.software_residuals_m.values, eq_6_3_1, atol=1e-15)
@@ -129,6 +132,7 @@ def test_gcv_spline_is_a_straight_line_and_the_adc_spline_nearly_interpolates(ba
 # --- the angle chain's DAC ------------------------------------------------------------------------------
 
 
+@pytest.mark.quick
 def test_dac_line_against_eq_6_2_6(dac: DacCalibration):
     slope, offset = np.polyfit(EQ_6_2_4_DI, EQ_6_2_4_VOLTS_V, 1)
     assert dac.volts_per_count == pytest.approx(slope, rel=1e-12)
@@ -178,6 +182,7 @@ def test_overrides_round_trip_through_parameters(ball: BallCalibration, dac: Dac
         assert loaded == expected
 
 
+@pytest.mark.quick
 def test_json_and_text(ball: BallCalibration, dac: DacCalibration):
     data = json.loads(json.dumps(ball.to_json()))
     assert data["line"]["gain_m_per_v"] == 0.0692523 and data["line"]["offset_m"] == 0.0018
@@ -242,6 +247,7 @@ def test_empty(tmp_path: Path):
     assert "empty" in _error(_write(tmp_path, "\n  \n"))
 
 
+@pytest.mark.quick
 def test_unknown_header(tmp_path: Path):
     message = _error(_write(tmp_path, "x,v\n0,0\n"))
     assert "line 1" in message and "unknown header 'x,v'" in message and "position_m,volts_v" in message

@@ -18,6 +18,7 @@ from twin.parameters import Parameters
 ROOT = Path(__file__).resolve().parents[1]
 
 
+@pytest.mark.quick
 def test_names_are_the_entries_keys_in_order() -> None:
     assert registry.NAMES == tuple(registry.ENTRIES)
     assert len(set(registry.NAMES)) == len(registry.NAMES)
@@ -28,6 +29,7 @@ def test_names_are_the_entries_keys_in_order() -> None:
         assert registry.simulation_only(name) == entry.simulation_only
 
 
+@pytest.mark.quick
 @pytest.mark.parametrize("name", registry.NAMES)
 def test_flags_are_true_to_the_built_controller(name: str) -> None:
     entry = registry.ENTRIES[name]
@@ -43,6 +45,7 @@ def test_flags_are_true_to_the_built_controller(name: str) -> None:
     assert (batched([built, entry.build(Parameters())]) is not None) == entry.batched
 
 
+@pytest.mark.quick
 @pytest.mark.parametrize("name", [n for n in registry.NAMES if registry.ENTRIES[n].setpoint])
 def test_a_declared_setpoint_is_the_law_reference(name: str) -> None:
     built = registry.make(name)
@@ -89,6 +92,7 @@ def test_the_appendix_controllers_load_no_python_control() -> None:
     assert "FIXED False" in out and "DESIGNED True" in out, out
 
 
+@pytest.mark.quick
 def test_unknown_names_are_refused_by_every_reader() -> None:
     for call in (registry.make, registry.describe, registry.simulation_only):
         with pytest.raises(KeyError, match="unknown controller 'pid'"):
@@ -113,6 +117,7 @@ class _WithSetpoint(_Plain):
         self.setpoint_m = 0.0
 
 
+@pytest.mark.quick
 @pytest.mark.parametrize(("cls", "setpoint"), [(_Plain, False), (_WithSetpoint, True)])
 def test_the_users_controller_is_one_more_entry(cls: type[Controller], setpoint: bool) -> None:
     spec = f"tests.test_catalogue:{cls.__name__}"

@@ -6,6 +6,7 @@ The commands run in-process (``main([...])``); a run that must not happen is rep
 
 from __future__ import annotations
 
+import argparse
 import errno
 import json
 import os
@@ -284,6 +285,7 @@ def test_an_existing_output_is_still_refused_without_overwrite(tmp_path: Path, c
 
 
 # --- runs shorter than the verdict's window ------------------------------------------------------------
+@pytest.mark.quick
 @pytest.mark.parametrize("duration", ["0.05", "1"])
 def test_json_works_on_runs_shorter_than_the_final_window(capsys, duration: str) -> None:
     argv = ["run", "--controller", "appendix-clp", "--x0", "0.1", "--theta0", "0", "--duration", duration]
@@ -297,6 +299,7 @@ def test_json_works_on_runs_shorter_than_the_final_window(capsys, duration: str)
 
 
 # --- negative numbers ----------------------------------------------------------------------------------
+@pytest.mark.quick
 @pytest.mark.parametrize(
     ("args", "x0", "theta0"),
     [
@@ -346,6 +349,7 @@ def test_view_refuses_speeds_its_slider_cannot_show(capsys, monkeypatch, speed: 
     _refused(capsys, ["view", "--speed", speed, "--duration", "1"], "--speed", "0.1…4")
 
 
+@pytest.mark.quick
 @pytest.mark.parametrize("speed", ["0.1", "1", "4"])
 def test_view_accepts_the_slider_range(capsys, monkeypatch, speed: str) -> None:
     import twin.viewer
@@ -375,6 +379,21 @@ def test_help_imports_no_controller_code() -> None:
     assert "HEAVY []" in out, out
 
 
+def _commands() -> list[str]:
+    (sub,) = [a for a in cli.build_parser()._actions if isinstance(a, argparse._SubParsersAction)]
+    return sorted(sub.choices)
+
+
+@pytest.mark.quick
+@pytest.mark.parametrize("command", _commands())
+def test_every_command_has_its_help(capsys, command: str) -> None:
+    """Each subcommand's --help prints its usage and exits 0 (the quick tier's smoke of every command)."""
+    assert main([command, "--help"]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith(f"usage: ballbeam {command}") and "options:" in out
+
+
+@pytest.mark.quick
 def test_help_lists_the_registry_names(capsys) -> None:
     from controllers import registry
 
@@ -386,6 +405,7 @@ def test_help_lists_the_registry_names(capsys) -> None:
         assert name in text
 
 
+@pytest.mark.quick
 def test_version(capsys) -> None:
     assert main(["--version"]) == 0
     assert capsys.readouterr().out.strip() == f"ballbeam {cli.package_version()}"
@@ -402,6 +422,7 @@ def test_version_falls_back_to_pyproject(monkeypatch) -> None:
         assert cli.package_version() == tomllib.load(fh)["project"]["version"]
 
 
+@pytest.mark.quick
 def test_usage_errors_are_one_line(capsys) -> None:
     _refused(capsys, ["run", "--x0"], "--x0")
     _refused(capsys, ["run", "--controller", "lqr", "--x0", "zero", "--theta0", "0"], "--x0", "'zero'")
@@ -506,6 +527,7 @@ def user_dir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[Path]:
             del sys.modules[name]
 
 
+@pytest.mark.quick
 def test_run_a_user_controller_built_with_the_software_calibration(user_dir: Path, capsys) -> None:
     from twin.parameters import Parameters
 
@@ -648,3 +670,38 @@ def test_view_serve_options_reach_the_view(monkeypatch, argv: list[str], wire, c
     assert main(["view", *argv, "--seed", "3", "--no-noise", "--duration", "1"]) == 0
     assert seen["wire"] == wire and seen["controller"] == controller and seen["seed"] == 3
     assert seen["params"].ball_sensor.noise_enabled is False  # type: ignore[attr-defined]
+
+
+@pytest.mark.quick
+def test_the_command_table_is_one_module_per_command() -> None:
+    """``twin.app.commands.COMMANDS`` is the dispatcher's one table: a row per command module, named as the
+    module, each with its help line, its options and its handler, and the parser's subcommands are its rows."""
+    from twin.app import commands
+    from twin.app.commands import (
+        calibrate,
+        calibrate_static,
+        compare,
+        experiment,
+        judge,
+        linearize,
+        montecarlo,
+        params,
+        run,
+        serve,
+        shadow,
+        sweep,
+        validate,
+        view,
+    )
+
+    modules = [
+        linearize, run, serve, shadow, judge, sweep, montecarlo, validate, view, calibrate, compare,
+        calibrate_static, experiment, params,
+    ]  # fmt: skip
+    rows = commands.COMMANDS
+    assert sorted(m.__name__ for _, m, _ in rows) == sorted(m.__name__ for m in modules)
+    for name, module, help_line in rows:
+        assert module.__name__.rsplit(".", 1)[1] == name.replace("-", "_")
+        assert help_line == module.HELP and help_line.strip()
+        assert callable(module.add_arguments) and callable(module.run)
+    assert sorted(_commands()) == sorted(name for name, _, _ in rows)

@@ -12,6 +12,7 @@ from twin.app.cli import main
 from twin.parameters import Parameters
 
 
+@pytest.mark.quick
 def test_calibrate_static_reproduces_eq_6_3_1_and_writes_a_parameter_file(tmp_path: Path, capsys) -> None:
     out = tmp_path / "sensor.toml"
     assert main(["calibrate-static", str(TABLES_DIR / "table_6_3.csv"), "--out", str(out)]) == 0
@@ -26,6 +27,7 @@ def test_calibrate_static_reproduces_eq_6_3_1_and_writes_a_parameter_file(tmp_pa
     assert "exists; not overwritten" in capsys.readouterr().err
 
 
+@pytest.mark.quick
 def test_calibrate_static_refuses_a_bad_table_naming_the_line(tmp_path: Path, capsys) -> None:
     bad = tmp_path / "bad.csv"
     bad.write_text("position_m,volts_v\n0.0,0.0\n0.1,abc\n0.2,2.0\n")
@@ -34,6 +36,7 @@ def test_calibrate_static_refuses_a_bad_table_naming_the_line(tmp_path: Path, ca
     assert str(bad) in err and "line 3" in err and "volts_v" in err
 
 
+@pytest.mark.quick
 def test_experiment_writes_a_log_calibrate_can_read(tmp_path: Path, capsys) -> None:
     log = tmp_path / "square.mat"
     assert main(["experiment", "square", "--out", str(log), "--duration", "6", "--seed", "2"]) == 0

@@ -220,6 +220,7 @@ def test_cli_compare_a_rig_log_without_its_truth_in_csv(
     assert loop["verdicts_agree"] is True
 
 
+@pytest.mark.quick
 def test_cli_compare_refuses_bad_input_on_one_line(
     sf_log: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -284,6 +285,7 @@ def test_cli_compare_never_overwrites_a_users_file_or_an_input(
     assert log_in_out.read_bytes() == sf_log.read_bytes()
 
 
+@pytest.mark.quick
 def test_the_cli_defaults_are_the_analysis_defaults() -> None:
     parser = build_parser()
     args = parser.parse_args(["compare", "log.mat", "--out", "x"])

@@ -20,6 +20,7 @@ from twin.reference import ReferenceModel
 AT_RELEASE = Parameters().with_overrides({"start.free_run_s": 0.0})
 
 
+@pytest.mark.quick
 @pytest.mark.parametrize("name", registry.NAMES)
 def test_every_named_controller_runs_on_the_twin(name: str) -> None:
     controller = registry.make(name)
@@ -83,6 +84,7 @@ def test_printed_chapter5_state_feedback_fails_as_its_observer_is_unstable() -> 
     assert run.verdict.ball_lost and not run.verdict.held
 
 
+@pytest.mark.quick
 @pytest.mark.parametrize("name", ["sf", "lqr", "appendix-sf"])
 def test_redone_designs_bring_the_ball_back_from_the_chapter_4_start(name: str) -> None:
     run = run_closed_loop(registry.make(name), x0_m=0.2, theta0_rad=0.3, duration_s=10.0, seed=2)
@@ -90,6 +92,7 @@ def test_redone_designs_bring_the_ball_back_from_the_chapter_4_start(name: str) 
     assert run.verdict.steady_x_m is not None and abs(run.verdict.steady_x_m) < 0.01
 
 
+@pytest.mark.quick
 def test_cli_run_prints_the_verdict_and_saves_the_log(tmp_path, capsys) -> None:
     log = tmp_path / "data_file.mat"
     args = ["run", "--controller", "appendix-clp", "--x0", "0.1", "--theta0", "0.1", "--duration", "5"]
@@ -117,6 +120,7 @@ def test_cli_run_prints_the_verdict_and_saves_the_log(tmp_path, capsys) -> None:
     assert "not overwritten" in capsys.readouterr().err
 
 
+@pytest.mark.quick
 def test_cli_run_exit_code_is_the_verdict(capsys) -> None:
     """1 when the ball is lost (the printed chapter 5 state feedback), 2 on a period mismatch."""
     args = ["run", "--controller", "thesis-sf", "--x0", "0.2", "--theta0", "0.3", "--duration", "5", "--json"]

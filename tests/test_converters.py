@@ -11,6 +11,7 @@ from twin.parameters import SoftwareCalibration
 SW = SoftwareCalibration()
 
 
+@pytest.mark.quick
 def test_ball_position_is_eq_6_3_1():
     # 0.0693·V + 0.0018 (eq 6.3.1): 0 V → 1.8 mm, ±4.6 V (Table 6.3's ends) → ±0.32 m.
     assert C.ball_position_m(0.0, SW) == pytest.approx(0.0018, abs=1e-15)
@@ -22,6 +23,7 @@ def test_ball_position_is_eq_6_3_1():
     assert isinstance(C.ball_position_m(1.0, SW), float)
 
 
+@pytest.mark.quick
 def test_beam_angle_matches_appendix_a_operation_by_operation():
     v = np.linspace(-5.0, 5.0, 101)
     # The MATLAB lines of appendix A, typed again here.
@@ -42,6 +44,7 @@ def test_beam_angle_slope_is_one_count_per_dac_step():
     assert abs(C.beam_angle_deg(0.009818 * 512 - 5.042, SW)) < 1e-4
 
 
+@pytest.mark.quick
 def test_command_rescaling_of_section_6_4():
     # ±12 V at the motor ↔ 3.75 / 1.25 V command; 0 V ↔ 2.5 V (§6.4).
     assert C.dac_command_v(12.0, SW) == pytest.approx(3.75, abs=1e-15)
@@ -65,6 +68,7 @@ def test_clip_command_software_limits():
         C.clip_command_v(2.5, SW, low=3.0, high=2.0)
 
 
+@pytest.mark.quick
 @pytest.mark.parametrize(
     "func, arg",
     [
@@ -84,6 +88,7 @@ def test_nan_and_inf_raise_naming_the_argument(func, arg):
         func("abc", SW)
 
 
+@pytest.mark.quick
 def test_ideal_sensor_volts_invert_the_software_conversions():
     x = np.linspace(-0.3, 0.3, 13)
     theta = np.linspace(-0.7, 0.7, 15)
@@ -91,6 +96,7 @@ def test_ideal_sensor_volts_invert_the_software_conversions():
     np.testing.assert_allclose(C.beam_angle_rad(C.angle_volts_v(theta, SW), SW), theta, rtol=0, atol=1e-14)
 
 
+@pytest.mark.quick
 def test_a_recalibrated_software_converts_with_its_own_numbers():
     sw = SoftwareCalibration(ball_gain_m_per_v=0.07, ball_offset_m=-0.001, command_zero_v=2.4)
     assert C.ball_position_m(1.0, sw) == pytest.approx(0.069, abs=1e-15)

@@ -13,6 +13,7 @@ ADC_LSB = 10.0 / 4096  # 12 bit over −5…+5 V (Table 6.4, §6.5)
 DAC_LSB = 5.0 / 4096  # 12 bit over 0…5 V
 
 
+@pytest.mark.quick
 def test_lsb_sizes():
     assert D.adc_lsb_v(P.daq) == ADC_LSB == 0.00244140625
     assert D.dac_lsb_v(P.daq) == DAC_LSB
@@ -40,6 +41,7 @@ def test_adc_is_the_nearest_of_4096_levels_and_saturates():
     )
 
 
+@pytest.mark.quick
 def test_dac_is_the_nearest_of_4096_levels_and_clips():
     levels = DAC_LSB * np.arange(4096)
     v = np.random.default_rng(8).uniform(-0.5, 5.5, 3000)
@@ -52,6 +54,7 @@ def test_dac_is_the_nearest_of_4096_levels_and_clips():
     assert D.dac_quantize_v(6.0, P.daq) == 5.0 - DAC_LSB
 
 
+@pytest.mark.quick
 def test_quantizers_refuse_nan():
     with pytest.raises(ValueError, match="nan"):
         D.adc_quantize_v(math.nan, P.daq)
@@ -59,6 +62,7 @@ def test_quantizers_refuse_nan():
         D.dac_quantize_v(np.array([1.0, math.inf]), P.daq)
 
 
+@pytest.mark.quick
 def test_block_of_800_samples_ends_at_its_time_stamp():
     times = D.block_sample_times_s(2.0, P.daq)
     assert times.shape == (800,)  # 40 kHz × 20 ms (Table 6.4)
@@ -68,6 +72,7 @@ def test_block_of_800_samples_ends_at_its_time_stamp():
     assert D.block_time_s(2.0, P.daq) == pytest.approx(2.02, abs=1e-15)
 
 
+@pytest.mark.quick
 def test_software_block_reading_is_last_ball_sample_and_mean_angle():
     data = np.column_stack([np.linspace(-1.0, 1.0, 800), np.arange(800.0)])
     ball_v, angle_v = D.software_block_reading_v(data, P.daq)

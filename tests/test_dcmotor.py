@@ -8,6 +8,7 @@ from twin.dcmotor import beam_torque_nm
 from twin.parameters import Parameters
 
 
+@pytest.mark.quick
 def test_joint_torque_follows_eq_3_3_2_over_the_operating_range(params: Parameters) -> None:
     grid = measurements.motor_torque_grid(params)  # 13 volts in ±12 V × 11 rates in ±10 rad/s
     np.testing.assert_array_equal(grid.volts_v, np.linspace(-12.0, 12.0, 13))
@@ -26,6 +27,7 @@ def test_joint_torque_follows_eq_3_3_2_over_the_operating_range(params: Paramete
     assert worst < 1e-4  # 0.016383 is the thesis's rounding of 7·0.022/9.4 = 0.0163830
 
 
+@pytest.mark.quick
 @pytest.mark.parametrize(("command", "rail"), [(20.0, 12.0), (-20.0, -12.0)])
 def test_commands_beyond_the_rails_give_the_rail_torque(
     params: Parameters, command: float, rail: float

@@ -26,6 +26,7 @@ DISTINCT_S = [-1.5 + 2.6j, -1.5 - 2.6j, -7.0, -8.0]
 DISTINCT_Z = [0.969 + 0.0504j, 0.969 - 0.0504j, 0.86, 0.87]
 
 
+@pytest.mark.quick
 @pytest.mark.parametrize(
     "params", [Parameters(), Parameters().with_overrides({"ball.mass_kg": 0.03, "beam.cog_height_m": 0.005})]
 )
@@ -47,6 +48,7 @@ def test_repeated_poles_are_placed_by_characteristic_polynomial() -> None:
     np.testing.assert_allclose(np.poly(a - b @ k), T.SF_CONT_CHAR_POLY, rtol=1e-9)
 
 
+@pytest.mark.quick
 def test_reduced_order_observer_places_its_poles() -> None:
     phi, gamma = ReferenceModel(Parameters()).discretize("voltage")
     for poles in ([0.835 + 0.199j, 0.835 - 0.199j], [0.2, 0.3], [0.5, 0.6]):
@@ -58,6 +60,7 @@ def test_reduced_order_observer_places_its_poles() -> None:
         np.testing.assert_allclose(obs.h, gamma[2:] - g @ gamma[:2])
 
 
+@pytest.mark.quick
 def test_observer_estimates_the_velocities_of_the_linear_model() -> None:
     """Run the linear model with the observer: the estimation error decays as the observer poles say."""
     phi, gamma = ReferenceModel(Parameters()).discretize("voltage")
@@ -73,6 +76,7 @@ def test_observer_estimates_the_velocities_of_the_linear_model() -> None:
     assert np.max(np.abs(xb_hat - x[2:])) < 1e-6  # started 0.5 m/s off; 0.6**40 ≈ 1e-9
 
 
+@pytest.mark.quick
 def test_clp_gains_place_the_linearized_loop() -> None:
     params = Parameters()
     ref = ReferenceModel(params)
@@ -95,6 +99,7 @@ def test_clp_gains_place_the_linearized_loop() -> None:
         assert check_poles(a + b @ terms.beta_linear() - b @ k_eff, poles) < 1e-6
 
 
+@pytest.mark.quick
 def test_sliding_surface_gives_its_sliding_poles() -> None:
     a, b = ReferenceModel(Parameters()).linearize("torque")
     design = sliding_surface(a, b, [-2.0, -3.0, -10.0])
@@ -106,6 +111,7 @@ def test_sliding_surface_gives_its_sliding_poles() -> None:
     assert check_poles(np.diag(eig), [0.0, -2.0, -3.0, -10.0]) < 1e-6
 
 
+@pytest.mark.quick
 def test_uncontrollable_pair_is_refused() -> None:
     a = np.diag([1.0, 2.0])
     b = np.array([[1.0], [0.0]])
@@ -113,12 +119,14 @@ def test_uncontrollable_pair_is_refused() -> None:
         state_feedback_gain(a, b, [-1.0, -2.0])
 
 
+@pytest.mark.quick
 def test_thesis_sf_gain_follows_from_its_own_voltage_model() -> None:
     """§4.2: pole placement on the printed Ā, B̄ gives the printed K (to its printed digits)."""
     k = state_feedback_gain(T.A_VOLTAGE, T.B_VOLTAGE, T.SF_CONT_POLES)
     np.testing.assert_allclose(k, T.SF_CONT_K, rtol=2e-3)
 
 
+@pytest.mark.quick
 def test_appendix_observer_is_the_voltage_model_observer_with_g_4_8() -> None:
     """The printed G = [[4, −8], [−15, 12]] (§5.2.1) gives an unstable observer; the appendix's update
     coefficients are G = [[4, 8], [−15, 12]] on the voltage model, with the stated poles 0.835 ± 0.199i."""
@@ -141,6 +149,7 @@ def _voltage_model(params: Parameters) -> tuple[np.ndarray, np.ndarray]:
     return ReferenceModel(params).discretize("voltage", params.daq.period_s)
 
 
+@pytest.mark.quick
 def test_lqr_design_solves_the_two_riccati_equations() -> None:
     """K and the Kalman gain against scipy's Riccati solver (python-control's dlqr/dlqe are the design's)."""
     phi, gamma = _voltage_model(Parameters())
@@ -175,6 +184,7 @@ def test_a_pure_state_feedback_holds_the_balls_weight_with_a_steady_error(setpoi
     assert abs(x[0] - setpoint_m) > 0.05 * abs(setpoint_m)  # a real error, not rounding
 
 
+@pytest.mark.quick
 def test_lqi_reaches_the_setpoint_in_the_linear_model() -> None:
     """The augmented loop is stable and its equilibrium has the ball exactly at the setpoint, at rest, the
     integrator supplying the volts that hold the ball's weight there."""

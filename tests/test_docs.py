@@ -41,6 +41,7 @@ def test_the_maps_summaries_and_claims_follow_from_their_points(name: str) -> No
     assert json.loads(json.dumps(judged)) == data["claims"]
 
 
+@pytest.mark.quick
 def test_the_claims_summary_follows_from_both_maps() -> None:
     sf, clp = (_sweep(name)["points"] for name in MAPS)
     claims = json.loads((DOCS / "validation" / "claims.json").read_text())

@@ -10,6 +10,7 @@ from twin.parameters import Parameters
 from twin.plant import Plant
 
 
+@pytest.mark.quick
 def test_the_stops_hold_the_beam_at_full_voltage() -> None:
     """12 V from level for 1.5 s drives the beam into its stop: it overshoots 43.4° by less than 0.5°."""
     plant = Plant()
@@ -18,6 +19,7 @@ def test_the_stops_hold_the_beam_at_full_voltage() -> None:
     assert math.degrees(float(np.max(np.abs(block.theta_rad)))) - 43.4 < 0.5
 
 
+@pytest.mark.quick
 def test_a_lost_ball_keeps_the_state_it_left_the_track_with() -> None:
     plant = Plant(hold_beam_rad=0.2)
     plant.reset(0.0)

@@ -45,6 +45,7 @@ def test_a_run_round_trips_through_mat_and_csv(tmp_path) -> None:
     assert raw["timem"].shape == (1, 102) and float(raw["k"][0, 0]) == 102.0
 
 
+@pytest.mark.quick
 def test_same_seed_same_log_different_seed_different_log() -> None:
     a = run_closed_loop(AppendixStateFeedback(), x0_m=0.1, theta0_rad=0.1, duration_s=2.0, seed=8).log
     b = run_closed_loop(AppendixStateFeedback(), x0_m=0.1, theta0_rad=0.1, duration_s=2.0, seed=8).log

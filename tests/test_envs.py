@@ -33,6 +33,7 @@ OPTIONS: list[dict[str, Any]] = [
 ]
 
 
+@pytest.mark.quick
 @pytest.mark.parametrize("options", OPTIONS, ids=lambda o: ",".join(o) or "default")
 def test_gymnasiums_checker_passes(options: dict[str, Any]) -> None:
     env = gymnasium.make(f"twin.app.envs:{ENV_ID}", **options)
@@ -168,6 +169,7 @@ def test_domain_randomization_samples_the_calibration_and_does_not_compound(tmp_
     assert env.rig.params.motor.resistance_ohm == env.episode.params.motor.resistance_ohm  # type: ignore[union-attr]
 
 
+@pytest.mark.quick
 def test_the_vector_env_draws_each_envs_rigs_as_the_single_env(tmp_path: Path) -> None:
     cal = _calibration(tmp_path)
     venv = BallBeamVectorEnv(4, calibration=cal, duration_s=0.2)
@@ -182,6 +184,7 @@ def test_the_vector_env_draws_each_envs_rigs_as_the_single_env(tmp_path: Path) -
         assert env.episode == venv._episodes[i]
 
 
+@pytest.mark.quick
 def test_an_episode_is_ballbeam_run_of_the_same_policy() -> None:
     """A policy stepped through the env and the same policy as a PolicyController in ``run_closed_loop`` write
     the same DAC commands and reach the same verdict (the env's reset/step are the engine's start/tick)."""
@@ -206,6 +209,7 @@ def test_an_episode_is_ballbeam_run_of_the_same_policy() -> None:
     assert run.verdict.to_json() == info["verdict"]
 
 
+@pytest.mark.quick
 def test_the_reward_is_as_documented() -> None:
     p = Parameters()
     w_e, w_th, w_u, w_rail = REWARD_WEIGHTS

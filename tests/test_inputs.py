@@ -42,6 +42,7 @@ def no_work(monkeypatch: pytest.MonkeyPatch) -> None:
 
 
 # --- the option types ----------------------------------------------------------------------------------
+@pytest.mark.quick
 def test_the_types_return_the_number_and_refuse_naming_the_range() -> None:
     duration = options.finite_float(0, 3600, lo_open=True, unit="s", why="memory")
     assert duration("3600") == 3600.0 and duration("1e-9") == 1e-9
@@ -173,6 +174,7 @@ BAD_CRITERIA = [
 ]
 
 
+@pytest.mark.quick
 @pytest.mark.parametrize(("text", "needles"), [(c[0], c[1:]) for c in BAD_CRITERIA])
 def test_criteria_without_meaning_are_refused_before_any_run(
     tmp_path: Path, capsys: pytest.CaptureFixture[str], no_work: None, text: str, needles: tuple[str, ...]
@@ -367,6 +369,7 @@ def test_a_broken_v73_file_is_one_message(tmp_path: Path) -> None:
 TINY_R = {"motor.resistance_ohm": 1e-9}  # 1 nΩ: a torque per volt of 10⁷ N·m, far past what a 1 ms step holds
 
 
+@pytest.mark.quick
 def test_parameters_changed_lists_what_differs_from_the_defaults(params: Parameters) -> None:
     assert params.changed() == {}
     p = params.with_overrides({**TINY_R, "start.free_run_s": 0.02})

@@ -237,6 +237,7 @@ def test_judge_a_saved_twin_log_and_the_same_log_without_its_true_state(
     assert rc == 1
 
 
+@pytest.mark.quick
 def test_judge_a_lost_ball(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     result = run_closed_loop(registry.make("appendix-sf"), x0_m=0.3, theta0_rad=-0.7, duration_s=5.0, seed=0)
     assert result.verdict.ball_lost
@@ -248,6 +249,7 @@ def test_judge_a_lost_ball(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -
     assert rc == 1 and "ball lost at" in capsys.readouterr().out
 
 
+@pytest.mark.quick
 def test_judge_refuses_malformed_logs_on_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     junk = tmp_path / "junk.mat"
     junk.write_bytes(b"not a mat file at all")

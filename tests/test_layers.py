@@ -42,6 +42,7 @@ def _module_name(path: Path) -> str:
     return ".".join(path.relative_to(ROOT).with_suffix("").parts).removesuffix(".__init__")
 
 
+@pytest.mark.quick
 @pytest.mark.parametrize("path", _modules(), ids=lambda p: str(p.relative_to(ROOT)))
 def test_no_module_imports_a_layer_above_its_own(path: Path) -> None:
     own = _layer(_module_name(path))
@@ -95,6 +96,7 @@ def test_core_tests_use_no_application_layer(path: Path) -> None:
     assert not _app_imports(path), f"{path.name} imports the application layer: {_app_imports(path)}"
 
 
+@pytest.mark.quick
 def test_the_core_tests_are_found_and_the_rule_bites(tmp_path: Path) -> None:
     names = {p.name for p in _core_tests()}
     assert {

@@ -10,6 +10,7 @@ from twin.app.cli import main
 from twin.reference import InputKind
 
 
+@pytest.mark.quick
 @pytest.mark.parametrize("kind", ["torque", "voltage"])
 def test_mujoco_linearization_matches_reference(params, kind: InputKind) -> None:
     error = measurements.linearization_error(params, kind)
@@ -20,6 +21,7 @@ def test_mujoco_linearization_matches_reference(params, kind: InputKind) -> None
     assert error.worst_small_abs < 1e-3, kind
 
 
+@pytest.mark.quick
 def test_cli_prints_the_linearization_as_json(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["linearize", "--input", "voltage", "--json"]) == 0
     result = json.loads(capsys.readouterr().out)
@@ -38,3 +40,15 @@ def test_cli_reports_a_bad_parameter_file(tmp_path, capsys: pytest.CaptureFixtur
     err = capsys.readouterr().err
     assert "motor.resistance_ohm = 0.0" in err and str(bad) in err
     assert "Traceback" not in err
+
+
+@pytest.mark.quick
+def test_linearize_mujoco_is_the_analytic_models_linearization(params, reference) -> None:
+    from twin.linearize import linearize_mujoco
+
+    a, b = linearize_mujoco(params, "voltage")
+    a_ref, b_ref = reference.linearize("voltage")
+    assert a.shape == (4, 4) and b.shape == (4, 1)
+    np.testing.assert_allclose(a, a_ref, rtol=0.01, atol=1e-3)
+    np.testing.assert_allclose(b, b_ref, rtol=0.01, atol=1e-3)
+    assert max(np.linalg.eigvals(a).real) > 1.0  # the open loop is unstable: the ball runs off

@@ -27,6 +27,7 @@ def assert_identical(a: RunLog, b: RunLog) -> None:
     assert measurements.log_mismatches(a, b) == []
 
 
+@pytest.mark.quick
 def test_log_comparison_sees_one_bit_a_nan_and_a_length():
     log = make_log()
     flipped = make_log()
@@ -42,11 +43,13 @@ def test_log_comparison_sees_one_bit_a_nan_and_a_length():
     assert measurements.log_mismatches(log, short) == [*THESIS_FIELDS, "k"]
 
 
+@pytest.mark.quick
 def test_mat_round_trip_is_bit_identical(tmp_path):
     assert measurements.mat_round_trip_mismatches(make_log(), tmp_path) == []
     assert (tmp_path / "data_file.mat").is_file()
 
 
+@pytest.mark.quick
 def test_mat_has_the_thesis_variables_as_matlab_stores_them(tmp_path):
     log = make_log(ticks=7)
     save_mat(log, tmp_path / "data_file.mat")
@@ -79,6 +82,7 @@ def test_rig_file_with_preallocated_arrays_and_empty_uhesap(tmp_path):
     np.testing.assert_array_equal(log.timem, [0.0, 7.02, 7.04, 7.06])  # row 1 is kept
 
 
+@pytest.mark.quick
 def test_csv_round_trip_is_bit_identical(tmp_path):
     log = make_log()
     save_csv(log, tmp_path / "run.csv")
@@ -101,6 +105,7 @@ def test_overwrite_refused_unless_asked(tmp_path, save):
     assert_identical((load_mat if save is save_mat else load_csv)(path), make_log())
 
 
+@pytest.mark.quick
 def test_malformed_mat_files(tmp_path):
     text = tmp_path / "notes.mat"
     text.write_text("this is not a mat file\n")
@@ -131,6 +136,7 @@ def test_malformed_mat_files(tmp_path):
         load_mat(tmp_path / "nowhere.mat")
 
 
+@pytest.mark.quick
 def test_malformed_csv_files(tmp_path):
     save_csv(make_log(ticks=5, physics_steps=3), tmp_path / "good.csv")
     lines = (tmp_path / "good.csv").read_text().splitlines()
@@ -160,6 +166,7 @@ def test_malformed_csv_files(tmp_path):
         load_csv(tmp_path / "binary.csv")
 
 
+@pytest.mark.quick
 def test_runlog_refuses_inconsistent_arrays():
     arrays = {name: np.zeros(3) for name in THESIS_FIELDS}
     arrays["aout"] = np.zeros(4)

@@ -54,6 +54,7 @@ def test_every_element_is_named() -> None:
             assert mujoco.mj_id2name(m, obj, i), f"unnamed {kind} {i}"
 
 
+@pytest.mark.quick
 def test_xml_holds_the_same_values_as_the_parameters() -> None:
     """The XML alone (for viewers and tools) and the twin's build agree: one source of truth."""
     raw = mujoco.MjModel.from_xml_path(str(mdl.model_path()))
@@ -84,6 +85,7 @@ def test_xml_holds_the_same_values_as_the_parameters() -> None:
     np.testing.assert_allclose(raw.opt.gravity, built.opt.gravity)
 
 
+@pytest.mark.quick
 def test_model_carries_the_thesis_geometry(params: Parameters) -> None:
     m = mdl.build_model(params)
     d = mujoco.MjData(m)
@@ -107,6 +109,7 @@ def test_model_carries_the_thesis_geometry(params: Parameters) -> None:
         assert np.linalg.norm(to_axis) == pytest.approx(params.ball.radius_m + g.size[0], abs=1e-12)
 
 
+@pytest.mark.quick
 def test_ball_rests_on_the_wires_without_sinking(params: Parameters) -> None:
     # With the default margin the ball's rest gap is below 10 nm (0.2 % of r* would be 9 µm).
     assert abs(mdl.measure_rest_gap_m(params)) < 1e-8
@@ -121,6 +124,7 @@ def test_held_beam_has_no_hinge_and_the_given_angle() -> None:
     assert plant.state()[1] == pytest.approx(0.1)
 
 
+@pytest.mark.quick
 def test_bad_initial_states_are_refused() -> None:
     plant = Plant()
     with pytest.raises(ValueError, match="x_m = 0.5"):

@@ -12,6 +12,7 @@ import pytest
 from controllers import registry
 from twin.app.cli import main
 from twin.app.montecarlo import (
+    MonteCarloResult,
     MonteCarloSettings,
     load_calibration_spread,
     load_spread,
@@ -51,6 +52,7 @@ def test_a_spread_is_sampled_as_stated(spread_file: Path) -> None:
     assert again == sets[:3]  # the seed decides the samples
 
 
+@pytest.mark.quick
 def test_draws_outside_the_bounds_are_drawn_again(tmp_path: Path) -> None:
     """Pivot friction is ≥ 0: a normal about 0 gives only its non-negative half."""
     path = tmp_path / "s.toml"
@@ -133,6 +135,7 @@ def test_every_run_is_the_single_run_of_its_sample(spread_file: Path) -> None:
         assert run["parameters"]["motor.resistance_ohm"] == params.motor.resistance_ohm
 
 
+@pytest.mark.quick
 def test_the_success_interval_is_exact() -> None:
     """Clopper-Pearson: all n held gives [(α/2)^(1/n), 1]; none held gives [0, 1 − (α/2)^(1/n)]."""
     run = {"held": True, "ball_lost": False, "steady_x_m": 0.001, "settling_time_s": 2.0}
@@ -143,6 +146,7 @@ def test_the_success_interval_is_exact() -> None:
     assert s["worst"][0] == lost and s["lost"] == 20 and s["held"] == 1
 
 
+@pytest.mark.quick
 def test_the_command(tmp_path: Path, spread_file: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "mc"
     args = [
@@ -165,3 +169,30 @@ def test_the_command(tmp_path: Path, spread_file: Path, capsys: pytest.CaptureFi
     assert "--spread FILE or --calibration DIR" in capsys.readouterr().err
     assert main([*args, "--x0", "0.5"]) == 2
     assert "--x0/--theta0" in capsys.readouterr().err
+
+
+@pytest.mark.quick
+def test_the_command_draws_the_distributions_of_its_own_result(
+    tmp_path: Path, spread_file: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import struct
+
+    import twin.app.montecarlo_render as montecarlo_render
+
+    drawn: list[tuple[MonteCarloResult, Path]] = []
+    real = montecarlo_render.render_distributions
+
+    def spy(result: MonteCarloResult, path: Path) -> None:
+        drawn.append((result, path))
+        real(result, path)
+
+    monkeypatch.setattr(montecarlo_render, "render_distributions", spy)
+    out = tmp_path / "mc"
+    argv = ["montecarlo", "--controller", "appendix-sf", "--n", "2", "--duration", "1"]
+    assert main([*argv, "--spread", str(spread_file), "--out", str(out), "--json"]) == 0
+    printed = json.loads(capsys.readouterr().out)
+    ((result, path),) = drawn
+    assert path.name == "distributions.png" and result.summary == printed["summary"]
+    png = (out / "distributions.png").read_bytes()
+    assert png[:8] == b"\x89PNG\r\n\x1a\n" and png[12:16] == b"IHDR"
+    assert struct.unpack(">II", png[16:24]) == (1100, 418)  # figsize (10, 3.8) in at 110 dpi

@@ -128,6 +128,7 @@ def test_an_observer_sees_the_samples_the_commands_and_the_dac_of_a_lockstep_ses
     assert (counts.malformed, counts.wrong_session, counts.repeated, counts.sessions) == (0, 0, 0, 1)
 
 
+@pytest.mark.quick
 def test_observers_never_change_the_session(dac_during_blocks: list[list[float]]) -> None:
     results: list[SessionResult] = []
     for n_observers in (0, 2):
@@ -169,6 +170,7 @@ def test_a_serial_url_is_refused_with_a_message(url: str) -> None:
         open_observer(url)
 
 
+@pytest.mark.quick
 def test_a_malformed_url_is_a_value_error() -> None:
     with pytest.raises(ValueError, match="expected udp://HOST:PORT"):
         Observer("udp://127.0.0.1")
@@ -247,6 +249,7 @@ def test_in_real_time_the_observer_knows_the_dac_through_a_dead_controller_and_t
     assert {c.dac_v for c in _commands(events)} <= {2.5 + 0.05 * k for k in range(answered + 1)}
 
 
+@pytest.mark.quick
 def test_held_dac_v_from_the_applied_seq_the_echo_and_the_watchdog() -> None:
     """A real-time stream: command 2 was late (not accepted, the DAC kept command 1), the echo of command 3
     was lost, then the watchdog held the output at the zero command; a second session starts afresh."""

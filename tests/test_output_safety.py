@@ -224,6 +224,7 @@ def test_a_file_the_job_did_not_declare_is_not_moved_in(tmp_path: Path) -> None:
     assert _snapshot(out) == before
 
 
+@pytest.mark.quick
 def test_a_stale_file_of_the_same_job_goes_and_an_edited_one_stops_it(tmp_path: Path) -> None:
     """An interrupted validate writes no region.png: the previous run's goes (the job owns it) and another
     job's files stay; once the user has edited region.png it is theirs, and the job is refused."""
@@ -385,6 +386,7 @@ def test_a_dangling_link_does_not_create_its_target(tmp_path: Path, capsys, no_w
     assert not (tmp_path / "nowhere").exists()
 
 
+@pytest.mark.quick
 def test_special_files_and_directories_are_refused(tmp_path: Path, capsys, no_work) -> None:
     fifo = tmp_path / "pipe.csv"
     os.mkfifo(fifo)
@@ -447,6 +449,7 @@ COMPUTING = [
 COMPUTING += ["calib/report.py", "calib/compare.py"]
 
 
+@pytest.mark.quick
 @pytest.mark.parametrize("name", COMPUTING)
 def test_computation_modules_never_import_matplotlib(name: str) -> None:
     """Rendering lives in the *_render modules, with the writers of the jobs' folders; they import the

@@ -15,6 +15,7 @@ DAC_LSB = 5.0 / 4096
 DAC_TOLERANCE_V = 9.6 * DAC_LSB / 2
 
 
+@pytest.mark.quick
 def test_full_scale_commands_of_section_6_4_and_the_rails():
     volts = measurements.output_stage(P)
     # 1.25 / 2.5 / 3.75 V → −12 / 0 / +12 V (§6.4). These commands are exact DAC codes, so exact volts.
@@ -22,6 +23,7 @@ def test_full_scale_commands_of_section_6_4_and_the_rails():
     assert volts == {0.0: -12.0, 1.25: -12.0, 2.5: 0.0, 3.75: 12.0, 5.0: 12.0}
 
 
+@pytest.mark.quick
 def test_amplifier_rails_clip_beyond_the_card():
     assert motor_volts(-3.0, P) == -12.0  # below the card's range: the DAC clips to 0 V first
     np.testing.assert_array_equal(motor_volts(np.array([1.0, 4.0]), P), [-12.0, 12.0])
@@ -40,17 +42,20 @@ def test_dac_quantization_shows_between_codes():
     assert motor_volts(2.6, P) == 9.6 * (2130 * DAC_LSB - 2.5)  # code round(2.6/LSB) = 2130 (2129.92)
 
 
+@pytest.mark.quick
 def test_amplifier_alone():
     assert amplifier_volts(3.0, P.amplifier) == pytest.approx(4.8, abs=1e-12)
     assert amplifier_volts(4.9, P.amplifier) == 12.0
 
 
+@pytest.mark.quick
 @pytest.mark.parametrize("bad", [math.nan, math.inf, -math.inf])
 def test_non_finite_command_raises_naming_it(bad):
     with pytest.raises(ValueError, match=f"command_v contains {bad!r}"):
         motor_volts(bad, P)
 
 
+@pytest.mark.quick
 def test_the_bound_per_tick_form_equals_motor_volts():
     """The rig's per-tick form gives motor_volts' bits for every command, in range and beyond both rails,
     with other amplifier and card constants too, and refuses what motor_volts refuses."""

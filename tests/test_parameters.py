@@ -11,6 +11,7 @@ import pytest
 from twin.parameters import MAX_FILE_BYTES, READING, ParameterError, Parameters
 
 
+@pytest.mark.quick
 def test_derived_values_follow_the_thesis(params: Parameters) -> None:
     # r* = sqrt(r^2 - d^2/4) with Table 3.1's r and d: 4.676 mm (Table 3.1 misprints 4.264 mm).
     assert params.rolling_radius_m == pytest.approx(4.676e-3, abs=0.5e-6)
@@ -23,6 +24,7 @@ def test_derived_values_follow_the_thesis(params: Parameters) -> None:
     assert params.daq.block_size == 800
 
 
+@pytest.mark.quick
 @pytest.mark.parametrize(
     ("override", "fragment"),
     [
@@ -77,6 +79,7 @@ def test_fitted_values_by_name_fold_the_ball_reading_into_the_curve(params: Para
         params.with_values({"motor.resistnce_ohm": 10.0}, origin="fit")
 
 
+@pytest.mark.quick
 def test_files_round_trip_and_are_not_overwritten(tmp_path, params: Parameters) -> None:
     changed = params.with_overrides({"beam.cog_height_m": 0.011, "ball_sensor.noise_enabled": False})
     for name in ("p.toml", "p.json"):
@@ -89,6 +92,7 @@ def test_files_round_trip_and_are_not_overwritten(tmp_path, params: Parameters) 
         assert path.read_bytes() == before
 
 
+@pytest.mark.quick
 def test_partial_file_overrides_only_what_it_names(tmp_path) -> None:
     path = tmp_path / "rig.toml"
     path.write_text("[ball]\nmass_kg = 0.0191\n")
@@ -121,6 +125,7 @@ def test_missing_file_is_reported(tmp_path) -> None:
         Parameters.from_file(tmp_path / "absent.toml")
 
 
+@pytest.mark.quick
 def test_every_parameter_has_a_unit_and_a_source() -> None:
     rows = Parameters.describe()
     # One row per field of every group, in the order the dataclasses declare them.
@@ -241,6 +246,7 @@ def _group_fields() -> list[tuple[str, dataclasses.Field]]:
     ]
 
 
+@pytest.mark.quick
 def test_defaults_are_unchanged_by_the_bounds() -> None:
     assert Parameters().to_dict() == THESIS_DEFAULTS
     for name in INTEGER_FIELDS:

@@ -35,6 +35,7 @@ def _policy(kind: str = "volts", stack: int = 2, setpoint: bool = False) -> Line
     )
 
 
+@pytest.mark.quick
 def test_a_policy_file_round_trips_and_a_bad_one_is_refused_naming_it(tmp_path: Path) -> None:
     policy = _policy(setpoint=True)
     path = tmp_path / "policy.json"
@@ -57,6 +58,7 @@ def test_a_policy_file_round_trips_and_a_bad_one_is_refused_naming_it(tmp_path: 
         assert says in str(err.value)
 
 
+@pytest.mark.quick
 def test_the_policy_gives_the_same_bits_alone_and_over_a_batch() -> None:
     policy = _policy(stack=3)
     obs = np.random.default_rng(1).normal(2.5, 0.5, (50, policy.obs_spec.size))
@@ -68,6 +70,7 @@ def test_the_policy_gives_the_same_bits_alone_and_over_a_batch() -> None:
     assert np.allclose(batch[:, 0], policy.bias + x @ np.array(policy.weights), rtol=0, atol=1e-12)
 
 
+@pytest.mark.quick
 def test_the_controller_sees_the_environments_observation() -> None:
     """start fills the history with the start block; each update shifts the next block in (twin.learning)."""
     seen: list[np.ndarray] = []
@@ -95,6 +98,7 @@ def test_the_controller_sees_the_environments_observation() -> None:
     assert not isinstance(PolicyController(record), Setpoint)  # no setpoint in its observation: none declared
 
 
+@pytest.mark.quick
 def test_a_policy_returning_nan_fails_the_run_naming_the_tick() -> None:
     c = PolicyController(lambda obs: np.array([np.nan]))
     with pytest.raises(Exception, match="finite") as err:

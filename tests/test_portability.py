@@ -89,6 +89,7 @@ def _batch_digest(env: dict[str, str]) -> str:
     return batch.stdout
 
 
+@pytest.mark.quick
 def test_fixed_order_products() -> None:
     """Left to right, each product rounded: (1e16 + 1) − 1e16 is 0 in that order, (1e16 − 1e16) + 1 is 1; a row of a
     batch has the bits of the float form."""

@@ -72,6 +72,7 @@ def test_a_robust_map_moves_within_its_one_wave() -> None:
     assert len({d for d in done if 0 < d < 12}) >= 6
 
 
+@pytest.mark.quick
 def test_stages_count_over_the_whole_job() -> None:
     calls, progress = _recorder()
     stages = Stages(progress, {"nominal": 4, "region": 9, "monte carlo": 0})  # type: ignore[arg-type]
@@ -123,6 +124,7 @@ def test_validate_names_its_stages_and_counts_all_their_runs() -> None:
     assert done[-1] == runs  # the count ends at every run of every stage
 
 
+@pytest.mark.quick
 def test_the_bar_shows_the_stage_and_one_total(capsys: pytest.CaptureFixture[str]) -> None:
     update = _progress_bar("validate")
     for done, total, stage in [

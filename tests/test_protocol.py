@@ -31,6 +31,7 @@ def _frame(kind: int, length: int, seq: int, session: int, fields: list[tuple[in
     return bytes(buf)
 
 
+@pytest.mark.quick
 def test_crc_is_crc32_iso_hdlc() -> None:
     assert zlib.crc32(b"123456789") == 0xCBF43926
 
@@ -41,6 +42,7 @@ def test_hello_bytes() -> None:
     assert p.decode(want) == p.Hello(role=2, client="c-client")
 
 
+@pytest.mark.quick
 def test_sample_bytes() -> None:
     fields: list[tuple[int, str, object]] = [
         (16, "d", -0.04),
@@ -109,10 +111,12 @@ def test_config_bytes_and_parameters() -> None:
     assert got.to_parameters().daq.period_s == 0.01
 
 
+@pytest.mark.quick
 def test_frame_lengths_are_the_docs() -> None:
     assert p.LENGTHS == {1: 56, 2: 200, 3: 56, 4: 32, 5: 24}
 
 
+@pytest.mark.quick
 @pytest.mark.parametrize(
     "msg",
     [
@@ -167,6 +171,7 @@ def _malformed() -> list[tuple[str, bytes, str]]:
     ]
 
 
+@pytest.mark.quick
 @pytest.mark.parametrize(("what", "data", "message"), _malformed(), ids=[m[0] for m in _malformed()])
 def test_malformed_frames_are_refused_by_name(what: str, data: bytes, message: str) -> None:
     with pytest.raises(p.ProtocolError, match=message):

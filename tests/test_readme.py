@@ -5,6 +5,8 @@ import io
 import re
 from pathlib import Path
 
+import pytest
+
 from twin.parameters import Parameters
 
 README = (Path(__file__).resolve().parent.parent / "README.md").read_text(encoding="utf-8")
@@ -22,6 +24,7 @@ def test_the_controller_example_holds_the_ball() -> None:
     assert out.getvalue().startswith("True held")
 
 
+@pytest.mark.quick
 def test_the_parameter_file_example_loads(tmp_path: Path) -> None:
     (text,) = _blocks("toml")
     path = tmp_path / "rig.toml"

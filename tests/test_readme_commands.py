@@ -81,6 +81,7 @@ def _parse_error(argv: list[str], capsys: pytest.CaptureFixture[str]) -> str | N
     return None
 
 
+@pytest.mark.quick
 def test_the_readme_has_its_commands() -> None:
     """The extraction sees the commands it is meant to check (the test is not vacuous)."""
     commands = [words for _, words in _commands(README.read_text(encoding="utf-8"))]
@@ -107,6 +108,7 @@ def test_every_readme_command_parses(
         assert error is None, f"README.md line {number}: ballbeam {' '.join(argv)}: {error}"
 
 
+@pytest.mark.quick
 def test_a_split_list_is_caught(capsys: pytest.CaptureFixture[str]) -> None:
     """The pasted-command failure the README once had: a ``\\`` inside the --fit list splits it in two."""
     text = "```bash\nballbeam calibrate log.mat --fit motor.resistance_ohm,\\\n    beam.inertia_pivot_kgm2\n```\n"

@@ -28,6 +28,7 @@ class FakeClock:
         self.now += seconds
 
 
+@pytest.mark.quick
 def test_ticks_start_at_their_deadlines_and_overruns_are_counted() -> None:
     clock = FakeClock()
     pacer = WallClockPacer(0.02, clock=clock, sleep=clock.sleep)

@@ -2,7 +2,6 @@
 
 import math
 
-import control
 import numpy as np
 import pytest
 
@@ -34,6 +33,7 @@ def _thesis_residuals(
     return e26, e27
 
 
+@pytest.mark.quick
 def test_nonlinear_dynamics_satisfy_the_thesis_equations(params: Parameters) -> None:
     thesis_model = ReferenceModel(params, motor_inertia=False)
     rng = np.random.default_rng(7)
@@ -65,6 +65,7 @@ def test_stacked_coefficients_are_each_parameter_sets_columns_and_accelerate_eac
         assert (xdd[b, 0], thdd[b, 0]) == (one[0][0], one[1][0])
 
 
+@pytest.mark.quick
 def test_linearization_equals_finite_differences_of_the_nonlinear_model(reference: ReferenceModel) -> None:
     for kind in ("torque", "voltage"):
         a, b = reference.linearize(kind)
@@ -97,6 +98,7 @@ def test_rows_the_thesis_got_right_are_reproduced(params: Parameters) -> None:
     assert bv[3, 0] == pytest.approx(4.0984, rel=0.005)
 
 
+@pytest.mark.quick
 def test_open_loop_is_unstable_with_the_expected_pole_structure(
     params: Parameters, reference: ReferenceModel
 ) -> None:
@@ -112,6 +114,8 @@ def test_open_loop_is_unstable_with_the_expected_pole_structure(
 
 
 def test_zero_order_hold_matches_python_control(reference: ReferenceModel) -> None:
+    import control  # here, not at the top: python-control costs every collection half a second
+
     for kind in ("torque", "voltage"):
         a, b = reference.linearize(kind)
         phi, gamma = discretize_zoh(a, b, 0.02)
@@ -120,6 +124,7 @@ def test_zero_order_hold_matches_python_control(reference: ReferenceModel) -> No
         np.testing.assert_allclose(gamma, sysd.B, rtol=1e-10, atol=1e-13)
 
 
+@pytest.mark.quick
 def test_simulation_conserves_energy_without_motor_and_damping(params: Parameters) -> None:
     """Torque-free, undamped: kinetic + potential energy stays constant (an independent check of the EOM)."""
     model = ReferenceModel(params, motor_inertia=False)

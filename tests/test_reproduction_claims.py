@@ -73,6 +73,7 @@ def test_number_claim(claim: Claim, nominal) -> None:
     assert COMMITTED[claim.id]["verdict"] == entry.verdict, "docs/reproduction is stale"
 
 
+@pytest.mark.quick
 def test_claim_ids_are_unique_and_cover_the_committed_report() -> None:
     from twin.app.reproduction.closed_loop import CLAIMS as CLOSED
 
@@ -81,6 +82,7 @@ def test_claim_ids_are_unique_and_cover_the_committed_report() -> None:
     assert set(ids) == set(COMMITTED)
 
 
+@pytest.mark.quick
 def test_r_star_back_at_the_printed_value_changes_the_verdicts_that_depend_on_it(nominal, perturbed) -> None:
     changed = {i for i in nominal if nominal[i].verdict != perturbed[i].verdict}
     assert {"Table 3.1 r*", "eq 3.2.8 A ẍ row", "eq 3.2.9 B"} <= changed, changed
@@ -92,6 +94,7 @@ def test_r_star_back_at_the_printed_value_changes_the_verdicts_that_depend_on_it
         assert fixed not in changed
 
 
+@pytest.mark.quick
 def test_the_rule_computes_every_verdict() -> None:
     """A ×10 slip found by its hypothesis, nothing found without one, a pass is the confirmed verdict."""
     slip = Hypothesis("a ×10 slip", MISPRINT, value=lambda m: 10 * m)

@@ -46,6 +46,7 @@ def test_every_count_is_the_single_runs_of_the_drawn_rigs() -> None:
         assert point["lower_bound"] == pytest.approx(lower_bound(held, 3, 0.95), abs=1e-6)
 
 
+@pytest.mark.quick
 def test_the_bound_is_clopper_pearsons() -> None:
     # k = n: the bound solves p^n = 1 − confidence; k = 0: 0; and it rises with k.
     assert lower_bound(59, 59, 0.95) == pytest.approx(0.05 ** (1 / 59))
@@ -118,6 +119,7 @@ def _ellipse_maps(rigs: int, nx: int, nt: int, seed: int) -> list[str]:
     return maps
 
 
+@pytest.mark.quick
 def test_refining_each_rig_costs_less_than_refining_the_probability_contour_for_the_same_counts() -> None:
     """The design's choice, on maps alone: per rig, a cell is split only for the rigs whose corners disagree;
     on the contour (jointly, or on the held count) every rig runs every split cell's corners. Per rig is
@@ -136,3 +138,26 @@ def test_refining_each_rig_costs_less_than_refining_the_probability_contour_for_
     crossing = refinement_costs([left, right], 9, 3, 8)
     assert crossing["per_rig"]["counts_equal"] and crossing["joint"]["counts_equal"]
     assert not crossing["held_count"]["counts_equal"]
+
+
+@pytest.mark.quick
+def test_the_robust_folder_holds_the_numbers_it_was_given(tmp_path: Path) -> None:
+    """``write_robust`` (the render side) writes the result's JSON as computed and a map the size of the
+    figure; a folder already there is not overwritten."""
+    from twin.app.robust import RobustResult
+    from twin.app.robust_render import write_robust
+
+    settings = SweepSettings("appendix-sf", x0=Grid(-0.1, 0.1, 2), theta0=Grid(-0.2, 0.2, 2), duration_s=1.0)
+    points = [
+        {"x0_m": x, "theta0_rad": th, "held": h, "lost": 3 - h, "rigs": 3, "rate": h / 3, "robust": h == 3}
+        for (x, th), h in zip(settings.starts().tolist(), (3, 2, 0, 3), strict=True)
+    ]
+    summary = {"held_by_every_rig": 2, "starts": 4, "robust": 2}
+    result = RobustResult(settings, 3, 0.95, 0.95, "test", [], ["HHLH"] * 3, points, True, summary=summary)
+    out = write_robust(result, tmp_path / "robust")
+    written = json.loads((out / "robust.json").read_text())
+    assert [p["held"] for p in written["points"]] == [3, 2, 0, 3] and written["rigs"] == 3
+    assert written["summary"] == summary
+    assert (out / "robust.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    with pytest.raises(Exception, match="robust"):
+        write_robust(result, out)

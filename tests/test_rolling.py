@@ -10,6 +10,7 @@ from twin.parameters import Parameters
 from twin.plant import Plant
 
 
+@pytest.mark.quick
 @pytest.mark.parametrize("theta_rad", [0.05, 0.1, 0.3])
 def test_rolling_acceleration_and_spin_on_a_held_beam(params: Parameters, theta_rad: float) -> None:
     rolling = measurements.rolling(params, theta_rad)  # 0.3 s from x = 0.25 m
@@ -27,6 +28,7 @@ def test_rolling_acceleration_and_spin_on_a_held_beam(params: Parameters, theta_
     np.testing.assert_allclose(rolling.speed_over_spin, 1.0, rtol=0, atol=1e-3)
 
 
+@pytest.mark.quick
 def test_ball_leaves_the_track_past_its_end_and_is_reported_lost(params: Parameters) -> None:
     loss = measurements.ball_loss(params)  # released at x = 0 on a beam held at 0.2 rad, 4 s at 0 V
     assert loss.finite_every_tick
@@ -58,6 +60,7 @@ def test_motor_driven_beam_to_its_stop_loses_the_ball_without_error(params: Para
     assert state[1] == pytest.approx(params.beam.stop_angle_rad, abs=0.02)
 
 
+@pytest.mark.quick
 def test_state_is_the_ball_kinematics_projection_bit_for_bit(params: Parameters) -> None:
     # Plant.state computes (x, ẋ) from qpos/qvel without np.cross or the dataclass; the logs recorded so far
     # were computed from ball_kinematics, so the two must agree to the last bit while the beam moves.

@@ -28,6 +28,7 @@ def still_reading_v(theta_rad: float, params: Parameters = P) -> float:
 
 
 # --- beam angle ---------------------------------------------------------------------------------------------
+@pytest.mark.quick
 def test_count_step_is_eq_6_2_1():
     assert S.angle_count_step_rad(P) == STEP_RAD
     assert S.angle_count_step_rad(P) == pytest.approx(0.0035, abs=0.5e-4)  # as printed (2 digits)
@@ -44,6 +45,7 @@ def test_counter_convention_and_range():
     assert S.counter_value(math.radians(-43.0), P) == 512 - 214
 
 
+@pytest.mark.quick
 def test_dac_reproduces_measured_eq_6_2_4():
     measured = {0: -5.042, 512: -0.014, 1023: 5.002}  # eq 6.2.4, measured on the rig
     levels = measurements.counter_levels(P)
@@ -92,6 +94,7 @@ def test_read_back_angle_is_a_staircase_of_one_count():
     assert np.max(np.abs(angle - counts * STEP_RAD)) < 0.13 * STEP_RAD
 
 
+@pytest.mark.quick
 def test_counter_wraps_modulo_1024():
     # Zeroed with the beam at +1.1 rad (≈ 63°, far outside the stops), so that θ = −0.7 rad reaches count −1.
     params = P.with_overrides({"angle_sensor.zeroing_error_rad": 1.1})
@@ -132,6 +135,7 @@ def _random_trajectories(n: int, seed: int):
         yield times, theta, P.with_overrides({"angle_sensor.zeroing_error_rad": zero})
 
 
+@pytest.mark.quick
 def test_exact_block_mean_equals_40khz_brute_force():
     distinct, wrapped = [], 0
     for times, theta, params in _random_trajectories(400, seed=11):
@@ -148,6 +152,7 @@ def test_exact_block_mean_equals_40khz_brute_force():
     assert wrapped > 0  # … and some cross the counter's wrap
 
 
+@pytest.mark.quick
 def test_brute_force_is_the_per_sample_definition():
     # The brute-force reference itself against an explicit loop over the 800 samples.
     times = 5.0 + KNOTS
@@ -175,6 +180,7 @@ def test_angle_chain_object_and_bad_input():
 
 
 # --- ball position ------------------------------------------------------------------------------------------
+@pytest.mark.quick
 def test_static_curve_is_table_6_3_interpolated():
     assert S.wiper_static_v(0.18, P.ball_sensor) == 2.470
     assert S.wiper_static_v(0.195, P.ball_sensor) == pytest.approx((2.470 + 3.000) / 2, abs=1e-12)
@@ -196,6 +202,7 @@ def test_ball_at_rest_on_each_table_point():
         assert abs(C.ball_position_m(reading, P.software) - x) <= fit_residual_m + lsb_m
 
 
+@pytest.mark.quick
 def test_rc_time_constant_from_a_step():
     """The wiper opens (0 V) for 15 ms, then closes (back to 4.340 V at x = 0.30 m), sampled every 0.1 ms."""
     step = measurements.rc_step(P)
@@ -272,6 +279,7 @@ def test_dropout_rate_over_200_seconds():
     )  # measured: 0.516 ms
 
 
+@pytest.mark.quick
 def test_noise_off_means_no_dropouts_and_the_static_reading():
     chain = S.BallPositionChain(QUIET, seed=2024, x_m=0.3)
     readings = []

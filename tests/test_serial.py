@@ -48,6 +48,7 @@ def _frames(reader: FrameReader) -> list[bytes]:
 
 
 # --- the framing ----------------------------------------------------------------------------------------
+@pytest.mark.quick
 def test_frames_follow_the_sync_bytes_and_decode() -> None:
     reader = FrameReader()
     reader.feed(SYNC + SAMPLE + SYNC + COMMAND)
@@ -67,6 +68,7 @@ def test_garbage_before_a_frame_is_skipped_and_counted() -> None:
     assert reader.counts.resyncs >= 1 and reader.counts.frames == 1
 
 
+@pytest.mark.quick
 def test_a_frame_split_across_reads_is_assembled() -> None:
     reader = FrameReader()
     stream = SYNC + SAMPLE + SYNC + COMMAND
@@ -111,6 +113,7 @@ def test_garbage_alone_keeps_the_buffer_bounded() -> None:
     assert reader.counts.garbage_bytes == 100 * 1000 - len(reader.buf)
 
 
+@pytest.mark.quick
 def test_urls() -> None:
     assert parse_url("udp://127.0.0.1:9000") == ("udp", "127.0.0.1", 9000)
     assert parse_url("serial:///dev/ttyACM0?baud=115200") == ("serial", "/dev/ttyACM0", 115200)
@@ -137,6 +140,7 @@ def _pty() -> Iterator[tuple[int, str]]:
         os.close(slave)
 
 
+@pytest.mark.quick
 def test_frames_cross_a_pty_pair_with_garbage_between() -> None:
     with _pty() as (master, path):
         server, client = SerialLink.from_fd(master), SerialLink.open(path, 115200)
@@ -191,6 +195,7 @@ def _lockstep_case(name: str, start: int, seed: int, duration_s: float) -> None:
     _check_equal(ref, served, client_log)
 
 
+@pytest.mark.quick
 def test_lockstep_over_a_pty_equals_the_in_process_run() -> None:
     _lockstep_case("appendix-sf", 0, 0, 3.0)
 
@@ -350,6 +355,7 @@ def _check_equal(ref: RunResult, served: SessionResult, client: RunLog) -> None:
     assert served.result.verdict == ref.verdict
 
 
+@pytest.mark.quick
 def test_baud_without_serial_is_refused(capsys: pytest.CaptureFixture[str]) -> None:
     from twin.app.cli import main
 

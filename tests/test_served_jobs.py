@@ -285,6 +285,7 @@ def test_bb_sf_sessions_run_a_served_job_of_the_hardware_starts_as_the_python_po
     assert err.strip().splitlines()[-1] == "bb_sf: 4 sessions, each as the server said"
 
 
+@pytest.mark.quick
 def test_bb_sf_sessions_usage(bb_sf: Path) -> None:
     proc = subprocess.run(
         [str(bb_sf), "pipe", "--sessions", "-1"], capture_output=True, text=True, timeout=10
@@ -296,6 +297,7 @@ def test_bb_sf_sessions_usage(bb_sf: Path) -> None:
 # --- refusals ------------------------------------------------------------------------------------------------
 
 
+@pytest.mark.quick
 @pytest.mark.parametrize(
     ("argv", "needles"),
     [
@@ -387,3 +389,19 @@ def test_the_default_validation_served_to_bb_sf_gives_the_in_process_report(bb_s
     assert got.complete and len(job.clients) == 18 + 256 + 28
     assert same([asdict(c) for c in got.checks], [asdict(c) for c in ref.checks])
     assert got.passed == ref.passed
+
+
+@pytest.mark.quick
+def test_connecting_to_a_silent_address_fails_in_time_naming_it() -> None:
+    """``twin.rigs.session.connect``: nobody answers HELLO at the address, so it fails within its wait with a
+    message naming the URL — never a hang."""
+    import socket
+    import time
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as silent:  # bound, never answers
+        silent.bind(("127.0.0.1", 0))
+        url = f"udp://127.0.0.1:{silent.getsockname()[1]}"
+        t0 = time.monotonic()
+        with pytest.raises(RemoteError, match=url.replace(".", r"\.")):
+            _connect(url, "quick", 0.4, retry_refused=True)
+        assert time.monotonic() - t0 < 3.0

@@ -69,6 +69,7 @@ def _feed(
     return out
 
 
+@pytest.mark.quick
 def test_cusum_run_lengths_are_the_textbooks() -> None:
     """Montgomery, Introduction to Statistical Quality Control, Table 9.3 (Siegmund's approximation): the
     two-sided tabular CUSUM with k = 1/2, h = 5 runs 465 samples in control, 38.0 at a 0.5-sd shift, 10.4 at
@@ -86,6 +87,7 @@ def test_cusum_run_lengths_are_the_textbooks() -> None:
     assert two_sided(Cusum(k=0.5, h=4.0), 0.0) == pytest.approx(168.0, rel=0.01)
 
 
+@pytest.mark.quick
 def test_the_false_alarm_probability_by_resampling_is_a_direct_simulations() -> None:
     """A band of independent standard normal scores: the resampled probability of an alarm within 100 windows
     equals a simulation drawing fresh normal scores (an independent computation) within sampling error."""
@@ -233,6 +235,7 @@ def test_on_the_wire_a_nominal_server_for_10_minutes_raises_no_alarm() -> None:
     assert max(shadow.cusum.values()) < Cusum().h
 
 
+@pytest.mark.quick
 def test_cli_shadow_refuses_bad_input_on_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     existing = tmp_path / "mine.jsonl"
     existing.write_text("keep")
@@ -243,3 +246,19 @@ def test_cli_shadow_refuses_bad_input_on_one_line(tmp_path: Path, capsys: pytest
     refused(capsys, [*rig, "--reference", "a.mat", "--reference-controller", "lqr"], "not with")
     refused(capsys, [*rig, "--reference", str(tmp_path / "none.mat")], "none.mat")
     assert existing.read_text() == "keep"
+
+
+@pytest.mark.quick
+def test_the_reference_logs_are_read_checked_and_a_bad_one_named(tmp_path: Path) -> None:
+    """``ballbeam shadow --reference``'s logs (twin.app.shadow.load_reference): each read as ``compare`` reads
+    it, every tick kept; a file that is not a log is refused naming it, before anything runs."""
+    from twin.app.shadow import load_reference
+    from twin.log import save_csv
+
+    run = run_closed_loop(registry.make("appendix-sf"), x0_m=0.1, theta0_rad=0.0, duration_s=6.0, seed=2)
+    save_csv(run.log, tmp_path / "ref.csv")
+    (loaded,) = load_reference([tmp_path / "ref.csv"])
+    np.testing.assert_array_equal(loaded.command_v, rig_log(run.log).command_v)
+    (tmp_path / "bad.csv").write_text("not a log\n")
+    with pytest.raises(ValueError, match="bad.csv"):
+        load_reference([tmp_path / "ref.csv", tmp_path / "bad.csv"])

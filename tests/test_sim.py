@@ -40,6 +40,7 @@ def test_blocks_end_at_free_run_plus_whole_periods(free_run_s: float) -> None:
     assert rig.time_s == pytest.approx(free_run_s + 0.06)
 
 
+@pytest.mark.quick
 @pytest.mark.parametrize("plant", ["twin", "reference"])
 def test_a_free_run_longer_than_the_period_runs_the_rig_before_the_start_block(plant: str) -> None:
     """daq.period_s = 1 ms, free run 10 ms: start() reads the block (8, 9] ms of a rig released at 0; the
@@ -56,6 +57,7 @@ def test_a_free_run_longer_than_the_period_runs_the_rig_before_the_start_block(p
     np.testing.assert_array_equal(rig.true_state(), free.true_state())
 
 
+@pytest.mark.quick
 def test_the_rig_is_held_until_release_then_falls_freely() -> None:
     """free_run = 0.02 s: the start block (−0.02, 0] sees the held rig; the next one the rig falling at 0 V."""
     rig = TwinRig(Parameters().with_overrides({"start.free_run_s": 0.02}), noise=False)
@@ -68,12 +70,14 @@ def test_the_rig_is_held_until_release_then_falls_freely() -> None:
     assert theta != 0.2 and thetadot != 0.0 and xdot < 0.0
 
 
+@pytest.mark.quick
 def test_nan_command_is_refused() -> None:
     rig = TwinRig(noise=False)
     with pytest.raises(ValueError, match="command_v = nan"):
         rig.write(float("nan"))
 
 
+@pytest.mark.quick
 def test_ball_at_rest_reads_table_6_3() -> None:
     """Ball placed at each measured position, noise off: the first block reads the table to the ADC's
     rounding, half an LSB (the curve passes through the table's points and the filter is at rest)."""
@@ -94,6 +98,7 @@ def test_beam_angle_reads_back_to_one_count(theta_rad: float) -> None:
     assert angle == pytest.approx(theta_rad, abs=2 * np.pi / (256 * 7) + 1e-3)
 
 
+@pytest.mark.quick
 def test_zeroing_error_shifts_the_reading() -> None:
     """Fig 7.20: the counter zeroed with the beam 0.05 rad off level reads the level beam as −0.05 rad."""
     rig = TwinRig(Parameters().with_overrides({"angle_sensor.zeroing_error_rad": 0.05}), noise=False)
@@ -101,6 +106,7 @@ def test_zeroing_error_shifts_the_reading() -> None:
     assert angle == pytest.approx(-0.05, abs=2 * np.pi / (256 * 7))
 
 
+@pytest.mark.quick
 def test_output_latency_delays_the_motor_within_the_tick(params: Parameters) -> None:
     """Full positive command from rest: the beam's rate after one tick scales with the time the volts acted."""
     rates = {}
@@ -136,6 +142,7 @@ def test_noise_off_has_no_dropouts_and_can_be_switched_mid_run() -> None:
     assert abs(rig.dropout_count - expected) <= 4 * np.sqrt(expected)
 
 
+@pytest.mark.quick
 @pytest.mark.parametrize("plant", ["twin", "reference"])
 def test_ideal_sensors_read_the_exact_state_in_the_softwares_volts(plant: str) -> None:
     """No quantization, wiper curve, RC or noise: the software's converters give back the true x and θ."""

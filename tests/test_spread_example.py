@@ -50,6 +50,7 @@ def test_every_entry_says_where_its_spread_comes_from() -> None:
         assert any(s in c for c in above for s in SOURCES), f"line {i + 1}: {lines[i]} has no source comment"
 
 
+@pytest.mark.quick
 def test_it_loads_as_a_spread_about_the_nominal_rig() -> None:
     spread = load_spread(EXAMPLE, Parameters())
     assert list(spread.names) == _entries()

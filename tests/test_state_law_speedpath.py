@@ -104,6 +104,7 @@ def test_the_float_path_gives_the_numpy_formulas_bits(law, formula) -> None:
     np.testing.assert_array_equal(_bits([law(x) for x in states]), expected)
 
 
+@pytest.mark.quick
 @pytest.mark.parametrize(("law", "formula"), _laws())
 def test_the_float_path_at_non_finite_and_extreme_states(law, formula) -> None:
     """NaN, ±inf and squares that overflow: the same value (NaN for NaN) or the same exception."""
@@ -140,6 +141,7 @@ def test_the_true_state_law_takes_an_array_or_four_floats() -> None:
     assert tel.u_computed == volts
 
 
+@pytest.mark.quick
 def test_a_state_law_without_the_float_path_gets_the_same_state_arrays() -> None:
     """A StateLaw that only takes arrays (here wrapping the registry's) runs the same episode, bit for bit."""
 

@@ -33,6 +33,7 @@ SMALL = SweepSettings(
 )
 
 
+@pytest.mark.quick
 @pytest.mark.parametrize(
     ("text", "grid"),
     [("-0.3:0.3:7", Grid(-0.3, 0.3, 7)), ("0.1", Grid(0.1, 0.1, 1)), ("0:0:1", Grid(0.0, 0.0, 1))],
@@ -47,6 +48,7 @@ def test_bad_ranges_are_refused_naming_the_option(text: str) -> None:
         parse_range("--x0", text)
 
 
+@pytest.mark.quick
 def test_point_seeds_depend_on_the_seed_and_the_index_only() -> None:
     assert np.array_equal(point_seeds(7, 10)[:5], point_seeds(7, 5))
     assert len(set(point_seeds(7, 1000).tolist())) == 1000
@@ -137,6 +139,7 @@ def test_the_claims_are_judged_from_the_points() -> None:
     assert {c.applies_to for c in CLAIMS if "appendix-clp" in c.applies_to}
 
 
+@pytest.mark.quick
 def test_the_map_and_json_are_written_atomically(tmp_path: Path) -> None:
     result = run_sweep(SMALL)
     out = write_sweep(result, tmp_path / "roa")
@@ -161,6 +164,7 @@ def test_the_map_and_json_are_written_atomically(tmp_path: Path) -> None:
     assert render_map is sweep_module_render
 
 
+@pytest.mark.quick
 def test_the_command(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "roa"
     args = [
@@ -206,6 +210,7 @@ class Fragile(Controller):
 '''
 
 
+@pytest.mark.quick
 def test_a_failing_controller_fails_its_own_run_not_the_sweep(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -258,6 +263,7 @@ def _synthetic_map(monkeypatch: pytest.MonkeyPatch, lost: set[tuple[int, int]]) 
 SYNTHETIC = SweepSettings("lqr", Grid(-0.32, 0.32, 17), Grid(-0.32, 0.32, 17), refine=4)
 
 
+@pytest.mark.quick
 def test_refinement_follows_a_boundary_between_coarse_starts_and_audits_the_assumption(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
@@ -317,6 +323,7 @@ def _threshold_map(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr("twin.app.sweep.run_starts", fake_run_starts)
 
 
+@pytest.mark.quick
 @pytest.mark.parametrize("refine", [0, 4])
 def test_locate_brackets_a_known_boundary_to_the_stated_fraction(
     monkeypatch: pytest.MonkeyPatch, refine: int

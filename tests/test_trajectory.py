@@ -5,6 +5,7 @@ import pytest
 from twin import measurements
 
 
+@pytest.mark.quick
 @pytest.mark.parametrize("x0", [(0.15, 0.1, 0.0, 0.0), (-0.2, 0.3, 0.0, 0.0)])
 def test_same_voltage_profile_same_trajectory(params, x0) -> None:
     """The profile: volts computed in closed loop on the reference, replayed open loop on both models."""

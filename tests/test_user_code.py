@@ -198,6 +198,7 @@ def test_the_users_ctrl_c_still_interrupts_a_blocked_controller(user_dir: Path) 
     assert "Traceback" not in stderr and _last_line(stderr) == "ballbeam: interrupted"
 
 
+@pytest.mark.quick
 @pytest.mark.parametrize("value", ["0", "-1", "nan"])
 def test_controller_timeout_option_is_checked(capsys: pytest.CaptureFixture[str], value: str) -> None:
     from twin.app.cli import main
@@ -250,6 +251,7 @@ def _raise(exc: BaseException) -> Callable[[], Any]:
     return act
 
 
+@pytest.mark.quick
 @pytest.mark.parametrize(
     ("exc", "says"),
     [
@@ -330,6 +332,7 @@ def test_a_user_keyboard_interrupt_in_another_thread_is_the_controllers() -> Non
     assert "raised KeyboardInterrupt at tick k = 4" in str(caught[0])
 
 
+@pytest.mark.quick
 @pytest.mark.parametrize(
     ("value", "says"),
     [
@@ -425,6 +428,7 @@ def test_run_batch_fails_a_scalar_controller_that_exits_or_stalls() -> None:
         run_batch(_Catalogue(lambda: _Scripted(3, lambda: 7.0)), "scripted", duration_s=0.2, **starts)
 
 
+@pytest.mark.quick
 def test_healthy_runs_are_unchanged_by_the_guard() -> None:
     """The watchdog and the range check change nothing for a controller that behaves: a built-in's run is
     the same under an infinite and the default budget."""
@@ -438,6 +442,7 @@ def test_healthy_runs_are_unchanged_by_the_guard() -> None:
     assert 1.25 <= a.log.aout.min() and a.log.aout.max() <= 3.75  # the software's own limits, inside 0…5 V
 
 
+@pytest.mark.quick
 def test_budgets() -> None:
     assert guard.update_budget_s(0.02) == 1.0  # 10 periods, but at least 1 s
     assert guard.update_budget_s(0.5) == 5.0

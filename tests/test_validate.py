@@ -106,6 +106,7 @@ def test_the_robust_region_is_each_required_start_on_the_spreads_rigs() -> None:
     assert check.passed == all(r["kept_lower_bound"] >= 0.5 for r in rows)
 
 
+@pytest.mark.quick
 def test_criteria_files(tmp_path: Path) -> None:
     path = tmp_path / "criteria.toml"
     path.write_text(QUICK_TOML)
@@ -160,6 +161,7 @@ def test_ctrl_c_keeps_the_checks_done(tmp_path: Path, monkeypatch: pytest.Monkey
     assert "interrupted" in (out / "report.md").read_text()
 
 
+@pytest.mark.quick
 def test_the_progress_bar_restarts_for_each_stage(capsys: pytest.CaptureFixture[str]) -> None:
     from twin.app.commands.common import progress_bar as _progress_bar
 
@@ -169,3 +171,49 @@ def test_the_progress_bar_restarts_for_each_stage(capsys: pytest.CaptureFixture[
     err = capsys.readouterr().err
     assert "3/3" in err and "5/5" in err  # each finished stage's bar is drawn full
     assert err.count(" 0/3 ") == 1 and err.count(" 0/5 ") == 2  # a new bar for each stage, from zero
+
+
+@pytest.mark.quick
+def test_the_report_file_is_the_rendering_of_the_checks_done(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys
+) -> None:
+    """An interrupted validation (Ctrl-C after the nominal runs): report.md is ``render_markdown`` of the
+    report the job kept, a row per check done with its result, and says it was interrupted."""
+    import twin.app.fanout as fanout
+    import twin.app.validate_render as validate_render
+
+    real_chunk, calls = fanout.run_chunk, []
+
+    def interrupted(chunk):
+        calls.append(chunk)
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return real_chunk(chunk)
+
+    rendered = []
+    real_render = validate_render.render_markdown
+
+    def spy(report):
+        rendered.append((report, real_render(report)))
+        return rendered[-1][1]
+
+    monkeypatch.setattr(fanout, "run_chunk", interrupted)
+    monkeypatch.setattr(validate_render, "render_markdown", spy)
+    criteria = tmp_path / "criteria.toml"
+    criteria.write_text(QUICK_TOML)
+    out = tmp_path / "report"
+    assert (
+        main(["validate", "--controller", "appendix-sf", "--criteria", str(criteria), "--out", str(out)])
+        == 130
+    )
+    capsys.readouterr()
+    ((report, text),) = rendered
+    assert (out / "report.md").read_text() == text
+    assert not report.complete and "**interrupted**" in text and "**Verdict: FAIL**" in text
+    rows = [line for line in text.splitlines() if line.startswith("| ") and not line.startswith("| check")]
+    for check in report.checks:
+        mark = {True: "pass", False: "**FAIL**", None: "not run"}[check.passed]
+        assert any(line.startswith(f"| {check.name} | {mark} |") for line in rows), check.name
+    nominal = next(c for c in report.checks if c.name == "nominal")
+    runs = [line for line in rows if line.startswith(("| +", "| -")) and not line.startswith("| --")]
+    assert len(runs) == len(nominal.rows) == 6  # the thesis's six starts, one seed

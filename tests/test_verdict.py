@@ -21,6 +21,7 @@ def _verdict(x, theta=None, volts=None, peaks=None, lost=None, x0=0.2, criteria=
     )  # fmt: skip
 
 
+@pytest.mark.quick
 def test_an_exponential_decay_to_an_offset_settles_when_the_band_says() -> None:
     """x = −4 mm + 0.204·e^(−2t): |x − steady| ≤ 4 mm (2 % of 0.2 m) from t = ln(0.204/0.004)/2 = 1.966 s."""
     x = -0.004 + 0.204 * np.exp(-2.0 * np.maximum(T, 0.0))
@@ -34,6 +35,7 @@ def test_an_exponential_decay_to_an_offset_settles_when_the_band_says() -> None:
     assert v.limit_cycle_x_pp_m == pytest.approx(0.204 * (math.exp(-14.0) - math.exp(-20.0)), rel=1e-6)
 
 
+@pytest.mark.quick
 def test_a_limit_cycle_is_measured_peak_to_peak_about_its_mean() -> None:
     """A 0.73 s orbit of ±1.5 mm about −3 mm and ±5 mrad: p-p 3 mm / 10 mrad, held; settling band 1 mm
     (2 % of 5 cm) is narrower than the orbit, so the run never settles into it."""
@@ -47,6 +49,7 @@ def test_a_limit_cycle_is_measured_peak_to_peak_about_its_mean() -> None:
     assert v.settling_time_s is None
 
 
+@pytest.mark.quick
 @pytest.mark.parametrize(
     ("offset_m", "amplitude_m", "fragment"),
     [
@@ -63,6 +66,7 @@ def test_outside_the_bands_is_not_held_and_says_why(
     assert fragment in v.reason
 
 
+@pytest.mark.quick
 def test_a_lost_ball_has_no_steady_state() -> None:
     x = 0.2 + 0.1 * T**2
     v = _verdict(x, lost=1.5)
@@ -79,6 +83,7 @@ def test_a_run_shorter_than_the_window_is_not_held() -> None:
     assert not v.held and "shorter than the final window" in v.reason
 
 
+@pytest.mark.quick
 def test_saturation_share_peak_volts_and_stops() -> None:
     """12 V for the first 50 of 501 ticks after release: 10 % saturated (the held row does not count);
     a beam that reached 43.4° hit the stops."""
@@ -93,6 +98,7 @@ def test_saturation_share_peak_volts_and_stops() -> None:
     assert not _verdict(np.zeros_like(T)).hit_stops
 
 
+@pytest.mark.quick
 def test_json_is_rounded_to_meaning_and_every_combination_is_consistent() -> None:
     x = -0.0031234567 + 0.0 * T
     out = _verdict(x).to_json()

@@ -169,6 +169,7 @@ def test_a_flick_that_is_refused_leaves_the_ball_alone(live: LiveTwin) -> None:
     np.testing.assert_array_equal(live.rig.true_state(), ball)
 
 
+@pytest.mark.quick
 def test_good_values_are_applied(live: LiveTwin) -> None:
     refused, runs = live.refused, live.runs
     for action, value in [
@@ -232,6 +233,7 @@ def test_a_failing_controller_marks_the_run_failed(name: str, reason: str) -> No
     assert live.error is None and live.running and live.rig.time_s > 0
 
 
+@pytest.mark.quick
 @pytest.mark.parametrize(
     "exc", [FloatingPointError("MuJoCo state is not finite"), ValueError("off the track")]
 )
@@ -268,12 +270,14 @@ def test_a_controller_that_cannot_start_is_refused() -> None:
         LiveTwin(Parameters(), Broken(), "test-raises", 0, 1.0)
 
 
+@pytest.mark.quick
 def test_refusals_and_failures_cannot_inject_markup_into_the_status(live: LiveTwin) -> None:
     live.apply("controller", "<img src=x onerror=alert(1)>[link](javascript:alert(1))")
     status = live.status_markdown()
     assert "<img" not in status and "](" not in status and "&lt;img" in status
 
 
+@pytest.mark.quick
 @pytest.mark.parametrize("speed", [1e9, math.inf, math.nan, -1.0, 0.0, 1.0, SPEED_MAX])
 def test_the_pacing_debt_never_exceeds_a_few_frames(speed: float) -> None:
     owed = 0.0
@@ -285,6 +289,7 @@ def test_the_pacing_debt_never_exceeds_a_few_frames(speed: float) -> None:
     assert owe(math.nan, 1.0) == FRAME_S
 
 
+@pytest.mark.quick
 def test_the_origin_policy() -> None:
     loop = OriginPolicy.for_bind("127.0.0.1", 8080)
     for host, origin in [
@@ -328,6 +333,7 @@ def test_the_origin_policy() -> None:
             OriginPolicy.for_bind("127.0.0.1", 8080, (bad,))  # type: ignore[arg-type]
 
 
+@pytest.mark.quick
 def test_a_speed_outside_the_slider_is_refused_at_start() -> None:
     for speed in (10.0, 0.0, math.nan):
         with pytest.raises(ViewerError, match="--speed"):

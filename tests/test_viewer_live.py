@@ -97,6 +97,7 @@ def test_the_record_is_the_runs_log(kind: str, tmp_path) -> None:
     assert loaded.k == 51  # the start sample and 50 ticks
 
 
+@pytest.mark.quick
 def test_the_record_is_bounded(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr("twin.viewer.session.RECORD_LIMIT_S", 0.1)
     live = _live()
@@ -105,6 +106,7 @@ def test_the_record_is_bounded(monkeypatch: pytest.MonkeyPatch) -> None:
     assert live.rig.time_s > 0.45
 
 
+@pytest.mark.quick
 def test_a_download_of_an_unknown_format_is_refused() -> None:
     live = _live()
     received: list[tuple[str, bytes]] = []
@@ -124,6 +126,7 @@ def load_csv_bytes(data: bytes):
         return load_csv(path)
 
 
+@pytest.mark.quick
 def test_the_panel_lists_the_parameters_that_differ() -> None:
     assert parameter_changes(Parameters()) == []
     changed = Parameters().with_overrides({"start.free_run_s": 0.02, "ball.mass_kg": 0.03})

@@ -101,6 +101,7 @@ def test_a_flick_goes_the_way_of_its_button_at_the_sliders_speed(action: str, si
 
 
 # --- bursts -----------------------------------------------------------------------------------------------
+@pytest.mark.quick
 def test_5000_queued_resets_are_one_run_applied_in_one_frame() -> None:
     live = _live("appendix-clp")
     for _ in range(10):
@@ -173,6 +174,7 @@ def test_250_downloads_of_a_full_record_build_one_file(monkeypatch: pytest.Monke
 
 
 # --- plots ------------------------------------------------------------------------------------------------
+@pytest.mark.quick
 def test_a_nan_series_is_a_gap_and_the_rest_of_the_chart_stays() -> None:
     live = _live("no-estimate", StubCatalogue({"no-estimate": lambda params: NoEstimate()}))
     for _ in range(10):
@@ -189,6 +191,7 @@ def test_a_nan_series_is_a_gap_and_the_rest_of_the_chart_stays() -> None:
     assert partial[1] == [1.0, None, 3.0]
 
 
+@pytest.mark.quick
 def test_the_chart_data_sent_to_the_browser_keeps_the_gap() -> None:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
@@ -214,6 +217,7 @@ def test_the_chart_data_sent_to_the_browser_keeps_the_gap() -> None:
         server.stop()
 
 
+@pytest.mark.quick
 @pytest.mark.parametrize("controller", ["no-estimate", "thesis-sf"])
 def test_the_run_plot_draws_the_measured_trace_for_any_controller(controller: str) -> None:
     from controllers import registry
@@ -239,6 +243,7 @@ def test_the_run_plot_draws_the_measured_trace_for_any_controller(controller: st
 
 
 # --- setpoint ---------------------------------------------------------------------------------------------
+@pytest.mark.quick
 def test_the_setpoint_is_the_declared_capability() -> None:
     catalogue = StubCatalogue({"settable": lambda params: Settable()}, setpoint=("settable",))
     live = _live("settable", catalogue)
@@ -284,3 +289,16 @@ def test_the_verdict_so_far_calls_the_transient_a_transient() -> None:
     v = live.loop.verdict(live.run_x0_m)
     assert v.held and v.settling_time_s is not None and verdict_text(v).startswith("verdict so far: held")
     assert math.isfinite(v.steady_x_m or math.nan)
+
+
+@pytest.mark.quick
+def test_the_three_cameras_look_at_the_rig_from_under_a_metre() -> None:
+    """The view's cameras (twin.viewer.scene), as the README lists them: three-quarter, side, top; each looks
+    at the beam's pivot (on the rig's axis, a quarter metre up) from another point, with a unit up vector."""
+    from twin.viewer.scene import CAMERAS
+
+    assert list(CAMERAS) == ["Three-quarter", "Side", "Top"]
+    for position, look_at, up in CAMERAS.values():
+        distance = float(np.linalg.norm(np.subtract(position, look_at)))
+        assert look_at[:2] == (0.0, 0.0) and 0.2 < look_at[2] < 0.3
+        assert 0.5 < distance < 1.0 and float(np.linalg.norm(up)) == 1.0

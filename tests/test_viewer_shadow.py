@@ -67,6 +67,7 @@ def _wait(predicate: Any, what: str) -> None:
         time.sleep(0.01)
 
 
+@pytest.mark.quick
 def test_the_monitor_gets_every_block_with_the_dac_held_during_it() -> None:
     rec = Recorder()
     live = _live(rec)
@@ -103,12 +104,14 @@ def test_the_loop_never_waits_on_the_shadow() -> None:
     live.close()
 
 
+@pytest.mark.quick
 def test_a_view_without_a_shadow_refuses_it() -> None:
     live = LiveTwin(Parameters(), registry, "appendix-sf", 0, 1.0)
     live.apply("shadow", True)
     assert live.shadow is None and "without a shadow" in live.refusals[-1].reason
 
 
+@pytest.mark.quick
 def test_a_failing_monitor_is_reported_and_the_view_goes_on() -> None:
     def broken(_p: Parameters) -> Any:
         raise RuntimeError("no band")

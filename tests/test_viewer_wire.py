@@ -277,6 +277,7 @@ def test_a_client_that_never_acknowledges_the_held_sample_gets_stop_3_and_a_new_
         raw.close()
 
 
+@pytest.mark.quick
 def test_a_flick_and_the_noise_switch_act_on_the_wire_run() -> None:
     with _wired() as (live, server), _python_client(server.port):
         _frames_until(live, lambda: _wire(live).released)

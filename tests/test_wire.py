@@ -115,6 +115,7 @@ def _lockstep_case(name: str, x0: float, th0: float, seed: int, duration_s: floa
     _check_equal(ref, served, run.log)
 
 
+@pytest.mark.quick
 def test_lockstep_session_equals_the_in_process_run() -> None:
     x0, th0 = STARTS[0]
     _lockstep_case("appendix-sf", x0, th0, 0, 5.0)
@@ -175,6 +176,7 @@ def _junk(rng: random.Random, session: int, seq: int) -> list[bytes]:
     ]
 
 
+@pytest.mark.quick
 def test_hostile_datagrams_are_counted_and_change_nothing() -> None:
     x0, th0 = STARTS[1]
     settings = SessionSettings(x0_m=x0, theta0_rad=th0, seed=2, duration_s=2.0, wait_client_s=10.0)
@@ -253,6 +255,7 @@ def test_hostile_datagrams_are_counted_and_change_nothing() -> None:
     assert served.result.verdict == ref.verdict
 
 
+@pytest.mark.quick
 def test_a_second_controlling_client_is_refused() -> None:
     settings = SessionSettings(x0_m=0.1, theta0_rad=0.0, duration_s=0.5, wait_client_s=10.0)
     with _serving(settings) as (server, box), RemoteRig("127.0.0.1", server.port) as rig:
@@ -278,6 +281,7 @@ def test_a_client_that_disappears_ends_the_session_within_the_timeout() -> None:
     assert served.result.log.timem.size == 4  # the held block and three ticks were logged
 
 
+@pytest.mark.quick
 def test_a_client_stop_ends_the_session() -> None:
     settings = SessionSettings(x0_m=0.1, theta0_rad=0.0, duration_s=5.0, wait_client_s=10.0)
     with _serving(settings) as (server, box), RemoteRig("127.0.0.1", server.port) as rig:
@@ -392,6 +396,7 @@ def test_serve_and_run_rig_on_the_command_line(tmp_path: Path) -> None:
     assert log.exists()
 
 
+@pytest.mark.quick
 def test_a_reconnect_gets_a_new_session_and_the_old_ones_datagrams_are_dropped() -> None:
     settings = SessionSettings(x0_m=0.1, theta0_rad=0.0, duration_s=0.3, wait_client_s=10.0)
     server = Server(settings, log=lambda _: None)
