@@ -129,3 +129,19 @@ def test_the_design_records_diagram_is_these_layers() -> None:
         line.split()[0] for line in block.splitlines() if line[:1].isalpha() and not line.startswith("models")
     ]
     assert drawn == sorted(LAYERS, key=LAYERS.__getitem__, reverse=True), drawn
+
+
+def test_the_design_records_loop_diagram_names_every_rig() -> None:
+    """docs/design.md's diagram of the one loop names a class of every rig module (twin/rigs/, but the remote
+    sessions' orchestration), and every rig it names exists: a new rig module must be drawn there."""
+    import importlib
+    import re
+
+    text = (ROOT / "docs" / "design.md").read_text(encoding="utf-8")
+    block = text.split("## One loop, many rigs", 1)[1].split("```", 2)[1]
+    named = set(re.findall(r"twin\.rigs\.(\w+)\.(\w+)", block))
+    for module, name in named:
+        assert hasattr(importlib.import_module(f"twin.rigs.{module}"), name), (module, name)
+    modules = {p.stem for p in (ROOT / "twin" / "rigs").glob("*.py")} - {"__init__", "session"}
+    assert {m for m, _ in named} == modules
+    assert "ClosedLoop(rig, controller)" in block
