@@ -9,9 +9,13 @@ The public surface (the implementation is in the modules named):
                                                        Calibration.problems; calib.adequacy: the residuals)
     FITTABLE                                           the parameters it can fit, with their bounds
     load_table(path), calibrate_table(table)           calib.static: Table 6.3-style sensor tables
-    EXPERIMENTS, run_experiment(name, params)          calib.experiments: what to record on a rig
+    EXPERIMENTS, RECOMMENDED, run_experiment(name, params)
+                                                       calib.experiments: what to record on a rig
     write_report(calibration, out_dir)                 calib.report: params.toml, calibration.json, report
     calib.compare.compare(logs, params)                the twin's prediction of recorded logs (ballbeam compare)
+    CalibrationError, TableError                       what a log or table it cannot use raises, naming it
+
+Every other name of the package's modules is internal and may change.
 """
 
 from calib.experiments import EXPERIMENTS, RECOMMENDED, run_experiment

@@ -55,7 +55,7 @@ def make_log(source: str, seed: int, duration_s: float = 60.0) -> RigLog:
     rig = START.with_overrides(truth(seed))
     if source == "twin":
         return rig_log(run_experiment("square", rig, duration_s=duration_s, seed=seed).log, f"twin-{seed}")
-    from independent_rig import rig_log_of, simulate
+    from independent_rig import rig_log_of, simulate  # type: ignore[import-not-found]  # tests/, put on the path
 
     return rig_log_of(simulate(rig, duration_s=duration_s, seed=seed), f"independent-{seed}")
 

@@ -50,6 +50,7 @@ def main() -> None:
         text=True,
     )
     try:
+        assert server.stdout is not None  # stdout=PIPE
         for line in server.stdout:
             if line.startswith("ballbeam view:"):
                 break

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import threading
 import time
 from pathlib import Path
@@ -68,7 +69,8 @@ def main() -> None:
 
     live = viewer.live
     start = time.perf_counter()
-    samples = []
+    samples: list[dict[str, float | str | None]] = []
+    last_wall_s = -math.inf  # the last sample's time
     minute = 0
     while server.is_alive():
         time.sleep(1.0)
@@ -76,7 +78,8 @@ def main() -> None:
         if elapsed >= 60 * (minute + 1) and server.is_alive():
             minute += 1
             click("reset" if minute % 10 == 0 else "flick_right")
-        if not samples or elapsed >= samples[-1]["wall_s"] + 300 or not server.is_alive():
+        if elapsed >= last_wall_s + 300 or not server.is_alive():
+            last_wall_s = elapsed
             sample = {
                 "wall_s": round(elapsed, 1),
                 "rss_mib": round(rss_mib(), 1),

@@ -9,6 +9,7 @@ from typing import Any
 import msgspec
 import viser
 import websockets.sync.client
+from websockets.typing import Origin
 
 __all__ = ["CAMERA", "ViewerClient"]
 
@@ -32,7 +33,7 @@ class ViewerClient:
     def __init__(self, port: int) -> None:
         self.ws = websockets.sync.client.connect(
             f"ws://127.0.0.1:{port}",
-            origin=f"http://127.0.0.1:{port}",
+            origin=Origin(f"http://127.0.0.1:{port}"),
             subprotocols=[f"viser-v{viser.__version__}"],  # type: ignore[list-item]
             max_size=None,
             compression=None,

@@ -1,7 +1,10 @@
 """The rigs a controller runs on, each behind the hardware contract ``twin.interface.Rig``:
 
     sim.SimRig         the MuJoCo twin with its I/O chain, with ideal converters, or the reference model
+                       (``make_rig(params, plant=PlantKind, ideal_sensors=…)``; ``TwinRig``, ``ReferenceRig``;
+                       ``RigError``: a configuration it cannot run)
     remote.RemoteRig   a rig over protocol 1 (UDP or serial): the served twin, or a rig's own firmware
+                       (``open_remote(url)``; ``RemoteError``: it cannot be reached or went silent)
     batch.BatchRig     N simulated rigs stepped together (``run_batch``), each its single rig bit for bit
     vector.VectorRig   N simulated rigs reset one by one and stepped together (the vector environment)
 

@@ -3,7 +3,8 @@
     protocol   the messages and their encoding (HELLO, CONFIG, SAMPLE, COMMAND, STOP)
     links      UDP and serial links that carry them
     server     the served twin: a session of the one loop whose controller is across the link
-    observer   a client that watches a session without driving it
+               (``Server(SessionSettings(...)).serve()`` gives a ``SessionResult``)
+    observer   a client that watches a session without driving it (``Observer``, ``open_observer(url)``)
 
 The client side of a session is a rig (``twin.rigs.remote.RemoteRig``). The names load on first use.
 """
