@@ -216,3 +216,31 @@ def test_lqi_reaches_the_setpoint_in_the_linear_model() -> None:
     volts = -d.integral_gain * xi[4]
     weight_nm = params.ball.mass_kg * params.physics.gravity_m_s2 * r
     assert volts * params.motor.torque_per_volt_nm_per_v == pytest.approx(weight_nm, rel=1e-9)
+
+
+# --- cases a reader checks on paper ---------------------------------------------------------------------
+@pytest.mark.quick
+def test_pole_placement_on_a_double_integrator_by_hand() -> None:
+    """ẍ = u with u = −K·x: A − B·K = [[0, 1], [−k1, −k2]] has s² + k2·s + k1; poles −2, −3 give
+    s² + 5s + 6, so K = [6, 5]."""
+    k = state_feedback_gain(np.array([[0.0, 1.0], [0.0, 0.0]]), np.array([[0.0], [1.0]]), [-2.0, -3.0])
+    assert k == pytest.approx(np.array([[6.0, 5.0]]), abs=1e-12)
+
+
+@pytest.mark.quick
+def test_scalar_lqr_and_kalman_gains_are_the_golden_ratios() -> None:
+    """x[k+1] = x[k] + u[k] with Q = R = 1 (Bryson scales 1): the Riccati equation P = 1 + P − P²/(1 + P)
+    gives P² − P − 1 = 0, P = φ = (1 + √5)/2 and K = P/(1 + P) = 1/φ = 0.618…. The filter with unit input and
+    measurement noise has the same equation for its a-priori covariance, P⁻ = φ, and the current gain
+    L = P⁻/(P⁻ + 1) = 1/φ on the measured x; the second measurement row (θ, absent here) gets no gain."""
+    golden = (1.0 + 5.0**0.5) / 2.0
+    d = lqr_design(
+        np.array([[1.0]]),
+        np.array([[1.0]]),
+        state_scale=[1.0],
+        input_scale_v=1.0,
+        input_noise_v=1.0,
+        measurement_noise=[1.0, 1.0],
+    )
+    assert d.gain == pytest.approx(np.array([[1.0 / golden]]), rel=1e-12)
+    assert d.kalman_gain == pytest.approx(np.array([[1.0 / golden, 0.0]]), rel=1e-9, abs=1e-12)
