@@ -14,8 +14,7 @@ The names load on first use: the command line's ``--help`` reads the registry's 
 
 from __future__ import annotations
 
-import importlib
-from typing import Any
+from twin.exports import lazy_exports
 
 __all__ = [
     "NAMES",
@@ -51,8 +50,4 @@ _HOMES = {
     "PolicyController": "controllers.policy",
 }
 
-
-def __getattr__(name: str) -> Any:
-    if name in _HOMES:
-        return getattr(importlib.import_module(_HOMES[name]), name)
-    raise AttributeError(f"module 'controllers' has no attribute {name!r}")
+__getattr__ = lazy_exports(__name__, _HOMES)

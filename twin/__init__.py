@@ -21,8 +21,7 @@ The names load on first use, so that importing a light module of the package (th
 
 from __future__ import annotations
 
-import importlib
-from typing import Any
+from twin.exports import lazy_exports
 
 __all__ = [
     "BatchRig",
@@ -94,8 +93,4 @@ _HOMES = {
     "ReferenceModel": "twin.reference",
 }
 
-
-def __getattr__(name: str) -> Any:
-    if name in _HOMES:
-        return getattr(importlib.import_module(_HOMES[name]), name)
-    raise AttributeError(f"module 'twin' has no attribute {name!r}")
+__getattr__ = lazy_exports(__name__, _HOMES)

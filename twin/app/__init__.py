@@ -18,8 +18,7 @@ The names load on first use."""
 
 from __future__ import annotations
 
-import importlib
-from typing import Any
+from twin.exports import lazy_exports
 
 __all__ = [
     "BallBeamEnv",
@@ -51,8 +50,4 @@ _HOMES = {
     "BallBeamVectorEnv": "twin.app.envs",
 }
 
-
-def __getattr__(name: str) -> Any:
-    if name in _HOMES:
-        return getattr(importlib.import_module(_HOMES[name]), name)
-    raise AttributeError(f"module 'twin.app' has no attribute {name!r}")
+__getattr__ = lazy_exports(__name__, _HOMES)

@@ -15,8 +15,7 @@ remote rig does not load the batch engine.
 
 from __future__ import annotations
 
-import importlib
-from typing import Any
+from twin.exports import lazy_exports
 
 __all__ = [
     "BatchRig",
@@ -34,22 +33,18 @@ __all__ = [
 ]
 
 _HOMES = {
-    "BatchRig": "batch",
-    "run_batch": "batch",
-    "PlantKind": "sim",
-    "ReferenceRig": "sim",
-    "RigError": "sim",
-    "SimRig": "sim",
-    "TwinRig": "sim",
-    "make_rig": "sim",
-    "RemoteError": "remote",
-    "RemoteRig": "remote",
-    "open_remote": "remote",
-    "VectorRig": "vector",
+    "BatchRig": "twin.rigs.batch",
+    "run_batch": "twin.rigs.batch",
+    "PlantKind": "twin.rigs.sim",
+    "ReferenceRig": "twin.rigs.sim",
+    "RigError": "twin.rigs.sim",
+    "SimRig": "twin.rigs.sim",
+    "TwinRig": "twin.rigs.sim",
+    "make_rig": "twin.rigs.sim",
+    "RemoteError": "twin.rigs.remote",
+    "RemoteRig": "twin.rigs.remote",
+    "open_remote": "twin.rigs.remote",
+    "VectorRig": "twin.rigs.vector",
 }
 
-
-def __getattr__(name: str) -> Any:
-    if name in _HOMES:
-        return getattr(importlib.import_module(f"{__name__}.{_HOMES[name]}"), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+__getattr__ = lazy_exports(__name__, _HOMES)

@@ -11,21 +11,16 @@ The client side of a session is a rig (``twin.rigs.remote.RemoteRig``). The name
 
 from __future__ import annotations
 
-import importlib
-from typing import Any
+from twin.exports import lazy_exports
 
 __all__ = ["Observer", "Server", "SessionResult", "SessionSettings", "open_observer"]
 
 _HOMES = {
-    "Observer": "observer",
-    "open_observer": "observer",
-    "Server": "server",
-    "SessionResult": "server",
-    "SessionSettings": "server",
+    "Observer": "twin.wire.observer",
+    "open_observer": "twin.wire.observer",
+    "Server": "twin.wire.server",
+    "SessionResult": "twin.wire.server",
+    "SessionSettings": "twin.wire.server",
 }
 
-
-def __getattr__(name: str) -> Any:
-    if name in _HOMES:
-        return getattr(importlib.import_module(f"{__name__}.{_HOMES[name]}"), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+__getattr__ = lazy_exports(__name__, _HOMES)
