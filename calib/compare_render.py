@@ -11,12 +11,14 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+from matplotlib.figure import Figure  # noqa: E402
 
 from calib.compare import (  # noqa: E402
     CHANNELS,
     MAX_LAG,
     OUTPUT_FILES,
     ChannelScore,
+    ClosedLoopPrediction,
     Comparison,
     LogWindows,
     WindowedPrediction,
@@ -52,15 +54,30 @@ def render_figures(result: Comparison, out: Path) -> None:
     """prediction.png, residuals.png, autocorrelation.png, windows.png and (with a controller) closed_loop.png."""
     wp = result.windowed
     offsets = _offsets(wp.logs)
-    many = len(wp.logs) > 1
-    xlabel = "time over the logs (s)" if many else "log time (s)"
+    xlabel = "time over the logs (s)" if len(wp.logs) > 1 else "log time (s)"
+    _save(_prediction_figure(wp, offsets, xlabel), out / "prediction.png")
+    _save(_residuals_figure(wp, offsets, xlabel), out / "residuals.png")
+    _save(_autocorrelation_figure(wp), out / "autocorrelation.png")
+    _save(_windows_figure(wp, offsets, xlabel), out / "windows.png")
+    loops = result.closed_loop[:_MAX_CLOSED_LOOP_ROWS]
+    if loops:
+        _save(_closed_loop_figure(loops), out / "closed_loop.png")
 
+
+def _save(fig: Figure, path: Path) -> None:
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)  # pyplot keeps every open figure alive
+
+
+def _prediction_figure(wp: WindowedPrediction, offsets: list[float], xlabel: str) -> Figure:
+    """Per channel: the readings, each window's fitted line and its prediction from the previous window."""
     fig, axes = plt.subplots(2, 1, figsize=(11, 6.5), sharex=True)
     for ax, c in zip(axes, CHANNELS, strict=True):
         label, scale = _LABEL[c]
         for i, (lw, off) in enumerate(zip(wp.logs, offsets, strict=True)):
             t = lw.t_s + off
-            first = i == 0
+            first = i == 0  # one legend entry per line kind, not one per log
             ax.plot(
                 t.ravel(),
                 scale * lw.measured[c].ravel(),
@@ -89,10 +106,11 @@ def render_figures(result: Comparison, out: Path) -> None:
         )
     axes[0].legend(loc="upper right", fontsize=7)
     axes[1].set_xlabel(xlabel)
-    fig.tight_layout()
-    fig.savefig(out / "prediction.png", dpi=100)
-    plt.close(fig)
+    return fig
 
+
+def _residuals_figure(wp: WindowedPrediction, offsets: list[float], xlabel: str) -> Figure:
+    """Per channel: the prediction's residual against time (with ± the noise floor) and its histogram."""
     fig, axes = plt.subplots(2, 2, figsize=(11, 6), gridspec_kw={"width_ratios": (3, 1)})
     for row, c in enumerate(CHANNELS):
         label, scale = _LABEL[c]
@@ -114,10 +132,11 @@ def render_figures(result: Comparison, out: Path) -> None:
         "prediction residual (dashed: ± the noise floor; ball dropouts left out)", fontsize=9
     )
     axes[1, 0].set_xlabel(xlabel)
-    fig.tight_layout()
-    fig.savefig(out / "residuals.png", dpi=100)
-    plt.close(fig)
+    return fig
 
+
+def _autocorrelation_figure(wp: WindowedPrediction) -> Figure:
+    """Per channel: the predicted and the fitted residuals' autocorrelation with their whiteness bands."""
     fig, axes = plt.subplots(1, 2, figsize=(11, 4))
     lags = np.arange(MAX_LAG + 1)
     for ax, c in zip(axes, CHANNELS, strict=True):
@@ -138,16 +157,17 @@ def render_figures(result: Comparison, out: Path) -> None:
         ax.set_xlabel(f"lag (ticks of {1e3 * wp.window_s / wp.ticks_per_window:g} ms)")
         ax.set_title(f"{c} residual autocorrelation (band ±1.96/√N)", fontsize=9)
         ax.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(out / "autocorrelation.png", dpi=100)
-    plt.close(fig)
+    return fig
 
+
+def _windows_figure(wp: WindowedPrediction, offsets: list[float], xlabel: str) -> Figure:
+    """Per channel: each window's RMS error against its start time, where a drift shows."""
     fig, axes = plt.subplots(2, 1, figsize=(11, 5.5), sharex=True)
     for ax, c in zip(axes, CHANNELS, strict=True):
         label, scale = _LABEL[c]
         for i, (lw, off) in enumerate(zip(wp.logs, offsets, strict=True)):
             t = lw.t_s[:, 0] + off
-            first = i == 0
+            first = i == 0  # one legend entry per line kind, not one per log
             ax.plot(
                 t,
                 scale * wp.window_rms(lw, "predicted")[c],
@@ -170,32 +190,29 @@ def render_figures(result: Comparison, out: Path) -> None:
     axes[0].set_title("error per window against time (drift)", fontsize=9)
     axes[0].legend(fontsize=7)
     axes[1].set_xlabel(f"window start, {xlabel}")
-    fig.tight_layout()
-    fig.savefig(out / "windows.png", dpi=100)
-    plt.close(fig)
+    return fig
 
-    loops = result.closed_loop[:_MAX_CLOSED_LOOP_ROWS]
-    if loops:
-        fig, axes = plt.subplots(len(loops), 2, figsize=(11, 2.8 * len(loops)), squeeze=False)
-        for row, cl in enumerate(loops):
-            for col, c in enumerate(CHANNELS):
-                label, scale = _LABEL[c]
-                ax = axes[row, col]
-                ax.plot(cl.t_s, scale * cl.measured[c], lw=0.8, color="k", label="log")
-                ax.plot(cl.t_s, scale * cl.twin[c], lw=0.8, color="tab:red", label="twin, closed loop")
-                tracked = cl.tracked_s[c]
-                if tracked is not None:
-                    ax.axvline(
-                        tracked, color="tab:blue", ls="--", lw=0.8, label=f"leaves ±{scale * cl.bands[c]:g}"
-                    )
-                ax.set_ylabel(label)
-                ax.set_title(f"{Path(cl.path).name}: {c}", fontsize=8)
-                ax.legend(fontsize=7)
-        for col in range(2):
-            axes[-1, col].set_xlabel("time from release (s)")
-        fig.tight_layout()
-        fig.savefig(out / "closed_loop.png", dpi=100)
-        plt.close(fig)
+
+def _closed_loop_figure(loops: list[ClosedLoopPrediction]) -> Figure:
+    """One row per log: its readings and the closed-loop twin's, and where the twin leaves the band."""
+    fig, axes = plt.subplots(len(loops), 2, figsize=(11, 2.8 * len(loops)), squeeze=False)
+    for row, cl in enumerate(loops):
+        for col, c in enumerate(CHANNELS):
+            label, scale = _LABEL[c]
+            ax = axes[row, col]
+            ax.plot(cl.t_s, scale * cl.measured[c], lw=0.8, color="k", label="log")
+            ax.plot(cl.t_s, scale * cl.twin[c], lw=0.8, color="tab:red", label="twin, closed loop")
+            tracked = cl.tracked_s[c]
+            if tracked is not None:
+                ax.axvline(
+                    tracked, color="tab:blue", ls="--", lw=0.8, label=f"leaves ±{scale * cl.bands[c]:g}"
+                )
+            ax.set_ylabel(label)
+            ax.set_title(f"{Path(cl.path).name}: {c}", fontsize=8)
+            ax.legend(fontsize=7)
+    for col in range(2):
+        axes[-1, col].set_xlabel("time from release (s)")
+    return fig
 
 
 def _dropped_text(wp: WindowedPrediction) -> str:

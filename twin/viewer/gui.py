@@ -103,13 +103,25 @@ class Panels:
         self._build()
 
     def _build(self) -> None:
-        gui, live, p = self.server.gui, self.live, self.live.params
-        # The sliders stay inside the track and the stops of these parameters.
-        x_max = min(X0.high, p.track.half_length_m)
-        th_max = min(THETA0.high, p.beam.stop_angle_rad)
-        ref_max = min(SETPOINT.high, p.track.half_length_m)
+        gui = self.server.gui
         self.banner = gui.add_html("", visible=False)
-        self.status = gui.add_markdown(live.status_markdown())
+        self.status = gui.add_markdown(self.live.status_markdown())
+        # viser lays elements out in creation order: the folders are built top to bottom, each wiring its
+        # controls (registering a callback sends nothing to the browsers).
+        self.controls: dict[str, Any] = {
+            **self._add_run_folder(),
+            **self._add_initial_state_folder(),
+            **self._add_disturb_folder(),
+            **self._add_shadow_folder(),
+            **self._add_record_folder(),
+            **self._add_camera_folder(),
+        }
+        with gui.add_folder("Parameters", expand_by_default=False):
+            gui.add_markdown(self._parameters_markdown())
+        self._add_plot_panel()
+
+    def _add_run_folder(self) -> dict[str, Any]:
+        gui, live = self.server.gui, self.live
         with gui.add_folder("Run"):
             controller = gui.add_dropdown(
                 "Controller", options=live.catalogue.NAMES, initial_value=live.controller_name
@@ -121,6 +133,27 @@ class Panels:
                 "Speed", min=SPEED.low, max=SPEED.high, step=SPEED.step, initial_value=live.speed
             )
             noise = gui.add_checkbox("Sensor noise", initial_value=live.noise)
+        self.run_button = run
+        controller.on_update(lambda _: live.enqueue("controller", controller.value))
+        run.on_click(lambda _: live.enqueue("run", not live.running))
+        step.on_click(lambda _: live.enqueue("step"))
+        reset.on_click(lambda _: live.enqueue("reset"))
+        speed.on_update(lambda _: live.enqueue("speed", speed.value))
+        noise.on_update(lambda _: live.enqueue("noise", noise.value))
+        return {
+            "controller": controller,
+            "run": run,
+            "step": step,
+            "reset": reset,
+            "speed": speed,
+            "noise": noise,
+        }
+
+    def _add_initial_state_folder(self) -> dict[str, Any]:
+        gui, live, p = self.server.gui, self.live, self.live.params
+        # The sliders stay inside the track and the beam's stops.
+        x_max = min(X0.high, p.track.half_length_m)
+        th_max = min(THETA0.high, p.beam.stop_angle_rad)
         with gui.add_folder("Initial state (applies on Reset)"):
             x0 = gui.add_slider(
                 "x0 (m)",
@@ -138,6 +171,13 @@ class Panels:
                 initial_value=live.theta0_rad,
                 hint="Where the beam is held before release; press Reset to apply",
             )
+        x0.on_update(lambda _: live.enqueue("x0", x0.value))
+        th0.on_update(lambda _: live.enqueue("theta0", th0.value))
+        return {"x0": x0, "theta0": th0}
+
+    def _add_disturb_folder(self) -> dict[str, Any]:
+        gui, live = self.server.gui, self.live
+        ref_max = min(SETPOINT.high, live.params.track.half_length_m)  # the setpoint stays on the track
         with gui.add_folder("Disturb"):
             kick = gui.add_slider(
                 "Flick (m/s)", min=FLICK.low, max=FLICK.high, step=FLICK.step, initial_value=live.flick_m_s
@@ -156,6 +196,14 @@ class Panels:
             self.setpoint_note = gui.add_markdown(
                 "" if live.supports_reference else f"*{_markdown_text(live.setpoint_reason)}*"
             )
+        self.reference_slider = reference
+        flick_left.on_click(lambda _: live.enqueue("flick_left", kick.value))
+        flick_right.on_click(lambda _: live.enqueue("flick_right", kick.value))
+        reference.on_update(lambda _: live.enqueue("reference", reference.value))
+        return {"flick": kick, "flick_left": flick_left, "flick_right": flick_right, "setpoint": reference}
+
+    def _add_shadow_folder(self) -> dict[str, Any]:
+        gui, live = self.server.gui, self.live
         with gui.add_folder("Shadow (drift alarm)"):
             shadow = gui.add_checkbox(
                 "Shadow the rig",
@@ -173,6 +221,12 @@ class Panels:
                 hint="A warm motor: the rig's resistance this much above the parameters' from the next Reset; "
                 "the shadow keeps the parameters it started with",
             )
+        shadow.on_update(lambda _: live.enqueue("shadow", shadow.value))
+        drift.on_update(lambda _: live.enqueue("drift", drift.value))
+        return {"shadow": shadow, "drift": drift}
+
+    def _add_record_folder(self) -> dict[str, Any]:
+        gui = self.server.gui
         with gui.add_folder("Record"):
             gui.add_markdown(
                 f"Each run is recorded from its start (Reset) for up to {RECORD_LIMIT_S / 60:g} min of "
@@ -180,51 +234,21 @@ class Panels:
             )
             download_mat = gui.add_button("Download .mat")
             download_csv = gui.add_button("Download CSV")
-        with gui.add_folder("Camera"):
-            cameras = {name: gui.add_button(name) for name in CAMERAS}
-        with gui.add_folder("Parameters", expand_by_default=False):
-            gui.add_markdown(self._parameters_markdown())
-        self.reference_slider = reference
-        self.run_button = run
-        self.controls: dict[str, Any] = {
-            "controller": controller,
-            "run": run,
-            "step": step,
-            "reset": reset,
-            "speed": speed,
-            "noise": noise,
-            "x0": x0,
-            "theta0": th0,
-            "flick": kick,
-            "flick_left": flick_left,
-            "flick_right": flick_right,
-            "setpoint": reference,
-            "shadow": shadow,
-            "drift": drift,
-            "download_mat": download_mat,
-            "download_csv": download_csv,
-            **{f"camera_{name}": button for name, button in cameras.items()},
-        }
-
-        controller.on_update(lambda _: live.enqueue("controller", controller.value))
-        run.on_click(lambda _: live.enqueue("run", not live.running))
-        step.on_click(lambda _: live.enqueue("step"))
-        reset.on_click(lambda _: live.enqueue("reset"))
-        speed.on_update(lambda _: live.enqueue("speed", speed.value))
-        noise.on_update(lambda _: live.enqueue("noise", noise.value))
-        x0.on_update(lambda _: live.enqueue("x0", x0.value))
-        th0.on_update(lambda _: live.enqueue("theta0", th0.value))
-        flick_left.on_click(lambda _: live.enqueue("flick_left", kick.value))
-        flick_right.on_click(lambda _: live.enqueue("flick_right", kick.value))
-        reference.on_update(lambda _: live.enqueue("reference", reference.value))
-        shadow.on_update(lambda _: live.enqueue("shadow", shadow.value))
-        drift.on_update(lambda _: live.enqueue("drift", drift.value))
         download_mat.on_click(lambda event: self._download(event.client, "mat"))
         download_csv.on_click(lambda event: self._download(event.client, "csv"))
+        return {"download_mat": download_mat, "download_csv": download_csv}
+
+    def _add_camera_folder(self) -> dict[str, Any]:
+        gui = self.server.gui
+        with gui.add_folder("Camera"):
+            cameras = {name: gui.add_button(name) for name in CAMERAS}
         for name, button in cameras.items():
             button.on_click(functools.partial(on_camera, name))
+        return {f"camera_{name}": button for name, button in cameras.items()}
 
-        # The plots in their own panel, docked left of the view: all of them visible at 1400 × 900.
+    def _add_plot_panel(self) -> None:
+        """The plots in their own panel, docked left of the view: all of them visible at 1400 × 900."""
+        gui = self.server.gui
         # Compact: the quantity as the y-axis label (no title), a static legend, a low time axis.
         scales: dict[str, viser.uplot.Scale] = {"x": {"time": False, "auto": True}}
         legend: viser.uplot.Legend = {"live": False}
@@ -232,35 +256,36 @@ class Panels:
         self.plot_panel = gui.add_panel()
         with self.plot_panel.add_tab("Plots (last 10 s, time in s)"):
             for label, traces in PLOTS:
-                series = [viser.uplot.Series(label="t (s)")] + [
-                    viser.uplot.Series(label=name, stroke=colour, width=1.5) for name, _, colour in traces
-                ]
-                axes: tuple[viser.uplot.Axis, ...] = (
-                    {"size": 26},
-                    {"size": PLOT_AXIS_PX, "label": label, "labelSize": 18},
-                )
-                data = tuple(np.zeros(2) for _ in series)
-                handle = gui.add_uplot(
-                    data, tuple(series), aspect=PLOT_ASPECT, scales=scales, axes=axes, legend=legend
-                )
+                handle = self._add_plot(label, [(name, colour) for name, _, colour in traces], scales, legend)
                 self.plots.append((handle, [key for _, key, _ in traces]))
         self.shadow_plots = []
         with self.plot_panel.add_tab("Shadow (predicted vs measured)"):
             for shadow_label, shadow_traces in SHADOW_PLOTS:
-                series = [viser.uplot.Series(label="t (s)")] + [
-                    viser.uplot.Series(label=name, stroke=colour, width=1.5) for name, colour in shadow_traces
-                ]
-                axes = ({"size": 26}, {"size": PLOT_AXIS_PX, "label": shadow_label, "labelSize": 18})
-                data = tuple(np.zeros(2) for _ in series)
-                self.shadow_plots.append(
-                    gui.add_uplot(
-                        data, tuple(series), aspect=PLOT_ASPECT, scales=scales, axes=axes, legend=legend
-                    )
-                )
+                self.shadow_plots.append(self._add_plot(shadow_label, shadow_traces, scales, legend))
         self._shadow_alarms = 0
         self.plot_panel.dock_left()
         gui.main_panel.dock_right()  # the view between the two: nothing covers the rig
         self.plot_panel.set_width(PLOT_PANEL_PX)
+
+    def _add_plot(
+        self,
+        label: str,
+        traces: Sequence[tuple[str, str]],
+        scales: dict[str, viser.uplot.Scale],
+        legend: viser.uplot.Legend,
+    ) -> viser.GuiUplotHandle:
+        """One live chart: time against ``traces`` (legend label, colour), ``label`` on its y axis."""
+        series = [viser.uplot.Series(label="t (s)")] + [
+            viser.uplot.Series(label=name, stroke=colour, width=1.5) for name, colour in traces
+        ]
+        axes: tuple[viser.uplot.Axis, ...] = (
+            {"size": 26},
+            {"size": PLOT_AXIS_PX, "label": label, "labelSize": 18},
+        )
+        data = tuple(np.zeros(2) for _ in series)
+        return self.server.gui.add_uplot(
+            data, tuple(series), aspect=PLOT_ASPECT, scales=scales, axes=axes, legend=legend
+        )
 
     def _download(self, client: Any, kind: str) -> None:
         """The loop builds the file (it owns the record) and hands it to the clicking browser's receiver."""
