@@ -57,3 +57,13 @@ def test_the_contract_through_the_top_package_loads_no_mujoco() -> None:
         [sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=60, check=True
     )
     assert out.stdout.split()[0] == "False", out.stdout
+
+
+@pytest.mark.quick
+def test_a_lazy_export_imports_its_module_on_first_read() -> None:
+    from twin.exports import lazy_exports
+
+    get = lazy_exports("pkg", {"sqrt": "math"})
+    assert get("sqrt")(4.0) == 2.0
+    with pytest.raises(AttributeError, match="module 'pkg' has no attribute 'nope'"):
+        get("nope")
