@@ -899,20 +899,9 @@ def calibrate(
     warnings += _correlation_warnings(problem, intervals.corr)
     diagnosis = ""
     if mismatched:
-        shown = "; ".join(
-            f"{a.channel} residual {a.ratio:.1f}× its noise floor, lag-1 autocorrelation {a.lag1:+.2f}"
-            for a in adequacy.values()
-            if a.channel in mismatched
-        )
-        diagnosis = (
-            _diagnose(logs, base, dynamic, adequacy, window_s, substeps, max_nfev, progress)
-            if diagnose
-            else ""
-        )
-        problems.append(
-            f"model mismatch: {shown}: the fitted values are not to be trusted"
-            + (f"; {diagnosis}" if diagnosis else "; no candidate effect explains it (docs/design.md)")
-        )
+        if diagnose:
+            diagnosis = _diagnose(logs, base, dynamic, adequacy, window_s, substeps, max_nfev, progress)
+        problems.append(_mismatch_problem(adequacy, mismatched, diagnosis))
     values = intervals.values
     params_fitted = problem.parameters(z)
     if DROPOUT in fit:
@@ -1032,6 +1021,18 @@ def _correlation_warnings(problem: WindowProblem, corr: np.ndarray) -> list[str]
                     "separate them; excite the rig differently (README: how to record a log)"
                 )
     return warnings
+
+
+def _mismatch_problem(adequacy: dict[str, ChannelAdequacy], mismatched: list[str], diagnosis: str) -> str:
+    """The problem a model mismatch makes: the mismatched channels' statistics, and the diagnosis if any."""
+    shown = "; ".join(
+        f"{a.channel} residual {a.ratio:.1f}× its noise floor, lag-1 autocorrelation {a.lag1:+.2f}"
+        for a in adequacy.values()
+        if a.channel in mismatched
+    )
+    return f"model mismatch: {shown}: the fitted values are not to be trusted" + (
+        f"; {diagnosis}" if diagnosis else "; no candidate effect explains it (docs/design.md)"
+    )
 
 
 def _fit_dropout(
