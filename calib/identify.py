@@ -880,9 +880,67 @@ def calibrate(
     if DROPOUT in fit and DROPOUT not in FITTABLE:
         raise CalibrationError(f"cannot fit {DROPOUT}")
     problem = WindowProblem(logs, base, dynamic, window_s=window_s, substeps=substeps, screen=screen)
-    n_g = problem.n_global
-    warnings: list[str] = []
+    warnings = _dropped_warnings(problem)
+    fitted = _fit(problem, max_nfev=max_nfev, progress=progress)
+    z = fitted.result.x
+    intervals = _intervals(problem, fitted)
+    warnings += intervals.warnings
+    condition = _normalized_condition(fitted.sandwich.information)
+    adequacy = _adequacy(problem, z)
+    mismatched = _mismatched(adequacy)
     problems: list[str] = []
+    # A mismatched model's standard deviations mean nothing: only an adequate fit is judged on excitation.
+    if intervals.weak and not mismatched:
+        problems.append(
+            "weak excitation: the logs determine "
+            + ", ".join(intervals.weak)
+            + " only loosely (README: how to record a log — move the setpoint and add the dither)"
+        )
+    warnings += _correlation_warnings(problem, intervals.corr)
+    diagnosis = ""
+    if mismatched:
+        if diagnose:
+            diagnosis = _diagnose(logs, base, dynamic, adequacy, window_s, substeps, max_nfev, progress)
+        problems.append(_mismatch_problem(adequacy, mismatched, diagnosis))
+    values = intervals.values
+    params_fitted = problem.parameters(z)
+    if DROPOUT in fit:
+        values[DROPOUT], params_fitted = _fit_dropout(problem, z, params_fitted, base, warnings)
+    pred_b0, pred_a0 = problem.predict(fitted.z_before)
+    pred_b1, pred_a1 = problem.predict(z)
+    return Calibration(
+        params=params_fitted,
+        values=values,
+        correlation=intervals.corr,
+        rms_before=_rms(problem, pred_b0, pred_a0),
+        rms_after=_rms(problem, pred_b1, pred_a1),
+        converged=bool(fitted.result.success),
+        message=str(fitted.result.message),
+        warnings=warnings,
+        wall_s=time.perf_counter() - started,
+        n_windows=problem.n_windows,
+        n_ticks=problem.n_windows * problem.W,
+        ci_inflation=intervals.inflation,
+        problems=problems,
+        adequacy=adequacy,
+        dropped=list(problem.dropped),
+        information_condition=condition,
+        diagnosis=diagnosis,
+        traces={
+            "t_s": np.arange(problem.n_windows * problem.W) * problem.windows.period_s,
+            "y_ball_m": problem.windows.y_ball_m.ravel(),
+            "y_angle_rad": problem.windows.y_angle_rad.ravel(),
+            "before_ball_m": pred_b0.ravel(),
+            "before_angle_rad": pred_a0.ravel(),
+            "after_ball_m": pred_b1.ravel(),
+            "after_angle_rad": pred_a1.ravel(),
+        },
+    )
+
+
+def _dropped_warnings(problem: WindowProblem) -> list[str]:
+    """One warning per reason windows were dropped before the fit, naming the logs and the first window."""
+    warnings = []
     for reason, what in (
         ("railed", f"the amplifier at a rail for {RAILED_TICKS} ticks or more in a row"),
         ("ball lost", "the ball lost (at the track's end, or gone from the spring) from then on"),
@@ -894,22 +952,37 @@ def calibrate(
                 f"{len(dropped)} window(s) dropped, {what}: {where} from t = {dropped[0].start_s:.2f} s"
                 + (f" (and {len(dropped) - 1} more)" if len(dropped) > 1 and reason == "railed" else "")
             )
-    fitted = _fit(problem, max_nfev=max_nfev, progress=progress)
-    result, sandwich, rw = fitted.result, fitted.sandwich, fitted.rw
-    z, z_before = result.x, fitted.z_before
-    n_c = sandwich.n_clusters
+    return warnings
+
+
+@dataclass(frozen=True)
+class _Intervals:
+    """The fitted values with their intervals, and what the covariance says about them."""
+
+    values: dict[str, FittedValue]
+    corr: np.ndarray  # the globals' correlation matrix
+    inflation: float  # median of the cluster-robust over the white-residual standard deviations
+    warnings: list[str]  # per value, in the fit's order: undetermined, unidentifiable, on a bound
+    weak: list[str]  # the values the logs excite too little (``WEAK_EXCITATION``), as shown in the problem
+
+
+def _intervals(problem: WindowProblem, fitted: _Fit) -> _Intervals:
+    """Each fitted global's interval: the sandwich covariance with Student's t, the model's resolution
+    (``MODEL_RESOLUTION``) added in quadrature."""
+    z, z_before, sandwich, rw = fitted.result.x, fitted.z_before, fitted.sandwich, fitted.rw
     # The same covariance assuming white residuals, to report how much the correlation widens the intervals.
     spread2 = float(rw @ rw) / max(rw.size - z.size, 1)
     naive = np.sqrt(np.maximum(sandwich.naive_var * spread2, 1e-300))
     cov_g = sandwich.cov
     std = np.sqrt(np.maximum(np.diag(cov_g), 0.0))
-    inflation = float(np.median(std / naive)) if n_g else 1.0
+    inflation = float(np.median(std / naive)) if problem.n_global else 1.0
     with np.errstate(invalid="ignore", divide="ignore"):
         corr = cov_g / np.outer(std, std)
     corr = np.nan_to_num(corr)
     # Student's t with (clusters − 1) degrees of freedom: few clusters make the covariance itself uncertain.
-    z_crit = float(scipy.stats.t.ppf(0.5 + CONFIDENCE / 2, max(n_c - 1, 1)))
+    z_crit = float(scipy.stats.t.ppf(0.5 + CONFIDENCE / 2, max(sandwich.n_clusters - 1, 1)))
     values: dict[str, FittedValue] = {}
+    warnings: list[str] = []
     weak: list[str] = []
     for i, name in enumerate(problem.fit):
         spec = FITTABLE[name]
@@ -933,16 +1006,13 @@ def calibrate(
             if size > bound[1]:
                 shown = f"{size:.1%} of its value" if bound[0] == "relative" else f"{size:.3g} {spec.unit}"
                 weak.append(f"{name} (standard deviation {shown})")
-    condition = _normalized_condition(sandwich.information)
-    adequacy = _adequacy(problem, z)
-    mismatched = _mismatched(adequacy)
-    # A mismatched model's standard deviations mean nothing: only an adequate fit is judged on excitation.
-    if weak and not mismatched:
-        problems.append(
-            "weak excitation: the logs determine "
-            + ", ".join(weak)
-            + " only loosely (README: how to record a log — move the setpoint and add the dither)"
-        )
+    return _Intervals(values, corr, inflation, warnings, weak)
+
+
+def _correlation_warnings(problem: WindowProblem, corr: np.ndarray) -> list[str]:
+    """A warning for each pair of fitted globals the logs barely separate (|correlation| > 0.95)."""
+    warnings = []
+    n_g = problem.n_global
     for i in range(n_g):
         for j in range(i + 1, n_g):
             if abs(corr[i, j]) > 0.95:
@@ -950,65 +1020,36 @@ def calibrate(
                     f"{problem.fit[i]} and {problem.fit[j]} are correlated ({corr[i, j]:+.2f}): the logs barely "
                     "separate them; excite the rig differently (README: how to record a log)"
                 )
-    diagnosis = ""
-    if mismatched:
-        shown = "; ".join(
-            f"{a.channel} residual {a.ratio:.1f}× its noise floor, lag-1 autocorrelation {a.lag1:+.2f}"
-            for a in adequacy.values()
-            if a.channel in mismatched
-        )
-        diagnosis = (
-            _diagnose(logs, base, dynamic, adequacy, window_s, substeps, max_nfev, progress)
-            if diagnose
-            else ""
-        )
-        problems.append(
-            f"model mismatch: {shown}: the fitted values are not to be trusted"
-            + (f"; {diagnosis}" if diagnosis else "; no candidate effect explains it (docs/design.md)")
-        )
-    params_fitted = problem.parameters(z)
-    if DROPOUT in fit:
-        rate, rate_lo, rate_hi, outliers = dropout_rate(problem, z, params_fitted)
-        # Its interval is a likelihood interval (asymmetric); its width over 2·1.96 is the standard uncertainty.
-        sd_rate = (rate_hi - rate_lo) / (2 * float(scipy.stats.norm.ppf(0.5 + CONFIDENCE / 2)))
-        values[DROPOUT] = FittedValue(
-            rate, rate_lo, rate_hi, base.ball_sensor.dropout_rate_hz, "1/s", sd=sd_rate
-        )
-        params_fitted = params_fitted.with_overrides({DROPOUT: rate}, origin="calibration")
-        if outliers < 10:
-            warnings.append(
-                f"{DROPOUT}: only {outliers} outlier ticks in the logs: the rate is barely determined"
-            )
-    pred_b0, pred_a0 = problem.predict(z_before)
-    pred_b1, pred_a1 = problem.predict(z)
-    return Calibration(
-        params=params_fitted,
-        values=values,
-        correlation=corr,
-        rms_before=_rms(problem, pred_b0, pred_a0),
-        rms_after=_rms(problem, pred_b1, pred_a1),
-        converged=bool(result.success),
-        message=str(result.message),
-        warnings=warnings,
-        wall_s=time.perf_counter() - started,
-        n_windows=problem.n_windows,
-        n_ticks=problem.n_windows * problem.W,
-        ci_inflation=inflation,
-        problems=problems,
-        adequacy=adequacy,
-        dropped=list(problem.dropped),
-        information_condition=condition,
-        diagnosis=diagnosis,
-        traces={
-            "t_s": np.arange(problem.n_windows * problem.W) * problem.windows.period_s,
-            "y_ball_m": problem.windows.y_ball_m.ravel(),
-            "y_angle_rad": problem.windows.y_angle_rad.ravel(),
-            "before_ball_m": pred_b0.ravel(),
-            "before_angle_rad": pred_a0.ravel(),
-            "after_ball_m": pred_b1.ravel(),
-            "after_angle_rad": pred_a1.ravel(),
-        },
+    return warnings
+
+
+def _mismatch_problem(adequacy: dict[str, ChannelAdequacy], mismatched: list[str], diagnosis: str) -> str:
+    """The problem a model mismatch makes: the mismatched channels' statistics, and the diagnosis if any."""
+    shown = "; ".join(
+        f"{a.channel} residual {a.ratio:.1f}× its noise floor, lag-1 autocorrelation {a.lag1:+.2f}"
+        for a in adequacy.values()
+        if a.channel in mismatched
     )
+    return f"model mismatch: {shown}: the fitted values are not to be trusted" + (
+        f"; {diagnosis}" if diagnosis else "; no candidate effect explains it (docs/design.md)"
+    )
+
+
+def _fit_dropout(
+    problem: WindowProblem, z: np.ndarray, params_fitted: Parameters, base: Parameters, warnings: list[str]
+) -> tuple[FittedValue, Parameters]:
+    """The ball channel's dropout rate, estimated apart on the smooth fit: its value and the fitted
+    parameters with it (a warning appended when the logs hold too few outliers to tell it)."""
+    rate, rate_lo, rate_hi, outliers = dropout_rate(problem, z, params_fitted)
+    # Its interval is a likelihood interval (asymmetric); its width over 2·1.96 is the standard uncertainty.
+    sd_rate = (rate_hi - rate_lo) / (2 * float(scipy.stats.norm.ppf(0.5 + CONFIDENCE / 2)))
+    value = FittedValue(rate, rate_lo, rate_hi, base.ball_sensor.dropout_rate_hz, "1/s", sd=sd_rate)
+    params_fitted = params_fitted.with_overrides({DROPOUT: rate}, origin="calibration")
+    if outliers < 10:
+        warnings.append(
+            f"{DROPOUT}: only {outliers} outlier ticks in the logs: the rate is barely determined"
+        )
+    return value, params_fitted
 
 
 def _normalized_condition(information: np.ndarray) -> float:

@@ -306,7 +306,6 @@ def _validate(
     check_criteria_for(c, params)  # before any run
     started = time.perf_counter()
     runs = Runs(controller, params, c.duration_s, True, "twin", False)
-    checks: list[Check] = []
     starts = [*T.CHAPTER4_STARTS, *T.HARDWARE_STARTS.values()]
     cases = _sensitivity_cases(c, params)
     x_required, theta_required = _required_grid(c)
@@ -321,17 +320,63 @@ def _validate(
             "monte carlo": c.montecarlo_runs if spread is not None else 0,
         },
     )
+    b = _Battery(controller, params, c, spread, seed, workers, serve, runs, stages, started)
+    # The stages in order; the first one interrupted ends the battery with the checks done so far.
+    if not _nominal_stage(b, starts):
+        return b.report(None, complete=False)
+    settings = SweepSettings(
+        controller,
+        x0=Grid(*c.region_x0),
+        theta0=Grid(*c.region_theta0),
+        duration_s=c.region_duration_s,
+        noise=True,
+        seed=seed,
+    )
+    region = _region_stage(b, settings)
+    if region is None:
+        return b.report(None, complete=False)
+    if not _sensitivity_stage(b, cases):
+        return b.report(region, complete=False)
+    if not _robust_region_stage(b, settings, x_required, theta_required):
+        return b.report(region, complete=False)
+    if not _montecarlo_stage(b):
+        return b.report(region, complete=False)
+    return b.report(region)
 
-    # Nominal: the thesis's starts, several seeds.
+
+@dataclass
+class _Battery:
+    """What every stage of a validation shares, and the checks done so far (in the stages' order)."""
+
+    controller: str
+    params: Parameters
+    c: ValidationCriteria
+    spread: Distribution | None
+    seed: int
+    workers: int
+    serve: Served | None
+    runs: Runs
+    stages: Stages
+    started: float
+    checks: list[Check] = field(default_factory=list)
+
+    def report(self, region: SweepResult | None, *, complete: bool = True) -> ValidationReport:
+        wall_s = time.perf_counter() - self.started
+        return ValidationReport(self.controller, self.checks, region, wall_s, self.c, complete=complete)
+
+
+def _nominal_stage(b: _Battery, starts: list[tuple[float, float]]) -> bool:
+    """The thesis's starts, several seeds: the nominal and the saturation checks. False: interrupted."""
+    c = b.c
     grid = np.array([s for s in starts for _ in range(c.nominal_seeds)], dtype=float)
-    seeds = point_seeds(seed, len(grid))
+    seeds = point_seeds(b.seed, len(grid))
     records, complete = run_starts(
-        runs, grid, seeds, workers=workers, progress=stages.stage("nominal"), serve=serve
+        b.runs, grid, seeds, workers=b.workers, progress=b.stages.stage("nominal"), serve=b.serve
     )
     if not complete:
-        return ValidationReport(controller, checks, None, time.perf_counter() - started, c, complete=False)
+        return False
     held, n = _runs_held(records)
-    checks.append(
+    b.checks.append(
         Check(
             "nominal",
             held == n,
@@ -342,7 +387,7 @@ def _validate(
     )
     # A run whose controller failed has no figures (it already fails the nominal check).
     saturated = max((r["saturated_fraction"] for r in records if r and not r.get("failed")), default=0.0)
-    checks.append(
+    b.checks.append(
         Check(
             "saturation",
             saturated <= c.max_saturated_fraction,
@@ -350,24 +395,21 @@ def _validate(
             f"at most {100 * saturated:.1f} %",
         )
     )
+    return True
 
-    # Region of attraction.
-    settings = SweepSettings(
-        controller,
-        x0=Grid(*c.region_x0),
-        theta0=Grid(*c.region_theta0),
-        duration_s=c.region_duration_s,
-        noise=True,
-        seed=seed,
+
+def _region_stage(b: _Battery, settings: SweepSettings) -> SweepResult | None:
+    """The region of attraction over the criteria's grid: the region check. None: interrupted."""
+    region = run_sweep(
+        settings, b.params, workers=b.workers, progress=b.stages.stage("region"), serve=b.serve
     )
-    region = run_sweep(settings, params, workers=workers, progress=stages.stage("region"), serve=serve)
     if not region.complete:
-        return ValidationReport(controller, checks, None, time.perf_counter() - started, c, complete=False)
-    (xlo, xhi), (tlo, thi) = c.required_x0_m, c.required_theta0_rad
+        return None
+    (xlo, xhi), (tlo, thi) = b.c.required_x0_m, b.c.required_theta0_rad
     inside = [p for p in region.points if p and xlo <= p["x0_m"] <= xhi and tlo <= p["theta0_rad"] <= thi]
     lost_inside = [(p["x0_m"], p["theta0_rad"]) for p in inside if p["ball_lost"]]
     kept_all = sum(not p["ball_lost"] for p in region.points if p)
-    checks.append(
+    b.checks.append(
         Check(
             "region",
             bool(inside) and not lost_inside,
@@ -381,8 +423,12 @@ def _validate(
             + f"; {kept_all} of {len(region.points)} over the whole grid",
         )
     )
+    return region
 
-    # Sensitivity: one parameter at a time, from the chapter 4 starts, seed-matched.
+
+def _sensitivity_stage(b: _Battery, cases: list[tuple[str, str, Parameters]]) -> bool:
+    """One parameter at a time, from the chapter 4 starts, seed-matched: a check per parameter. False:
+    interrupted."""
     per_run: list[Parameters] = []
     labels = []
     for name, label, p in cases:
@@ -391,16 +437,16 @@ def _validate(
             labels.append((name, label, start))
     grid = np.array([start for _, _, start in labels], dtype=float)
     records, complete = run_starts(
-        runs,
+        b.runs,
         grid,
-        point_seeds(seed + 1, len(grid)),
+        point_seeds(b.seed + 1, len(grid)),
         params=per_run,
-        workers=workers,
-        progress=stages.stage("sensitivity"),
-        serve=serve,
+        workers=b.workers,
+        progress=b.stages.stage("sensitivity"),
+        serve=b.serve,
     )
     if not complete:
-        return ValidationReport(controller, checks, region, time.perf_counter() - started, c, complete=False)
+        return False
     by_param: dict[str, list[tuple[str, dict[str, Any]]]] = {}
     for (name, label, _), record in zip(labels, records, strict=True):
         if record:
@@ -411,7 +457,7 @@ def _validate(
             for label, r in rows
             if not r["held"]
         ]
-        checks.append(
+        b.checks.append(
             Check(
                 f"sensitivity: {name}",
                 not bad,
@@ -421,10 +467,17 @@ def _validate(
                 [{"value": label, **r} for label, r in rows],
             )
         )
+    return True
 
-    # The robust region: the required starts on rigs drawn from the spread.
+
+def _robust_region_stage(
+    b: _Battery, settings: SweepSettings, x_required: Grid, theta_required: Grid
+) -> bool:
+    """The required starts (the region's settings on the required grid) on rigs drawn from the spread: the
+    robust region check, not run without a spread. False: interrupted."""
+    c, spread = b.c, b.spread
     if spread is None:
-        checks.append(
+        b.checks.append(
             Check(
                 "robust region",
                 None,
@@ -433,46 +486,49 @@ def _validate(
                 "not run: give --spread FILE or --calibration DIR",
             )
         )
-    else:
-        robust = run_robust(
-            replace(settings, x0=x_required, theta0=theta_required),
-            params,
-            spread,
-            c.robust_rigs,
-            workers=workers,
-            progress=stages.stage("robust region"),
-            serve=serve,
+        return True
+    robust = run_robust(
+        replace(settings, x0=x_required, theta0=theta_required),
+        b.params,
+        spread,
+        c.robust_rigs,
+        workers=b.workers,
+        progress=b.stages.stage("robust region"),
+        serve=b.serve,
+    )
+    if not robust.complete:
+        return False
+    kept_rows = [
+        {
+            **point,
+            "kept": point["rigs"] - point["lost"],
+            "kept_lower_bound": success_lower_bound(point["rigs"] - point["lost"], point["rigs"]),
+        }
+        for point in robust.points
+    ]
+    worst = min(kept_rows, key=lambda r: (r["kept_lower_bound"], r["kept"]))
+    short = [r for r in kept_rows if r["kept_lower_bound"] < c.min_success_lower_bound]
+    b.checks.append(
+        Check(
+            "robust region",
+            not short,
+            f"every required start ({len(kept_rows)}) kept by a share of {c.robust_rigs} rigs from "
+            f"{spread.source} with a 95 % lower bound ≥ {c.min_success_lower_bound:g}",
+            f"{len(kept_rows) - len(short)} of {len(kept_rows)} starts; worst ({worst['x0_m']:+.2f}, "
+            f"{worst['theta0_rad']:+.2f}): kept by {worst['kept']} of {worst['rigs']} rigs, held by "
+            f"{worst['held']}, bound {worst['kept_lower_bound']:.3f}",
+            sorted(kept_rows, key=lambda r: (r["kept_lower_bound"], r["kept"]))[:20],
         )
-        if not robust.complete:
-            return ValidationReport(
-                controller, checks, region, time.perf_counter() - started, c, complete=False
-            )
-        kept_rows = [
-            {
-                **point,
-                "kept": point["rigs"] - point["lost"],
-                "kept_lower_bound": success_lower_bound(point["rigs"] - point["lost"], point["rigs"]),
-            }
-            for point in robust.points
-        ]
-        worst = min(kept_rows, key=lambda r: (r["kept_lower_bound"], r["kept"]))
-        short = [r for r in kept_rows if r["kept_lower_bound"] < c.min_success_lower_bound]
-        checks.append(
-            Check(
-                "robust region",
-                not short,
-                f"every required start ({len(kept_rows)}) kept by a share of {c.robust_rigs} rigs from "
-                f"{spread.source} with a 95 % lower bound ≥ {c.min_success_lower_bound:g}",
-                f"{len(kept_rows) - len(short)} of {len(kept_rows)} starts; worst ({worst['x0_m']:+.2f}, "
-                f"{worst['theta0_rad']:+.2f}): kept by {worst['kept']} of {worst['rigs']} rigs, held by "
-                f"{worst['held']}, bound {worst['kept_lower_bound']:.3f}",
-                sorted(kept_rows, key=lambda r: (r["kept_lower_bound"], r["kept"]))[:20],
-            )
-        )
+    )
+    return True
 
-    # Monte Carlo.
+
+def _montecarlo_stage(b: _Battery) -> bool:
+    """The success rate on rigs drawn from the spread: the Monte Carlo check, not run without a spread.
+    False: interrupted."""
+    c, spread = b.c, b.spread
     if spread is None:
-        checks.append(
+        b.checks.append(
             Check(
                 "monte carlo",
                 None,
@@ -480,33 +536,31 @@ def _validate(
                 "not run: give --spread FILE or --calibration DIR",
             )
         )
-    else:
-        mc = run_montecarlo(
-            MonteCarloSettings(
-                controller, c.montecarlo_runs, *T.CHAPTER4_STARTS[1], duration_s=c.duration_s, seed=seed
-            ),
-            params,
-            spread,
-            workers=workers,
-            progress=stages.stage("monte carlo"),
-            serve=serve,
+        return True
+    mc = run_montecarlo(
+        MonteCarloSettings(
+            b.controller, c.montecarlo_runs, *T.CHAPTER4_STARTS[1], duration_s=c.duration_s, seed=b.seed
+        ),
+        b.params,
+        spread,
+        workers=b.workers,
+        progress=b.stages.stage("monte carlo"),
+        serve=b.serve,
+    )
+    if not mc.complete:
+        return False
+    s = mc.summary
+    b.checks.append(
+        Check(
+            "monte carlo",
+            s["success_ci"] is not None and s["success_ci"][0] >= c.min_success_lower_bound,
+            f"95 % lower bound of the success rate ≥ {c.min_success_lower_bound:g} "
+            f"({c.montecarlo_runs} runs, spread {spread.source})",
+            f"held {s['held']} of {s['runs']}, 95 % interval {s['success_ci'][0]:.3f}–{s['success_ci'][1]:.3f}",
+            s["worst"],
         )
-        if not mc.complete:
-            return ValidationReport(
-                controller, checks, region, time.perf_counter() - started, c, complete=False
-            )
-        s = mc.summary
-        checks.append(
-            Check(
-                "monte carlo",
-                s["success_ci"] is not None and s["success_ci"][0] >= c.min_success_lower_bound,
-                f"95 % lower bound of the success rate ≥ {c.min_success_lower_bound:g} "
-                f"({c.montecarlo_runs} runs, spread {spread.source})",
-                f"held {s['held']} of {s['runs']}, 95 % interval {s['success_ci'][0]:.3f}–{s['success_ci'][1]:.3f}",
-                s["worst"],
-            )
-        )
-    return ValidationReport(controller, checks, region, time.perf_counter() - started, c)
+    )
+    return True
 
 
 def _required_grid(c: ValidationCriteria) -> tuple[Grid, Grid]:
