@@ -1,18 +1,18 @@
-"""The closed-loop engine: the one stepper that ``ballbeam run``, the live view and the reproduction use.
+"""The closed-loop engine: the one loop every run goes through (docs/design.md, "One loop, many rigs").
 
-A ``ClosedLoop`` couples a simulated rig (twin.rigs.sim: the MuJoCo twin with its I/O chain or with ideal
-converters, or the reference model) to either
+A ``ClosedLoop`` couples any rig behind the hardware contract (``twin.interface.Rig``: a simulated rig of
+twin.rigs.sim, a remote one of twin.rigs.remote, an I/O card) to either
 
-* a ``Controller`` (twin.interface): the hardware contract, raw blocks in and a DAC command out at the
-  DAQ's period, exactly as on the rig; or
+* a ``Controller`` (twin.interface): raw blocks in and a DAC command out at the DAQ's period, exactly as on
+  the rig — in process, or a host for something foreign (the wire's client, an environment's agent); or
 * a ``StateLaw``: simulation only, terminal volts from the plant's true state at the law's own period
   (the thesis's chapter 4 designs, which assume all four states are measured). It never passes through
-  the hardware contract.
+  the hardware contract and needs a rig with the true state (``TrueState``).
 
-Sequence (appendix A's buttons, twin.rigs.sim's start timing): ``start()`` reads the held rig's block and starts
-the controller; each ``tick()`` reads the next block, runs the controller and writes its command. A tick
-records the row the rig software logs (twin.log) plus the true state; ``run_closed_loop`` runs a whole
-episode and computes the verdict (twin.verdict) once.
+Sequence (appendix A's buttons, twin.rigs.sim's start timing): ``start()`` reads the held rig's block and
+starts the controller; each ``tick()`` reads the next block, runs the controller and writes its command;
+``run()`` is the episode. A tick records the row the rig software logs (twin.log), plus the true state when
+the rig offers it; the verdict (twin.verdict) is computed once, from the true state or the measured volts.
 """
 
 from __future__ import annotations
