@@ -410,3 +410,53 @@ def test_a_long_recorded_run_costs_its_log_table_per_tick() -> None:
         tracemalloc.stop()
     assert 137 <= per_tick <= 2 * 137 + 80, per_tick
     assert loop.log().timem.size == n + 101
+
+
+class _Telemetry(Controller):
+    """Holds the DAC at its zero and logs what it is given."""
+
+    name = "logger"
+
+    def __init__(self, u: object = math.nan, estimate: object = None) -> None:
+        super().__init__()
+        self.u, self.estimate = u, estimate
+
+    def start(self, sample: DaqSample) -> None:
+        pass
+
+    def update(self, sample: DaqSample) -> float:
+        self.telemetry.u = self.u  # type: ignore[assignment]
+        if self.estimate is not None:
+            self.telemetry.estimate = self.estimate  # type: ignore[assignment]
+        return 2.5
+
+
+@pytest.mark.quick
+@pytest.mark.parametrize(
+    ("u", "estimate", "message"),
+    [
+        ("oops", None, "logger.telemetry.u = 'oops' at tick k = 1: the logged values must be numbers (one)"),
+        (None, None, "logger.telemetry.u = None at tick k = 1"),
+        (0.0, np.array(["a", "b", "c", "d"]), "logger.telemetry.estimate = array(['a', 'b', 'c', 'd']"),
+        (0.0, [1.0, 2.0], "logger.telemetry.estimate = [1.0, 2.0] at tick k = 1: the logged values must be "
+         "numbers (4 of them, x1…x4)"),
+    ],
+)  # fmt: skip
+def test_telemetry_that_is_not_numbers_names_the_controller_field_and_tick(u, estimate, message) -> None:
+    rig = make_rig(Parameters(), seed=0)
+    rig.reset(0.1, 0.0)
+    loop = ClosedLoop(rig, _Telemetry(u, estimate))
+    loop.start()
+    with pytest.raises(ControllerError) as err:
+        loop.tick()
+    assert str(err.value).startswith(message)
+
+
+@pytest.mark.quick
+def test_numpy_numbers_in_the_telemetry_are_logged_as_floats() -> None:
+    rig = make_rig(Parameters(), seed=0)
+    rig.reset(0.1, 0.0)
+    loop = ClosedLoop(rig, _Telemetry(np.float32(0.25), np.arange(4)))
+    loop.run(3)
+    log = loop.log()
+    assert log.u[1:].tolist() == [0.25] * 3 and log.x4[1:].tolist() == [3.0] * 3

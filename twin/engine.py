@@ -24,7 +24,7 @@ import time
 from array import array
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
-from typing import Protocol, runtime_checkable
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -348,8 +348,9 @@ class _Recorder:
     (``SimRig.true_states_of_rows``), a fraction of the cost. Without ``truth`` (a rig that has none) the
     truth columns stay empty in the log."""
 
-    def __init__(self, capacity: int, truth: TrueState | None) -> None:
+    def __init__(self, capacity: int, truth: TrueState | None, controller: str = "controller") -> None:
         self.truth = truth
+        self.controller = controller  # named when its telemetry is not numbers
         self.flushed = 0
         self.table = np.zeros((capacity, len(_COLUMNS)))
         self.cols = {name: self.table[:, j] for j, name in enumerate(_COLUMNS)}
@@ -375,6 +376,7 @@ class _Recorder:
                 self._state_rows.append((self.n, state_row.copy()))
                 time_s, state = math.nan, _NAN4
             motor_v, peak = truth.motor_volts_v, block_peak_abs_theta_rad(truth.last_block)
+        estimate, u, u_computed = _logged(tel, self.controller, self.n)
         # timem, datam1, datam2, aout, x1…x4, u, uhesap, true_time_s, true state, motor_volts_v (_COLUMNS),
         # then the lost flag and the peak |θ|
         self._ticks.append(
@@ -383,9 +385,9 @@ class _Recorder:
                 sample.ball_v,
                 sample.angle_v,
                 command_v,
-                *_four(tel.estimate),
-                tel.u,
-                tel.u_computed,
+                *estimate,
+                u,
+                u_computed,
                 time_s,
                 *state,
                 motor_v,
@@ -445,9 +447,44 @@ _NAN4 = (math.nan,) * 4
 
 def _four(estimate: np.ndarray) -> list[float]:
     """x1…x4 as floats (an estimate given in another shape broadcasts to the four, as into a table row)."""
-    if type(estimate) is np.ndarray and estimate.shape == (4,):
+    if type(estimate) is np.ndarray and estimate.shape == (4,) and estimate.dtype == np.float64:
         return estimate.tolist()
+    if isinstance(estimate, (str, bytes)):
+        raise TypeError("text, not numbers")
     return np.broadcast_to(np.asarray(estimate, dtype=float), (4,)).tolist()
+
+
+def _real(value: object) -> float:
+    if type(value) is float:  # the common case
+        return value
+    if isinstance(value, (str, bytes)) or not isinstance(value, (int, float, np.floating, np.integer)):
+        raise TypeError("not a number")
+    return float(value)
+
+
+def _logged(tel: Telemetry, controller: str, k: int) -> tuple[list[float], float, float]:
+    """What a tick logs of the controller's telemetry as floats: x1…x4, u, uhesap; a ``ControllerError``
+    naming the controller, the field, its value and the tick when one is not numbers (as the rig software
+    could not log it either)."""
+    try:
+        return _four(tel.estimate), _real(tel.u), _real(tel.u_computed)
+    except (TypeError, ValueError, OverflowError):
+        pass
+    fields: tuple[tuple[str, Callable[[Any], object], object], ...] = (
+        ("estimate", _four, tel.estimate),
+        ("u", _real, tel.u),
+        ("u_computed", _real, tel.u_computed),
+    )
+    for field, convert, value in fields:
+        try:
+            convert(value)
+        except (TypeError, ValueError, OverflowError) as exc:
+            what = "4 of them, x1…x4" if field == "estimate" else "one"
+            raise ControllerError(
+                f"{controller}.telemetry.{field} = {_short_repr(value)} at tick k = {k}: the logged values must "
+                f"be numbers ({what}): {exc}"
+            ) from None
+    raise AssertionError("unreachable: a field failed above")
 
 
 class _StateLawVolts:
@@ -529,7 +566,7 @@ class ClosedLoop:
                 f"file) or change the controller"
             )
         self.guard = None if self.is_state_law else Guard.for_period(rig.period_s, controller_timeout_s)
-        self.recorder = _Recorder(256, self.truth) if record else None
+        self.recorder = _Recorder(256, self.truth, self._name) if record else None
         self.record_limit = record_limit
         self.last_sample: DaqSample | None = None
         self.command_v = rig.command_v
