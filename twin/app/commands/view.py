@@ -73,7 +73,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--duration",
         type=finite_float(0, lo_open=True, unit="s"),
         metavar="S",
-        help="stop after S wall-clock seconds and print the pace as JSON (the run still starts when the first browser connects)",
+        help=(
+            "stop after S wall-clock seconds and print the pace as JSON (the run still starts when the first "
+            "browser connects)"
+        ),
     )
     add_plant_options(parser)
     add_params_options(parser)
