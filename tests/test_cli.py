@@ -705,3 +705,36 @@ def test_the_command_table_is_one_module_per_command() -> None:
         assert help_line == module.HELP and help_line.strip()
         assert callable(module.add_arguments) and callable(module.run)
     assert sorted(_commands()) == sorted(name for name, _, _ in rows)
+
+
+@pytest.mark.quick
+def test_run_json_keeps_a_chatty_controllers_prints_off_stdout(user_dir: Path, capsys) -> None:
+    """``run --json``: stdout is the summary alone; what the controller prints at import and every tick goes
+    to stderr."""
+    (user_dir / "broken_chatty.py").write_text(
+        "from controllers.appendix import AppendixStateFeedback\n"
+        "print('import chatter')\n"
+        "class Chatty(AppendixStateFeedback):\n"
+        "    def update(self, sample):\n"
+        "        print('tick chatter')\n"
+        "        return super().update(sample)\n"
+    )
+    code = main(
+        [
+            "run",
+            "--controller",
+            "broken_chatty:Chatty",
+            "--x0",
+            "0.1",
+            "--theta0",
+            "0",
+            "--duration",
+            "0.2",
+            "--json",
+        ]
+    )
+    out, err = capsys.readouterr()
+    assert code == 1  # too short to be judged held
+    assert json.loads(out)["controller"] == "broken_chatty:Chatty" and len(out.splitlines()) == 1
+    # update_ticks: 1 + ⌈(0.2 s − free run 0.01 s)/0.02 s⌉ = 11 updates
+    assert "import chatter" in err and err.count("tick chatter") == 11

@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import sys
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from twin.app.catalogue import construct, one_line, user_controller
@@ -26,6 +28,7 @@ from twin.outputs import check_outputs, writing
 if TYPE_CHECKING:
     from twin.engine import RunResult
     from twin.parameters import Parameters
+    from twin.realtime import WallClockPacer
     from twin.verdict import Verdict
 
 PLOT_SUFFIXES = (".png",)
@@ -92,10 +95,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from controllers import registry
-    from twin.engine import ControllerError, run_closed_loop
-    from twin.plant import NumericalError
-
     params = load_params(args)
     if args.rig is not None:
         return _run_on_remote_rig(args, params)
@@ -110,44 +109,14 @@ def run(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return 2
-    user = user_controller(args.controller)
-    paths = check_outputs(
-        [
-            ("--log", args.log, LOG_SUFFIXES, log_bytes(args.log, args.duration, params)),
-            ("--plot", args.plot, PLOT_SUFFIXES, _PLOT_BYTES),
-        ],
-        overwrite=args.overwrite,
-        inputs=inputs(args),
-    )
-    controller = (
-        registry.make(args.controller, params) if user is None else construct(user, args.controller, params)
-    )
-    if args.setpoint is not None:
-        _apply_setpoint(controller, args.controller, args.setpoint, params)
-    pacer = None
-    if args.realtime:
-        from twin.realtime import WallClockPacer
-
-        pacer = WallClockPacer(params.daq.period_s)
-    try:
-        result = run_closed_loop(
-            controller,
-            x0_m=args.x0,
-            theta0_rad=args.theta0,
-            duration_s=args.duration,
-            seed=args.seed,
-            noise=not args.no_noise,
-            params=params,
-            plant=args.plant,
-            ideal_sensors=args.ideal_sensors or args.plant == "reference",
-            pacer=pacer,
-        )
-    except ControllerError as exc:
-        print(f"ballbeam run: the controller failed: {exc}", file=sys.stderr)
-        return 1
-    except NumericalError as exc:  # the simulation failed: no physical verdict
-        print(f"ballbeam run: {one_line(exc)}", file=sys.stderr)
-        return 1
+    # With --json, stdout carries the summary alone: what the controller prints (at import, in its
+    # constructor or its ticks) goes to stderr.
+    out = sys.stdout
+    with contextlib.redirect_stdout(sys.stderr) if args.json else contextlib.nullcontext():
+        outcome = _run_in_process(args, params)
+    if isinstance(outcome, int):
+        return outcome
+    result, paths, pacer = outcome
     if args.setpoint is not None:
         result.verdict = _verdict_about(result, params, args.x0, args.setpoint)
     if "--log" in paths:
@@ -172,11 +141,58 @@ def run(args: argparse.Namespace) -> int:
     if pacer is not None:
         summary["realtime"] = pacer.timing().to_json()
     if args.json:
-        print(json.dumps(summary))
+        print(json.dumps(summary), file=out)
     else:
         for key, value in summary.items():
             print(f"{key:<26} {value}")
     return 0 if result.verdict.held else 1
+
+
+def _run_in_process(
+    args: argparse.Namespace, params: Parameters
+) -> int | tuple[RunResult, dict[str, Path], WallClockPacer | None]:
+    """The controller built and run on the twin: (the result, the checked output paths, the pacer), or the
+    exit code of a failure (reported)."""
+    from controllers import registry
+    from twin.engine import ControllerError, run_closed_loop
+    from twin.plant import NumericalError
+    from twin.realtime import WallClockPacer
+
+    user = user_controller(args.controller)
+    paths = check_outputs(
+        [
+            ("--log", args.log, LOG_SUFFIXES, log_bytes(args.log, args.duration, params)),
+            ("--plot", args.plot, PLOT_SUFFIXES, _PLOT_BYTES),
+        ],
+        overwrite=args.overwrite,
+        inputs=inputs(args),
+    )
+    controller = (
+        registry.make(args.controller, params) if user is None else construct(user, args.controller, params)
+    )
+    if args.setpoint is not None:
+        _apply_setpoint(controller, args.controller, args.setpoint, params)
+    pacer = WallClockPacer(params.daq.period_s) if args.realtime else None
+    try:
+        result = run_closed_loop(
+            controller,
+            x0_m=args.x0,
+            theta0_rad=args.theta0,
+            duration_s=args.duration,
+            seed=args.seed,
+            noise=not args.no_noise,
+            params=params,
+            plant=args.plant,
+            ideal_sensors=args.ideal_sensors or args.plant == "reference",
+            pacer=pacer,
+        )
+    except ControllerError as exc:
+        print(f"ballbeam run: the controller failed: {exc}", file=sys.stderr)
+        return 1
+    except NumericalError as exc:  # the simulation failed: no physical verdict
+        print(f"ballbeam run: {one_line(exc)}", file=sys.stderr)
+        return 1
+    return result, paths, pacer
 
 
 def _apply_setpoint(controller: object, spec: str, setpoint_m: float, params: Parameters) -> None:
