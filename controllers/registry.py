@@ -433,7 +433,8 @@ _TABLE: tuple[_Row, ...] = (
         "lqi",
         _lqi,
         "LQR with integral action on the ball position (and lqr's Kalman filter), anti-windup at the "
-        "command limits: reaches a moved setpoint",
+        "command limits: reaches a moved setpoint; a setpoint step acts at once (no shaping), and a large one "
+        "can throw the ball (docs/design.md)",
         setpoint=True,
     ),
 )
