@@ -77,6 +77,11 @@ def test_a_lost_ball_pauses_and_the_banner_gives_the_verdict() -> None:
     banner = live.lost_banner_html()
     assert f"Ball lost at t = {live.rig.ball_lost_time_s:.2f} s" in banner and "verdict: lost" in banner
     assert abs(live.rig.true_state()[0]) < 0.4  # frozen where it left the track: the plots keep their range
+    x = float(live.rig.true_state()[0])
+    if abs(x) >= live.rig.params.track.half_length_m:  # the banner says which way it went
+        assert f"rolled off the {'+' if x > 0 else '−'} end of the track (x = {x:+.3f} m)" in banner
+    else:
+        assert f"thrown off the wires at x = {x:+.3f} m, on the beam" in banner
     live.apply("initial", (0.15, 0.1))
     live.apply("reset")  # the next run goes (the pause was the lost ball's)
     assert live.running and not live.rig.ball_lost and live.lost_banner_html() == ""

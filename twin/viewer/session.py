@@ -703,9 +703,15 @@ class LiveTwin:
             return ""
         verdict = self.verdict()
         x = float(self.rig.true_state()[0])
-        where = f" at x = {x:+.3f} m" if math.isfinite(x) else ""
+        half_m = self.rig.params.track.half_length_m
+        if not math.isfinite(x):
+            where = "it left the track"
+        elif abs(x) >= half_m:  # rolled past an end of the wires
+            where = f"it rolled off the {'+' if x > 0 else '−'} end of the track (x = {x:+.3f} m)"
+        else:  # thrown off the wires along the beam
+            where = f"it was thrown off the wires at x = {x:+.3f} m, on the beam"
         return (
-            f"Ball lost at t = {self.rig.ball_lost_time_s:.2f} s: it left the track{where}. The run is paused "
+            f"Ball lost at t = {self.rig.ball_lost_time_s:.2f} s: {where}. The run is paused "
             f"({verdict_text(verdict, self.setpoint_m, self.criteria) if verdict is not None else 'no verdict'}). "
             "Press Reset to start again."
         )
