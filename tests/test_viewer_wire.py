@@ -102,6 +102,7 @@ def test_the_rig_is_held_until_a_client_says_hello() -> None:
         np.testing.assert_array_equal(before_state, [*START, 0.0, 0.0])
         assert live.loop.log().k == 1  # the held block only
         assert _markdown_text(f"waiting for a client on {server.url}") in live.status_markdown()
+        assert " · waiting for the wire client · " in live.status_markdown()  # not "running": the rig is held
 
 
 @pytest.mark.realtime

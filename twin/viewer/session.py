@@ -646,8 +646,11 @@ class LiveTwin:
         )
 
     def status_markdown(self) -> str:
+        wire = self.wire
         if self.awaiting_client:
             state = "waiting for a browser"
+        elif wire is not None and not wire.released:  # the rig is held until the wire client answers
+            state = "waiting for the wire client" if self.running else "paused"
         else:
             state = "running" if self.running else "paused"
         ball = (
@@ -668,7 +671,6 @@ class LiveTwin:
                 f"(this run started at {self.run_x0_m:+.2f} m, {self.run_theta0_rad:+.2f} rad)"
             )
         error = f"  \n**run failed**: {_markdown_text(self.error)}" if self.error else ""
-        wire = self.wire
         speed = f"speed ×{self.speed:g}{self._speed_note()}"
         if wire is not None:
             speed = "real time ×1 (the wire client)"
