@@ -894,3 +894,15 @@ def test_a_lost_ball_pauses_the_run_until_reset() -> None:
     live.apply_actions()
     assert not live.rig.ball_lost and not live.lost_paused
     assert abs(left[0]) > 0.3
+
+
+@pytest.mark.quick
+def test_a_setpoint_for_a_controller_without_one_is_refused_and_not_kept() -> None:
+    """The greyed setpoint slider's number box still sends values: for a controller that declares no setpoint
+    (appendix-clp) the value is refused with the reason, and the next controller with one starts from the
+    setpoint it had, not from the refused value."""
+    live = LiveTwin(Parameters(), CATALOGUE, "appendix-clp", 0, 1.0)
+    before = live.reference_x_m
+    live.apply("reference", 0.1)
+    assert live.refusals[-1].reason == live.setpoint_reason and "declares no setpoint" in live.setpoint_reason
+    assert live.reference_x_m == before

@@ -539,7 +539,10 @@ class LiveTwin:
         self.speed = _on_slider("speed", value, SPEED)
 
     def _do_reference(self, value: Any) -> None:
-        self.reference_x_m = _on_slider("setpoint", value, SETPOINT, self.params.track.half_length_m)
+        x_ref_m = _on_slider("setpoint", value, SETPOINT, self.params.track.half_length_m)
+        if not self.supports_reference:  # the greyed slider's number box still sends: not kept for later
+            raise _Refused(self.setpoint_reason)
+        self.reference_x_m = x_ref_m
         self._apply_reference()
 
     _HANDLERS: dict[str, Callable[[LiveTwin, Any], None]] = {
