@@ -42,6 +42,19 @@ def test_hello_bytes() -> None:
     assert p.decode(want) == p.Hello(role=2, client="c-client")
 
 
+def test_hello_reply_port_bytes() -> None:
+    """The reply port is the u16 at offset 18 (once pad: a HELLO written before carries 0 there)."""
+    want = _frame(1, 56, 0, 0, [(16, "B", 1), (18, "H", 25001), (20, "32s", b"simulink")])
+    assert p.encode(p.Hello(role=1, client="simulink", reply_port=25001), 0) == want
+    assert p.decode(want) == p.Hello(role=1, client="simulink", reply_port=25001)
+    assert p.decode(_frame(1, 56, 0, 0, [(16, "B", 1)])).reply_port == 0  # type: ignore[union-attr]
+
+
+def test_refused_flag_is_bit_5() -> None:
+    assert p.FLAG_REFUSED == 0x20
+    assert not p.FLAG_REFUSED & (p.FLAG_HELD | p.FLAG_BALL_LOST | p.FLAG_WATCHDOG | p.FLAG_LATE | p.FLAG_LAST)
+
+
 @pytest.mark.quick
 def test_sample_bytes() -> None:
     fields: list[tuple[int, str, object]] = [

@@ -4,6 +4,7 @@ vanished server is a bounded error on the client side."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import os
@@ -24,7 +25,7 @@ from serving import in_thread, session_of
 from controllers import registry
 from controllers.thesis_numbers import HARDWARE_STARTS
 from twin.converters import ball_position_m, beam_angle_rad, clip_command_v, dac_command_v
-from twin.engine import RunResult, run_closed_loop, run_on_rig
+from twin.engine import RunResult, run_closed_loop, run_on_rig, update_ticks
 from twin.interface import Controller, DaqSample
 from twin.log import THESIS_FIELDS, TRUTH_FIELDS, RunLog
 from twin.parameters import Parameters
@@ -532,3 +533,172 @@ def test_binding_beyond_loopback_warns_and_loopback_does_not() -> None:
             "there can drive the twin — there is no authentication. Serve on 127.0.0.1 (the default) unless "
             "that is what you want."
         ]
+
+
+def _until_sample(raw: RawClient) -> p.Sample:
+    """The next SAMPLE (an echo or anything else skipped)."""
+    while not isinstance(msg := raw.recv().msg, p.Sample):
+        assert not isinstance(msg, p.Stop), msg
+    return msg
+
+
+@pytest.mark.quick
+def test_a_refused_command_is_told_at_once_and_counted() -> None:
+    """Lock-step: NaN answering SAMPLE 3 gets SAMPLE 3 again with the refused flag at its 0.2 s repeat (not
+    a timeout); a valid answer then goes on, and the summary counts the refusal."""
+    settings = SessionSettings(x0_m=0.1, theta0_rad=0.0, duration_s=0.3, wait_client_s=10.0, timeout_s=3.0)
+    with _serving(settings) as (server, box):
+        raw = RawClient(server.port)
+        refused_at = 3
+        told: p.Sample | None = None
+        while True:
+            msg = raw.recv().msg
+            if isinstance(msg, p.Stop):
+                break
+            assert isinstance(msg, p.Sample)
+            if msg.seq == refused_at and told is None:
+                assert not msg.flags & p.FLAG_REFUSED
+                raw.send(p.Command(msg.seq, math.nan))
+                began = time.monotonic()
+                told = _until_sample(raw)
+                waited = time.monotonic() - began
+                assert told == dataclasses.replace(msg, flags=msg.flags | p.FLAG_REFUSED)  # the same block
+                assert waited < 1.0  # told, not timed out (3 s)
+            else:
+                assert not msg.flags & p.FLAG_REFUSED
+            raw.send(p.Command(msg.seq, 2.5))
+        raw.close()
+    served = _session(box)
+    assert told is not None
+    assert served.stop_reason == p.STOP_DONE
+    assert served.counts.refused_commands == 1 and served.summary()["refused_commands"] == 1
+
+
+def test_a_client_repeating_a_refused_command_gets_a_flagged_repeat_every_0_2_s() -> None:
+    """A client written before the flag answers every repeat with its refused command: each repeat (0.2 s
+    apart, no ping-pong) carries the flag, until the server's timeout ends the session."""
+    settings = SessionSettings(x0_m=0.1, theta0_rad=0.0, duration_s=1.0, wait_client_s=10.0, timeout_s=0.7)
+    with pytest.raises(ServeError, match="ended before"), _serving(settings) as (server, _box):
+        raw = RawClient(server.port)
+        first = raw.recv().msg
+        assert isinstance(first, p.Sample) and first.seq == 0
+        raw.send(p.Command(0, 7.5))  # out of the DAC's 0…5 V
+        repeats = 0
+        while not isinstance(msg := raw.recv().msg, p.Stop):
+            assert isinstance(msg, p.Sample) and msg.seq == 0 and msg.flags & p.FLAG_REFUSED
+            repeats += 1
+            raw.send(p.Command(0, 7.5))
+        raw.close()
+        assert 1 <= repeats <= 0.7 / 0.2 + 1
+
+
+def test_remote_rig_turns_the_refused_flag_into_an_error() -> None:
+    """``RemoteRig`` against a rig that refuses its command: a ``RemoteError`` naming it, not a timeout."""
+    rig_sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    rig_sock.bind(("127.0.0.1", 0))
+    rig_sock.settimeout(5.0)
+    config = p.Config.from_parameters(
+        Parameters(), role=p.ROLE_CONTROL, mode=p.MODE_LOCKSTEP, watchdog_periods=5, rig="firmware"
+    )
+    sample = p.Sample(1, 0.02, 1.0, 2.0)
+
+    def firmware() -> None:
+        _, addr = rig_sock.recvfrom(4096)  # HELLO
+        rig_sock.sendto(p.encode(config, 9), addr)
+        rig_sock.sendto(p.encode(sample, 9), addr)
+        rig_sock.recvfrom(4096)  # its COMMAND 1, refused
+        rig_sock.sendto(p.encode(dataclasses.replace(sample, flags=p.FLAG_REFUSED), 9), addr)
+
+    thread = threading.Thread(target=firmware, daemon=True)
+    thread.start()
+    with RemoteRig("127.0.0.1", rig_sock.getsockname()[1], timeout_s=3.0) as rig:
+        rig.read()
+        rig.write(4.0)
+        began = time.monotonic()
+        with pytest.raises(RemoteError, match="refused COMMAND 1"):
+            rig.read()
+        assert time.monotonic() - began < 2.0
+    thread.join(5.0)
+    rig_sock.close()
+
+
+def test_a_dead_client_in_real_time_leaves_the_session_to_run_out_under_the_watchdog() -> None:
+    """Real time: a client that vanishes does not end the session; it runs to its duration with the output
+    at the zero command from the watchdog on, then STOP 0 (done)."""
+    settings = SessionSettings(
+        x0_m=0.05, duration_s=0.6, wait_client_s=10.0, mode=p.MODE_REALTIME, watchdog_periods=3
+    )
+    with _serving(settings) as (server, box):
+        raw = RawClient(server.port)
+        for _ in range(6):  # the held sample and five ticks answered, then the process is gone
+            msg = _until_sample(raw)
+            raw.send(p.Command(msg.seq, 3.0))
+        raw.close()
+    served = _session(box)
+    log = served.result.log
+    assert served.stop_reason == p.STOP_DONE
+    assert log.timem.size == update_ticks(0.6, Parameters()) + 1  # every tick of the duration
+    assert served.counts.watchdog_trips == 1
+    assert np.all(log.aout[-5:] == Parameters().amplifier.zero_command_v)
+
+
+@pytest.mark.realtime
+def test_in_real_time_a_command_in_time_takes_effect_at_the_next_boundary() -> None:
+    """Real time: the command answering SAMPLE k, received before the next period boundary however late in
+    the period, is the DAC's value for the whole of block k+1 (SAMPLE k+1's ``applied_seq`` = k): with
+    every command in time the run is the lock-step one."""
+    x0, th0 = STARTS[0]
+    settings = SessionSettings(
+        x0_m=x0, theta0_rad=th0, duration_s=1.0, wait_client_s=10.0, mode=p.MODE_REALTIME
+    )
+    controller = _build("appendix-sf", Parameters())
+    samples: list[p.Sample] = []
+    with _serving(settings) as (server, box):
+        raw = RawClient(server.port)
+        while not isinstance(msg := raw.recv().msg, p.Stop):
+            assert isinstance(msg, p.Sample)
+            samples.append(msg)
+            if msg.flags & p.FLAG_LAST:
+                continue  # real time: the last sample is not answered
+            block = DaqSample(msg.time_s, msg.ball_v, msg.angle_v)
+            if msg.seq == 0:
+                controller.start(block)
+                command = 2.5
+            else:
+                command = controller.update(block)
+            time.sleep(0.006)  # answer well into the period
+            raw.send(p.Command(msg.seq, command))
+        raw.close()
+    served = _session(box)
+    for before, after in zip(samples[1:], samples[2:], strict=False):
+        if not after.flags & p.FLAG_LATE:  # the answer to `before` came in time
+            assert after.applied_seq == before.seq
+    if served.counts.missing_commands == 0:
+        ref = run_closed_loop(_build("appendix-sf", Parameters()), x0_m=x0, theta0_rad=th0, duration_s=1.0)
+        assert _same(ref.log.true_x_m, served.result.log.true_x_m)
+
+
+@pytest.mark.quick
+def test_stop_from_an_observer_is_ignored_and_a_repeated_hello_gets_config_again() -> None:
+    settings = SessionSettings(x0_m=0.1, theta0_rad=0.0, duration_s=0.3, wait_client_s=10.0)
+    with _serving(settings) as (server, box):
+        observer = RawClient(server.port, role=p.ROLE_OBSERVE)
+        raw = RawClient(server.port)
+        raw.send(p.Hello(role=p.ROLE_OBSERVE, client="again"), 0)  # the controller's HELLO again, any role
+        frames = [raw.recv(), raw.recv()]  # the held sample and CONFIG again, in either order
+        configs = [f for f in frames if isinstance(f.msg, p.Config)]
+        assert len(configs) == 1 and configs[0].session == raw.session
+        assert configs[0].msg == raw.config  # the role first granted: control
+        observer.send(p.Stop(p.STOP_CLIENT_QUIT))  # an observer may not end the session
+        msg = next(f.msg for f in frames if isinstance(f.msg, p.Sample))
+        while True:
+            assert isinstance(msg, p.Sample)
+            raw.send(p.Command(msg.seq, 2.5))
+            if msg.flags & p.FLAG_LAST:
+                break
+            msg = _until_sample(raw)
+        assert raw.recv().msg == p.Stop(p.STOP_DONE)
+        raw.close()
+        observer.close()
+    served = _session(box)
+    assert served.stop_reason == p.STOP_DONE and served.counts.unexpected == 1

@@ -25,6 +25,7 @@ enum bb_mode { BB_MODE_LOCKSTEP = 1, BB_MODE_REALTIME = 2 };
 #define BB_FLAG_WATCHDOG 0x4u
 #define BB_FLAG_LATE 0x8u
 #define BB_FLAG_LAST 0x10u
+#define BB_FLAG_REFUSED 0x20u /* lock-step, on a repeated sample: its COMMAND was refused (not finite, out of range) */
 
 enum bb_stop_reason {
     BB_STOP_DONE = 0,

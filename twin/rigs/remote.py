@@ -163,6 +163,8 @@ class RemoteRig(OverLink, Rig):
             if isinstance(msg, p.Stop):
                 raise SessionEnded(f"{self.url} ended the session (STOP {msg.reason})", msg.reason)
             if isinstance(msg, p.Sample) and msg.seq == after and self._answered and self.last is not None:
+                if msg.flags & p.FLAG_REFUSED and self.config.role == p.ROLE_CONTROL:
+                    raise RemoteError(f"{self.url} refused COMMAND {after} (dac_v = {self.command_v!r} V)")
                 if self.config.role == p.ROLE_CONTROL:  # a repeated sample: our answer was lost, repeat it
                     self._send(p.Command(seq=after, dac_v=self.command_v), self.session)
                 continue

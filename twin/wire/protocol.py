@@ -33,6 +33,7 @@ __all__ = [
     "FLAG_WATCHDOG",
     "FLAG_LATE",
     "FLAG_LAST",
+    "FLAG_REFUSED",
     "ROLE_REFUSED",
     "ROLE_CONTROL",
     "ROLE_OBSERVE",
@@ -55,12 +56,13 @@ TYPE_HELLO, TYPE_CONFIG, TYPE_SAMPLE, TYPE_COMMAND, TYPE_STOP = 1, 2, 3, 4, 5
 ROLE_REFUSED, ROLE_CONTROL, ROLE_OBSERVE = 0, 1, 2
 MODE_LOCKSTEP, MODE_REALTIME = 1, 2
 FLAG_HELD, FLAG_BALL_LOST, FLAG_WATCHDOG, FLAG_LATE, FLAG_LAST = 1, 2, 4, 8, 16
+FLAG_REFUSED = 32  # the server refused a COMMAND carrying this sample's seq (non-finite or out of range)
 STOP_DONE, STOP_CLIENT_QUIT, STOP_BALL_LOST, STOP_ERROR, STOP_SHUTDOWN = 0, 1, 2, 3, 4
 BLOCK_LAST, BLOCK_MEAN = 0, 1  # CONFIG's ball_block / angle_block reductions
 
 _HEADER = struct.Struct("<4sBBHII")  # magic, version, type, length, seq, session
 _CRC = struct.Struct("<I")
-_HELLO = struct.Struct("<B3x32s")  # role, pad, client
+_HELLO = struct.Struct("<BxH32s")  # role, pad, reply_port (0: the sender's port), client
 _CONFIG = struct.Struct("<BBBBddI4x14d40s")  # role … angle_block, period, rate, watchdog, pad, 14 f64, rig
 _SAMPLE = struct.Struct("<dddII4x")  # time, ball, angle, flags, applied_seq, pad
 _COMMAND = struct.Struct("<d4x")  # dac_v, pad
@@ -96,6 +98,7 @@ class ProtocolError(ValueError):
 class Hello:
     role: int = ROLE_CONTROL
     client: str = ""
+    reply_port: int = 0  # UDP: the server sends to the HELLO's host at this port; 0: to the sender's port
 
 
 @dataclass(frozen=True)
@@ -189,7 +192,7 @@ def encode(msg: Message, session: int) -> bytes:
     """One frame of ``msg`` in session ``session`` (a u32)."""
     seq = 0
     if isinstance(msg, Hello):
-        kind, payload = TYPE_HELLO, _HELLO.pack(msg.role, _text(msg.client, _TEXT_HELLO))
+        kind, payload = TYPE_HELLO, _HELLO.pack(msg.role, msg.reply_port, _text(msg.client, _TEXT_HELLO))
     elif isinstance(msg, Config):
         sw = [float(getattr(msg.software, name)) for name in _SOFTWARE_FIELDS]
         kind = TYPE_CONFIG
@@ -245,10 +248,10 @@ def decode_frame(data: bytes) -> Frame:
     values = _PAYLOADS[kind].unpack_from(data, _HEADER.size)
     msg: Message
     if kind == TYPE_HELLO:
-        role, client = values
+        role, reply_port, client = values
         if role not in (ROLE_CONTROL, ROLE_OBSERVE):
             raise ProtocolError(f"HELLO role {role}: expected 1 control or 2 observe")
-        msg = Hello(role=role, client=_untext(client))
+        msg = Hello(role=role, client=_untext(client), reply_port=reply_port)
     elif kind == TYPE_CONFIG:
         role, mode, ball_block, angle_block, period_s, rate_hz, watchdog = values[:7]
         if role not in (ROLE_REFUSED, ROLE_CONTROL, ROLE_OBSERVE):

@@ -31,7 +31,7 @@ import secrets
 import sys
 import time
 from collections.abc import Callable, Hashable
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 
 from twin.engine import ENDED_BALL_LOST, ClosedLoop, ControllerError, RunResult, update_ticks
 from twin.interface import Controller, DaqSample
@@ -39,7 +39,7 @@ from twin.parameters import Parameters
 from twin.realtime import TickTiming, WallClockPacer
 from twin.rigs.sim import PlantKind, SimRig, make_rig
 from twin.wire import protocol as p
-from twin.wire.links import Link, LinkError, OverLink, UdpLink
+from twin.wire.links import Link, LinkError, OverLink, SerialCounts, SerialLink, UdpLink
 
 __all__ = [
     "DEFAULT_TIMEOUT_S",
@@ -128,6 +128,7 @@ class SessionResult:
     counts: SessionCounts
     client: str
     timing: TickTiming | None = None
+    serial: SerialCounts | None = None  # a serial line: what its reader threw away during the session
 
     def summary(self) -> dict[str, object]:
         out: dict[str, object] = {
@@ -138,7 +139,17 @@ class SessionResult:
         }
         if self.timing is not None:
             out["realtime"] = self.timing.to_json()
+        if self.serial is not None:
+            out["serial"] = self.serial.to_json()
         return out
+
+
+def _reply_to(addr: Hashable, reply_port: int) -> Hashable:
+    """Where a client that said HELLO from ``addr`` is sent to: ``addr``, or its host at ``reply_port`` (UDP;
+    a client whose sending and receiving sockets differ, as Simulink's UDP Send and Receive blocks)."""
+    if reply_port and isinstance(addr, tuple):
+        return (addr[0], reply_port, *addr[2:])
+    return addr
 
 
 class _SessionOver(Exception):
@@ -216,6 +227,7 @@ class Server(OverLink):
         self.controller_addr: Hashable | None = None
         self.client_name = ""
         self.observers: list[Hashable] = []
+        self._reply: dict[Hashable, Hashable] = {}  # an admitted client's address → where it is sent to
         self._seq = 0
         self._n_ticks = 0
         self._rig: SimRig | None = None
@@ -226,6 +238,9 @@ class Server(OverLink):
         self._watchdog = False
         self._end: tuple[int, str] | None = None
         self._resend_at: float | None = None  # when the latest sample is repeated (set by its first wait)
+        self._refused_seq: int | None = None  # the latest sample's seq once an answer to it was refused
+        link = getattr(self, "link", None)
+        self._serial_at_start = replace(link.counts) if isinstance(link, SerialLink) else None
 
     def _new_session(self) -> None:
         """A new session id (the previous session's late datagrams are dropped), counts and clients reset."""
@@ -277,7 +292,15 @@ class Server(OverLink):
             raise ServeError(f"the session ended before the client acknowledged the held sample: {detail}")
         result = loop.result(x0_m=s.x0_m)
         timing = pacer.timing() if pacer is not None else None
-        return SessionResult(result, reason, detail, self.counts, self.client_name, timing)
+        serial = self._serial_counts()
+        return SessionResult(result, reason, detail, self.counts, self.client_name, timing, serial)
+
+    def _serial_counts(self) -> SerialCounts | None:
+        """A serial line's reader counts since this session began (``None`` on UDP)."""
+        if not isinstance(self.link, SerialLink) or self._serial_at_start is None:
+            return None
+        now, then = asdict(self.link.counts), asdict(self._serial_at_start)
+        return SerialCounts(**{name: now[name] - then[name] for name in now})
 
     # --- a session another loop drives (the live view: twin.viewer.wire) ----------------------------
     def open_session(self, rig: SimRig) -> None:
@@ -294,8 +317,10 @@ class Server(OverLink):
         return self._watchdog
 
     def _peers(self) -> list[Hashable]:
-        """Who receives this session's samples and STOP: the controller (once it said HELLO), the observers."""
-        return ([self.controller_addr] if self.controller_addr else []) + self.observers
+        """Where this session's samples and STOP go: the controller (once it said HELLO), the observers (each
+        at its HELLO's address, or that host's reply port if its HELLO named one)."""
+        admitted = ([self.controller_addr] if self.controller_addr else []) + self.observers
+        return [self._reply.get(addr, addr) for addr in admitted]
 
     def stop_clients(self, reason: int) -> None:
         """STOP ``reason`` to the controller and the observers of this session."""
@@ -353,25 +378,28 @@ class Server(OverLink):
         daq = self.settings.params.daq
         if not (math.isfinite(msg.dac_v) and daq.dac_min_v <= msg.dac_v <= daq.dac_max_v):
             c.refused_commands += 1  # not an answer: the DAC keeps its last value, the wait goes on
+            self._refused_seq = msg.seq  # the sample's 0.2 s repeats tell the client (the refused flag)
             return None
         return msg
 
     def _hello(self, msg: p.Hello, addr: Hashable) -> None:
         c = self.counts
-        if addr == self.controller_addr:  # a repeated HELLO: our CONFIG was lost
-            self._send(self._config(p.ROLE_CONTROL), addr)
+        if addr == self.controller_addr:  # a repeated HELLO: our CONFIG was lost (the first reply port stays)
+            self._send(self._config(p.ROLE_CONTROL), self._reply[addr])
         elif addr in self.observers:
-            self._send(self._config(p.ROLE_OBSERVE), addr)
+            self._send(self._config(p.ROLE_OBSERVE), self._reply[addr])
         elif msg.role == p.ROLE_CONTROL and self.controller_addr is None:
             self.controller_addr, self.client_name = addr, msg.client
-            self._send(self._config(p.ROLE_CONTROL), addr)
+            self._reply[addr] = _reply_to(addr, msg.reply_port)
+            self._send(self._config(p.ROLE_CONTROL), self._reply[addr])
         elif msg.role == p.ROLE_OBSERVE and len(self.observers) < MAX_OBSERVERS:
             self.observers.append(addr)
+            self._reply[addr] = _reply_to(addr, msg.reply_port)
             c.observers += 1
-            self._send(self._config(p.ROLE_OBSERVE), addr)
+            self._send(self._config(p.ROLE_OBSERVE), self._reply[addr])
         else:
             c.refused_clients += 1
-            self._send(self._config(p.ROLE_REFUSED), addr)
+            self._send(self._config(p.ROLE_REFUSED), _reply_to(addr, msg.reply_port))
 
     # --- one block out, one command back ------------------------------------------------------------
     # The pieces of one tick's exchange (``send_sample``, ``await_command``, ``accept``, ``missed``) are
@@ -421,6 +449,7 @@ class Server(OverLink):
         for addr in self._peers():
             self._send(out, addr)
         self._resend_at = None
+        self._refused_seq = None
         return out
 
     def await_command(
@@ -433,7 +462,9 @@ class Server(OverLink):
     ) -> p.Command | p.Stop | None:
         """Handle datagrams until ``deadline`` (on ``clock``): the controller's valid COMMAND answering ``out``
         (the latest sample) or its STOP, else ``None``. With ``resend`` (lock-step, a held sample), ``out``
-        is repeated every 0.2 s meanwhile; a caller may wait for one sample in several calls."""
+        is repeated every 0.2 s meanwhile, with the refused flag once a COMMAND answering it was refused (the
+        client learns it from the next repeat, not the timeout); a caller may wait for one sample in several
+        calls."""
         if self._resend_at is None:
             self._resend_at = clock() + _RESEND_S
         while True:
@@ -442,7 +473,10 @@ class Server(OverLink):
             if left <= 0:
                 return None
             if resend and now >= self._resend_at and self.controller_addr is not None:
-                self._send(out, self.controller_addr)  # the sample or its answer may have been lost
+                # the sample or its answer may have been lost, or its answer refused (then flagged so)
+                refused = self._refused_seq == out.seq
+                again = replace(out, flags=out.flags | p.FLAG_REFUSED) if refused else out
+                self._send(again, self._reply[self.controller_addr])
                 self.counts.resent_samples += 1
                 self._resend_at = now + _RESEND_S
             got = self.receive(min(left, max(self._resend_at - now, 1e-4)) if resend else left)

@@ -153,8 +153,6 @@ def run(args: argparse.Namespace) -> int:
         **session.summary(),
         **session.result.verdict.to_json(),
     }
-    if isinstance(server.link, SerialLink):  # what the serial reader threw away before a frame existed
-        summary["serial"] = server.link.counts.to_json()
     if args.json:
         print(json.dumps(summary))
     else:
