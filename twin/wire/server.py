@@ -363,7 +363,7 @@ class Server(OverLink):
         elif addr in self.observers:
             self._send(self._config(p.ROLE_OBSERVE), addr)
         elif msg.role == p.ROLE_CONTROL and self.controller_addr is None:
-            self.controller_addr, self.client_name = addr, msg.client
+            self.controller_addr, self.client_name = addr, p.printable(msg.client)  # printed: escaped
             self._send(self._config(p.ROLE_CONTROL), addr)
         elif msg.role == p.ROLE_OBSERVE and len(self.observers) < MAX_OBSERVERS:
             self.observers.append(addr)
