@@ -693,10 +693,10 @@ class ClosedLoop:
                 self.tick()
                 if pacer is not None:
                     pacer.done()
+                if rig.is_last:  # the rig ends the session (also when it stops on a lost ball)
+                    return ENDED_LAST_SAMPLE
                 if stop_when_lost and rig.ball_lost:
                     return ENDED_BALL_LOST
-                if rig.is_last:
-                    return ENDED_LAST_SAMPLE
         except RigEnded as exc:
             return str(exc)
         return ENDED_TICKS
@@ -820,10 +820,14 @@ def run_on_rig(
     controller_timeout_s: float | None = None,
 ) -> RunResult:
     """``controller`` on a rig that runs its own session (a ``RemoteRig``: the served twin, a rig's firmware)
-    until the sample flagged last, a STOP or the rig going silent: the one loop, timed, judged from the
-    measured volts unless the rig gives the true state. ``params``: the rig's description (default
-    ``rig.parameters()``)."""
+    until the sample flagged last, the first sample the rig reports the ball lost on, a STOP or the rig going
+    silent: the one loop, timed, judged from the measured volts unless the rig gives the true state.
+    ``params``: the rig's description (default ``rig.parameters()``).
+
+    A rig that stops on a lost ball flags that sample last as well: the run ends ``ENDED_LAST_SAMPLE`` after
+    answering it, as the rig expects. One that reports the ball lost and goes on ends ``ENDED_BALL_LOST``,
+    also after answering that sample: the caller then tells the rig the session is over (``RemoteRig.stop``
+    with ``STOP_BALL_LOST``: ``twin.rigs.session``), so that it does not wait for the next command."""
     loop = ClosedLoop(rig, controller, params=params, controller_timeout_s=controller_timeout_s, timed=True)
-    # The rig ends the session (its last sample after a lost ball, when it stops on one): the loop follows.
-    ended = loop.run(None, stop_when_lost=False)
+    ended = loop.run(None, stop_when_lost=True)
     return loop.result(ended)

@@ -6,6 +6,17 @@ The handshake repeats HELLO until CONFIG comes (bounded: ``connect_timeout_s``);
 ``timeout_s`` for the next SAMPLE; a server that disappears is a ``RemoteError`` within that time, never a
 hang. A sample that has not been answered when the next is read (the held block that ``start`` reads) is
 acknowledged with the command the DAC holds, as the protocol's session requires.
+
+The server is a boundary, as a file is: what it sends is checked on arrival, and what is wrong with it is a
+``RemoteError`` naming the rig, the message, the field and its value (the rig's fault, not the controller's):
+
+* CONFIG: every field in its documented range (``twin.wire.protocol`` decodes it so), the role the one asked
+  for. A CONFIG refused for a field ends the handshake at once; CONFIG frames refused otherwise (a CRC that
+  does not match) are counted, and a handshake that gets no acceptable one says how many came.
+* SAMPLE: a finite ``time_s`` on the session's grid (``check_time``), ball and angle volts finite and within the
+  ADC's range (the client's ``daq.adc_min_v`` … ``daq.adc_max_v``: CONFIG does not carry it). A bad sample is
+  answered with STOP 3 (error), so that the rig does not wait for a command that will not come.
+* Missing sequence numbers are counted (``sequence_gaps``).
 """
 
 from __future__ import annotations
@@ -16,13 +27,15 @@ from typing import Any
 from urllib.parse import urlsplit
 
 from twin.interface import DaqSample, Rig, RigEnded
-from twin.parameters import Parameters, SoftwareCalibration
+from twin.parameters import Daq, Parameters, SoftwareCalibration
 from twin.rigs.sim import RigError
 from twin.wire import protocol as p
 from twin.wire.links import Link, LinkError, OverLink, UdpLink, open_link, parse_url
 
 __all__ = [
     "HELLO_INTERVAL_S",
+    "LATE_PERIODS",
+    "TIME_TOLERANCE_PERIODS",
     "RemoteError",
     "RemoteRig",
     "Refused",
@@ -32,6 +45,13 @@ __all__ = [
 ]
 
 HELLO_INTERVAL_S = 0.2  # the doc's HELLO repetition (a client's and an observer's)
+# SAMPLE k's time_s is due at t0 + (k - k0)·period_s, (k0, t0) the session's first sample. It may come this
+# fraction of a period off that grid either way (a rig's clock rounding; the twin's is exact) ...
+TIME_TOLERANCE_PERIODS = 0.01
+# ... and, in real time (CONFIG mode 2), up to this many periods late (a timer that fired late: the blocks
+# keep their seq, a later one is back on the grid). Never earlier, never backwards.
+LATE_PERIODS = 25
+_ROLES = {p.ROLE_REFUSED: "refused", p.ROLE_CONTROL: "control", p.ROLE_OBSERVE: "observe"}
 
 
 class RemoteError(RigError, RigEnded):
@@ -88,8 +108,13 @@ class RemoteRig(OverLink, Rig):
         client: str = "ballbeam-twin RemoteRig",
         connect_timeout_s: float = 5.0,
         timeout_s: float = 5.0,
+        adc_range_v: tuple[float, float] | None = None,
     ) -> None:
+        """``adc_range_v``: the card's analog input range, which SAMPLE volts must lie in (default the
+        thesis's card, ``twin.parameters.Daq``'s; ``run --rig`` gives its parameters')."""
         self.timeout_s = timeout_s
+        daq = Daq()
+        self.adc_range_v = adc_range_v if adc_range_v is not None else (daq.adc_min_v, daq.adc_max_v)
         if link is None:
             try:
                 link = UdpLink.connect(host, port)
@@ -98,6 +123,12 @@ class RemoteRig(OverLink, Rig):
         self.link: Link = link
         self.url = link.url
         self.counts_malformed = 0
+        self.configs_received = 0  # CONFIG frames (valid or not) that came during the handshake
+        self.configs_refused = 0  # ... of which this client refused
+        self.sequence_gaps = 0  # seq numbers that never arrived (a lost block)
+        self._config_problem = ""  # why the latest CONFIG was refused
+        self._config_field_error = False  # ... and whether for a field (an intact frame)
+        self._first: p.Sample | None = None  # the session's first sample: the anchor of the time grid
         try:
             self.config, self.session = self._handshake(role, client, connect_timeout_s)
         except RemoteError:
@@ -115,11 +146,21 @@ class RemoteRig(OverLink, Rig):
         got = self.link.recv(wait_s)
         if got is None:
             return None
+        data = got[0]
         try:
-            return p.decode_frame(got[0])
-        except p.ProtocolError:
+            return p.decode_frame(data)
+        except p.ProtocolError as exc:
             self.counts_malformed += 1
-            return None
+            if len(data) > 5 and data[:4] == p.MAGIC and data[5] == p.TYPE_CONFIG:
+                self.configs_received += 1
+                self.configs_refused += 1
+                self._config_problem = str(exc)
+                # intact (its CRC matched) but a field out of its range: the rig's fault, not the line's
+                self._config_field_error = isinstance(exc, p.FieldError)
+        return None
+
+    def _config_counts(self) -> str:
+        return f"{self.configs_received} CONFIG received, {self.configs_refused} refused"
 
     def _handshake(self, role: int, client: str, timeout_s: float) -> tuple[p.Config, int]:
         deadline = time.monotonic() + timeout_s
@@ -129,10 +170,29 @@ class RemoteRig(OverLink, Rig):
                 self._send(p.Hello(role=role, client=client), 0)
                 next_hello = now + HELLO_INTERVAL_S
             frame = self._recv(min(next_hello, deadline) - time.monotonic())
+            if self._config_field_error:
+                raise RemoteError(
+                    f"{self.url} sent a CONFIG this client refuses: {self._config_problem} — the rig's fault "
+                    f"({self._config_counts()})"
+                )
             if frame is not None and isinstance(frame.msg, p.Config):
-                if frame.msg.role == p.ROLE_REFUSED:
+                self.configs_received += 1
+                granted = frame.msg.role
+                if granted == p.ROLE_REFUSED:
                     raise Refused(f"{self.url} refused this client (another client controls the rig)")
+                if granted != role:
+                    self.configs_refused += 1
+                    raise RemoteError(
+                        f"{self.url} granted the role {granted} ({_ROLES.get(granted)}) to a HELLO asking for "
+                        f"{role} ({_ROLES.get(role, '?')}): CONFIG role = {granted} — the rig's fault "
+                        f"({self._config_counts()})"
+                    )
                 return frame.msg, frame.session
+        if self.configs_received:
+            raise RemoteError(
+                f"no acceptable CONFIG from {self.url} within {timeout_s:g} s: {self._config_counts()} "
+                f"(the latest: {self._config_problem}) — the rig's fault"
+            )
         raise RemoteError(f"no CONFIG from {self.url} within {timeout_s:g} s: is `ballbeam serve` running?")
 
     # --- the Rig interface ---------------------------------------------------------------------------
@@ -164,15 +224,67 @@ class RemoteRig(OverLink, Rig):
                 raise SessionEnded(f"{self.url} ended the session (STOP {msg.reason})", msg.reason)
             if isinstance(msg, p.Sample) and msg.seq == after and self._answered and self.last is not None:
                 if msg.flags & p.FLAG_REFUSED and self.config.role == p.ROLE_CONTROL:
+                    self.stop()  # the session ends here: the rig does not wait out its timeout for us
                     raise RemoteError(f"{self.url} refused COMMAND {after} (dac_v = {self.command_v!r} V)")
                 if self.config.role == p.ROLE_CONTROL:  # a repeated sample: our answer was lost, repeat it
                     self._send(p.Command(seq=after, dac_v=self.command_v), self.session)
                 continue
             if isinstance(msg, p.Sample) and msg.seq > after:
+                self._check_sample(msg)
+                self.sequence_gaps += msg.seq - after - 1
+                if self._first is None:
+                    self._first = msg
                 self.last = msg
                 self._answered = self.config.role != p.ROLE_CONTROL
                 return DaqSample(time_s=msg.time_s, ball_v=msg.ball_v, angle_v=msg.angle_v)
         raise RemoteError(f"no SAMPLE from {self.url} within {self.timeout_s:g} s: the server is gone")
+
+    # --- the checks on arrival ------------------------------------------------------------------------
+    def _check_sample(self, msg: p.Sample) -> None:
+        """``msg`` (the next SAMPLE) as the protocol says, else STOP 3 and a ``RemoteError`` naming it."""
+        lo, hi = self.adc_range_v
+        problem = ""
+        for name, value in (("ball_v", msg.ball_v), ("angle_v", msg.angle_v)):
+            if not math.isfinite(value):
+                problem = f"{name} = {value!r} V: not a finite number"
+            elif not lo <= value <= hi:
+                problem = f"{name} = {value!r} V: outside the ADC's range {lo!r} … {hi!r} V"
+            if problem:
+                break
+        problem = self.check_time(msg) or problem
+        if problem:
+            self.stop(p.STOP_ERROR)  # the rig is not left waiting for the command of a sample we refuse
+            kept = "nothing logged" if self.last is None else f"the log up to SAMPLE {self.last.seq} is kept"
+            raise RemoteError(f"{self.url} sent SAMPLE {msg.seq} with {problem} — the rig's fault ({kept})")
+
+    def check_time(self, msg: p.Sample) -> str:
+        """What is wrong with SAMPLE ``msg``'s ``time_s`` ('' nothing): not finite; not after the previous
+        sample's; off the session's grid t0 + (k − k0)·period_s (the first sample's k0, t0) by more than
+        ``TIME_TOLERANCE_PERIODS`` of a period early, or late by more than that in lock-step and more than
+        ``LATE_PERIODS`` periods in real time."""
+        t = msg.time_s
+        if not math.isfinite(t):
+            return f"time_s = {t!r} s: not a finite number"
+        prev, first = self.last, self._first
+        if prev is None or first is None:
+            return ""
+        if not t > prev.time_s:
+            return f"time_s = {t!r} s: not after SAMPLE {prev.seq}'s {prev.time_s!r} s (time runs backwards)"
+        period = self.config.period_s
+        due = first.time_s + (msg.seq - first.seq) * period
+        tol = TIME_TOLERANCE_PERIODS * period
+        late = LATE_PERIODS * period if self.config.mode == p.MODE_REALTIME else 0.0
+        if t < due - tol:
+            return (
+                f"time_s = {t!r} s: earlier than its due time {due!r} s (SAMPLE {first.seq} + whole periods)"
+            )
+        if t > due + late + tol:
+            allowed = f"{LATE_PERIODS} periods" if late else "none in lock-step"
+            return (
+                f"time_s = {t!r} s: {(t - due) / period:.6g} periods after its due time {due!r} s "
+                f"(SAMPLE {first.seq} + whole periods; late allowed: {allowed})"
+            )
+        return ""
 
     def write(self, command_v: float) -> None:
         """COMMAND answering the latest sample (the DAC then holds ``command_v``)."""

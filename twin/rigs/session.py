@@ -24,9 +24,17 @@ MakeController = Callable[["Parameters"], object]
 OnRun = Callable[[int, "RunResult", dict[str, Any]], None]
 
 
-def connect(url: str, client: str, wait_s: float, *, retry_refused: bool) -> RemoteRig:
+def connect(
+    url: str,
+    client: str,
+    wait_s: float,
+    *,
+    retry_refused: bool,
+    adc_range_v: tuple[float, float] | None = None,
+) -> RemoteRig:
     """``open_remote`` within ``wait_s``; ``retry_refused``: a refusal (the rig is still another session's,
-    e.g. a dead client's waiting out its timeout) is asked again until then."""
+    e.g. a dead client's waiting out its timeout) is asked again until then. ``adc_range_v``: the card's
+    analog input range that the samples' volts are checked against (``RemoteRig``)."""
     import time
 
     from twin.rigs.remote import Refused, open_remote
@@ -34,7 +42,12 @@ def connect(url: str, client: str, wait_s: float, *, retry_refused: bool) -> Rem
     deadline = time.monotonic() + wait_s
     while True:
         try:
-            return open_remote(url, client=client, connect_timeout_s=max(deadline - time.monotonic(), 0.2))
+            return open_remote(
+                url,
+                client=client,
+                connect_timeout_s=max(deadline - time.monotonic(), 0.2),
+                adc_range_v=adc_range_v,
+            )
         except Refused:
             if not retry_refused or time.monotonic() >= deadline:
                 raise
@@ -63,7 +76,11 @@ def run_on_remote_rig(
     done, ok = 0, True
     while sessions == 0 or done < sessions:
         try:
-            rig = connect(url, f"ballbeam run {name}"[:32], wait_s, retry_refused=many)
+            adc = (
+                params.daq.adc_min_v,
+                params.daq.adc_max_v,
+            )  # not in CONFIG: the card's as the client knows it
+            rig = connect(url, f"ballbeam run {name}"[:32], wait_s, retry_refused=many, adc_range_v=adc)
         except RemoteError as exc:
             if sessions == 0 and done:  # the server has no further session: the job is over
                 break
@@ -96,9 +113,10 @@ def remote_session(
 ) -> tuple[bool, RunResult | None, dict[str, Any]] | None:
     """One session of ``run --rig`` on the open ``rig``: (held, the run or None if the controller failed,
     the summary); None when the controller cannot drive a rig (reported)."""
-    from twin.engine import ENDED_LAST_SAMPLE, ControllerError, run_on_rig
+    from twin.engine import ENDED_BALL_LOST, ENDED_LAST_SAMPLE, ControllerError, run_on_rig
     from twin.interface import Controller
     from twin.rigs.remote import RemoteError
+    from twin.wire.protocol import STOP_BALL_LOST, printable
 
     rig_params = rig.parameters(params)  # the rig's period, DAC and software calibration
     controller = make_controller(rig_params)
@@ -115,7 +133,11 @@ def remote_session(
         rig.stop()
         print(f"ballbeam run: the controller failed: {exc}", file=sys.stderr)
         return False, None, {}
-    if many and run.ended == ENDED_LAST_SAMPLE:
+    if run.ended == ENDED_BALL_LOST:
+        # The rig reported the ball lost without ending the session (a rig that stops on a lost ball flags that
+        # sample last): its sample is answered; the session ends here, and the rig is told so.
+        rig.stop(STOP_BALL_LOST)
+    if many and run.ended in (ENDED_LAST_SAMPLE, ENDED_BALL_LOST):
         # Wait for the server's STOP (answering a repeated last sample): the next HELLO then reaches the next
         # session, not this one, which would refuse a second controller.
         try:
@@ -128,10 +150,11 @@ def remote_session(
     summary = {
         "controller": name,
         "rig": url,
-        "rig_identity": rig.config.rig,
+        "rig_identity": printable(rig.config.rig),  # the rig's own words: escaped, a terminal is not its
         "ticks": int(run.log.timem.size),
         "ended": run.ended,
         "ball_lost": rig.ball_lost,
+        "sequence_gaps": rig.sequence_gaps,  # seq numbers that never arrived (blocks lost on the way)
         "verdict_source": "measured (the rig's volts through its calibration: ballbeam judge)",
         **verdict.to_json(),
         **({} if run.timing is None else {"realtime": run.timing.to_json()}),

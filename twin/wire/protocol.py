@@ -14,8 +14,9 @@ import math
 import struct
 import zlib
 from dataclasses import dataclass, field
+from typing import Any
 
-from twin.parameters import Parameters, SoftwareCalibration
+from twin.parameters import Daq, Parameters, SoftwareCalibration
 
 __all__ = [
     "MAGIC",
@@ -47,6 +48,8 @@ __all__ = [
     "decode",
     "decode_frame",
     "encode",
+    "FieldError",
+    "printable",
 ]
 
 MAGIC = b"BBTW"
@@ -92,6 +95,33 @@ _SOFTWARE_FIELDS = tuple(f.name for f in dataclasses.fields(SoftwareCalibration)
 
 class ProtocolError(ValueError):
     """Bytes that are not one valid frame of protocol 1; the message names what is wrong."""
+
+
+class FieldError(ProtocolError):
+    """An intact frame (its CRC matches) whose field is outside its documented range: the sender's fault,
+    not the line's. The message names the message type, the field and its value."""
+
+
+NAME_LIMIT = 80  # the longest name ``printable`` returns (a name on the wire is 32 or 40 bytes)
+
+
+def printable(name: str, limit: int = NAME_LIMIT) -> str:
+    """A name received from the network (a HELLO's client, a CONFIG's rig) fit to print or put in a summary:
+    printable ASCII kept, a backslash doubled, anything else (control characters, terminal escapes, a byte the
+    ASCII decoding replaced) shown as ``\\xNN`` / ``\\uNNNN``, the result cut to ``limit`` characters
+    (``...`` at the end when cut). One line, no escape sequence can reach a terminal through it."""
+    out = []
+    for c in name:
+        if c == "\\":
+            out.append("\\\\")
+        elif " " <= c <= "~":
+            out.append(c)
+        elif ord(c) < 0x100:
+            out.append(f"\\x{ord(c):02x}")
+        else:
+            out.append(f"\\u{ord(c):04x}")
+    text = "".join(out)
+    return text if len(text) <= limit else text[: max(limit - 3, 0)] + "..."
 
 
 @dataclass(frozen=True)
@@ -146,7 +176,8 @@ class Config:
             "amplifier.zero_command_v": self.zero_command_v,
         }
         overrides.update({f"software.{name}": getattr(self.software, name) for name in _SOFTWARE_FIELDS})
-        return (base or Parameters()).with_overrides(overrides, origin=f"CONFIG of {self.rig or 'the rig'}")
+        origin = f"CONFIG of {printable(self.rig) or 'the rig'}"  # a rig's name reaches messages escaped
+        return (base or Parameters()).with_overrides(overrides, origin=origin)
 
 
 @dataclass(frozen=True)
@@ -223,6 +254,69 @@ def encode(msg: Message, session: int) -> bytes:
     return body + _CRC.pack(zlib.crc32(body))
 
 
+# CONFIG's doubles in wire order (offsets 20, 28, then 44…148): their names for a refusal's message.
+_CONFIG_FLOATS = ("period_s", "sample_rate_hz", "dac_min_v", "dac_max_v", "zero_command_v", *_SOFTWARE_FIELDS)
+_BLOCKS = {BLOCK_LAST: "the block's last sample", BLOCK_MEAN: "the block's mean"}
+
+
+def _config_field(name: str, value: object, why: str) -> FieldError:
+    return FieldError(f"CONFIG {name} = {value!r}: {why}")
+
+
+def _decode_config(values: tuple[Any, ...]) -> Config:
+    """CONFIG's payload, each field checked against its documented range (docs/protocol.md): a ``FieldError``
+    naming the first field out of it. The DAQ fields get ``twin.parameters.Daq``'s ranges, the calibration
+    ``SoftwareCalibration``'s; the zero command and the software's command limits must be DAC values."""
+    role, mode, ball_block, angle_block, period_s, rate_hz, watchdog = values[:7]
+    if role not in (ROLE_REFUSED, ROLE_CONTROL, ROLE_OBSERVE):
+        raise _config_field("role", role, "expected 0 refused, 1 control or 2 observe")
+    if mode not in (MODE_LOCKSTEP, MODE_REALTIME):
+        raise _config_field("mode", mode, "expected 1 lock-step or 2 real time")
+    for name, block in (("ball_block", ball_block), ("angle_block", angle_block)):
+        if block not in _BLOCKS:
+            raise _config_field(
+                name, block, "an undefined block reduction (0 the block's last sample, 1 its mean)"
+            )
+    floats = (period_s, rate_hz, *values[7:21])
+    for name, value in zip(_CONFIG_FLOATS, floats, strict=True):
+        if not math.isfinite(value):
+            raise _config_field(name, value, "not a finite number")
+    if watchdog < 1:
+        raise _config_field("watchdog_periods", watchdog, "expected at least 1 period")
+    dac_min_v, dac_max_v, zero_v = values[7:10]
+    try:
+        Daq(period_s=period_s, sample_rate_hz=rate_hz, dac_min_v=dac_min_v, dac_max_v=dac_max_v)
+    except ValueError as exc:  # twin.parameters.ParameterError: its message names daq.<field> and the value
+        raise FieldError(f"CONFIG refused: {exc}") from None
+    try:
+        software = SoftwareCalibration(**dict(zip(_SOFTWARE_FIELDS, values[10:21], strict=True)))
+    except ValueError as exc:  # twin.parameters.ParameterError: a calibration out of its range
+        raise FieldError(f"CONFIG calibration refused: {exc}") from None
+    dac = f"outside the DAC range dac_min_v … dac_max_v = {dac_min_v!r} … {dac_max_v!r} V"
+    for name, value in (
+        ("zero_command_v", zero_v),
+        ("command_zero_v", software.command_zero_v),
+        ("command_low_v", software.command_low_v),
+        ("command_high_v", software.command_high_v),
+    ):
+        if not dac_min_v <= value <= dac_max_v:
+            raise _config_field(name, value, dac)
+    return Config(
+        role=role,
+        mode=mode,
+        period_s=period_s,
+        sample_rate_hz=rate_hz,
+        watchdog_periods=watchdog,
+        dac_min_v=dac_min_v,
+        dac_max_v=dac_max_v,
+        zero_command_v=zero_v,
+        software=software,
+        rig=_untext(values[21]),
+        ball_block=ball_block,
+        angle_block=angle_block,
+    )
+
+
 def decode_frame(data: bytes) -> Frame:
     """The message and session of one frame; a ``ProtocolError`` naming the first thing wrong."""
     n = len(data)
@@ -253,33 +347,7 @@ def decode_frame(data: bytes) -> Frame:
             raise ProtocolError(f"HELLO role {role}: expected 1 control or 2 observe")
         msg = Hello(role=role, client=_untext(client), reply_port=reply_port)
     elif kind == TYPE_CONFIG:
-        role, mode, ball_block, angle_block, period_s, rate_hz, watchdog = values[:7]
-        if role not in (ROLE_REFUSED, ROLE_CONTROL, ROLE_OBSERVE):
-            raise ProtocolError(f"CONFIG role {role}: expected 0, 1 or 2")
-        if mode not in (MODE_LOCKSTEP, MODE_REALTIME):
-            raise ProtocolError(f"CONFIG mode {mode}: expected 1 lock-step or 2 real time")
-        floats = values[7:21]
-        if not all(math.isfinite(v) for v in (period_s, rate_hz, *floats)):
-            raise ProtocolError("CONFIG carries a non-finite number")
-        dac_min_v, dac_max_v, zero_v = floats[:3]
-        try:
-            software = SoftwareCalibration(**dict(zip(_SOFTWARE_FIELDS, floats[3:], strict=True)))
-        except ValueError as exc:  # twin.parameters.ParameterError: a calibration out of its range
-            raise ProtocolError(f"CONFIG calibration refused: {exc}") from None
-        msg = Config(
-            role=role,
-            mode=mode,
-            period_s=period_s,
-            sample_rate_hz=rate_hz,
-            watchdog_periods=watchdog,
-            dac_min_v=dac_min_v,
-            dac_max_v=dac_max_v,
-            zero_command_v=zero_v,
-            software=software,
-            rig=_untext(values[21]),
-            ball_block=ball_block,
-            angle_block=angle_block,
-        )
+        msg = _decode_config(values)
     elif kind == TYPE_SAMPLE:
         time_s, ball_v, angle_v, flags, applied = values
         msg = Sample(seq=seq, time_s=time_s, ball_v=ball_v, angle_v=angle_v, flags=flags, applied_seq=applied)

@@ -389,7 +389,7 @@ class Server(OverLink):
         elif addr in self.observers:
             self._send(self._config(p.ROLE_OBSERVE), self._reply[addr])
         elif msg.role == p.ROLE_CONTROL and self.controller_addr is None:
-            self.controller_addr, self.client_name = addr, msg.client
+            self.controller_addr, self.client_name = addr, p.printable(msg.client)  # printed: escaped
             self._reply[addr] = _reply_to(addr, msg.reply_port)
             self._send(self._config(p.ROLE_CONTROL), self._reply[addr])
         elif msg.role == p.ROLE_OBSERVE and len(self.observers) < MAX_OBSERVERS:
