@@ -50,7 +50,7 @@ from twin.learning import (
     reward,
 )
 from twin.parameters import Parameters
-from twin.physics import check_initial_state
+from twin.physics import check_initial_state, check_on_track
 from twin.rigs.sim import PlantKind, make_rig
 from twin.rigs.vector import VectorBlocks, VectorRig
 from twin.verdict import Criteria, Trace
@@ -144,8 +144,8 @@ def make_config(
     for name, (lo, hi), bound in (("x0_range_m", x0r, half), ("theta0_range_rad", th0r, stop)):
         if max(abs(lo), abs(hi)) > bound:
             raise ValueError(f"{name} = {(lo, hi)}: beyond the rig (|value| ≤ {bound:.4f})")
-    if max(abs(spr[0]), abs(spr[1])) > half:
-        raise ValueError(f"setpoint_range_m = {spr}: off the track (|x| ≤ {half} m)")
+    for end in spr:
+        check_on_track(base, "setpoint_range_m", end)
     start_list: tuple[tuple[float, float], ...] = ()
     if starts is not None:
         try:
@@ -229,8 +229,7 @@ def draw_episode(cfg: EnvConfig, rng: np.random.Generator, options: Mapping[str,
     th0 = _finite("theta0_rad", opts.get("theta0_rad", th0))
     setpoint = _finite("setpoint_m", opts.get("setpoint_m", setpoint))
     check_initial_state(params, x0, th0, 0.0, 0.0)
-    if abs(setpoint) > params.track.half_length_m:
-        raise ValueError(f"setpoint_m = {setpoint!r} is off the track (|x| ≤ {params.track.half_length_m} m)")
+    check_on_track(params, "setpoint_m", setpoint)
     return Episode(params, x0, th0, setpoint, seed)
 
 
