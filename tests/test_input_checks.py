@@ -8,7 +8,9 @@ from __future__ import annotations
 import os
 import threading
 from pathlib import Path
+from typing import Any
 
+import numpy as np
 import pytest
 from cli_checks import refused
 
@@ -154,3 +156,133 @@ def test_a_spread_of_the_period_is_refused_before_the_nominal_map(
 @pytest.mark.quick
 def test_level_without_rigs_is_refused(capsys: pytest.CaptureFixture[str], no_work: None) -> None:
     refused(capsys, ["sweep", "--controller", "lqr", "--level", "0.5"], "--level 0.5", "--rigs N")
+
+
+# --- the Gymnasium environment ------------------------------------------------------------------------------
+
+
+def _env(**options: Any) -> Any:
+    from twin.app.envs import BallBeamEnv
+
+    env = BallBeamEnv(duration_s=0.2, **options)
+    env.reset(seed=0)
+    return env
+
+
+@pytest.mark.quick
+@pytest.mark.parametrize("duration", [1e9, 3600.02, float("inf")])
+def test_an_episode_longer_than_a_run_may_be_is_refused(duration: float) -> None:
+    from twin.app.envs import BallBeamEnv, BallBeamVectorEnv
+
+    with pytest.raises(ValueError, match=rf"duration_s = {duration!r}: .*at most 3600 s"):
+        BallBeamEnv(duration_s=duration)
+    with pytest.raises(ValueError, match=rf"duration_s = {duration!r}: .*at most 3600 s"):
+        BallBeamVectorEnv(2, duration_s=duration)
+    assert BallBeamEnv(duration_s=3600.0).cfg.ticks == 180_000  # the longest run's ticks, not allocated
+
+
+@pytest.mark.quick
+@pytest.mark.parametrize(
+    ("action", "shown"),
+    [
+        (np.array([2.0, 3.0]), "array([2., 3.])"),
+        (True, "True"),
+        (np.bool_(True), "True"),
+        (np.array([True]), "array([ True])"),
+        ("2.5", "'2.5'"),
+        (np.array(["2.5"]), "array(['2.5']"),
+        (None, "None"),
+        ([[2.5]], "[[2.5]]"),
+        (np.array([], dtype=float), "array([]"),
+        (2.5 + 0j, "(2.5+0j)"),
+        (float("nan"), "nan"),
+        (np.array([np.inf]), "array([inf])"),
+    ],
+)
+def test_an_action_that_is_not_one_real_number_is_refused_naming_it(action: Any, shown: str) -> None:
+    env = _env()
+    with pytest.raises(ValueError) as info:
+        env.step(action)
+    message = str(info.value)
+    assert shown in message, message
+    assert "a finite real number of volts" in message and "shape (1,)" in message, message
+
+
+@pytest.mark.quick
+@pytest.mark.parametrize(
+    "action", [2.5, 2, np.float32(2.5), np.int64(2), np.array(2.5), np.array([2.5]), [2.5]]
+)
+def test_one_real_number_in_any_of_its_forms_is_an_action(action: Any) -> None:
+    env = _env()
+    env.step(action)
+    assert env.rig.command_v == pytest.approx(float(np.asarray(action, dtype=float).reshape(-1)[0]), abs=2e-3)
+
+
+@pytest.mark.quick
+@pytest.mark.parametrize(
+    ("actions", "shown"),
+    [
+        (np.full((2, 2), 2.5), "shape (2, 2)"),
+        (np.full(3, 2.5), "shape (3,)"),
+        (np.array([True, False]), "array([ True, False])"),
+        (np.array(["2.5", "2.5"]), "array(['2.5', '2.5']"),
+        ([2.5, None], "[2.5, None]"),
+        (np.array([2.5, np.nan]), "array([2.5, nan])"),
+        (2.5, "2.5"),
+    ],
+)
+def test_the_vector_envs_actions_are_checked_as_one_per_env(actions: Any, shown: str) -> None:
+    from twin.app.envs import BallBeamVectorEnv
+
+    venv = BallBeamVectorEnv(2, duration_s=0.2)
+    venv.reset(seed=0)
+    with pytest.raises(ValueError) as info:
+        venv.step(actions)
+    message = str(info.value)
+    assert shown in message and "shape (2,) or (2, 1)" in message, message
+    venv.step(np.full((2, 1), 2.5))  # both forms step
+    venv.step(np.full(2, 2.5))
+
+
+@pytest.mark.quick
+@pytest.mark.parametrize(
+    ("options", "needle"),
+    [
+        ("x0_m=0.1", "options = 'x0_m=0.1': a dict of x0_m, theta0_rad, setpoint_m, noise_seed"),
+        ({"x0_m": "0.1"}, "x0_m = '0.1': a number"),
+        ({"x0_m": None}, "x0_m = None: a number"),
+        ({"setpoint_m": 5.0}, "setpoint_m = 5.0 is off the track (|x| ≤ 0.323 m)"),
+        ({"setpoint_m": [0.1]}, "setpoint_m = [0.1]: a number"),
+        ({"noise_seed": 1.5}, "noise_seed = 1.5: a whole number"),
+    ],
+)
+def test_bad_reset_options_are_refused_naming_the_option(options: Any, needle: str) -> None:
+    from twin.app.envs import BallBeamEnv
+
+    env = BallBeamEnv(duration_s=0.2)
+    with pytest.raises(ValueError) as info:
+        env.reset(seed=0, options=options)
+    assert needle in str(info.value), str(info.value)
+
+
+@pytest.mark.quick
+@pytest.mark.parametrize(
+    ("options", "needle"),
+    [
+        ({"params": 3}, "params = 3: a Parameters, or the path of a parameter file"),
+        ({"params": {"ball": {}}}, "params = {'ball': {}}: a Parameters"),
+        ({"spread": 3}, "spread = 3: the path of a spread file"),
+        ({"calibration": 3}, "calibration = 3: the path of a calibration folder"),
+        ({"x0_range_m": 0.1}, "x0_range_m = 0.1: expected (low, high)"),
+        ({"stack": "2"}, "stack = '2'"),
+        ({"starts": [(0.1,)]}, "starts = [(0.1,)]: pairs (x0_m, theta0_rad)"),
+        ({"setpoint_range_m": (0.0, 0.4)}, "setpoint_range_m = 0.4 is off the track"),
+        ({"criteria": "strict"}, "criteria = 'strict': a twin.verdict.Criteria"),
+    ],
+)
+def test_bad_env_options_are_refused_naming_the_option(options: dict[str, Any], needle: str) -> None:
+    from twin.app.envs import BallBeamEnv
+
+    with pytest.raises(ValueError) as info:
+        BallBeamEnv(**options)
+    assert needle in str(info.value), str(info.value)
