@@ -286,3 +286,17 @@ def test_bad_env_options_are_refused_naming_the_option(options: dict[str, Any], 
     with pytest.raises(ValueError) as info:
         BallBeamEnv(**options)
     assert needle in str(info.value), str(info.value)
+
+
+@pytest.mark.quick
+def test_the_vector_envs_reset_options_are_one_value_or_one_per_env() -> None:
+    from twin.app.envs import BallBeamVectorEnv
+
+    venv = BallBeamVectorEnv(2, duration_s=0.2)
+    with pytest.raises(
+        ValueError, match=r"options 'x0_m' = \[0.1, 0.2, 0.3\]: one value for every env, or a sequence of 2"
+    ):
+        venv.reset(seed=0, options={"x0_m": [0.1, 0.2, 0.3]})
+    with pytest.raises(ValueError, match="options = 'x0_m': a dict of x0_m"):
+        venv.reset(seed=0, options="x0_m")  # type: ignore[arg-type]
+    venv.reset(seed=0, options={"x0_m": [0.1, 0.2], "setpoint_m": 0.05})
