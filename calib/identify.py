@@ -47,9 +47,10 @@ import scipy.sparse.linalg
 import scipy.stats
 
 from calib.adequacy import ChannelAdequacy, channel_adequacy
-from calib.logs import DAC_STEP_V, RigLog
+from calib.logs import DAC_STEP_V, RigLog, check_period
 from twin.converters import ball_position_m
 from twin.dcmotor import torque_nm
+from twin.log import LogError
 from twin.output_stage import amplifier_volts
 from twin.parameters import READING, Parameters, declaration, within_bounds
 from twin.reference import EquationCoefficients, rk4_step
@@ -80,9 +81,6 @@ STATE_SCALE = np.array([0.05, 0.05, 0.2, 0.5])
 # 11.7 mV steps and unmodelled friction can push the state in a second — the rig's state is continuous.
 CONTINUITY_SIGMA = np.array([0.2e-3, 0.5e-3, 5e-3, 20e-3])
 CONFIDENCE = 0.95
-# A log's median tick spacing (timem) must be daq.period_s within 1 %: a PC timer's period holds to far better
-# over a log, and a log recorded at another period (10 ms read as 20 ms) is a factor away.
-PERIOD_TOLERANCE = 0.01
 # The smooth model's own resolution (95 %), measured: on logs whose physics is exactly the fit's equations (the
 # reference plant) but whose sensors are the rig's quantized chain, fits of the recommended experiment miss by
 # up to 0.07 % (resistance), 0.09 % (inertia), 1.4 % (pivot damping) and 0.04 mrad (zeroing error); on logs of
@@ -397,14 +395,11 @@ class WindowProblem:
             raise CalibrationError(
                 f"the logs have different tick periods {sorted(periods)} s: fit them separately"
             )
-        expected = base.daq.period_s
         for log in logs:
-            if abs(log.period_s - expected) > PERIOD_TOLERANCE * expected:
-                raise CalibrationError(
-                    f"{log.path}: 'timem' (time_s) ticks every {log.period_s * 1e3:.6g} ms but the parameters' "
-                    f"daq.period_s is {expected * 1e3:.6g} ms: the model's zero-order hold and block mean would "
-                    f"be wrong; give the log's period (--set daq.period_s={log.period_s:.6g})"
-                )
+            try:
+                check_period(log, base.daq.period_s)
+            except LogError as exc:
+                raise CalibrationError(str(exc)) from None
         self.base = base
         self.fit = list(fit)
         self.substeps = substeps

@@ -42,7 +42,10 @@ __all__ = [
     "MIN_BALL_SPAN_V",
     "MIN_COMMAND_SPAN_V",
     "MIN_DURATION_S",
+    "PERIOD_TOLERANCE",
     "RigLog",
+    "check_period",
+    "load_judged_log",
     "load_rig_log",
     "read_mat73",
 ]
@@ -67,6 +70,10 @@ MIN_BALL_SPAN_V = 10 * ADC_STEP_V
 # A tick spacing beyond 1.5 periods is a missed block (the next one is 2 periods away): the samples are no
 # longer one per period, as the zero-order-hold models assume.
 MAX_GAP_PERIODS = 1.5
+
+# A log's median tick spacing (timem) must be daq.period_s within 1 %: a PC timer's period holds to far better
+# over a log, and a log recorded at another period (10 ms read as 20 ms) or in other units (ms) is a factor away.
+PERIOD_TOLERANCE = 0.01
 
 # A MATLAB v7.3 file: the text header "MATLAB 7.3 MAT-file…" in an HDF5 user block of 512 bytes, then HDF5.
 MAT73_HEADER = b"MATLAB 7.3 MAT-file"
@@ -139,11 +146,15 @@ class RigLog:
                 i = int(bad[0])
                 raise self._fail(name, i, f"{float(arr[i])!r} is not a finite number")
         if n < 2:
+            need = (
+                f"identification needs at least {MIN_DURATION_S} s of data"
+                if self.whole
+                else "a log needs at least 2 ticks after it (one tick spacing)"
+            )
             raise self._fail(
                 "time_s",
                 None,
-                f"the log ends at index {n - 1 + FIRST_INDEX}, {n} tick(s) after the start sample (index 1): "
-                f"identification needs at least {MIN_DURATION_S} s of data",
+                f"the log ends at index {n - 1 + FIRST_INDEX}, {n} tick(s) after the start sample (index 1): {need}",
             )
         steps = np.diff(t)
         bad = np.flatnonzero(~(steps > 0))
@@ -223,6 +234,31 @@ def load_rig_log(path: str | Path) -> RigLog:
     return rig_log(read_log(path), path)
 
 
+def check_period(log: RigLog, period_s: float) -> None:
+    """Refuse a log whose median tick spacing is not ``period_s`` (the parameters' ``daq.period_s``) within
+    ``PERIOD_TOLERANCE``: a log recorded at another period, or its ``timem`` in other units (ms), whose
+    zero-order hold, block mean and times the model would read wrong. A ``LogError`` naming the file, the field
+    and both periods."""
+    if abs(log.period_s - period_s) > PERIOD_TOLERANCE * period_s:
+        raise LogError(
+            f"{log.path}: {_name('time_s')} ticks every {log.period_s * 1e3:.6g} ms but the parameters' "
+            f"daq.period_s is {period_s * 1e3:.6g} ms: the model's zero-order hold and block mean would "
+            f"be wrong; give the log's period (--set daq.period_s={log.period_s:.6g})"
+        )
+
+
+def load_judged_log(path: str | Path, period_s: float) -> RunLog:
+    """A log to judge (``ballbeam judge``): read as ``read_log`` does and checked tick by tick as every rig log
+    is (``RigLog``: the ADC's and DAC's volts, strictly increasing time without gaps, at least two ticks), its
+    tick spacing ``period_s`` (``check_period``), but not held to identification's minimum duration and
+    excitation (a ball lost after a second is a verdict too). Returns the log as read."""
+    path = Path(path)
+    log = read_log(path)
+    rig = rig_log(log, path, whole=False)
+    check_period(rig, period_s)
+    return log
+
+
 def read_log(path: str | Path) -> RunLog:
     """A ``.mat`` (v5 or MATLAB v7.3) or ``.csv`` log as it is in the file, not yet checked as a rig log
     (``ballbeam judge`` reads logs so). Refusals are ``LogError``s naming the file."""
@@ -269,12 +305,14 @@ def read_mat73(path: str | Path) -> dict[str, np.ndarray]:
     return out
 
 
-def rig_log(log: RunLog, path: str | Path = "<memory>") -> RigLog:
-    """The identification ticks of a log already in memory (e.g. a twin run), validated as a file would be."""
+def rig_log(log: RunLog, path: str | Path = "<memory>", *, whole: bool = True) -> RigLog:
+    """The identification ticks of a log already in memory (e.g. a twin run), validated as a file would be
+    (``whole=False``: tick by tick only, see ``RigLog.whole``)."""
     return RigLog(
         path=Path(path),
         time_s=log.timem[1:],
         ball_v=log.datam1[1:],
         angle_v=log.datam2[1:],
         command_v=log.aout[1:],
+        whole=whole,
     )

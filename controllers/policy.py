@@ -29,7 +29,7 @@ import numpy as np
 from twin import fixedorder
 from twin.converters import motor_volts_from_command
 from twin.interface import Controller, DaqSample
-from twin.learning import ActionSpec, ObservationSpec, observation
+from twin.learning import ActionSpec, ObservationSpec, check_action, observation
 from twin.parameters import Parameters, SoftwareCalibration
 
 __all__ = ["LinearPolicy", "PolicyController"]
@@ -82,7 +82,7 @@ class PolicyController(Controller):
         setpoint = getattr(self, "setpoint_m", 0.0)
         obs = observation(self.obs_spec, self._ball, self._angle, self.params, setpoint)
         raw = self.policy(obs)
-        command = float(self.action_spec.command_v(raw, self.params)[0])
+        command = float(self.action_spec.command_v(check_action(raw), self.params)[0])
         sw = self.params.software
         self.telemetry.u = float(motor_volts_from_command(command, sw))
         first = float(np.asarray(raw, dtype=float).reshape(-1)[0])

@@ -263,3 +263,69 @@ def test_judge_refuses_malformed_logs_on_one_line(tmp_path: Path, capsys: pytest
     refused(capsys, ["judge", str(tmp_path / "missing.mat")], "missing.mat")
     refused(capsys, ["judge", str(tmp_path / "log.txt")], "log.txt", ".mat")
     refused(capsys, ["judge", str(short), "--set", "software.ball_gain_m_per_v=-1"], "ball_gain_m_per_v")
+
+
+# --- judge checks a log as calibrate, compare and shadow do (calib.logs.load_judged_log) -------------------
+
+
+def _bad_log(case: str) -> RunLog:
+    """A held ball's rig log (10 s at daq.period_s) spoiled in one way."""
+    log = _rig_log(np.full(500, 0.004))
+    t, ball, angle, aout = log.timem, log.datam1, log.datam2, log.aout
+    if case == "period":  # recorded every 10 ms, judged at the parameters' 20 ms
+        t = np.concatenate([[0.0], 0.01 * np.arange(1, t.size)])
+    elif case == "ms":  # timem in milliseconds: 500 ticks read as 10 000 s
+        t = t * 1e3
+    elif case == "millivolts":  # the ADC channels in mV: a ball at 4 mm reads hundreds of "volts"
+        ball, angle = ball * 1e3, angle * 1e3
+    elif case == "counts":  # the angle channel as the card's raw 12-bit code
+        angle = np.concatenate([[0.0], np.full(t.size - 1, 2048.0)])
+    elif case == "motor volts":  # aout holding the motor's volts (aout − 2.5)·9.6, negative for a push left
+        aout = np.concatenate([[0.0], np.full(t.size - 1, -3.0)])
+    elif case == "gap":  # ten blocks missing
+        keep = np.r_[0:200, 210 : t.size]
+        t, ball, angle, aout = t[keep], ball[keep], angle[keep], aout[keep]
+    elif case == "one tick":  # the start row and a single tick
+        t, ball, angle, aout = t[:2], ball[:2], angle[:2], aout[:2]
+    return RunLog(t, ball, angle, aout, *(np.full(t.size, np.nan) for _ in range(6)))
+
+
+@pytest.mark.quick
+@pytest.mark.parametrize(
+    "case, needles",
+    [
+        ("period", ("'timem'", "ticks every 10 ms", "daq.period_s is 20 ms")),
+        ("ms", ("'timem'", "ticks every 20000 ms")),
+        ("millivolts", ("'datam1'", "index 2", "V is outside the ADC's -5…5 V")),
+        ("counts", ("'datam2'", "2048.0 V is outside the ADC's")),
+        ("motor volts", ("'aout'", "-3.0 V is outside the DAC's 0.0…5.0 V")),
+        ("gap", ("'timem'", "index 201", "0.22 s after the previous tick", "a gap in the ticks")),
+        ("one tick", ("'timem'", "the log ends at index 2", "at least 2 ticks")),
+    ],
+)
+def test_judge_refuses_the_logs_the_calibration_refuses(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], case: str, needles: tuple[str, ...]
+) -> None:
+    good = _rig_log(np.full(500, 0.004))
+    save_csv(good, tmp_path / "good.csv")
+    rc, out = _judge_json(capsys, [str(tmp_path / "good.csv")])
+    assert rc == 0 and out["held"] is True  # the log before it was spoiled
+    path = tmp_path / f"{case.replace(' ', '_')}.csv"
+    save_csv(_bad_log(case), path)
+    line = refused(capsys, ["judge", str(path)], str(path), *needles)
+    assert "verdict" not in line and "held" not in line
+
+
+@pytest.mark.quick
+def test_judge_refuses_a_setpoint_off_the_track(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    save_csv(_rig_log(np.full(500, 0.004)), tmp_path / "good.csv")
+    refused(
+        capsys,
+        ["judge", str(tmp_path / "good.csv"), "--setpoint", "5"],
+        "--setpoint = 5.0 m is off the track",
+        "|x| ≤ 0.323 m",
+    )
+    rc, _ = _judge_json(
+        capsys, [str(tmp_path / "good.csv"), "--setpoint", "0.323"]
+    )  # the track's end: judged
+    assert rc == 1

@@ -12,7 +12,8 @@ oldest block read fills the rest (the start block, as a controller's filter star
 Action (``ActionSpec``): the DAC command in volts (``kind="dac"``, Box over the DAC's range, 0…5 V, Table
 6.4) or the motor volts the software means (``kind="motor"``, ±12 V, converted by appendix A's
 ``V/9.6 + 2.5``, ``twin.converters.dac_command_v``). An action outside its box is clipped to it (the card
-cannot output more); one that is not finite is refused.
+cannot output more). An action is one finite real number, a scalar or an array of shape (1,)
+(``check_action``; a vector of environments takes (n,) or (n, 1), ``check_actions``): anything else is refused.
 
 Reward (``reward``, per 20 ms step, from the simulation's true state after the step — never what the
 controller measured)::
@@ -40,6 +41,8 @@ from twin.parameters import Parameters
 
 __all__ = [
     "ActionSpec",
+    "check_action",
+    "check_actions",
     "ObservationSpec",
     "REWARD_WEIGHTS",
     "observation",
@@ -152,6 +155,50 @@ class ActionSpec:
         return a
 
 
+def _shown(value: object) -> str:
+    text = repr(value)
+    return text if len(text) <= 80 else text[:77] + "..."
+
+
+def _real_array(value: object) -> np.ndarray | None:
+    """``value`` as a float64 array when it is real numbers (Python or numpy ints and floats, in a scalar, a
+    list or an array); None for anything else (bool, str, None, complex, objects)."""
+    if isinstance(value, (bool, np.bool_, str, bytes)) or value is None:
+        return None
+    try:
+        arr = np.asarray(value)
+    except (TypeError, ValueError):  # ragged lists
+        return None
+    if arr.dtype.kind not in "iuf":  # b(ool), U/S (text), O(bject), c(omplex)
+        return None
+    return arr.astype(np.float64)
+
+
+def check_action(action: object) -> float:
+    """One action (the single environment's, a trained policy's): a finite real number, as a scalar or an
+    array of shape (1,); ``ValueError`` naming the value and the expected form otherwise (a second value is
+    not dropped, ``True`` and ``'2.5'`` are not volts, ``None`` is not NaN)."""
+    arr = _real_array(action)
+    if arr is None or arr.shape not in ((), (1,)) or not np.isfinite(arr).all():
+        raise ValueError(
+            f"action {_shown(action)}: expected a finite real number of volts, a scalar or an array of shape (1,)"
+        )
+    return float(arr.reshape(-1)[0])
+
+
+def check_actions(actions: object, n: int) -> np.ndarray:
+    """The vector environment's actions, one per env: finite real numbers of shape (n,) or (n, 1), as an (n,)
+    float64 array; ``ValueError`` naming the value, its shape and the expected form otherwise."""
+    arr = _real_array(actions)
+    if arr is None or arr.shape not in ((n,), (n, 1)) or not np.isfinite(arr).all():
+        shape = "" if arr is None else f" (shape {arr.shape})"
+        raise ValueError(
+            f"actions {_shown(actions)}{shape}: expected finite real numbers of volts, one per env: "
+            f"shape ({n},) or ({n}, 1)"
+        )
+    return arr.reshape(n)
+
+
 def reward(
     x_m: float | np.ndarray,
     theta_rad: float | np.ndarray,
@@ -170,8 +217,16 @@ def reward(
     return 1.0 - w_e * e * e - w_th * th * th - w_u * (v / rail) ** 2 - w_rail * at_rail
 
 
-def episode_ticks(duration_s: float, period_s: float) -> int:
-    """Steps of an episode of ``duration_s`` (truncated after them): whole periods, at least one."""
-    if not (isinstance(duration_s, (int, float)) and math.isfinite(duration_s) and duration_s > 0):
-        raise ValueError(f"duration_s = {duration_s!r}: a positive number of seconds")
+def episode_ticks(duration_s: float, period_s: float, max_s: float = math.inf) -> int:
+    """Steps of an episode of ``duration_s`` (truncated after them): whole periods, at least one; a duration
+    that is not a number of seconds in (0, ``max_s``] is refused (``ValueError`` naming it)."""
+    ok = (
+        isinstance(duration_s, (int, float, np.integer, np.floating))
+        and not isinstance(duration_s, (bool, np.bool_))
+        and math.isfinite(duration_s)
+        and 0 < duration_s <= max_s
+    )
+    if not ok:
+        most = "" if math.isinf(max_s) else f", at most {max_s:g} s (an episode's trace keeps every tick)"
+        raise ValueError(f"duration_s = {duration_s!r}: a positive number of seconds{most}")
     return max(1, int(round(duration_s / period_s)))

@@ -12,7 +12,9 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import os
 import re
+import stat
 import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
@@ -36,6 +38,7 @@ __all__ = [
     "Parameters",
     "READING",
     "declaration",
+    "read_input_file",
     "within_bounds",
 ]
 
@@ -983,6 +986,34 @@ _GROUPS: dict[str, type] = {
 }
 
 
+def read_input_file(path: str | Path, what: str, typical: str = "") -> bytes:
+    """The bytes of a small input file (``what``: "parameter file", "spread file"): a regular file of at most
+    ``MAX_FILE_BYTES``. Anything else is a ``ParameterError`` naming the file, before it is parsed: a missing or
+    unreadable file, a directory, a device or a pipe (``/dev/zero`` would be endless, a FIFO would wait for a
+    writer), or a larger file (only ``MAX_FILE_BYTES`` + 1 bytes are read). ``typical``: the size such a file
+    has, for the message."""
+    path = Path(path)
+    try:
+        # O_NONBLOCK: opening a FIFO does not wait for a writer; the fstat below refuses it
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+    except OSError as exc:
+        raise ParameterError(f"{path}: cannot read {what} ({exc.strerror or exc})") from None
+    mode = os.fstat(fd).st_mode
+    if not stat.S_ISREG(mode):
+        os.close(fd)
+        kind = "a directory" if stat.S_ISDIR(mode) else "a device, pipe or socket"
+        raise ParameterError(f"{path}: not a regular file ({kind}): a {what} is a TOML or JSON text file")
+    with os.fdopen(fd, "rb") as fh:
+        try:
+            text = fh.read(MAX_FILE_BYTES + 1)
+        except OSError as exc:
+            raise ParameterError(f"{path}: cannot read {what} ({exc.strerror or exc})") from None
+    if len(text) > MAX_FILE_BYTES:
+        note = f": {typical}" if typical else ""
+        raise ParameterError(f"{path}: larger than {MAX_FILE_BYTES} bytes (1 MiB), not read further{note}")
+    return text
+
+
 def declaration(name: str) -> Mapping[str, Any]:
     """What the parameter ``group.field`` declares (``param``, ``curve``, ``flag``: its unit, source, physical
     bounds ``gt``/``ge``/``lt``/``le`` and their reason); for the ball reading's names (``READING``) their unit.
@@ -1119,16 +1150,9 @@ class Parameters:
         parameter file (group → field → number or list of numbers)."""
         path = Path(path)
         kind = "JSON" if path.suffix.lower() == ".json" else "TOML"
-        try:
-            with path.open("rb") as fh:
-                text = fh.read(MAX_FILE_BYTES + 1)
-        except OSError as exc:
-            raise ParameterError(f"{path}: cannot read parameter file ({exc.strerror or exc})") from None
-        if len(text) > MAX_FILE_BYTES:
-            raise ParameterError(
-                f"{path}: larger than {MAX_FILE_BYTES} bytes (1 MiB), not read further: a parameter file with "
-                f"every value and its comments is about 10 kB"
-            )
+        text = read_input_file(
+            path, "parameter file", "a parameter file with every value and its comments is about 10 kB"
+        )
         nested = (
             f"{path}: nested deeper than a parameter file's two levels (group → field → number or list of "
             f"numbers)"

@@ -16,7 +16,7 @@ import numpy as np
 
 from twin.parameters import Parameters
 
-__all__ = ["PhysicsBackend", "PhysicsBlock", "check_initial_state"]
+__all__ = ["PhysicsBackend", "PhysicsBlock", "check_initial_state", "check_on_track"]
 
 
 class PhysicsBlock(NamedTuple):
@@ -87,9 +87,24 @@ def check_initial_state(
     ):
         if not isinstance(value, (int, float, np.floating, np.integer)) or not math.isfinite(value):
             raise ValueError(f"initial state {name} = {value!r} is not a finite number")
-    if abs(x_m) > params.track.half_length_m:
-        raise ValueError(f"initial x_m = {x_m!r} is off the track (|x| ≤ {params.track.half_length_m} m)")
+    check_on_track(params, "initial x_m", x_m)
     if abs(theta_rad) > params.beam.stop_angle_rad:
         raise ValueError(
             f"initial theta_rad = {theta_rad!r} is beyond the stops (|θ| ≤ {params.beam.stop_angle_rad:.4f} rad)"
         )
+
+
+def check_on_track(params: Parameters, name: str, x_m: object) -> float:
+    """A ball position given by the user — a start, a setpoint (``run``, ``judge``, the environment's options)
+    — as a float; refused unless it is a finite number on the track, |x| ≤ ``track.half_length_m``
+    (ValueError naming ``name`` and the value; a name ending in ``_m`` carries its unit, others are given m)."""
+    unit = "" if name.endswith("_m") else " m"
+    if isinstance(x_m, (bool, np.bool_)) or not isinstance(x_m, (int, float, np.floating, np.integer)):
+        raise ValueError(f"{name} = {x_m!r}: a number of metres along the track")
+    x = float(x_m)
+    if not math.isfinite(x):
+        raise ValueError(f"{name} = {x_m!r}{unit} is not a finite number")
+    half = params.track.half_length_m
+    if abs(x) > half:
+        raise ValueError(f"{name} = {x_m!r}{unit} is off the track (|x| ≤ {half:g} m)")
+    return x

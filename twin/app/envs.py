@@ -38,6 +38,7 @@ from gymnasium import spaces
 from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 
+from twin.app.options import MAX_RUN_S
 from twin.engine import ClosedLoop, block_peak_abs_theta_rad, judge
 from twin.interface import Controller, DaqSample
 from twin.learning import (
@@ -45,12 +46,14 @@ from twin.learning import (
     ActionSpec,
     ObservationKind,
     ObservationSpec,
+    check_action,
+    check_actions,
     episode_ticks,
     observation,
     reward,
 )
 from twin.parameters import Parameters
-from twin.physics import check_initial_state
+from twin.physics import check_initial_state, check_on_track
 from twin.rigs.sim import PlantKind, make_rig
 from twin.rigs.vector import VectorBlocks, VectorRig
 from twin.verdict import Criteria, Trace
@@ -62,6 +65,7 @@ ENV_ID = "BallBeam-v0"
 CHAPTER7_X0_M = (-0.32, 0.32)
 CHAPTER7_THETA0_RAD = (-0.7, 0.7)
 _SEED_BOUND = 2**31 - 1
+RESET_OPTIONS = "x0_m, theta0_rad, setpoint_m, noise_seed"
 
 
 @dataclass(frozen=True)
@@ -111,6 +115,7 @@ def make_config(
     """The environment's options (see ``BallBeamEnv``) checked into an ``EnvConfig``."""
     from twin.app.montecarlo import load_calibration_spread, load_spread
 
+    _check_types(params, spread, calibration, criteria)
     if calibration is not None and spread is not None:
         raise ValueError("give a spread or a calibration, not both")
     base = Parameters.from_file(params) if isinstance(params, (str, Path)) else (params or Parameters())
@@ -136,7 +141,7 @@ def make_config(
         raise ValueError(f"observation = {observation!r}: expected 'volts' or 'converted'")
     if action not in ("dac", "motor"):
         raise ValueError(f"action = {action!r}: expected 'dac' or 'motor'")
-    episode_ticks(duration_s, base.daq.period_s)  # a positive duration
+    episode_ticks(duration_s, base.daq.period_s, MAX_RUN_S)  # a positive duration, at most a run's
     x0r = _range("x0_range_m", x0_range_m)
     th0r = _range("theta0_range_rad", theta0_range_rad)
     spr = _range("setpoint_range_m", setpoint_range_m)
@@ -144,8 +149,8 @@ def make_config(
     for name, (lo, hi), bound in (("x0_range_m", x0r, half), ("theta0_range_rad", th0r, stop)):
         if max(abs(lo), abs(hi)) > bound:
             raise ValueError(f"{name} = {(lo, hi)}: beyond the rig (|value| ≤ {bound:.4f})")
-    if max(abs(spr[0]), abs(spr[1])) > half:
-        raise ValueError(f"setpoint_range_m = {spr}: off the track (|x| ≤ {half} m)")
+    for end in spr:
+        check_on_track(base, "setpoint_range_m", end)
     start_list: tuple[tuple[float, float], ...] = ()
     if starts is not None:
         try:
@@ -176,6 +181,20 @@ def make_config(
         terminate_at_stops=bool(terminate_at_stops),
         criteria=criteria or Criteria(),
     )
+
+
+def _check_types(params: object, spread: object, calibration: object, criteria: object) -> None:
+    """The options that name files or carry objects, refused naming the option when of another type."""
+    if params is not None and not isinstance(params, (Parameters, str, Path)):
+        raise ValueError(f"params = {params!r:.80}: a Parameters, or the path of a parameter file")
+    for name, value, what in (
+        ("spread", spread, "spread file"),
+        ("calibration", calibration, "calibration folder"),
+    ):
+        if value is not None and not isinstance(value, (str, Path)):
+            raise ValueError(f"{name} = {value!r:.80}: the path of a {what}")
+    if criteria is not None and not isinstance(criteria, Criteria):
+        raise ValueError(f"criteria = {criteria!r:.80}: a twin.verdict.Criteria")
 
 
 def _range(name: str, value: Sequence[float]) -> tuple[float, float]:
@@ -214,12 +233,12 @@ def draw_episode(cfg: EnvConfig, rng: np.random.Generator, options: Mapping[str,
         th0 = float(rng.uniform(*cfg.theta0_range_rad))
     setpoint = float(rng.uniform(*cfg.setpoint_range_m))
     seed = int(rng.integers(_SEED_BOUND))
+    if options is not None and not isinstance(options, Mapping):
+        raise ValueError(f"options = {options!r:.80}: a dict of {RESET_OPTIONS}")
     opts = dict(options or {})
-    unknown = set(opts) - {"x0_m", "theta0_rad", "setpoint_m", "noise_seed"}
+    unknown = set(opts) - set(RESET_OPTIONS.split(", "))
     if unknown:
-        raise ValueError(
-            f"reset options {sorted(unknown)}: known are x0_m, theta0_rad, setpoint_m, noise_seed"
-        )
+        raise ValueError(f"reset options {sorted(map(str, unknown))}: known are {RESET_OPTIONS}")
     if "noise_seed" in opts:
         given = opts["noise_seed"]
         if isinstance(given, (bool, np.bool_)) or not isinstance(given, (int, np.integer)) or given < 0:
@@ -229,8 +248,7 @@ def draw_episode(cfg: EnvConfig, rng: np.random.Generator, options: Mapping[str,
     th0 = _finite("theta0_rad", opts.get("theta0_rad", th0))
     setpoint = _finite("setpoint_m", opts.get("setpoint_m", setpoint))
     check_initial_state(params, x0, th0, 0.0, 0.0)
-    if abs(setpoint) > params.track.half_length_m:
-        raise ValueError(f"setpoint_m = {setpoint!r} is off the track (|x| ≤ {params.track.half_length_m} m)")
+    check_on_track(params, "setpoint_m", setpoint)
     return Episode(params, x0, th0, setpoint, seed)
 
 
@@ -408,7 +426,7 @@ class BallBeamEnv(gymnasium.Env[np.ndarray, np.ndarray]):
         if self._ended:
             raise RuntimeError("the episode has ended (terminated or truncated): call reset")
         ep, rig = self._episode, self.rig
-        command = float(self.cfg.action.command_v(action, ep.params)[0])
+        command = float(self.cfg.action.command_v(check_action(action), ep.params)[0])
         self._loop.answer(command)
         one = np.zeros(1, dtype=np.int64)
         obs = self._after_block(self._loop.sense(), one)
@@ -498,7 +516,12 @@ class BallBeamVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         for i, s in enumerate(seeds):
             if s is not None or self._rngs[i] is None:
                 self._rngs[i] = seeding.np_random(s)[0]
+        if options is not None and not isinstance(options, Mapping):
+            raise ValueError(f"options = {options!r:.80}: a dict of {RESET_OPTIONS}")
         opts = dict(options or {})
+        for k, v in opts.items():
+            if np.ndim(v) and (np.ndim(v) != 1 or len(v) != n):
+                raise ValueError(f"options {k!r} = {v!r:.80}: one value for every env, or a sequence of {n}")
         per_env = [{k: (v[i] if np.ndim(v) else v) for k, v in opts.items()} for i in range(n)]
         self._reset_envs(np.arange(n), per_env)
         self._autoreset[:] = False
@@ -572,10 +595,7 @@ class BallBeamVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
 
     def step(self, actions: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         n, cfg = self.num_envs, self.cfg
-        a = np.asarray(actions, dtype=float)
-        if a.size != n:
-            raise ValueError(f"actions of shape {a.shape}: one per env ({n})")
-        a = a.reshape(n)
+        a = check_actions(actions, n)
         resetting = np.flatnonzero(self._autoreset)
         if resetting.size:  # next-step autoreset: these envs' actions are ignored
             self._reset_envs(resetting, [None] * len(resetting))

@@ -18,6 +18,12 @@ Spread file (TOML or JSON), one entry per parameter::
     pivot_friction_nm = { low = 0.0, high = 0.004 }   # uniform
     [angle_sensor]
     zero_error_rad = { sd = 0.0035 }        # normal, absolute standard deviation
+
+What a spread must state (refused otherwise, naming the file, the entry and the value; ``load_spread``): a
+regular file of at most 1 MiB (``twin.parameters.read_input_file``, as parameter files); a uniform inside the
+parameter's physical bounds (its declaration in ``twin.parameters``); a normal whose nominal ± 3 standard
+deviations lie inside them, except on a side where the nominal sits on the bound (there only its half on the
+rig's side is drawn); not ``daq.period_s`` or ``physics.timestep_s``, which every rig of a study shares.
 """
 
 from __future__ import annotations
@@ -35,7 +41,16 @@ import numpy as np
 from twin.app.fanout import Progress, Runs, Served, run_starts
 from twin.app.sweep import point_seeds
 from twin.outputs import JobFiles
-from twin.parameters import READING, DuplicateKeyError, ParameterError, Parameters, load_json
+from twin.parameters import (
+    READING,
+    DuplicateKeyError,
+    ParameterError,
+    Parameters,
+    declaration,
+    load_json,
+    read_input_file,
+    within_bounds,
+)
 
 __all__ = [
     "Distribution",
@@ -52,6 +67,17 @@ MAX_RUNS = 100_000
 # What write_montecarlo (twin.app.montecarlo_render) puts into its folder (checked before the runs).
 OUTPUT_FILES = JobFiles("montecarlo", ("montecarlo.json", "distributions.png"))
 MAX_REDRAWS = 100  # a spread that puts a parameter outside its bounds this often is refused
+# A normal spread's nominal ± 3 standard deviations (99.7 % of its draws) must lie inside the parameter's
+# bounds (``_check_normal``); a uniform's low and high must.
+NORMAL_SDS = 3.0
+# What a spread may not vary: every rig of a study runs the controller at one period, and a batch of rigs steps
+# together (twin.rigs.batch, twin.rigs.vector): the period and the physics step are the study's, not the rig's.
+SHARED = {
+    "daq.period_s": "the tick period is the controller's and the study's, the same for every rig: set it "
+    "with --set daq.period_s=…, not in a spread",
+    "physics.timestep_s": "the physics step is a numerical setting, the same for every rig (the period must be "
+    "a whole number of steps): set it with --set physics.timestep_s=…, not in a spread",
+}
 WORST_SHOWN = 10
 
 
@@ -93,11 +119,12 @@ def _nominal(params: Parameters, name: str) -> float:
 def load_spread(path: str | Path, params: Parameters) -> Distribution:
     """A spread file (TOML or JSON) about the nominal ``params``; refused naming the file and entry."""
     path = Path(path)
+    raw = read_input_file(path, "spread file", "a spread of every parameter is a few kB")
     try:
-        text = path.read_text(encoding="utf-8-sig")
+        text = raw.decode("utf-8-sig")
         data = load_json(text) if path.suffix.lower() == ".json" else tomllib.loads(text)
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ParameterError(f"{path}: cannot read: {exc}") from None
+    except UnicodeDecodeError as exc:
+        raise ParameterError(f"{path}: cannot read: not UTF-8 text ({exc})") from None
     except DuplicateKeyError as exc:
         raise ParameterError(f"{path}: {exc}") from None
     except (tomllib.TOMLDecodeError, json.JSONDecodeError, RecursionError) as exc:
@@ -118,6 +145,8 @@ def load_spread(path: str | Path, params: Parameters) -> Distribution:
                 nominal = _nominal(params, full)
             except ParameterError as exc:
                 raise ParameterError(f"{path}: {exc}") from None
+            if full in SHARED:
+                raise ParameterError(f"{path}: {full}: {SHARED[full]}")
             keys = set(spec) if isinstance(spec, dict) else set()
             values = {k: spec[k] for k in keys} if isinstance(spec, dict) else {}
             if not all(
@@ -134,11 +163,18 @@ def load_spread(path: str | Path, params: Parameters) -> Distribution:
                         f"{path}: {full} = {spec!r}: its nominal value is 0, so a relative spread perturbs "
                         "nothing; give { sd = … } in its unit"
                     )
+                _check_normal(path, full, spec, nominal, s)
                 rows.append((full, nominal, s, math.nan, math.nan))
             elif keys == {"low", "high"}:
                 lo, hi = float(values["low"]), float(values["high"])
                 if lo > hi:
                     raise ParameterError(f"{path}: {full}: low = {lo:g} is above high = {hi:g}")
+                for key, end in (("low", lo), ("high", hi)):
+                    if not within_bounds(full, end):
+                        raise ParameterError(
+                            f"{path}: {full} = {spec!r}: {key} = {end:g} is outside the parameter's bounds "
+                            f"({_bounds_text(full)}): a uniform spread lies inside them"
+                        )
                 rows.append((full, nominal, math.nan, lo, hi))
             else:
                 raise ParameterError(
@@ -146,6 +182,29 @@ def load_spread(path: str | Path, params: Parameters) -> Distribution:
                 )
     names, mean, sd, low, high = zip(*rows, strict=True)
     return Distribution(names, "independent", mean, sd, low, high, source=str(path))
+
+
+def _bounds_text(name: str) -> str:
+    """The physical bounds parameter ``name`` declares, in words (``> 0``, ``>= 0 and <= 1``)."""
+    md = declaration(name)
+    signs = {"gt": ">", "ge": ">=", "lt": "<", "le": "<="}
+    return " and ".join(f"{signs[k]} {md[k]:g}" for k in signs if md.get(k) is not None) or "none"
+
+
+def _check_normal(path: Path, name: str, spec: object, nominal: float, sd: float) -> None:
+    """A normal spread's rule: nominal ± ``NORMAL_SDS`` · sd inside the parameter's bounds, except on a side
+    where the nominal value sits on the bound itself (a pivot friction of 0 ± sd: only the half on the rig's
+    side is drawn, the rest drawn again). Otherwise a sizeable share of the draws would be drawn again and the
+    distribution sampled would not be the one stated (``rel_sd = 0.9`` of a mass: a third of it below 0)."""
+    for sign, side in ((-1.0, "below"), (1.0, "above")):
+        end = nominal + sign * NORMAL_SDS * sd
+        on_bound = not within_bounds(name, math.nextafter(nominal, sign * math.inf))
+        if not on_bound and not within_bounds(name, end):
+            raise ParameterError(
+                f"{path}: {name} = {spec!r}: its nominal {nominal:g} {side} by {NORMAL_SDS:g} standard "
+                f"deviations ({sd:g}) is {end:g}, outside the parameter's bounds ({_bounds_text(name)}): "
+                "narrow the spread, or give a uniform { low = …, high = … } inside the bounds"
+            )
 
 
 def load_calibration_spread(directory: str | Path) -> tuple[Parameters, Distribution]:

@@ -18,6 +18,9 @@ from collections.abc import Callable
 
 Limit = float | Callable[[], float]
 
+# A run keeps every tick of its log in memory (and the log on disk holds them all): one simulated hour is
+# 180 000 ticks at 50 Hz. ``run``'s --duration and the Gymnasium environment's episodes are held to it.
+MAX_RUN_S = 3600.0
 # One run of a many-run job (sweep, Monte Carlo, validate): its verdict, not its log, is kept.
 MAX_JOB_RUN_S = 600.0
 

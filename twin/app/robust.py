@@ -29,10 +29,12 @@ from twin.app.sweep import ASSUMPTION, Refinement, SweepSettings, verdict_class
 from twin.outputs import JobFiles
 from twin.parameters import ParameterError, Parameters
 
-__all__ = ["OUTPUT_FILES", "RobustResult", "lower_bound", "rig_point_seeds", "run_robust"]
+__all__ = ["DEFAULT_LEVEL", "OUTPUT_FILES", "RobustResult", "lower_bound", "rig_point_seeds", "run_robust"]
 
 # What write_robust (twin.app.robust_render) puts into its folder (checked before the runs).
 OUTPUT_FILES = JobFiles("robust-sweep", ("robust.json", "robust.png"))
+# The share of rigs a robust start is held by, as a lower bound (``sweep --level``'s default).
+DEFAULT_LEVEL = 0.95
 # Each rig's map in the JSON: one letter per start (twin.app.sweep.verdict_class).
 CLASS_LETTERS = {"held": "h", "kept": "k", "lost": "l", "failed": "f"}
 
@@ -100,7 +102,7 @@ def run_robust(
     spread: Any,
     rigs: int,
     *,
-    level: float = 0.95,
+    level: float = DEFAULT_LEVEL,
     confidence: float = 0.95,
     nominal: list[dict[str, Any]] | None = None,
     workers: int = 1,

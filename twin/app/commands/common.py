@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from twin.app.catalogue import construct, user_controller
-from twin.app.options import MAX_JOB_RUN_S, count, finite_float, seed
+from twin.app.options import MAX_JOB_RUN_S, MAX_RUN_S, count, finite_float, seed
 from twin.outputs import JobFiles, check_output_folder, writing
 
 if TYPE_CHECKING:
@@ -35,9 +35,6 @@ SERVED_CONTROLLER = (
     "; required unless --serve, where it only names what the client runs (never built here; the region "
     "claims about that name are then judged) and the report names the client from its HELLO without it"
 )
-# A run keeps every tick of its log in memory (and the log on disk holds them all): one simulated hour is
-# 180 000 ticks at 50 Hz.
-MAX_RUN_S = 3600.0
 MAX_WORKERS = 256  # local processes
 LOG_SUFFIXES = (".mat", ".csv")
 # Lower bounds of a log's size, to refuse a disk without room before the run: 17 columns a tick, 8 bytes

@@ -26,11 +26,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from calib.logs import read_log
+    from calib.logs import load_judged_log
+    from twin.physics import check_on_track
     from twin.verdict import evaluate_measured
 
     params = load_params(args)
-    log = read_log(args.log)
+    if args.setpoint is not None:
+        check_on_track(params, "--setpoint", args.setpoint)
+    log = load_judged_log(args.log, params.daq.period_s)  # checked as every command checks a rig log
     verdict = evaluate_measured(log, params, x_ref_m=args.setpoint or 0.0)
     summary = {
         "log": args.log,

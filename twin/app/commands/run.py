@@ -199,10 +199,9 @@ def _apply_setpoint(controller: object, spec: str, setpoint_m: float, params: Pa
     """``--setpoint``: on the track, and only for a controller that declares one (twin.interface.Setpoint)."""
     from twin.interface import Setpoint
     from twin.parameters import ParameterError
+    from twin.physics import check_on_track
 
-    half_m = params.track.half_length_m
-    if abs(setpoint_m) > half_m:
-        raise ParameterError(f"--setpoint = {setpoint_m!r} m is off the track (|x| ≤ {half_m:g} m)")
+    check_on_track(params, "--setpoint", setpoint_m)
     if not isinstance(controller, Setpoint):
         from controllers import registry
 

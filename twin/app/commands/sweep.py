@@ -120,8 +120,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--level",
         type=finite_float(0.0, 1.0),
-        default=0.95,
-        help="robust map: the share of rigs a start must be held by, as a 95 %% lower bound (default 0.95)",
+        metavar="P",
+        help="robust map (with --rigs N): the share of rigs a start must be held by, as a 95 %% lower bound "
+        "(default 0.95)",
     )
     add_served_options(parser)
     parser.add_argument("--out", metavar="DIR", help="write DIR/sweep.json and DIR/map.png")
@@ -143,6 +144,10 @@ def run(args: argparse.Namespace) -> int:
     from twin.parameters import ParameterError
 
     check_served(args)
+    if args.level is not None and args.rigs is None:
+        raise ParameterError(
+            f"--level {args.level:g}: the robust map's level, given with --rigs N (and --spread or --calibration)"
+        )
     robust = args.rigs is not None or args.spread is not None or args.calibration is not None
     if robust:
         if args.rigs is None or (args.spread is None and args.calibration is None):
@@ -246,7 +251,7 @@ def _print_sweep(args: argparse.Namespace, settings: SweepSettings, result: Swee
 
 def _robust_sweep(args: argparse.Namespace, settings: Any, params: Parameters, spread: Any) -> int:
     """``sweep --rigs N --spread|--calibration``: the nominal rig's map, then every start on N drawn rigs."""
-    from twin.app.robust import OUTPUT_FILES, run_robust
+    from twin.app.robust import DEFAULT_LEVEL, OUTPUT_FILES, run_robust
     from twin.app.sweep import run_sweep
 
     check_job(args, params, OUTPUT_FILES)
@@ -262,7 +267,7 @@ def _robust_sweep(args: argparse.Namespace, settings: Any, params: Parameters, s
         params,
         spread,
         args.rigs,
-        level=args.level,
+        level=DEFAULT_LEVEL if args.level is None else args.level,
         nominal=nominal.points,
         workers=args.workers,
         scheduler=args.scheduler,
