@@ -2,6 +2,7 @@
 
 import dataclasses
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -344,3 +345,21 @@ def test_loading_never_modifies_the_file(tmp_path, save, load):
     before = (path.read_bytes(), path.stat().st_mtime_ns)
     load(path)
     assert (path.read_bytes(), path.stat().st_mtime_ns) == before
+
+
+@pytest.mark.quick
+@pytest.mark.parametrize("suffix", [".mat", ".csv"])
+def test_a_log_path_that_is_not_a_regular_file_is_named_for_what_it_is(tmp_path: Path, suffix: str) -> None:
+    """A directory or a link to a device named like a log is refused for what it is (not "no such file"), and
+    a device is never read (``/dev/zero`` would be endless)."""
+    load = load_mat if suffix == ".mat" else load_csv
+    folder = tmp_path / f"x{suffix}"
+    folder.mkdir()
+    with pytest.raises(LogError, match=r"x\.\w+: a directory, not a log file"):
+        load(folder)
+    device = tmp_path / f"z{suffix}"
+    device.symlink_to("/dev/zero")
+    with pytest.raises(LogError, match=r"z\.\w+: not a regular file \(a device, pipe or socket\)"):
+        load(device)
+    with pytest.raises(LogError, match="no such file"):
+        load(tmp_path / f"missing{suffix}")

@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import csv
 import io
+import stat
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import BinaryIO
@@ -203,6 +204,21 @@ def _check_values(path: Path, kind: str, values: dict[str, np.ndarray], hint: st
         )
 
 
+def _check_file(path: Path) -> None:
+    """A ``LogError`` naming what ``path`` is when it is not a regular file a log can be read from: missing, a
+    directory, or a device, pipe or socket (a link to ``/dev/zero`` would be endless)."""
+    try:
+        mode = path.stat().st_mode
+    except FileNotFoundError:
+        raise LogError(f"{path}: no such file") from None
+    except OSError as exc:
+        raise LogError(f"{path}: cannot read the log ({exc.strerror or exc})") from None
+    if stat.S_ISDIR(mode):
+        raise LogError(f"{path}: a directory, not a log file")
+    if not stat.S_ISREG(mode):
+        raise LogError(f"{path}: not a regular file (a device, pipe or socket): a log is a .mat or .csv file")
+
+
 def load_mat(path: str | Path, *, variables: dict[str, np.ndarray] | None = None) -> RunLog:
     """Read a log written by ``save_mat`` or by the rig's Plot button (``data_file.mat``).
 
@@ -212,9 +228,8 @@ def load_mat(path: str | Path, *, variables: dict[str, np.ndarray] | None = None
     path = Path(path)
     if variables is not None:
         raw = dict(variables)
-    elif not path.is_file():
-        raise LogError(f"{path}: no such file")
     else:
+        _check_file(path)
         try:
             import scipy.io
 
@@ -301,8 +316,7 @@ def load_csv(path: str | Path) -> RunLog:
     """Read a log written by ``save_csv`` (or by hand: only timem, datam1, datam2 and aout are required; a
     UTF-8 byte-order mark is accepted). The file is only read."""
     path = Path(path)
-    if not path.is_file():
-        raise LogError(f"{path}: no such file")
+    _check_file(path)
     try:
         # utf-8-sig: a leading byte-order mark (a spreadsheet's "CSV UTF-8") is dropped, none is needed
         text = path.read_text(encoding="utf-8-sig")
