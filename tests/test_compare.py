@@ -366,3 +366,16 @@ def test_progress_advances_by_stage_and_changes_no_number(sf_log: Path) -> None:
     a, b = with_bar.to_json(), plain.to_json()
     a.pop("wall_s"), b.pop("wall_s")
     assert a == b
+
+
+@pytest.mark.quick
+def test_a_log_in_milliseconds_is_refused_for_its_time_not_the_window(tmp_path: Path, capsys) -> None:
+    """A log whose ``timem`` is in ms ticks every 20 000 "s": the log is named and the period advised, before
+    any check of ``--window`` against that period."""
+    import dataclasses
+
+    log = run_closed_loop(registry.make("appendix-sf"), x0_m=0.1, theta0_rad=0.1, duration_s=8.0, seed=0).log
+    path = tmp_path / "ms.csv"
+    save_csv(dataclasses.replace(log, timem=log.timem * 1000.0), path)
+    line = refused(capsys, ["compare", str(path), "--out", str(tmp_path / "out")], "ms.csv", "timem")
+    assert "daq.period_s is 20 ms" in line and "--window" not in line

@@ -83,7 +83,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from calib.compare import OUTPUT_FILES, Criterion, compare
-    from calib.logs import read_log, rig_log
+    from calib.logs import check_period, read_log, rig_log
     from twin.engine import ControllerError
     from twin.parameters import ParameterError
     from twin.plant import NumericalError
@@ -94,6 +94,8 @@ def run(args: argparse.Namespace) -> int:
     check_output_folder("--out", args.out, OUTPUT_FILES, overwrite=args.overwrite, inputs=inputs(args))
     logs = [(path, read_log(path)) for path in args.logs]
     rigs = [rig_log(log, path) for path, log in logs]  # every log checked before the work
+    for rig in rigs:  # a log at another period (or in ms) is the log's fault, not the window's
+        check_period(rig, params.daq.period_s)
     period_s = min(r.period_s for r in rigs)
     if args.window < 2 * period_s:
         raise ParameterError(
