@@ -543,7 +543,7 @@ def bench_wire(repeats: int) -> dict[str, float]:
     def wire() -> tuple[float, int]:
         server = subprocess.Popen(serve, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
         assert server.stdout is not None
-        host, port = parse_udp_url(server.stdout.readline().split()[-1])
+        host, port = parse_udp_url(json.loads(server.stdout.readline())["serving_on"])
         start = time.perf_counter()
         with RemoteRig(host, port) as rig:
             controller = registry.make("appendix-sf", rig.parameters())

@@ -373,9 +373,9 @@ def test_serve_and_run_rig_on_the_command_line(tmp_path: Path) -> None:
         env=env,
     )
     assert serve.stdout is not None
-    first = serve.stdout.readline().strip()
-    assert first.startswith("serving on udp://127.0.0.1:")
-    url = first.split()[-1]
+    first = json.loads(serve.stdout.readline())  # --json: stdout is JSON lines, the address first
+    assert list(first) == ["serving_on"] and first["serving_on"].startswith("udp://127.0.0.1:")
+    url = first["serving_on"]
     log = tmp_path / "client.csv"
     run = subprocess.run(
         [*cli, "run", "--rig", url, "--controller", "appendix-sf", "--log", str(log), "--json"],

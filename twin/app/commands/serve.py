@@ -131,7 +131,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"ballbeam serve: error: {exc}", file=sys.stderr)
         return 2
     with server:
-        print(f"serving on {server.url}", flush=True)
+        # The address first (port 0 picks one): with --json stdout is JSON lines, this one and the summary.
+        print(json.dumps({"serving_on": server.url}) if args.json else f"serving on {server.url}", flush=True)
         try:
             session = server.serve()
         except ServeError as exc:
