@@ -278,8 +278,8 @@ def test_serve_serial_and_run_rig_serial_on_the_command_line(tmp_path: Path) -> 
                 env=env,
             )
             assert serve.stdout is not None
-            first = serve.stdout.readline().strip()
-            assert first == f"serving on serial://{path_a}?baud=115200", first
+            first = json.loads(serve.stdout.readline())  # --json: JSON lines, the address first
+            assert first == {"serving_on": f"serial://{path_a}?baud=115200"}, first
             run = subprocess.run(
                 [
                     *cli,

@@ -187,8 +187,9 @@ def _served_cli(job: list[str], client: list[str], timeout_s: float = 240.0) -> 
     )
     assert server.stdout is not None
     first = server.stdout.readline().strip()
-    assert first.startswith("serving on udp://127.0.0.1:"), first
-    url = first.split()[-1]
+    # --json: stdout is JSON lines, the address first; else the text line
+    url = json.loads(first)["serving_on"] if "--json" in job else first.removeprefix("serving on ")
+    assert url.startswith("udp://127.0.0.1:") and " " not in url, first
     host, port = url.removeprefix("udp://").split(":")
     argv = [a.replace("{url}", url).replace("{host}", host).replace("{port}", port) for a in client]
     try:

@@ -308,7 +308,13 @@ def serving(args: argparse.Namespace, params: Parameters) -> Iterator[Served | N
         raise ParameterError(f"--serve {args.serve}: {exc}") from None
     timeout_s = args.timeout if args.timeout is not None else DEFAULT_TIMEOUT_S
     with server:
-        print(f"serving on {server.url}", flush=True)
+        # The address first; with --json stdout is JSON lines (this one, then the job's summary).
+        address = (
+            json.dumps({"serving_on": server.url})
+            if getattr(args, "json", False)
+            else f"serving on {server.url}"
+        )
+        print(address, flush=True)
         yield Served(
             server,
             timeout_s=timeout_s,
