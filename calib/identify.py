@@ -183,6 +183,9 @@ WEAK_EXCITATION: dict[str, tuple[str, float]] = {
     "beam.pivot_damping_nm_s_per_rad": ("relative", 0.04),
     "angle_sensor.zeroing_error_rad": ("absolute", 0.3e-3),
 }
+# Two fitted values the logs barely separate: |correlation| beyond this (a warning; with one of them loose, the
+# problem names the correlation, ``_excitation_problems``).
+INSEPARABLE_CORRELATION = 0.95
 INTERVAL_METHOD = (
     f"cluster-robust (sandwich) covariance, {CLUSTER_S:g} s clusters, Student's t, plus the model's measured "
     "resolution in quadrature"
@@ -1025,10 +1028,12 @@ def _loosely_determined(name: str, value: float, std: float) -> str:
 def _excitation_problems(names: Sequence[str], z: np.ndarray, std: np.ndarray, corr: np.ndarray) -> list[str]:
     """The problems of the values the logs determine only loosely (``_loosely_determined``), told apart by
     cause. A value's deviation with the other fitted values known is std·√(1 − R²), R² its multiple
-    correlation with them (1 − 1/(C⁻¹)ᵢᵢ of the correlation matrix C): when that is within the bound, the
-    logs do determine it and what they do not is its split from the values it is correlated with (the pivot's
+    correlation with them (1 − 1/(C⁻¹)ᵢᵢ of the correlation matrix C): when that is within the bound and its
+    strongest correlation is beyond ``INSEPARABLE_CORRELATION``, the logs do determine it and what they do not
+    is its split from the value it is correlated with (the pivot's
     viscous and Coulomb friction both oppose the beam's speed) — more setpoint moves and dither, which the
-    log already has, is not the remedy; the problem names the correlation. Otherwise: weak excitation."""
+    log already has, is not the remedy; the problem names the correlation. Otherwise: weak excitation (a
+    regulation log's damping is loose through moderate correlations with all the others, +0.69 at most)."""
     inverse = np.linalg.pinv(corr) if corr.size else corr
     weak, inseparable = [], []
     for i, name in enumerate(names):
@@ -1037,10 +1042,14 @@ def _excitation_problems(names: Sequence[str], z: np.ndarray, std: np.ndarray, c
             continue
         others = [j for j in range(len(names)) if j != i]
         conditional = float(std[i]) / math.sqrt(max(float(inverse[i, i]), 1.0)) if others else float(std[i])
-        if not others or _loosely_determined(name, float(z[i]), conditional):
+        j = max(others, key=lambda k: abs(float(corr[i, k]))) if others else i
+        if (
+            j == i
+            or abs(corr[i, j]) <= INSEPARABLE_CORRELATION
+            or _loosely_determined(name, float(z[i]), conditional)
+        ):
             weak.append(shown)
             continue
-        j = max(others, key=lambda k: abs(float(corr[i, k])))
         inseparable.append(
             f"not separable: the logs do not tell {name} from {names[j]} (correlation {corr[i, j]:+.2f}): "
             f"{shown[len(name) + 2 : -1]}, {conditional:.3g} {FITTABLE[name].unit} were the others known — "
@@ -1064,7 +1073,7 @@ def _correlation_warnings(problem: WindowProblem, corr: np.ndarray) -> list[str]
     n_g = problem.n_global
     for i in range(n_g):
         for j in range(i + 1, n_g):
-            if abs(corr[i, j]) > 0.95:
+            if abs(corr[i, j]) > INSEPARABLE_CORRELATION:
                 warnings.append(
                     f"{problem.fit[i]} and {problem.fit[j]} are correlated ({corr[i, j]:+.2f}): the logs barely "
                     "separate them; excite the rig differently (README: how to record a log)"

@@ -215,6 +215,11 @@ def test_a_loose_value_that_is_only_correlated_is_named_not_sent_to_record_again
     # A loose value that stays loose with the others known is weak excitation however correlated it is.
     [problem] = _excitation_problems(names, z, 10 * std, np.array([[1.0, -0.96], [-0.96, 1.0]]))
     assert problem.startswith("weak excitation")
+    # A moderate correlation (the regulation log's damping and resistance, +0.69) is weak excitation even where
+    # the deviation with the others known would be within the bound (4.5 %·√(1 − 0.69²) = 3.3 %).
+    moderate = np.array([[1.0, 0.69], [0.69, 1.0]])
+    [problem] = _excitation_problems(names, z, np.array([4.5e-5, 2e-5]), moderate)
+    assert problem.startswith("weak excitation")
     assert _excitation_problems(names, z, np.array([2e-5, 2e-5]), np.eye(2)) == []
 
 
