@@ -167,16 +167,25 @@ COLOURED_RATIO = 1.5
 COLOURED_LAG1 = 0.5
 # Effects a mismatch is refitted with, freed one at a time, to name the one that explains it.
 DIAGNOSTIC_EFFECTS = {"beam.pivot_friction_nm": "Coulomb (dry) friction in the pivot"}
-# Weak excitation: a parameter whose statistical standard deviation exceeds its bound (relative to its value,
-# or absolute) is only loosely determined by the logs: measured on the recommended experiment (resistance
-# 0.05 %, inertia 0.07 %, damping 1.9 %, zeroing 0.04 mrad) against regulation without setpoint moves or
-# dither (0.05 %, 0.15 %, 5.9 %, 0.04 mrad), docs/design.md.
+# Weak excitation: a parameter whose statistical standard deviation exceeds its bound (relative, or absolute) is
+# only loosely determined by the logs: measured on the recommended experiment (resistance 0.05 %, inertia
+# 0.07 %, damping 1.9 %, zeroing 0.04 mrad) against regulation without setpoint moves or dither (0.05 %,
+# 0.15 %, 5.9 %, 0.04 mrad), docs/design.md, with the damping at 1e-3 N·m·s/rad. A relative bound is taken of
+# the larger of the value and the parameter's typical size (``FitSpec.scale``) when the value can be 0 (its
+# search range reaches 0): the pivot damping's statistical deviation hardly depends on its value, and a rig
+# whose damping is near 0 (the twin's: 0) would otherwise be "loosely determined" by any log — the README's
+# recipe, 2.4e-5 ± 0.8e-5 N·m·s/rad, was 34 % of its value. Its bound is then 4 % of 1e-3 = 4e-5 N·m·s/rad,
+# the model's own resolution of it (``MODEL_RESOLUTION``): a deviation below what the model resolves is not
+# loose.
 WEAK_EXCITATION: dict[str, tuple[str, float]] = {
     "motor.resistance_ohm": ("relative", 0.01),
     "beam.inertia_pivot_kgm2": ("relative", 0.01),
     "beam.pivot_damping_nm_s_per_rad": ("relative", 0.04),
     "angle_sensor.zeroing_error_rad": ("absolute", 0.3e-3),
 }
+# Two fitted values the logs barely separate: |correlation| beyond this (a warning; with one of them loose, the
+# problem names the correlation, ``_excitation_problems``).
+INSEPARABLE_CORRELATION = 0.95
 INTERVAL_METHOD = (
     f"cluster-robust (sandwich) covariance, {CLUSTER_S:g} s clusters, Student's t, plus the model's measured "
     "resolution in quadrature"
@@ -885,12 +894,8 @@ def calibrate(
     mismatched = _mismatched(adequacy)
     problems: list[str] = []
     # A mismatched model's standard deviations mean nothing: only an adequate fit is judged on excitation.
-    if intervals.weak and not mismatched:
-        problems.append(
-            "weak excitation: the logs determine "
-            + ", ".join(intervals.weak)
-            + " only loosely (README: how to record a log — move the setpoint and add the dither)"
-        )
+    if not mismatched:
+        problems += _excitation_problems(problem.fit, z, intervals.std, intervals.corr)
     warnings += _correlation_warnings(problem, intervals.corr)
     diagnosis = ""
     if mismatched:
@@ -958,7 +963,7 @@ class _Intervals:
     corr: np.ndarray  # the globals' correlation matrix
     inflation: float  # median of the cluster-robust over the white-residual standard deviations
     warnings: list[str]  # per value, in the fit's order: undetermined, unidentifiable, on a bound
-    weak: list[str]  # the values the logs excite too little (``WEAK_EXCITATION``), as shown in the problem
+    std: np.ndarray  # the globals' statistical (cluster-robust) standard deviations
 
 
 def _intervals(problem: WindowProblem, fitted: _Fit) -> _Intervals:
@@ -978,7 +983,6 @@ def _intervals(problem: WindowProblem, fitted: _Fit) -> _Intervals:
     z_crit = float(scipy.stats.t.ppf(0.5 + CONFIDENCE / 2, max(sandwich.n_clusters - 1, 1)))
     values: dict[str, FittedValue] = {}
     warnings: list[str] = []
-    weak: list[str] = []
     for i, name in enumerate(problem.fit):
         spec = FITTABLE[name]
         rel, absolute = MODEL_RESOLUTION.get(name, (0.0, 0.0))
@@ -995,13 +999,72 @@ def _intervals(problem: WindowProblem, fitted: _Fit) -> _Intervals:
             warnings.append(
                 f"{name} = {z[i]:.6g} {spec.unit} sits on its bound [{spec.lower:g}, {spec.upper:g}]"
             )
-        bound = WEAK_EXCITATION.get(name)
-        if bound is not None:
-            size = std[i] / abs(float(z[i])) if bound[0] == "relative" and z[i] != 0 else std[i]
-            if size > bound[1]:
-                shown = f"{size:.1%} of its value" if bound[0] == "relative" else f"{size:.3g} {spec.unit}"
-                weak.append(f"{name} (standard deviation {shown})")
-    return _Intervals(values, corr, inflation, warnings, weak)
+    return _Intervals(values, corr, inflation, warnings, std)
+
+
+def _loosely_determined(name: str, value: float, std: float) -> str:
+    """How a fitted value is only loosely determined by the logs (its statistical standard deviation ``std``
+    beyond its ``WEAK_EXCITATION`` bound), as the weak-excitation problem shows it; "" when it is not. A
+    relative bound is of max(|value|, ``FitSpec.scale``) when the value can be 0 (its search range reaches
+    0), so that a value near 0 is not loose for being small."""
+    bound = WEAK_EXCITATION.get(name)
+    if bound is None:
+        return ""
+    kind, limit = bound
+    spec = FITTABLE[name]
+    if kind == "absolute":
+        return f"{name} (standard deviation {std:.3g} {spec.unit})" if not std <= limit else ""
+    can_vanish = spec.lower <= 0.0
+    reference = max(abs(value), spec.scale) if can_vanish else abs(value)
+    if reference > 0 and std <= limit * reference:
+        return ""
+    if reference > abs(value):
+        shown = f"{std:.3g} {spec.unit}, {std / reference:.1%} of its typical size {reference:g} {spec.unit}"
+    else:
+        shown = f"{std / reference:.1%} of its value" if reference > 0 else f"{std:.3g} {spec.unit}"
+    return f"{name} (standard deviation {shown})"
+
+
+def _excitation_problems(names: Sequence[str], z: np.ndarray, std: np.ndarray, corr: np.ndarray) -> list[str]:
+    """The problems of the values the logs determine only loosely (``_loosely_determined``), told apart by
+    cause. A value's deviation with the other fitted values known is std·√(1 − R²), R² its multiple
+    correlation with them (1 − 1/(C⁻¹)ᵢᵢ of the correlation matrix C): when that is within the bound and its
+    strongest correlation is beyond ``INSEPARABLE_CORRELATION``, the logs do determine it and what they do not
+    is its split from the value it is correlated with (the pivot's
+    viscous and Coulomb friction both oppose the beam's speed) — more setpoint moves and dither, which the
+    log already has, is not the remedy; the problem names the correlation. Otherwise: weak excitation (a
+    regulation log's damping is loose through moderate correlations with all the others, +0.69 at most)."""
+    inverse = np.linalg.pinv(corr) if corr.size else corr
+    weak, inseparable = [], []
+    for i, name in enumerate(names):
+        shown = _loosely_determined(name, float(z[i]), float(std[i]))
+        if not shown:
+            continue
+        others = [j for j in range(len(names)) if j != i]
+        conditional = float(std[i]) / math.sqrt(max(float(inverse[i, i]), 1.0)) if others else float(std[i])
+        j = max(others, key=lambda k: abs(float(corr[i, k]))) if others else i
+        if (
+            j == i
+            or abs(corr[i, j]) <= INSEPARABLE_CORRELATION
+            or _loosely_determined(name, float(z[i]), conditional)
+        ):
+            weak.append(shown)
+            continue
+        inseparable.append(
+            f"not separable: the logs do not tell {name} from {names[j]} (correlation {corr[i, j]:+.2f}): "
+            f"{shown[len(name) + 2 : -1]}, {conditional:.3g} {FITTABLE[name].unit} were the others known — "
+            "a correlation, not a lack of excitation: leave one out of --fit (its value from --set, measured "
+            "apart) or fit them from logs that separate their effects"
+        )
+    problems = inseparable
+    if weak:
+        problems.insert(
+            0,
+            "weak excitation: the logs determine "
+            + ", ".join(weak)
+            + " only loosely (README: how to record a log — move the setpoint and add the dither)",
+        )
+    return problems
 
 
 def _correlation_warnings(problem: WindowProblem, corr: np.ndarray) -> list[str]:
@@ -1010,7 +1073,7 @@ def _correlation_warnings(problem: WindowProblem, corr: np.ndarray) -> list[str]
     n_g = problem.n_global
     for i in range(n_g):
         for j in range(i + 1, n_g):
-            if abs(corr[i, j]) > 0.95:
+            if abs(corr[i, j]) > INSEPARABLE_CORRELATION:
                 warnings.append(
                     f"{problem.fit[i]} and {problem.fit[j]} are correlated ({corr[i, j]:+.2f}): the logs barely "
                     "separate them; excite the rig differently (README: how to record a log)"

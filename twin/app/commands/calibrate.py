@@ -59,8 +59,9 @@ def run(args: argparse.Namespace) -> int:
             f"({2 * period_s:g} s)"
         )
 
-    # A bar per stage over its evaluation budget: the ETA is an upper bound (a fit stops when it converges).
-    progress = None if args.json else progress_bar("calibrate", unit="evaluation")
+    # A bar per stage over its evaluation budget: the ETA is an upper bound (a fit stops when it converges). It
+    # goes to stderr, with --json too (the JSON is stdout's): a 1-hour log's fit is minutes of work.
+    progress = progress_bar("calibrate", unit="evaluation")
     cal = calibrate(logs, fit, start, window_s=args.window, progress=progress)
     write_out(args, write_report, cal)
     if args.json:
