@@ -379,3 +379,15 @@ def test_a_log_in_milliseconds_is_refused_for_its_time_not_the_window(tmp_path: 
     save_csv(dataclasses.replace(log, timem=log.timem * 1000.0), path)
     line = refused(capsys, ["compare", str(path), "--out", str(tmp_path / "out")], "ms.csv", "timem")
     assert "daq.period_s is 20 ms" in line and "--window" not in line
+
+
+@pytest.mark.quick
+def test_calibrate_refuses_a_log_in_milliseconds_for_its_time_not_the_window(tmp_path: Path, capsys) -> None:
+    import dataclasses
+
+    log = run_closed_loop(registry.make("appendix-sf"), x0_m=0.1, theta0_rad=0.1, duration_s=8.0, seed=0).log
+    path = tmp_path / "ms.csv"
+    save_csv(dataclasses.replace(log, timem=log.timem * 1000.0), path)
+    argv = ["calibrate", str(path), "--fit", "motor.resistance_ohm", "--out", str(tmp_path / "cal")]
+    line = refused(capsys, argv, "ms.csv", "timem")
+    assert "daq.period_s is 20 ms" in line and "--window" not in line

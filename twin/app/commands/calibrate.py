@@ -40,7 +40,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from calib.identify import FITTABLE, calibrate
-    from calib.logs import load_rig_log
+    from calib.logs import check_period, load_rig_log
     from calib.report import OUTPUT_FILES, write_report
     from twin.parameters import ParameterError
 
@@ -52,6 +52,8 @@ def run(args: argparse.Namespace) -> int:
     if args.out is not None:
         check_output_folder("--out", args.out, OUTPUT_FILES, overwrite=args.overwrite, inputs=inputs(args))
     logs = [load_rig_log(path) for path in args.logs]
+    for log in logs:  # a log at another period (or in ms) is the log's fault, not the window's
+        check_period(log, start.daq.period_s)
     period_s = min(log.period_s for log in logs)
     if args.window < 2 * period_s:  # a window is fitted from its ticks' differences: at least two
         raise ParameterError(
