@@ -68,6 +68,7 @@ __all__ = [
     "Comparison",
     "Criterion",
     "LogWindows",
+    "TickProgress",
     "WindowedPrediction",
     "autocorrelation",
     "closed_loop_prediction",
@@ -578,7 +579,7 @@ def _median3(y: np.ndarray) -> np.ndarray:
     return out
 
 
-class _TickProgress:
+class TickProgress:
     """A ``twin.engine.Pacer`` that paces nothing: it reports the ticks done, for the progress bar."""
 
     def __init__(self, total: int, progress: Callable[[int, int], None]) -> None:
@@ -613,7 +614,7 @@ def closed_loop_prediction(
     n_log = log.k - row  # rows from the first block on: the held block, then one per update
     duration = params.start.free_run_s + (n_log - 2) * period
     ticks = update_ticks(duration, params)
-    pacer = None if progress is None else _TickProgress(ticks, progress)
+    pacer = None if progress is None else TickProgress(ticks, progress)
     result = run_closed_loop(
         controller, x0_m=x0, theta0_rad=theta0, duration_s=duration, seed=seed, params=params, pacer=pacer
     )

@@ -10,6 +10,7 @@ import math
 import os
 import subprocess
 import sys
+import time
 from functools import cache
 from pathlib import Path
 
@@ -262,3 +263,64 @@ def test_the_reference_logs_are_read_checked_and_a_bad_one_named(tmp_path: Path)
     (tmp_path / "bad.csv").write_text("not a log\n")
     with pytest.raises(ValueError, match="bad.csv"):
         load_reference([tmp_path / "ref.csv", tmp_path / "bad.csv"])
+
+
+# --- the band's build reported, a session that waits for its controller --------------------------------------
+def _stages(calls: list[tuple[int, int, str]]) -> list[str]:
+    return list(dict.fromkeys(stage for _, _, stage in calls))
+
+
+def test_the_bands_build_reports_its_progress_over_the_whole_build(nominal_run: RunResult) -> None:
+    """``reference_band`` and ``logs_band`` (a long ``--reference``) report ``(done, total, stage)`` as the
+    progress bar takes them: one total for the whole build, never going back, ending at it."""
+    from twin.app.shadow import logs_band
+
+    for build in (
+        lambda progress: reference_band(P, lambda: _sf(P), duration_s=12.0, progress=progress),
+        lambda progress: logs_band(
+            [rig_log(nominal_run.log, "a"), rig_log(nominal_run.log, "b")], P, progress=progress
+        ),
+    ):
+        calls: list[tuple[int, int, str]] = []
+        band = build(lambda done, total, stage, calls=calls: calls.append((done, total, stage)))
+        assert band.windows >= 30 and len(calls) >= 8
+        done = [d for d, _, _ in calls]
+        assert len({t for _, t, _ in calls}) == 1 and done == sorted(done) and done[-1] == calls[-1][1]
+        assert done[len(done) // 2] < done[-1]  # it advances during the build, not only at its end
+    assert _stages(calls) == ["predicting the windows of a", "predicting the windows of b"]
+
+
+def test_a_session_joined_before_its_controller_waits_for_it() -> None:
+    """The shadow joins a served session before its controller starts (``ballbeam shadow`` first, as the README's
+    recipe has it): the session waits ``start_timeout_s`` for its first sample, not ``idle_timeout_s``; a
+    controller that never comes is named in the end's words, with what to do."""
+    for controller_after_s in (None, 2.0):
+        server = subprocess.Popen(
+            [*CLI, "serve", "--port", "0", "--x0", str(X0), "--theta0", str(TH0), "--duration", "4"],
+            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, env=ENV,
+        )  # fmt: skip
+        try:
+            assert server.stdout is not None
+            url = server.stdout.readline().strip().split()[-1]
+            with Observer(url, connect_timeout_s=10.0) as observer:
+                shadow = Shadow(observer.parameters(P), _band())
+                if controller_after_s is None:
+                    silent = watch(observer, shadow, idle_timeout_s=0.5, start_timeout_s=1.0)
+                    assert (
+                        silent.sessions == 0
+                        and "no controller started the session within 1 s" in silent.ended
+                    )
+                    assert "ballbeam run --rig" in silent.ended
+                    continue
+                time.sleep(controller_after_s)  # far beyond idle_timeout_s: a user switching terminals
+                client = subprocess.Popen(
+                    [*CLI, "run", "--rig", url, "--controller", "appendix-sf"],
+                    stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=ENV,
+                )  # fmt: skip
+                result = watch(observer, shadow, idle_timeout_s=0.5, start_timeout_s=120.0)
+                client.wait(120.0)
+            assert result.sessions == 1 and result.ended == "1 session(s) watched", result.ended
+            assert shadow.scored >= 1
+            server.wait(30.0)
+        finally:
+            server.kill()

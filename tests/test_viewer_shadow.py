@@ -158,3 +158,58 @@ def test_the_views_shadow_catches_a_warm_motor_and_not_a_nominal_one(drift_pct: 
         assert "no drift" in snap.status and np.nanmax(snap.sums["angle"]) < snap.threshold
     w = snap.windows[-1]  # the plot's data: a predicted span against its readings
     assert w.t_s.size == 25 and all(math.isfinite(v) for v in w.predicted["angle"])
+
+
+@pytest.mark.quick
+def test_the_status_reports_the_bands_progress_while_it_is_measured() -> None:
+    """A factory taking ``progress`` (``twin.app.shadow.view_monitor``'s) has the fraction of its band in the
+    status, in place of a bare "measuring" over blank charts."""
+    gate, reached = threading.Event(), threading.Event()
+    rec = Recorder()
+
+    def building(_p: Parameters, progress: Any = None) -> Any:
+        progress(0.25)
+        reached.set()
+        gate.wait(60.0)
+        progress(1.0)
+        return rec
+
+    worker = ShadowWorker(building, Parameters(), run=3)
+    _wait(reached.is_set, "the band is a quarter built")
+    snap = worker.snapshot()
+    assert not snap.ready and snap.status.startswith("shadow: measuring its band") and "25 %" in snap.status
+    gate.set()
+    _wait(lambda: worker.snapshot().ready, "the shadow is built")
+    worker.feed(0, 12.5, 1.0, 2.0, 1, 2.5)
+    _wait(lambda: "from t = 12.50 s" in worker.snapshot().status, "the status names where it joined")
+    assert worker.snapshot().status.startswith("shadow: watching run 3 from t = 12.50 s")
+    worker.stop()
+
+
+def test_an_alarm_and_the_windows_are_on_the_runs_clock() -> None:
+    """The shadow switched on 10 s into a warm-motor run: its windows, sums and alarm are at the times the run
+    shows (t from its release, > 10 s), and the alarm names the run."""
+    live = LiveTwin(Parameters(), registry, "appendix-sf", 0, 1.0, monitor=_real())
+    live.apply("initial", (X0, TH0))
+    live.apply("drift", 15.0)
+    live.apply("reset")
+    for _ in range(10 * 50):  # 10 s of the run before the shadow is asked for
+        live.tick()
+    on_s = live.rig.time_s
+    live.apply("shadow", True)
+    shadow = live.shadow
+    assert shadow is not None
+    _wait(lambda: shadow.snapshot().ready, "the shadow is built")
+    for _ in range(15 * 50):
+        live.tick()
+    _wait(lambda: shadow.scored + shadow.skipped >= 12, "the shadow worked the windows off")
+    snap = shadow.snapshot()
+    times = live.loop.log().timem
+    live.close()
+    assert snap.alarms, snap.status
+    channel, at, run = snap.alarms[0]
+    assert run == live.runs == snap.run
+    assert on_s + 2.0 <= at <= on_s + 12.0 and np.min(np.abs(times - at)) < 1e-9  # a time the run showed
+    assert f"DRIFT ALARM** at t = {at:.2f} s of run {run} ({channel})" in snap.status
+    assert all(on_s < w.t_s[0] and w.t_s[-1] <= times[-1] for w in snap.windows)
+    assert snap.sums_t.size and on_s < snap.sums_t[0] and np.all(np.diff(snap.sums_t) > 0)

@@ -49,6 +49,8 @@ REFERENCE_CONTROLLER = "appendix-sf"
 # (a band of 4 × 60 s put the resampled false-alarm probability per hour at twice that of 4 × 150 s).
 REFERENCE_DURATION_S = 150.0
 FALSE_ALARM_HOURS = 1.0  # the false-alarm probability is stated over an hour of windows
+# A band's build reports (done, total, stage), as ``twin.app.commands.common.progress_bar`` takes them.
+Progress = Callable[[int, int, str], None]
 # The commands kept for the echo lookup: the applied one is at most a few periods old (the watchdog's).
 _COMMANDS_KEPT = 256
 
@@ -60,23 +62,49 @@ def reference_band(
     name: str = REFERENCE_CONTROLLER,
     duration_s: float = REFERENCE_DURATION_S,
     seed: int = 0,
+    progress: Progress | None = None,
 ) -> Band:
     """The band of the twin at ``params``: ``controller`` run from each chapter 6 hardware start for
     ``duration_s`` with the hardware sensor chain (noise seeds ``seed``, ``seed`` + 1, …), each run's windows
-    predicted at ``params`` — a model exactly right, with the estimate's error only."""
-    from controllers.thesis_numbers import HARDWARE_STARTS
-    from twin.engine import run_closed_loop
+    predicted at ``params`` — a model exactly right, with the estimate's error only.
 
+    ``progress`` gets ``(done, total, stage)`` over the whole build, in ticks: each run's closed loop counts
+    its ticks, the fit of its windows as many again (the two take about as long)."""
+    from calib.compare import TickProgress
+    from controllers.thesis_numbers import HARDWARE_STARTS
+    from twin.engine import run_closed_loop, update_ticks
+
+    n = len(HARDWARE_STARTS)
+    ticks = update_ticks(duration_s, params)
+    total = 2 * n * ticks
     predictions = []
     for i, (x0, th0) in enumerate(HARDWARE_STARTS.values()):
+        offset, what = 2 * i * ticks, f"reference run {i + 1} of {n}"
+
+        def ran(done: int, _total: int, offset: int = offset, what: str = what) -> None:
+            if progress is not None:
+                progress(offset + done, total, f"{what}, the twin")
+
+        def fitted(done: int, of: int, offset: int = offset + ticks, what: str = what) -> None:
+            if progress is not None:
+                progress(offset + ticks * done // max(1, of), total, f"{what}, its windows predicted")
+
         run = run_closed_loop(
-            controller(), x0_m=x0, theta0_rad=th0, duration_s=duration_s, seed=seed + i, params=params
+            controller(),
+            x0_m=x0,
+            theta0_rad=th0,
+            duration_s=duration_s,
+            seed=seed + i,
+            params=params,
+            pacer=None if progress is None else TickProgress(ticks, ran),
         )
-        predictions.append(windowed_prediction([rig_log(run.log, f"reference run {i}")], params))
+        predictions.append(
+            windowed_prediction([rig_log(run.log, f"reference run {i}")], params, progress=fitted)
+        )
     return Band.from_predictions(
         predictions,
-        f"the twin at these parameters: {name} from the {len(HARDWARE_STARTS)} chapter 6 hardware starts, "
-        f"{duration_s:g} s each, noise seeds {seed}…{seed + len(HARDWARE_STARTS) - 1}",
+        f"the twin at these parameters: {name} from the {n} chapter 6 hardware starts, "
+        f"{duration_s:g} s each, noise seeds {seed}…{seed + n - 1}",
     )
 
 
@@ -87,9 +115,11 @@ def load_reference(paths: Sequence[str | Path]) -> list[RigLog]:
 
 def view_monitor(controller: str = REFERENCE_CONTROLLER) -> Callable[[Parameters], Shadow]:
     """The live view's shadow (``twin.viewer.monitor.MonitorFactory``): a ``Shadow`` at the parameters it is
-    given, against the band of the twin's own runs of ``controller`` at them."""
+    given, against the band of the twin's own runs of ``controller`` at them; its ``progress`` keyword gets
+    the fraction of the band built (the view shows it)."""
 
-    def make(params: Parameters) -> Shadow:
+    def make(params: Parameters, progress: Callable[[float], None] | None = None) -> Shadow:
+        """The shadow at ``params``; ``progress`` gets the fraction of its band built so far."""
         from controllers import registry
         from twin.interface import Controller
 
@@ -98,17 +128,31 @@ def view_monitor(controller: str = REFERENCE_CONTROLLER) -> Callable[[Parameters
             assert isinstance(made, Controller)
             return made
 
-        return Shadow(params, reference_band(params, build, name=controller))
+        def fraction(done: int, total: int, _stage: str) -> None:
+            if progress is not None:
+                progress(done / max(1, total))
+
+        return Shadow(params, reference_band(params, build, name=controller, progress=fraction))
 
     return make
 
 
-def logs_band(logs: Sequence[RigLog], params: Parameters) -> Band:
-    """The band of logs recorded on the rig when it was known good, predicted at ``params``."""
-    return Band.from_predictions(
-        [windowed_prediction([log], params) for log in logs],
-        "the logs " + ", ".join(str(g.path) for g in logs),
-    )
+def logs_band(logs: Sequence[RigLog], params: Parameters, *, progress: Progress | None = None) -> Band:
+    """The band of logs recorded on the rig when it was known good, predicted at ``params``. ``progress`` gets
+    ``(done, total, stage)`` in the logs' ticks (a log's share advancing with its windows' fit)."""
+    sizes = [len(log.time_s) for log in logs]
+    total = sum(sizes)
+    predictions = []
+    for i, log in enumerate(logs):
+
+        def fitted(
+            done: int, of: int, offset: int = sum(sizes[:i]), size: int = sizes[i], log: RigLog = log
+        ) -> None:
+            if progress is not None:
+                progress(offset + size * done // max(1, of), total, f"predicting the windows of {log.path}")
+
+        predictions.append(windowed_prediction([log], params, progress=fitted))
+    return Band.from_predictions(predictions, "the logs " + ", ".join(str(g.path) for g in logs))
 
 
 @dataclass
@@ -127,14 +171,17 @@ def watch(
     *,
     sessions: int = 1,
     idle_timeout_s: float = 5.0,
+    start_timeout_s: float | None = None,
     on_window: Callable[[WindowScore], None] | None = None,
     on_session: Callable[[int, str], None] | None = None,
     keep_windows: bool = False,
 ) -> WatchResult:
     """Follow ``observer``'s sessions into ``shadow`` until ``sessions`` have ended (0: until the rig is
     silent for ``idle_timeout_s`` after a session), the rig goes silent within a session, or Ctrl-C (the
-    watch ends there, keeping what it saw). ``on_window`` gets each window as it is processed, ``on_session``
-    each session's end (its number, the STOP in words)."""
+    watch ends there, keeping what it saw). A session joined before its controller started waits for its
+    first sample ``start_timeout_s`` (None: ``idle_timeout_s``): a served rig sends nothing until a
+    controller says HELLO. ``on_window`` gets each window as it is processed, ``on_session`` each session's
+    end (its number, the STOP in words)."""
     from twin.wire.server import STOP_NAMES
 
     result = WatchResult()
@@ -142,6 +189,9 @@ def watch(
     commands: dict[int, float] = {}
     zero_v = observer.config.zero_command_v if observer.config else math.nan
     in_session = False
+    # The rig time of the session's latest sample (NaN: none yet, its controller has not started).
+    last_s = math.nan
+    start_wait = idle_timeout_s if start_timeout_s is None else start_timeout_s
 
     def work_off(max_windows: int = MAX_BATCH_WINDOWS) -> None:
         for score in shadow.process(max_windows):
@@ -157,23 +207,24 @@ def watch(
                 if shadow.pending():
                     work_off()
                     continue
-                event = observer.next_event(idle_timeout_s)
+                waiting = in_session and math.isnan(last_s)
+                event = observer.next_event(start_wait if waiting else idle_timeout_s)
                 if event is None:
-                    result.ended = (
-                        "the rig went silent during a session" if in_session else "no further session"
-                    )
+                    result.ended = _silence(in_session, last_s, idle_timeout_s, start_wait)
                     break
             if isinstance(event, Joined):
                 shadow.new_session()
                 commands.clear()
                 zero_v = event.config.zero_command_v
                 in_session = True
+                last_s = math.nan
             elif isinstance(event, p.Command):
                 commands[event.seq] = event.dac_v
                 if len(commands) > 2 * _COMMANDS_KEPT:
                     for seq in sorted(commands)[:-_COMMANDS_KEPT]:
                         del commands[seq]
             elif isinstance(event, p.Sample):
+                last_s = event.time_s
                 shadow.add(
                     event.seq,
                     event.time_s,
@@ -200,3 +251,19 @@ def watch(
         result.ended = str(exc)
     result.wall_s = time.perf_counter() - started
     return result
+
+
+def _silence(in_session: bool, last_s: float, idle_s: float, start_s: float) -> str:
+    """Why the watch ended on a silent rig: what was awaited, for how long, and what to do."""
+    if not in_session:
+        return "no further session"
+    if math.isnan(last_s):
+        return (
+            f"the rig went silent: no controller started the session within {start_s:g} s of the shadow "
+            "joining it (start the controller, e.g. `ballbeam run --rig URL`, while the shadow watches; "
+            "--start-wait sets how long it waits)"
+        )
+    return (
+        f"the rig went silent during a session: no frame for {idle_s:g} s (--idle) after its sample at "
+        f"{last_s:.2f} s (the rig or its controller stopped without STOP)"
+    )

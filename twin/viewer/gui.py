@@ -210,7 +210,8 @@ class Panels:
                 initial_value=False,
                 disabled=live.monitor_factory is None,
                 hint="The twin at these parameters predicts each second of the run and raises a drift alarm "
-                "when the rig stops behaving like it (ballbeam shadow; it takes a few seconds to start)",
+                "when the rig stops behaving like it (ballbeam shadow); it first measures its band, tens of seconds "
+                "(minutes on a loaded machine), its progress in the status",
             )
             drift = gui.add_slider(
                 "Rig drift: motor R (+%)",
@@ -377,8 +378,12 @@ class Panels:
             send_uplot_data(
                 self.shadow_plots[2], uplot_data(snap.sums_t, [snap.sums["ball"], snap.sums["angle"], h])
             )
-        for channel, at in snap.alarms[self._shadow_alarms :]:
-            self._notify("Drift alarm", f"at {at:.2f} s: the {channel} no longer follows the twin", "red")
+        for channel, at, run in snap.alarms[self._shadow_alarms :]:
+            self._notify(
+                "Drift alarm",
+                f"at t = {at:.2f} s of run {run}: the {channel} no longer follows the twin",
+                "red",
+            )
         self._shadow_alarms = len(snap.alarms)
 
     def _notify(self, title: str, body: str, color: Any, seconds: float | None = 8.0) -> list[Any]:

@@ -4,14 +4,17 @@ The monitor itself (``calib.shadow.Shadow``: each window predicted by the twin a
 started with, a CUSUM drift alarm) is the application's: the core never imports ``calib``, so the view is
 handed a ``MonitorFactory`` (parameters → a ``Monitor``), as it is handed the controller catalogue.
 
-``ShadowWorker`` owns the monitor in a daemon thread: building it (the band takes seconds) and predicting
-windows (~0.6 s a batch) never wait in the 50 Hz loop, which only puts each tick's sample on a queue. The
-GUI reads ``snapshot()``: the latest scored windows (measured and predicted), the sums against time, the
-alarms and a status line.
+``ShadowWorker`` owns the monitor in a daemon thread: building it (the band takes tens of seconds, minutes on a
+loaded machine; a factory taking a ``progress`` keyword reports the fraction built, shown in the status) and
+predicting windows (~0.6 s a batch) never wait in the 50 Hz loop, which only puts each tick's sample on a
+queue. The GUI reads ``snapshot()``: the latest scored windows of the run being watched (measured and
+predicted), its sums, the alarms and a status line — all on the run's clock (t from its release, the time
+the view shows), each alarm with its run.
 """
 
 from __future__ import annotations
 
+import inspect
 import math
 import queue
 import threading
@@ -69,6 +72,7 @@ class Monitor(Protocol):
     def process(self) -> Sequence[MonitorWindow]: ...
 
 
+# Parameters → a monitor; one whose ``progress`` keyword takes the fraction of its build done reports it.
 MonitorFactory = Callable[[Parameters], Monitor]
 
 
@@ -82,38 +86,47 @@ class ShadowSnapshot:
     sums_t: np.ndarray = field(default_factory=lambda: np.zeros(0))
     sums: dict[str, np.ndarray] = field(default_factory=dict)
     threshold: float = math.nan
-    alarms: list[tuple[str, float]] = field(default_factory=list)  # (channel, rig time), oldest first
+    # (channel, t of the run, the run's number), oldest first
+    alarms: list[tuple[str, float, int]] = field(default_factory=list)
+    run: int = 0  # the view's run the windows and sums are of (0: none yet)
 
 
+_BUILDING = "shadow: measuring its band (the twin's own runs at these parameters)…"
 _STOP = ("stop",)
 _SESSION = ("session",)
 
 
 class ShadowWorker:
     """The monitor built from ``factory(params)`` in a daemon thread, fed by ``feed`` (any thread, never
-    blocks), working its windows off whenever samples are not waiting."""
+    blocks), working its windows off whenever samples are not waiting. ``run`` is the number of the view's
+    run it starts on (``new_session`` gives each next one's)."""
 
-    def __init__(self, factory: MonitorFactory, params: Parameters) -> None:
+    def __init__(self, factory: MonitorFactory, params: Parameters, run: int = 0) -> None:
         self._queue: queue.SimpleQueue[tuple[Any, ...]] = queue.SimpleQueue()
         self._lock = threading.Lock()
-        self._status = "shadow: measuring its band (the twin's own runs at these parameters)…"
+        self._status = _BUILDING
         self._ready = False
         self._windows: deque[MonitorWindow] = deque(maxlen=WINDOWS_SHOWN)
         self._sums: deque[tuple[float, float, float]] = deque(maxlen=SUMS_SHOWN)
-        self._alarms: list[tuple[str, float]] = []
+        self._alarms: list[tuple[str, float, int]] = []
         self._threshold = math.nan
+        self._run = run  # the worker thread's: the run of the samples it takes
+        self._from_s = math.nan  # t of the first sample it took of that run
         self.scored = 0
         self.skipped = 0
-        self._thread = threading.Thread(target=self._run, args=(factory, params), name="shadow", daemon=True)
+        self._thread = threading.Thread(
+            target=self._run_thread, args=(factory, params), name="shadow", daemon=True
+        )
         self._thread.start()
 
     # --- any thread ----------------------------------------------------------------------------------
     def feed(self, seq: int, time_s: float, ball_v: float, angle_v: float, flags: int, dac_v: float) -> None:
         self._queue.put(("sample", seq, time_s, ball_v, angle_v, flags, dac_v))
 
-    def new_session(self) -> None:
-        """A new run: its ticks count from 0 again (the sums carry on: the rig is the same)."""
-        self._queue.put(_SESSION)
+    def new_session(self, run: int | None = None) -> None:
+        """A new run (the view's ``run``, else the next): its ticks count from 0 again (the sums carry on:
+        the rig is the same)."""
+        self._queue.put((*_SESSION, run))
 
     def stop(self) -> None:
         self._queue.put(_STOP)
@@ -133,12 +146,27 @@ class ShadowWorker:
                 sums={"ball": sums[:, 1].copy(), "angle": sums[:, 2].copy()},
                 threshold=self._threshold,
                 alarms=list(self._alarms),
+                run=self._run,
             )
 
     # --- the worker's thread -------------------------------------------------------------------------
-    def _run(self, factory: MonitorFactory, params: Parameters) -> None:
+    def _build(self, factory: MonitorFactory, params: Parameters) -> Monitor:
+        """The monitor; a factory that takes ``progress`` reports the band's build into the status."""
+
+        def progress(fraction: float) -> None:
+            with self._lock:
+                self._status = f"{_BUILDING} {100.0 * min(max(fraction, 0.0), 1.0):.0f} %"
+
         try:
-            monitor = factory(params)
+            takes_progress = "progress" in inspect.signature(factory).parameters
+        except (TypeError, ValueError):  # a callable without a signature: built without progress
+            takes_progress = False
+        build: Callable[..., Monitor] = factory  # its keywords are not in MonitorFactory's type
+        return build(params, progress=progress) if takes_progress else build(params)
+
+    def _run_thread(self, factory: MonitorFactory, params: Parameters) -> None:
+        try:
+            monitor = self._build(factory, params)
         except Exception as exc:  # noqa: BLE001 - a monitor that cannot be built is reported, the view goes on
             with self._lock:
                 self._status = f"shadow failed: {type(exc).__name__}: {exc}"
@@ -146,7 +174,14 @@ class ShadowWorker:
         with self._lock:
             self._ready = True
             self._threshold = monitor.threshold
-            self._status = "shadow: watching (the first window is predicted 2 s into a run)"
+            self._status = f"shadow: watching run {self._run}"
+        try:
+            self._follow(monitor)
+        except Exception as exc:  # noqa: BLE001 - a failing prediction stops the shadow, not the view
+            with self._lock:
+                self._status = f"shadow failed: {type(exc).__name__}: {exc}"
+
+    def _follow(self, monitor: Monitor) -> None:
         while True:
             try:
                 item = self._queue.get(timeout=0.05 if monitor.pending() else None)
@@ -154,19 +189,30 @@ class ShadowWorker:
                 item = None
             if item is _STOP:
                 return
-            if item is _SESSION:
+            if item is not None and item[0] == _SESSION[0]:
+                while monitor.pending():  # the run's last complete windows, before its stream is forgotten
+                    self._publish(monitor.process())
                 monitor.new_session()
+                with self._lock:
+                    self._run = item[1] if item[1] is not None else self._run + 1
+                    self._from_s = math.nan
+                    self._windows.clear()
+                    self._sums.clear()
+                    self._status = f"shadow: watching run {self._run}"
             elif item is not None:
                 monitor.add(*item[1:])
-            if item is None or (self._queue.empty() and monitor.pending()):
-                try:
-                    self._publish(monitor, monitor.process())
-                except Exception as exc:  # noqa: BLE001 - a failing prediction stops the shadow, not the view
+                if math.isnan(self._from_s):
                     with self._lock:
-                        self._status = f"shadow failed: {type(exc).__name__}: {exc}"
-                    return
+                        self._from_s = item[2]
+                        if not self._alarms:
+                            self._status = (
+                                f"shadow: watching run {self._run} from t = {self._from_s:.2f} s (its first "
+                                "window is predicted 2 s later)"
+                            )
+            if item is None or (self._queue.empty() and monitor.pending()):
+                self._publish(monitor.process())
 
-    def _publish(self, monitor: Monitor, windows: Sequence[MonitorWindow]) -> None:
+    def _publish(self, windows: Sequence[MonitorWindow]) -> None:
         with self._lock:
             for w in windows:
                 if w.skipped:
@@ -175,16 +221,16 @@ class ShadowWorker:
                 self.scored += 1
                 self._windows.append(w)
                 self._sums.append((w.end_s, w.cusum["ball"], w.cusum["angle"]))
-                self._alarms += [(a.channel, a.time_s) for a in w.alarms]
+                self._alarms += [(a.channel, a.time_s, self._run) for a in w.alarms]
             if self._alarms:
-                channel, at = self._alarms[0]
+                channel, at, run = self._alarms[0]
                 self._status = (
-                    f"**DRIFT ALARM** at {at:.2f} s ({channel}): the rig no longer behaves as the twin "
-                    f"predicts ({len(self._alarms)} alarm(s))"
+                    f"**DRIFT ALARM** at t = {at:.2f} s of run {run} ({channel}): the rig no longer behaves "
+                    f"as the twin predicts ({len(self._alarms)} alarm(s))"
                 )
             elif self._sums:
-                _, ball, angle = self._sums[-1]
+                upto, ball, angle = self._sums[-1]
                 self._status = (
-                    f"shadow: no drift — CUSUM ball {ball:.1f}, angle {angle:.1f} of {self._threshold:g} "
-                    f"({self.scored} windows scored, {self.skipped} not)"
+                    f"shadow: no drift in run {self._run} up to t = {upto:.2f} s — CUSUM ball {ball:.1f}, "
+                    f"angle {angle:.1f} of {self._threshold:g} ({self.scored} windows scored, {self.skipped} not)"
                 )

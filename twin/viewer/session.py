@@ -258,7 +258,7 @@ class LiveTwin:
             self.loop.start()
             self._record()
             if self.shadow is not None:
-                self.shadow.new_session()
+                self.shadow.new_session(self.runs)
                 self._feed_shadow(self.rig.command_v, held=True)
         except Exception as exc:  # noqa: BLE001 - the run failed; the server goes on
             self._fail(exc)
@@ -526,7 +526,7 @@ class LiveTwin:
         if on and factory is None:
             raise _Refused("this view was started without a shadow (the application gives none)")
         if on and factory is not None and self.shadow is None:
-            self.shadow = ShadowWorker(factory, self.params)
+            self.shadow = ShadowWorker(factory, self.params, run=self.runs)
             self._feed_shadow(self.loop.command_v, held=True)  # its first session starts at this block
         elif not on and self.shadow is not None:
             self.shadow.stop()

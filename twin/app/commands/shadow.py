@@ -8,7 +8,13 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from twin.app.commands.common import add_params_options, compare_params, hardware_controller, inputs
+from twin.app.commands.common import (
+    add_params_options,
+    compare_params,
+    hardware_controller,
+    inputs,
+    progress_bar,
+)
 from twin.app.options import count, finite_float
 from twin.outputs import check_outputs
 
@@ -64,6 +70,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="the rig counts as gone after this long without a frame (default 5)",
     )
     parser.add_argument(
+        "--start-wait",
+        type=finite_float(0, lo_open=True, unit="s"),
+        default=600.0,
+        metavar="S",
+        help="how long a session the shadow joined waits for its controller's first sample (default 600; "
+        "--idle applies once the session runs)",
+    )
+    parser.add_argument(
         "--cusum-k",
         type=finite_float(0, unit="sd"),
         default=None,
@@ -111,12 +125,28 @@ def run(args: argparse.Namespace) -> int:
         return 1
     with observer:
         params = observer.parameters(base)  # the rig's period, DAC range and software calibration
+        if not args.json:
+            print(
+                f"shadow of {observer.url}: parameters {source}; measuring the band (progress on stderr), "
+                "the session's samples queued meanwhile",
+                flush=True,
+            )
         # The samples queue in the observer meanwhile: none is lost while the band is measured.
-        band = logs_band(reference_logs, params) if reference_logs else None
-        if band is None:
+        bar = progress_bar("shadow: measuring the band", unit="tick")
+        if reference_logs:
+            band = logs_band(reference_logs, params, progress=bar)
+        else:
             assert factory is not None
-            band = reference_band(params, hardware_controller(reference, params), name=reference)
+            band = reference_band(
+                params, hardware_controller(reference, params), name=reference, progress=bar
+            )
         shadow, head = _start(args, observer.url, params, band, source)
+        if not args.json:
+            print(
+                f"watching {observer.url}: start the rig's controller now if it has not started (a session "
+                f"waits up to {args.start_wait:g} s for it, --start-wait)",
+                flush=True,
+            )
         result, summary = _watch(args, observer, shadow, head, paths.get("--log"))
     if args.json:
         print(json.dumps({**head, "summary": summary}))
@@ -159,7 +189,6 @@ def _start(
         "false_alarm_probability_per_hour": p_hour,
     }
     if not args.json:
-        print(f"shadow of {url}: parameters {source}")
         print(
             f"band: {band.windows} windows of {band.source}; median error ball "
             f"{1e3 * math.exp(band.mean['ball']):.3g} mm, angle {1e3 * math.exp(band.mean['angle']):.3g} mrad"
@@ -222,6 +251,7 @@ def _watch(
             shadow,
             sessions=args.sessions,
             idle_timeout_s=args.idle,
+            start_timeout_s=args.start_wait,
             on_window=on_window,
             on_session=on_session,
         )
