@@ -219,6 +219,7 @@ def test_an_observer_of_a_served_job_sees_each_session(
     assert _same(both, np.array(dac_during_blocks[0] + dac_during_blocks[1]))
 
 
+@pytest.mark.realtime
 def test_in_real_time_the_observer_knows_the_dac_through_a_dead_controller_and_the_watchdog(
     dac_during_blocks: list[list[float]],
 ) -> None:

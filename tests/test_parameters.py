@@ -556,6 +556,7 @@ def test_files_that_cannot_be_parameter_files_are_refused(
     assert "Traceback" not in message
 
 
+@pytest.mark.realtime
 def test_a_long_dotted_key_is_refused_before_the_parser_spends_minutes_on_it(tmp_path) -> None:
     # tomllib's time grows with the square of a dotted key's length: 40 kB take seconds, 1 MiB would take an hour.
     path = tmp_path / "dotted.toml"

@@ -280,6 +280,7 @@ def test_the_processs_own_ctrl_c_passes_through() -> None:
         _run(_Scripted(3, _raise(guard.Interrupted())))
 
 
+@pytest.mark.realtime
 @pytest.mark.parametrize("block", ["sleep", "busy"])
 def test_a_blocking_update_is_stopped_by_the_watchdog(block: str) -> None:
     def stall() -> None:
@@ -297,6 +298,7 @@ def test_a_blocking_update_is_stopped_by_the_watchdog(block: str) -> None:
     assert 0.2 <= time.monotonic() - started < 3.0
 
 
+@pytest.mark.realtime
 def test_the_watchdog_works_outside_the_main_thread() -> None:
     """The live view's simulation thread: the call runs in a helper thread, abandoned when it stalls."""
     caught: list[BaseException] = []
@@ -405,6 +407,7 @@ class _Catalogue:
         return self._make()
 
 
+@pytest.mark.realtime
 def test_run_batch_fails_a_scalar_controller_that_exits_or_stalls() -> None:
     starts = {"x0_m": np.array([0.0, 0.05]), "theta0_rad": np.zeros(2), "seeds": np.array([0, 1])}
     with pytest.raises(ControllerError, match=r"raised SystemExit at tick k = 4 \(t = 0\.050 s, run 0\)"):

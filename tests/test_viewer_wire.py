@@ -166,6 +166,7 @@ class RawClient:
         self.sock.close()
 
 
+@pytest.mark.realtime
 def test_a_silent_client_trips_the_watchdog_after_its_periods() -> None:
     periods, answered = 3, 10
     samples: list[p.Sample] = []
@@ -332,6 +333,7 @@ def test_the_view_serves_with_a_warning_beyond_loopback_and_stops_its_client_at_
     assert run.log.k > 25 and stats["ticks"] >= run.log.k - 1
 
 
+@pytest.mark.realtime
 def test_a_stalled_client_never_slows_the_views_frames() -> None:
     """The client acknowledges the held sample and then says nothing: the view's own loop (``serve``) keeps
     sending a sample every 20 ms, every period counts missing, the output goes to the zero command after the

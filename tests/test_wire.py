@@ -266,6 +266,7 @@ def test_a_second_controlling_client_is_refused() -> None:
     assert _session(box).counts.refused_clients == 1
 
 
+@pytest.mark.realtime
 def test_a_client_that_disappears_ends_the_session_within_the_timeout() -> None:
     settings = SessionSettings(x0_m=0.1, theta0_rad=0.0, duration_s=5.0, wait_client_s=10.0, timeout_s=0.3)
     with _serving(settings) as (server, box):
@@ -292,6 +293,7 @@ def test_a_client_stop_ends_the_session() -> None:
     assert _session(box).stop_reason == p.STOP_CLIENT_QUIT
 
 
+@pytest.mark.realtime
 def test_a_server_that_disappears_is_a_bounded_error() -> None:
     settings = SessionSettings(x0_m=0.1, theta0_rad=0.0, duration_s=5.0, wait_client_s=10.0, timeout_s=0.2)
     with pytest.raises(ServeError, match="ended before"), _serving(settings) as (server, _box):
@@ -305,6 +307,7 @@ def test_a_server_that_disappears_is_a_bounded_error() -> None:
         rig.close()
 
 
+@pytest.mark.realtime
 def test_no_server_is_a_bounded_error() -> None:
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
         s.bind(("127.0.0.1", 0))
@@ -315,6 +318,7 @@ def test_no_server_is_a_bounded_error() -> None:
         assert time.monotonic() - began < 1.5
 
 
+@pytest.mark.realtime
 def test_watchdog_zeroes_the_output_in_real_time() -> None:
     periods = 3
     settings = SessionSettings(
