@@ -60,3 +60,21 @@ def _realtime_runs_alone(request: pytest.FixtureRequest) -> Iterator[None]:
             fcntl.flock(lock, fcntl.LOCK_UN)
             if alone:
                 fcntl.flock(gate, fcntl.LOCK_UN)
+
+
+@pytest.fixture
+def no_work(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The refusal must come before any run: starting one (a run, a sweep's, Monte Carlo's or validate's runs,
+    the live view) fails the test."""
+
+    def fail(*args: object, **kwargs: object) -> None:
+        raise AssertionError("the work started although an argument was bad")
+
+    for target in (
+        "twin.engine.run_closed_loop",
+        "twin.app.validate.run_starts",
+        "twin.app.sweep.run_starts",
+        "twin.app.montecarlo.run_starts",
+        "twin.viewer.serve",
+    ):
+        monkeypatch.setattr(target, fail)

@@ -20,22 +20,6 @@ from twin.parameters import MAX_FILE_BYTES, ParameterError, Parameters
 P = Parameters()
 
 
-@pytest.fixture
-def no_work(monkeypatch: pytest.MonkeyPatch) -> None:
-    """The refusal must come before any run: starting one fails the test."""
-
-    def fail(*args: object, **kwargs: object) -> None:
-        raise AssertionError("the work started although an argument was bad")
-
-    for target in (
-        "twin.engine.run_closed_loop",
-        "twin.app.validate.run_starts",
-        "twin.app.sweep.run_starts",
-        "twin.app.montecarlo.run_starts",
-    ):
-        monkeypatch.setattr(target, fail)
-
-
 def _spread(tmp_path: Path, text: str) -> Path:
     path = tmp_path / "spread.toml"
     path.write_text(text)

@@ -24,23 +24,6 @@ from twin.parameters import ParameterError, Parameters
 PERIOD_S = 0.02
 
 
-@pytest.fixture
-def no_work(monkeypatch: pytest.MonkeyPatch) -> None:
-    """The refusal must come before any run: starting one fails the test."""
-
-    def fail(*args: object, **kwargs: object) -> None:
-        raise AssertionError("the work started although an argument was bad")
-
-    for target in (
-        "twin.engine.run_closed_loop",
-        "twin.app.validate.run_starts",
-        "twin.app.sweep.run_starts",
-        "twin.app.montecarlo.run_starts",
-        "twin.viewer.serve",
-    ):
-        monkeypatch.setattr(target, fail)
-
-
 # --- the option types ----------------------------------------------------------------------------------
 @pytest.mark.quick
 def test_the_types_return_the_number_and_refuse_naming_the_range() -> None:
