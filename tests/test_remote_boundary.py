@@ -408,6 +408,7 @@ def _view(timeout_s: float) -> Iterator[tuple[Any, Server]]:
         server.close()
 
 
+@pytest.mark.realtime
 def test_a_hello_alone_loses_the_view_session_after_the_timeout_and_a_new_client_takes_it() -> None:
     """``view --serve``: one HELLO takes the session, its held sample is never acknowledged; within the server's
     ``timeout_s`` (``serve --timeout``'s) the session ends with STOP 3, and another client's HELLO gets the

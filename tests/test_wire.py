@@ -546,7 +546,7 @@ def _until_sample(raw: RawClient) -> p.Sample:
     return msg
 
 
-@pytest.mark.quick
+@pytest.mark.realtime  # told within 1 s of wall time, before the 3 s timeout
 def test_a_refused_command_is_told_at_once_and_counted() -> None:
     """Lock-step: NaN answering SAMPLE 3 gets SAMPLE 3 again with the refused flag at its 0.2 s repeat (not
     a timeout); a valid answer then goes on, and the summary counts the refusal."""
@@ -596,6 +596,7 @@ def test_a_client_repeating_a_refused_command_gets_a_flagged_repeat_every_0_2_s(
         assert 1 <= repeats <= 0.7 / 0.2 + 1
 
 
+@pytest.mark.realtime
 def test_remote_rig_turns_the_refused_flag_into_an_error() -> None:
     """``RemoteRig`` against a rig that refuses its command: a ``RemoteError`` naming it, not a timeout."""
     rig_sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -626,6 +627,7 @@ def test_remote_rig_turns_the_refused_flag_into_an_error() -> None:
     rig_sock.close()
 
 
+@pytest.mark.realtime
 def test_a_dead_client_in_real_time_leaves_the_session_to_run_out_under_the_watchdog() -> None:
     """Real time: a client that vanishes does not end the session; it runs to its duration with the output
     at the zero command from the watchdog on, then STOP 0 (done)."""
