@@ -314,3 +314,16 @@ def test_the_three_cameras_look_at_the_rig_from_under_a_metre() -> None:
         distance = float(np.linalg.norm(np.subtract(position, look_at)))
         assert look_at[:2] == (0.0, 0.0) and 0.2 < look_at[2] < 0.3
         assert 0.5 < distance < 1.0 and float(np.linalg.norm(up)) == 1.0
+
+
+@pytest.mark.quick
+def test_an_estimate_is_dashed_so_the_measurement_beneath_it_shows() -> None:
+    """appendix-clp's estimated x is its reading: drawn solid over the measured trace it hid it."""
+    from twin.viewer.gui import PLOTS, _series
+
+    for _, traces in PLOTS:
+        for name, _key, colour in traces:
+            series = _series(name, colour)
+            assert series["stroke"] == colour
+            assert ("dash" in series) == (name == "estimated"), name
+    assert any({"measured", "estimated"} <= {n for n, _k, _c in traces} for _, traces in PLOTS)

@@ -57,6 +57,16 @@ SHADOW_PLOTS = (
     ("θ (rad)", (("measured", "#ff7f0e"), ("predicted", "#17becf"))),
     ("CUSUM (sd)", (("ball", "#1f77b4"), ("angle", "#d62728"), ("alarm at h", "#000000"))),
 )
+
+
+def _series(name: str, colour: str) -> viser.uplot.Series:
+    """A trace of a live chart. An estimate is dashed: where it equals the measurement (appendix-clp's x is
+    its reading), the measurement drawn beneath it still shows."""
+    if name == "estimated":
+        return viser.uplot.Series(label=name, stroke=colour, width=1.5, dash=(6.0, 4.0))
+    return viser.uplot.Series(label=name, stroke=colour, width=1.5)
+
+
 PLOT_AXIS_PX = 58  # room for a y value such as "−0.005" with its minus sign (uPlot's default clips it)
 PLOT_ASPECT = 3.4  # wide and low: all the plots fit the height of a 900 px window
 PLOT_PANEL_PX = 460
@@ -276,9 +286,7 @@ class Panels:
         legend: viser.uplot.Legend,
     ) -> viser.GuiUplotHandle:
         """One live chart: time against ``traces`` (legend label, colour), ``label`` on its y axis."""
-        series = [viser.uplot.Series(label="t (s)")] + [
-            viser.uplot.Series(label=name, stroke=colour, width=1.5) for name, colour in traces
-        ]
+        series = [viser.uplot.Series(label="t (s)")] + [_series(name, colour) for name, colour in traces]
         axes: tuple[viser.uplot.Axis, ...] = (
             {"size": 26},
             {"size": PLOT_AXIS_PX, "label": label, "labelSize": 18},
