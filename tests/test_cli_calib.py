@@ -45,3 +45,22 @@ def test_experiment_writes_a_log_calibrate_can_read(tmp_path: Path, capsys) -> N
     assert main(["experiment", "square", "--out", str(log), "--duration", "6"]) == 2
     assert main(["experiment", "wiggle", "--out", str(tmp_path / "w.mat")]) == 2
     assert "unknown experiment 'wiggle'" in capsys.readouterr().err
+
+
+@pytest.mark.quick
+def test_the_shipped_tables_are_found_without_a_clone(capsys: pytest.CaptureFixture[str]) -> None:
+    """``thesis:table_6_3`` is the table the package ships: the same fit as the repository's file, from any
+    directory; an unknown name lists the shipped ones."""
+    import json
+
+    from twin.app.commands.calibrate_static import table_path
+
+    assert main(["calibrate-static", str(TABLES_DIR / "table_6_3.csv"), "--json"]) == 0
+    from_file = json.loads(capsys.readouterr().out)
+    assert main(["calibrate-static", "thesis:table_6_3", "--json"]) == 0
+    shipped = json.loads(capsys.readouterr().out)
+    assert table_path("thesis:table_6_3").read_bytes() == (TABLES_DIR / "table_6_3.csv").read_bytes()
+    from_file.pop("table", None), shipped.pop("table", None)
+    assert shipped == from_file
+    assert main(["calibrate-static", "thesis:table_9_9"]) == 2
+    assert "thesis:eq_6_2_4, thesis:table_6_3" in capsys.readouterr().err

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+from pathlib import Path
 
 from twin.app.commands.common import add_params_options, inputs, load_params
 from twin.outputs import check_outputs, writing
@@ -15,7 +16,12 @@ HELP = "fit a sensor's static curve from a measured table (CSV)"
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
-        "table", metavar="TABLE.csv", help="columns position_m,volts_v (ball) or di,volts_v (angle)"
+        "table",
+        metavar="TABLE.csv",
+        help=(
+            "columns position_m,volts_v (ball) or di,volts_v (angle); or a table the package ships: "
+            "thesis:table_6_3 (Table 6.3), thesis:eq_6_2_4 (eq 6.2.4's three points)"
+        ),
     )
     parser.add_argument("--out", metavar="FILE.toml", help="write the fitted parameters as a parameter file")
     parser.add_argument("--overwrite", action="store_true", help="replace an existing --out file")
@@ -32,9 +38,25 @@ def run(args: argparse.Namespace) -> int:
     paths = check_outputs(
         [("--out", args.out, PARAMS_OUT_SUFFIXES, 0)], overwrite=args.overwrite, inputs=inputs(args)
     )
-    result = calibrate(load_table(args.table), params)
+    result = calibrate(load_table(table_path(args.table)), params)
     print(json.dumps(result.to_json(), indent=2) if args.json else "\n".join(render_lines(result)))
     if "--out" in paths:
         with writing("--out", args.out), atomic_output(paths["--out"], overwrite=args.overwrite) as fh:
             fh.write(render_toml(result).encode("utf-8"))
     return 0
+
+
+def table_path(spec: str) -> Path:
+    """``spec`` as a path; ``thesis:NAME`` is a table the package ships (``calib/tables/NAME.csv``: the
+    thesis's measurements, found without a clone of the repository)."""
+    from calib.static import TABLES_DIR
+    from twin.parameters import ParameterError
+
+    if not spec.startswith("thesis:"):
+        return Path(spec)
+    shipped = Path(TABLES_DIR)
+    names = sorted(p.stem for p in shipped.glob("*.csv"))
+    name = spec.removeprefix("thesis:")
+    if name not in names:
+        raise ParameterError(f"TABLE {spec!r}: the package ships {', '.join('thesis:' + n for n in names)}")
+    return shipped / f"{name}.csv"
