@@ -738,3 +738,18 @@ def test_run_json_keeps_a_chatty_controllers_prints_off_stdout(user_dir: Path, c
     assert json.loads(out)["controller"] == "broken_chatty:Chatty" and len(out.splitlines()) == 1
     # update_ticks: 1 + ⌈(0.2 s − free run 0.01 s)/0.02 s⌉ = 11 updates
     assert "import chatter" in err and err.count("tick chatter") == 11
+
+
+@pytest.mark.quick
+def test_a_controller_module_that_calls_os_exit_at_import_is_refused(user_dir: Path, capsys) -> None:
+    """``os._exit(0)`` at import would end the process with exit code 0 and no report: it is refused naming
+    the module (exit 2), and os._exit is the real one again afterwards."""
+    import os
+
+    (user_dir / "broken_exit.py").write_text("import os\nos._exit(0)\n")
+    real = os._exit
+    line = _refused(
+        capsys, ["run", "--controller", "broken_exit:X", "--x0", "0.1", "--theta0", "0"], "--controller"
+    )
+    assert "importing broken_exit failed" in line and "os._exit(0) called while importing" in line
+    assert os._exit is real

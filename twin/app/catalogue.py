@@ -43,6 +43,26 @@ def _what(fault: Fault) -> str:
     return fault_text(fault)
 
 
+class ProcessExit(Exception):
+    """A user's module called ``os._exit`` while it was imported: the process would end with no report."""
+
+
+def _import_keeping_the_process(name: str) -> Any:
+    """``importlib.import_module(name)`` with ``os._exit`` refused while it runs: a module that calls it at
+    import (no exception, no cleanup: the process would just end, with exit code 0 for ``os._exit(0)``) raises
+    ``ProcessExit`` instead, which the guard reports like any other failed import."""
+    real_exit = os._exit
+
+    def refuse(code: int) -> None:
+        raise ProcessExit(f"os._exit({code!r}) called while importing: the process would have ended silently")
+
+    os._exit = refuse  # type: ignore[assignment]
+    try:
+        return importlib.import_module(name)
+    finally:
+        os._exit = real_exit
+
+
 def user_controller(spec: str, timeout_s: float | None = None) -> Callable[..., Controller] | None:
     """The class named by ``MODULE:CLASS`` (a ``Controller`` subclass) or the function named by
     ``MODULE:FUNCTION`` (one that builds a ``Controller``: a trained policy's ``PolicyController``, say), or
@@ -71,7 +91,7 @@ def user_controller(spec: str, timeout_s: float | None = None) -> Callable[..., 
         sys.path.insert(0, cwd)
     guard = _first_call_guard(timeout_s)
     try:
-        module = guard.call(importlib.import_module, module_name, guard.first_budget_s)
+        module = guard.call(_import_keeping_the_process, module_name, guard.first_budget_s)
     except Fault as fault:
         exc = fault.exc
         if isinstance(exc, ModuleNotFoundError) and exc.name:
