@@ -22,7 +22,7 @@ import math
 import sys
 import time
 from array import array
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
 from typing import Any, Protocol, runtime_checkable
 
@@ -33,7 +33,7 @@ from twin.interface import Controller, DaqSample, Rig, RigEnded, Telemetry
 from twin.log import THESIS_FIELDS, TRUTH_FIELDS, RunLog
 from twin.parameters import Daq, Parameters
 from twin.physics import PhysicsBlock
-from twin.realtime import TickTiming, tick_timing
+from twin.realtime import TickTiming, arrival_timing
 from twin.rigs.sim import PlantKind, RigError, make_rig, whole_steps
 from twin.verdict import Criteria, Trace, Verdict, evaluate, evaluate_measured
 
@@ -47,7 +47,6 @@ __all__ = [
     "ENDED_TICKS",
     "RunResult",
     "TrueState",
-    "arrival_timing",
     "block_peak_abs_theta_rad",
     "StateLaw",
     "check_period_s",
@@ -233,14 +232,6 @@ def _where(where: str | Callable[[], str]) -> str:
 ENDED_TICKS = "all ticks"
 ENDED_BALL_LOST = "ball lost"
 ENDED_LAST_SAMPLE = "last sample"
-
-
-def arrival_timing(arrivals_s: Sequence[float], compute_s: Sequence[float], period_s: float) -> TickTiming:
-    """Tick timing from the wall-clock arrivals of the blocks after the first: jitter is an arrival's
-    lateness against the first's + k·period (negative: early), compute the controller's update and write."""
-    t = np.asarray(arrivals_s, dtype=float)
-    late_s = (t - t[0] - np.arange(t.size) * period_s).tolist() if t.size else []
-    return tick_timing(late_s, compute_s, period_s)
 
 
 class RunResult:

@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["TickTiming", "WallClockPacer"]
+__all__ = ["TickTiming", "WallClockPacer", "arrival_timing", "tick_timing"]
 
 _SPIN_S = 0.0005  # sleep() overshoots by up to a scheduler quantum: spin for the last half millisecond
 
@@ -87,3 +87,11 @@ def tick_timing(late_s: Sequence[float], compute_s: Sequence[float], period_s: f
         compute_max_ms=float(compute.max()),
         overruns=int(np.sum((late >= period_ms) | (compute > period_ms))),
     )
+
+
+def arrival_timing(arrivals_s: Sequence[float], compute_s: Sequence[float], period_s: float) -> TickTiming:
+    """Tick timing from the wall-clock arrivals of the blocks after the first: jitter is an arrival's
+    lateness against the first's + k·period (negative: early), compute the controller's update and write."""
+    t = np.asarray(arrivals_s, dtype=float)
+    late_s = (t - t[0] - np.arange(t.size) * period_s).tolist() if t.size else []
+    return tick_timing(late_s, compute_s, period_s)
