@@ -1,25 +1,31 @@
-"""Coverage of the calibration's 95 % intervals: how often they contain the truth, per parameter.
+"""Coverage of the calibration's 95 % intervals, and the model resolution derived from it.
 
-For each seed a rig is drawn (resistance, inertia and pivot damping up to ±20 % from the start of the fit,
-a zeroing error up to ±15 mrad), a 60 s log of the recommended experiment is made on the twin
-(``calib.experiments``) and on the independent simulator (``tests/independent_rig.py``, sharing only the
-parameter values), and the four parameters are fitted from the thesis's values. Printed: per source and
-parameter, the share of seeds whose interval contains the truth, with its exact (Clopper–Pearson) 95 %
-interval, the median |error| and the median interval half-width.
+For each seed a rig is drawn from ``scripts/calib_coverage_spread.toml`` (resistance, inertia and pivot damping
+±20 %, a zeroing error within ±15 mrad, the ball sensor's contact losses 0–10 per second), a 60 s log of the
+recommended experiment is made on the twin (``calib.experiments``) and on the independent simulator
+(``tests/independent_rig.py``, sharing only the parameter values), and the four parameters are fitted from
+the study's start. Printed: per source and parameter, the share of seeds whose interval contains the truth,
+with its exact (Clopper–Pearson) 95 % interval, the median |error| and the median interval half-width.
 
-    PYTHONPATH=$PWD python scripts/calib_coverage.py [--seeds 20] [--first-seed 20] [--sources twin,independent]
-        [--out cov.json]
+    PYTHONPATH=$PWD python scripts/calib_coverage.py [--seeds 20] [--first-seed 30] [--jobs 2]
+        [--sources twin,independent] [--fixed-rig SEED] [--derive calib/resolution.toml] [--out cov.json]
 
-Seeds 0…19 were used to measure the model's resolution (``calib.identify.MODEL_RESOLUTION``); the default
-checks the intervals on seeds 20…39, which did not set them.
+``--derive FILE`` writes the model's resolution (``calib.identify.MODEL_RESOLUTION``) from the runs: per
+parameter, the smallest floor that, added in quadrature to each fit's statistical half-width, puts the truth
+inside the interval in 95 % of the runs of every source (``derive_floors``). Seeds 0…29 derive it; the default
+checks it on seeds 30…49, which did not. ``--fixed-rig SEED``: every run's rig is seed SEED's draw, only the
+logs' noise varies (the coverage of one rig, as a user's repeated logs).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
+import os
 import statistics
 import sys
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -27,53 +33,103 @@ import scipy.stats
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
-from calib.experiments import (  # noqa: E402
-    STUDY_FIT,
-    STUDY_START,
-    run_experiment,
-)
-from calib.identify import calibrate  # noqa: E402
+from calib.experiments import STUDY_FIT, STUDY_START, run_experiment  # noqa: E402
+from calib.identify import FITTABLE, calibrate  # noqa: E402
 from calib.logs import RigLog, rig_log  # noqa: E402
+from twin.app.montecarlo import load_spread  # noqa: E402
 from twin.parameters import Parameters  # noqa: E402
 
 FIT = list(STUDY_FIT)
 START = Parameters().with_overrides(STUDY_START)
+SPREAD = Path(__file__).resolve().with_name("calib_coverage_spread.toml")
+DERIVING_SEEDS = range(0, 30)
+COVERAGE = 0.95
+# How the floor of each parameter scales: relative to its value, or absolute (the zeroing error, whose
+# value can be anything near 0). A relative floor's absolute part is the floor at the parameter's typical
+# size (``FitSpec.scale``), for a value near 0.
+RELATIVE = {FIT[0]: True, FIT[1]: True, FIT[2]: True, FIT[3]: False}
 
 
 def truth(seed: int) -> dict[str, float]:
-    rng = np.random.default_rng(1000 + seed)
-    f = rng.uniform(-0.2, 0.2, 3)
-    return {
-        FIT[0]: START.motor.resistance_ohm * (1 + f[0]),
-        FIT[1]: START.beam.inertia_pivot_kgm2 * (1 + f[1]),
-        FIT[2]: START.beam.pivot_damping_nm_s_per_rad * (1 + f[2]),
-        FIT[3]: float(rng.uniform(-0.015, 0.015)),
-    }
+    """Seed's rig: a draw from the spread (its own generator: the log's noise draws are the log seed's)."""
+    spread = load_spread(SPREAD, START)
+    values = spread.draw(np.random.default_rng(1000 + seed))
+    return dict(zip(spread.names, (float(v) for v in values), strict=True))
 
 
-def make_log(source: str, seed: int, duration_s: float = 60.0) -> RigLog:
-    rig = START.with_overrides(truth(seed))
+def make_log(source: str, seed: int, rig_seed: int, duration_s: float = 60.0) -> RigLog:
+    rig = START.with_overrides(truth(rig_seed))
     if source == "twin":
         return rig_log(run_experiment("square", rig, duration_s=duration_s, seed=seed).log, f"twin-{seed}")
     from independent_rig import rig_log_of, simulate  # type: ignore[import-not-found]  # tests/, put on the path
 
-    return rig_log_of(simulate(rig, duration_s=duration_s, seed=seed), f"independent-{seed}")
+    losses = rig.ball_sensor
+    log = simulate(
+        rig,
+        duration_s=duration_s,
+        seed=seed,
+        dropout_rate_hz=losses.dropout_rate_hz,
+        dropout_max_s=2 * losses.dropout_mean_duration_s,  # uniform 0…2μ: the twin's mean duration μ
+    )
+    return rig_log_of(log, f"independent-{seed}")
 
 
-def one(source: str, seed: int) -> dict[str, dict[str, float]]:
-    true = truth(seed)
-    cal = calibrate([make_log(source, seed)], FIT, START)
+def one(source: str, seed: int, rig_seed: int | None = None) -> dict[str, dict[str, float]]:
+    rig_seed = seed if rig_seed is None else rig_seed
+    true = truth(rig_seed)
+    cal = calibrate([make_log(source, seed, rig_seed)], FIT, START)
     out: dict[str, dict[str, float]] = {}
     for name in FIT:
         v = cal.values[name]
         out[name] = {
             "inside": float(v.ci_low <= true[name] <= v.ci_high),
             "error": v.value - true[name],
+            "value": v.value,
             "half": (v.ci_high - v.ci_low) / 2,
+            "statistical_half": v.statistical_half,
             "truth": true[name],
             "trustworthy": float(cal.trustworthy),
         }
     return out
+
+
+def derive_floors(results: dict[str, list[dict[str, dict[str, float]]]]) -> dict[str, dict[str, float]]:
+    """Per parameter, the smallest floor F (relative or absolute, ``RELATIVE``) with |error| ≤
+    hypot(statistical half, F·scale) in at least ``COVERAGE`` of the runs of every source: each run needs
+    √(error² − statistical half²) (0 when the statistical interval holds the truth by itself), and the floor is
+    that need's order statistic ⌈0.95·n⌉ of n, the largest over the sources."""
+    floors: dict[str, dict[str, float]] = {}
+    for name in FIT:
+        per_source = []
+        for runs in results.values():
+            need = sorted(
+                math.sqrt(max(r[name]["error"] ** 2 - r[name]["statistical_half"] ** 2, 0.0))
+                / (abs(r[name]["value"]) if RELATIVE[name] else 1.0)
+                for r in runs
+            )
+            per_source.append(need[math.ceil(COVERAGE * len(need)) - 1])
+        floor = float(f"{max(per_source):.2g}")  # two digits, rounded to nearest: the study's own resolution
+        if RELATIVE[name]:
+            floors[name] = {"relative": floor, "absolute": floor * FITTABLE[name].scale}
+        else:
+            floors[name] = {"relative": 0.0, "absolute": floor}
+    return floors
+
+
+def write_floors(path: Path, floors: dict[str, dict[str, float]], provenance: str) -> None:
+    lines = [
+        "# The smooth model's resolution added to each calibration interval (calib/identify.py MODEL_RESOLUTION).",
+        "# Written by scripts/calib_coverage.py --derive: do not edit by hand, run the study again.",
+        f"# {provenance}",
+        "[floors]",
+        *(
+            f'"{n}" = {{ relative = {f["relative"]!r}, absolute = {f["absolute"]!r} }}'
+            for n, f in floors.items()
+        ),
+    ]
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    os.replace(tmp, path)
 
 
 def clopper_pearson(k: int, n: int) -> tuple[float, float]:
@@ -91,7 +147,7 @@ def table(results: dict[str, list[dict[str, dict[str, float]]]]) -> list[str]:
             k = int(sum(r[name]["inside"] for r in runs))
             n = len(runs)
             lo, hi = clopper_pearson(k, n)
-            rel = name != FIT[3]
+            rel = RELATIVE[name]
             err = statistics.median(
                 abs(r[name]["error"] / r[name]["truth"]) if rel else abs(r[name]["error"]) for r in runs
             )
@@ -105,30 +161,39 @@ def table(results: dict[str, list[dict[str, dict[str, float]]]]) -> list[str]:
     return lines
 
 
+def _run(job: tuple[str, int, int | None]) -> dict[str, dict[str, float]]:
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    return one(*job)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--seeds", type=int, default=20)
     ap.add_argument(
-        "--first-seed", type=int, default=20, help="seeds 0…19 set MODEL_RESOLUTION: check others"
+        "--first-seed", type=int, default=30, help="seeds 0…29 derive the resolution: check others"
     )
     ap.add_argument("--sources", default="twin,independent")
+    ap.add_argument("--fixed-rig", type=int, default=None, help="every run on this seed's rig")
+    ap.add_argument("--jobs", type=int, default=1)
+    ap.add_argument("--derive", type=Path, help="write the resolution derived from these runs here")
     ap.add_argument("--out", type=Path)
     args = ap.parse_args(argv)
-    results: dict[str, list[dict[str, dict[str, float]]]] = {}
-    for source in args.sources.split(","):
-        results[source] = []
-        for seed in range(args.first_seed, args.first_seed + args.seeds):
-            results[source].append(one(source, seed))
-            print(
-                f"{source} seed {seed}: "
-                + ", ".join(
-                    f"{n.split('.')[-1]} {'in' if r['inside'] else 'OUT'}"
-                    for n, r in results[source][-1].items()
-                ),
-                file=sys.stderr,
-                flush=True,
-            )
+    seeds = range(args.first_seed, args.first_seed + args.seeds)
+    sources = args.sources.split(",")
+    jobs = [(source, seed, args.fixed_rig) for source in sources for seed in seeds]
+    with ProcessPoolExecutor(max_workers=max(args.jobs, 1)) as pool:
+        runs = list(pool.map(_run, jobs))
+    results: dict[str, list[dict[str, dict[str, float]]]] = {s: [] for s in sources}
+    for (source, seed, _), run in zip(jobs, runs, strict=True):
+        results[source].append(run)
+        shown = ", ".join(f"{n.split('.')[-1]} {'in' if r['inside'] else 'OUT'}" for n, r in run.items())
+        print(f"{source} seed {seed}: {shown}", file=sys.stderr)
     print("\n".join(table(results)))
+    if args.derive is not None:
+        floors = derive_floors(results)
+        provenance = f"seeds {seeds.start}…{seeds.stop - 1} of {', '.join(sources)}, spread {SPREAD.name}"
+        write_floors(args.derive, floors, provenance)
+        print(f"wrote {args.derive}: {json.dumps(floors)}")
     if args.out is not None:
         args.out.write_text(json.dumps(results, indent=1) + "\n")
     return 0

@@ -22,9 +22,13 @@ physics, not from twin/:
 * ``controller="regulate"``: the same gains at a fixed setpoint 0.05 m, no dither (a user's regulation log);
   ``controller="rails"``: the gains ×3 and a ±6 V dither, so the amplifier sits at its ±12 V rails often;
 * ``noise_m``, ``spike_rate``: the ball channel's Gaussian noise and the share of ticks with an open wiper;
+* ``dropout_rate_hz``, ``dropout_max_s``: wiper dropouts as a Poisson process in time, each lasting a
+  uniform 0…``dropout_max_s``, crossing block boundaries (the ball lifting off the spring as it rolls);
 * ``fall_at_s``: from then on the controller holds +2 V at the motor, the ball rolls off the −x end
   (|x| > ``track.half_length_m``), its wiper reads 0 V (open) and the beam turns without it;
-* ``period_s``: the tick (40 samples per block whatever the period).
+* ``period_s``: the tick (40 samples per block whatever the period);
+* ``rail_v``: the amplifier's output clipped at ±rail_v instead of ±12 V (a supply that sags, a current
+  limit), which the fit does not know.
 """
 
 from __future__ import annotations
@@ -40,7 +44,7 @@ K_SF = (-36.34, 24.6, -15.96, 3.98)  # §5.2.1's printed gains (V per m, rad, m/
 PERIOD_S = 0.02
 
 
-def _rhs(p: Parameters, volts: float, on_track: bool = True):
+def _rhs(p: Parameters, volts: float, on_track: bool = True, rail_v: float = 12.0):
     m, r, g = p.ball.mass_kg if on_track else 0.0, p.ball.radius_m, p.physics.gravity_m_s2
     rs = math.sqrt(r * r - p.track.contact_spacing_m**2 / 4)
     j_ball = 0.4 * m * r * r
@@ -54,7 +58,7 @@ def _rhs(p: Parameters, volts: float, on_track: bool = True):
     dry = p.beam.pivot_friction_nm
 
     def torque_of(thd: float) -> float:
-        return k_t * (min(max(volts, -12.0), 12.0) - k_b * thd)
+        return k_t * (min(max(volts, -rail_v), rail_v) - k_b * thd)
 
     def f(_t: float, s: np.ndarray) -> list[float]:
         x, th, xd, thd = s
@@ -92,6 +96,9 @@ def simulate(
     spike_rate: float = 0.04,
     fall_at_s: float | None = None,
     period_s: float = PERIOD_S,
+    dropout_rate_hz: float = 0.0,
+    dropout_max_s: float = 5e-3,
+    rail_v: float = 12.0,
 ) -> dict[str, np.ndarray]:
     """A closed-loop log: {"timem", "datam1", "datam2", "aout"}, one value per tick, row 0 the start sample."""
     if controller not in ("square", "regulate", "rails"):
@@ -113,10 +120,21 @@ def simulate(
     def adc(v: float) -> float:  # 12 bits over ±5 V: codes 0…4095
         return -5.0 + lsb_adc * min(max(round((v + 5.0) / lsb_adc), 0), 4095)
 
-    def ball_reading(xs: np.ndarray) -> float:
+    open_until = [0.0]  # the end of the dropout in progress (s)
+    dropout_rng = np.random.default_rng([seed, 7])  # its own stream: the other draws stay as they were
+
+    def ball_reading(xs: np.ndarray, times: np.ndarray) -> float:
         wiper = np.interp(xs, curve_x, curve_v)
         if rng.random() < spike_rate:
             wiper[-4:] = 0.0
+        if dropout_rate_hz > 0.0:
+            wiper[times < open_until[0]] = 0.0  # a dropout carried over from the last block
+            t = times[0] - (times[1] - times[0]) + dropout_rng.exponential(1.0 / dropout_rate_hz)
+            while t < times[-1]:
+                end = t + dropout_rng.uniform(0.0, dropout_max_s)
+                wiper[(times >= t) & (times < end)] = 0.0
+                open_until[0] = max(open_until[0], end)
+                t += dropout_rng.exponential(1.0 / dropout_rate_hz)
         if not on_track[0]:
             wiper[:] = 0.0  # no ball on the spring: the wiper is open
         for w in wiper:
@@ -138,7 +156,7 @@ def simulate(
     ticks = int(round(duration_s / period_s))
     out = {k: np.zeros(ticks + 1) for k in ("timem", "datam1", "datam2", "aout")}
     out["datam1"][0], out["datam2"][0], out["aout"][0] = (
-        ball_reading(np.full(40, state[0])),
+        ball_reading(np.full(40, state[0]), -period_s + period_s * np.arange(1, 41) / 40),
         angle_level(state[1]),
         2.5,
     )
@@ -149,7 +167,7 @@ def simulate(
         t0 = (k - 1) * period_s
         samples = t0 + period_s * np.arange(1, 41) / 40
         sol = solve_ivp(
-            _rhs(p, volts, on_track[0]),
+            _rhs(p, volts, on_track[0], rail_v),
             (t0, t0 + period_s),
             state,
             method="DOP853",
@@ -160,7 +178,7 @@ def simulate(
         state = sol.y[:, -1]
         if abs(state[0]) > p.track.half_length_m:
             on_track[0] = False
-        ball_v = ball_reading(sol.y[0])
+        ball_v = ball_reading(sol.y[0], samples)
         angle_v = float(np.mean([angle_level(th) for th in sol.y[1]]))
         x, th = measured(ball_v, angle_v)
         if controller == "regulate":

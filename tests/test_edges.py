@@ -1,5 +1,6 @@
 """Physics and sensors at the edges: the stops hold, a lost ball stays where it left, histories are bounded."""
 
+import json
 import math
 
 import numpy as np
@@ -40,3 +41,22 @@ def test_the_dropout_history_stays_bounded_in_a_long_session() -> None:
         chain.advance(chain.time_s + knots, np.zeros(21))
     assert chain.dropout_count == pytest.approx(12000, abs=3 * math.sqrt(12000))
     assert len(chain.dropout_intervals) <= 2 * sensors.DROPOUT_HISTORY + 50
+
+
+def test_a_motor_that_drives_the_beam_through_its_stops_is_told(capsys) -> None:
+    """An amplifier of 1000 V/V with a ±2500 V rail drives the beam past its stops further than their contact
+    yields (``twin.plant.STOP_YIELD_RAD``): the run says so on stderr and in its summary; the thesis's
+    amplifier never does."""
+    from twin.app.cli import main
+    from twin.plant import STOP_YIELD_RAD
+
+    base = ["run", "--controller", "appendix-sf", "--x0", "0.2", "--theta0", "0.3", "--duration", "1", "--json"]
+    main([*base, "--set", "amplifier.gain_v_per_v=1000", "--set", "amplifier.rail_v=2500"])
+    captured = capsys.readouterr()
+    summary = json.loads(captured.out)
+    past = summary["peak_theta_rad"] - math.radians(43.4)
+    assert past > STOP_YIELD_RAD and "past its ±43.4° stops" in summary["warning"]
+    assert "ballbeam run: warning: the beam went" in captured.err
+    main(base)
+    captured = capsys.readouterr()
+    assert "warning" not in json.loads(captured.out) and "warning" not in captured.err

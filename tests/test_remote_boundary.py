@@ -226,7 +226,9 @@ def test_a_nan_sample_is_the_rigs_fault_not_the_controllers(capsys: pytest.Captu
     assert run is not None  # the controller did not fail: the run is kept, and summarised
     _assert_faulted(fake, run, 4, "ball_v = nan V: not a finite number")
     assert summary["ended"] == run.ended and summary["ticks"] == 4
-    assert "controller failed" not in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "controller failed" not in err
+    assert f"ballbeam run: the rig ended the run: {run.ended}" in err  # on stderr, not only in the summary
 
 
 @pytest.mark.quick

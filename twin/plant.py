@@ -32,7 +32,9 @@ __all__ = [
     "beyond_stops",
     "failure_time_s",
     "numerical_failure",
+    "STOP_YIELD_RAD",
     "stop_overshoot_bound_rad",
+    "through_stops",
     "warning_text",
 ]
 
@@ -118,6 +120,26 @@ def stop_overshoot_bound_rad(params: Parameters) -> float:
     so.)"""
     omega_max = params.amplifier.rail_v / params.motor.backemf_at_beam_v_s_per_rad
     return omega_max * (params.physics.timestep_s + params.physics.contact_timeconst_s)
+
+
+# How far a stop's contact yields before the beam counts as gone through it: an amplifier gain of 1000 slams
+# the beam into its stops at up to 7 rad/s and they yield 4.2 mrad (``stop_overshoot_bound_rad``); a rig's
+# steel stop yields less. Beyond this the motor overpowered the stops' soft contact.
+STOP_YIELD_RAD = 0.01
+
+
+def through_stops(peak_theta_rad: float, params: Parameters) -> str:
+    """What to tell of a run whose beam went past its stops further than they yield (``STOP_YIELD_RAD``):
+    "" when it did not."""
+    past = peak_theta_rad - params.beam.stop_angle_rad
+    if past <= STOP_YIELD_RAD:
+        return ""
+    return (
+        f"the beam went {past:.3f} rad past its ±{math.degrees(params.beam.stop_angle_rad):.1f}° stops "
+        f"(peak θ {peak_theta_rad:.3f} rad): the motor (rail ±{params.amplifier.rail_v:g} V) overpowered the "
+        f"stops' contact, which yields {1e3 * STOP_YIELD_RAD:.0f} mrad at most on the rig — what followed is "
+        "not what the rig would do"
+    )
 
 
 # The ball counts as lost once its centre has dropped this far below (or risen above) its seat on the wires.

@@ -133,6 +133,9 @@ def remote_session(
         rig.stop()
         print(f"ballbeam run: the controller failed: {exc}", file=sys.stderr)
         return False, None, {}
+    if run.ended not in (ENDED_LAST_SAMPLE, ENDED_BALL_LOST):
+        # The rig's fault (a bad SAMPLE, silence): said where the user looks, not only in the summary.
+        print(f"ballbeam run: the rig ended the run: {run.ended}", file=sys.stderr)
     if run.ended == ENDED_BALL_LOST:
         # The rig reported the ball lost without ending the session (a rig that stops on a lost ball flags that
         # sample last): its sample is answered; the session ends here, and the rig is told so.

@@ -140,6 +140,12 @@ def run(args: argparse.Namespace) -> int:
     }
     if pacer is not None:
         summary["realtime"] = pacer.timing().to_json()
+    from twin.plant import through_stops  # the physics' own module: loaded once a run has run
+
+    warning = through_stops(result.verdict.peak_theta_rad, params)
+    if warning:
+        summary["warning"] = warning
+        print(f"ballbeam run: warning: {warning}", file=sys.stderr)
     if args.json:
         print(json.dumps(summary), file=out)
     else:
