@@ -960,9 +960,9 @@ def calibrate(
     dynamic = [name for name in fit if name != DROPOUT]
     if DROPOUT in fit and DROPOUT not in FITTABLE:
         raise CalibrationError(f"cannot fit {DROPOUT}")
-    start = {RAIL: RAIL_START_SHARE * base.amplifier.rail_v} if RAIL in dynamic else None
+    below_rail = {RAIL: RAIL_START_SHARE * base.amplifier.rail_v} if RAIL in dynamic else None
     problem = WindowProblem(
-        logs, base, dynamic, window_s=window_s, substeps=substeps, screen=screen, start=start
+        logs, base, dynamic, window_s=window_s, substeps=substeps, screen=screen, start=below_rail
     )
     warnings = _dropped_warnings(problem)
     fitted = _fit(problem, max_nfev=max_nfev, progress=progress)
@@ -1257,8 +1257,10 @@ def _diagnose(
     for name, effect in DIAGNOSTIC_EFFECTS.items():
         if name in fit:
             continue
-        start = {RAIL: RAIL_START_SHARE * base.amplifier.rail_v} if name == RAIL else None
-        problem = WindowProblem(logs, base, [*fit, name], window_s=window_s, substeps=substeps, start=start)
+        below_rail = {RAIL: RAIL_START_SHARE * base.amplifier.rail_v} if name == RAIL else None
+        problem = WindowProblem(
+            logs, base, [*fit, name], window_s=window_s, substeps=substeps, start=below_rail
+        )
         refit = _fit(problem, max_nfev=max_nfev, progress=progress, stage=f"diagnosis ({name}): ")
         after = _adequacy(problem, refit.result.x)
         value = float(refit.result.x[problem.fit.index(name)])

@@ -86,6 +86,27 @@ def _rhs(p: Parameters, volts: float, on_track: bool = True, rail_v: float = 12.
     return f
 
 
+class _ContactLosses:
+    """Wiper dropouts as a Poisson process in time (its own generator, so that the other draws stay as they
+    were), each lasting a uniform 0…max_s, carried across block boundaries."""
+
+    def __init__(self, rate_hz: float, max_s: float, rng: np.random.Generator) -> None:
+        self.rate_hz, self.max_s, self.rng = rate_hz, max_s, rng
+        self.open_until = 0.0  # the end of the dropout in progress (s)
+
+    def open_wiper(self, wiper: np.ndarray, times: np.ndarray) -> None:
+        """Set the samples at ``times`` during a dropout to the open wiper's 0 V."""
+        if self.rate_hz <= 0.0:
+            return
+        wiper[times < self.open_until] = 0.0  # a dropout carried over from the last block
+        t = times[0] - (times[1] - times[0]) + self.rng.exponential(1.0 / self.rate_hz)
+        while t < times[-1]:
+            end = t + self.rng.uniform(0.0, self.max_s)
+            wiper[(times >= t) & (times < end)] = 0.0
+            self.open_until = max(self.open_until, end)
+            t += self.rng.exponential(1.0 / self.rate_hz)
+
+
 def simulate(
     params: Parameters,
     *,
@@ -120,21 +141,13 @@ def simulate(
     def adc(v: float) -> float:  # 12 bits over ±5 V: codes 0…4095
         return -5.0 + lsb_adc * min(max(round((v + 5.0) / lsb_adc), 0), 4095)
 
-    open_until = [0.0]  # the end of the dropout in progress (s)
-    dropout_rng = np.random.default_rng([seed, 7])  # its own stream: the other draws stay as they were
+    losses = _ContactLosses(dropout_rate_hz, dropout_max_s, np.random.default_rng([seed, 7]))
 
     def ball_reading(xs: np.ndarray, times: np.ndarray) -> float:
         wiper = np.interp(xs, curve_x, curve_v)
         if rng.random() < spike_rate:
             wiper[-4:] = 0.0
-        if dropout_rate_hz > 0.0:
-            wiper[times < open_until[0]] = 0.0  # a dropout carried over from the last block
-            t = times[0] - (times[1] - times[0]) + dropout_rng.exponential(1.0 / dropout_rate_hz)
-            while t < times[-1]:
-                end = t + dropout_rng.uniform(0.0, dropout_max_s)
-                wiper[(times >= t) & (times < end)] = 0.0
-                open_until[0] = max(open_until[0], end)
-                t += dropout_rng.exponential(1.0 / dropout_rate_hz)
+        losses.open_wiper(wiper, times)
         if not on_track[0]:
             wiper[:] = 0.0  # no ball on the spring: the wiper is open
         for w in wiper:

@@ -50,7 +50,18 @@ def test_a_motor_that_drives_the_beam_through_its_stops_is_told(capsys) -> None:
     from twin.app.cli import main
     from twin.plant import STOP_YIELD_RAD
 
-    base = ["run", "--controller", "appendix-sf", "--x0", "0.2", "--theta0", "0.3", "--duration", "1", "--json"]
+    base = [
+        "run",
+        "--controller",
+        "appendix-sf",
+        "--x0",
+        "0.2",
+        "--theta0",
+        "0.3",
+        "--duration",
+        "1",
+        "--json",
+    ]
     main([*base, "--set", "amplifier.gain_v_per_v=1000", "--set", "amplifier.rail_v=2500"])
     captured = capsys.readouterr()
     summary = json.loads(captured.out)
