@@ -28,7 +28,7 @@ outliers do not pull the fit. Residuals are in units of the channels' nominal no
 forward differences with the columns that share no residual perturbed together, all in one batched
 simulation. Intervals come from the cluster-robust (sandwich) covariance with 5 s of log per cluster and
 Student's t, because the residuals are correlated in time and the white-noise intervals are optimistic;
-the model's own resolution (``MODEL_RESOLUTION``, measured) is added to them.
+the model's own resolution (``MODEL_RESOLUTION``, derived by a coverage study) is added to them.
 """
 
 from __future__ import annotations
@@ -201,8 +201,8 @@ WEAK_EXCITATION: dict[str, tuple[str, float]] = {
 # problem names the correlation, ``_excitation_problems``).
 INSEPARABLE_CORRELATION = 0.95
 INTERVAL_METHOD = (
-    f"cluster-robust (sandwich) covariance, {CLUSTER_S:g} s clusters, Student's t, plus the model's measured "
-    "resolution in quadrature"
+    f"cluster-robust (sandwich) covariance, {CLUSTER_S:g} s clusters, Student's t, plus the model's resolution "
+    "(derived by a coverage study) in quadrature"
 )
 
 

@@ -9,12 +9,15 @@ with its exact (Clopper–Pearson) 95 % interval, the median |error| and the med
 
     PYTHONPATH=$PWD python scripts/calib_coverage.py [--seeds 20] [--first-seed 30] [--jobs 2]
         [--sources twin,independent] [--fixed-rig SEED] [--derive calib/resolution.toml] [--out cov.json]
+        [--from cov.json]
 
 ``--derive FILE`` writes the model's resolution (``calib.identify.MODEL_RESOLUTION``) from the runs: per
 parameter, the smallest floor that, added in quadrature to each fit's statistical half-width, puts the truth
-inside the interval in 95 % of the runs of every source (``derive_floors``). Seeds 0…29 derive it; the default
-checks it on seeds 30…49, which did not. ``--fixed-rig SEED``: every run's rig is seed SEED's draw, only the
-logs' noise varies (the coverage of one rig, as a user's repeated logs).
+inside the interval in 95 % of the runs of every source (``derive_floors``). Seeds 0…29 derive it (``--first-seed 0
+--seeds 30 --derive calib/resolution.toml --out docs/calib_coverage_derive.json``, the runs a test derives it
+from again); the default checks it on seeds 30…49, which did not. ``--fixed-rig SEED``: every run's rig is
+seed SEED's draw, only the logs' noise varies (the coverage of one rig, as a user's repeated logs).
+``--from cov.json``: the runs of an earlier ``--out`` instead of new ones (the table, or ``--derive``, again).
 """
 
 from __future__ import annotations
@@ -45,8 +48,8 @@ SPREAD = Path(__file__).resolve().with_name("calib_coverage_spread.toml")
 DERIVING_SEEDS = range(0, 30)
 COVERAGE = 0.95
 # How the floor of each parameter scales: relative to its value, or absolute (the zeroing error, whose
-# value can be anything near 0). A relative floor's absolute part is the floor at the parameter's typical
-# size (``FitSpec.scale``), for a value near 0.
+# value can be anything near 0). A relative floor of a parameter that can be 0 (its search range reaches 0:
+# the damping) has an absolute part, the floor at its typical size (``FitSpec.scale``), for a value near 0.
 RELATIVE = {FIT[0]: True, FIT[1]: True, FIT[2]: True, FIT[3]: False}
 
 
@@ -108,12 +111,23 @@ def derive_floors(results: dict[str, list[dict[str, dict[str, float]]]]) -> dict
                 for r in runs
             )
             per_source.append(need[math.ceil(COVERAGE * len(need)) - 1])
-        floor = float(f"{max(per_source):.2g}")  # two digits, rounded to nearest: the study's own resolution
+        floor = _two_digits_up(max(per_source))  # the study's own resolution, never below the need
         if RELATIVE[name]:
-            floors[name] = {"relative": floor, "absolute": floor * FITTABLE[name].scale}
+            can_vanish = FITTABLE[name].lower <= 0.0
+            floors[name] = {
+                "relative": floor,
+                "absolute": floor * FITTABLE[name].scale if can_vanish else 0.0,
+            }
         else:
             floors[name] = {"relative": 0.0, "absolute": floor}
     return floors
+
+
+def _two_digits_up(x: float) -> float:
+    if x <= 0.0:
+        return 0.0
+    unit = 10.0 ** (math.floor(math.log10(x)) - 1)
+    return float(f"{math.ceil(x / unit - 1e-9) * unit:.2g}")
 
 
 def write_floors(path: Path, floors: dict[str, dict[str, float]], provenance: str) -> None:
@@ -166,6 +180,20 @@ def _run(job: tuple[str, int, int | None]) -> dict[str, dict[str, float]]:
     return one(*job)
 
 
+def _study(
+    sources: list[str], seeds: range, fixed_rig: int | None, jobs: int
+) -> dict[str, list[dict[str, dict[str, float]]]]:
+    todo = [(source, seed, fixed_rig) for source in sources for seed in seeds]
+    with ProcessPoolExecutor(max_workers=max(jobs, 1)) as pool:
+        runs = list(pool.map(_run, todo))
+    results: dict[str, list[dict[str, dict[str, float]]]] = {s: [] for s in sources}
+    for (source, seed, _), run in zip(todo, runs, strict=True):
+        results[source].append(run)
+        shown = ", ".join(f"{n.split('.')[-1]} {'in' if r['inside'] else 'OUT'}" for n, r in run.items())
+        print(f"{source} seed {seed}: {shown}", file=sys.stderr)
+    return results
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--seeds", type=int, default=20)
@@ -177,17 +205,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--derive", type=Path, help="write the resolution derived from these runs here")
     ap.add_argument("--out", type=Path)
+    ap.add_argument("--from", dest="source_json", type=Path, help="the runs of an earlier --out")
     args = ap.parse_args(argv)
     seeds = range(args.first_seed, args.first_seed + args.seeds)
     sources = args.sources.split(",")
-    jobs = [(source, seed, args.fixed_rig) for source in sources for seed in seeds]
-    with ProcessPoolExecutor(max_workers=max(args.jobs, 1)) as pool:
-        runs = list(pool.map(_run, jobs))
-    results: dict[str, list[dict[str, dict[str, float]]]] = {s: [] for s in sources}
-    for (source, seed, _), run in zip(jobs, runs, strict=True):
-        results[source].append(run)
-        shown = ", ".join(f"{n.split('.')[-1]} {'in' if r['inside'] else 'OUT'}" for n, r in run.items())
-        print(f"{source} seed {seed}: {shown}", file=sys.stderr)
+    if args.source_json is not None:
+        results = json.loads(args.source_json.read_text())
+    else:
+        results = _study(sources, seeds, args.fixed_rig, args.jobs)
     print("\n".join(table(results)))
     if args.derive is not None:
         floors = derive_floors(results)

@@ -417,13 +417,7 @@ def test_an_amplifier_rail_the_fit_does_not_know_is_named_and_then_fitted() -> N
     assert advised.values["amplifier.rail_v"].value == pytest.approx(9.0, rel=0.01)
 
 
-@pytest.mark.slow
-@pytest.mark.study  # 40 calibrations, ~10 min on 2 cores: run by hand with -m study
-@pytest.mark.parametrize("source", ["twin", "independent"])
-def test_the_95_percent_intervals_contain_the_truth_at_their_rate(source: str) -> None:
-    """scripts/calib_coverage.py over 20 seeds that did not set the model's resolution (20…39): every
-    parameter's interval holds the truth in at least 17 of 20 (a 95 % interval misses more than 3 times in
-    20 with probability 1.6 %)."""
+def _coverage_script():  # type: ignore[no-untyped-def]
     import importlib.util
 
     spec = importlib.util.spec_from_file_location(
@@ -432,6 +426,39 @@ def test_the_95_percent_intervals_contain_the_truth_at_their_rate(source: str) -
     assert spec is not None and spec.loader is not None
     coverage = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(coverage)
-    runs = [coverage.one(source, seed) for seed in range(20, 40)]
+    return coverage
+
+
+@pytest.mark.quick
+def test_the_model_resolution_is_what_the_coverage_study_derived() -> None:
+    """calib/resolution.toml (``MODEL_RESOLUTION``) is what ``scripts/calib_coverage.py --derive`` makes of the
+    runs it recorded (docs/calib_coverage_derive.json: seeds 0…29 of both sources): a floor typed in by hand,
+    or runs that no longer give it, fail here. Each floor puts ≥ 95 % of each source's truths inside."""
+    coverage = _coverage_script()
+    runs = json.loads(
+        (Path(__file__).resolve().parents[1] / "docs" / "calib_coverage_derive.json").read_text()
+    )
+    assert set(runs) == {"twin", "independent"} and all(len(r) == 30 for r in runs.values())
+    floors = coverage.derive_floors(runs)
+    assert calib.identify.MODEL_RESOLUTION == {n: (f["relative"], f["absolute"]) for n, f in floors.items()}
+    for name, (rel, absolute) in calib.identify.MODEL_RESOLUTION.items():
+        for source in runs.values():
+            inside = sum(
+                abs(r[name]["error"])
+                <= math.hypot(r[name]["statistical_half"], max(rel * abs(r[name]["value"]), absolute))
+                for r in source
+            )
+            assert inside >= 0.95 * len(source), (name, inside)
+
+
+@pytest.mark.slow
+@pytest.mark.study  # 40 calibrations, ~8 min on 2 cores: run by hand with -m study
+@pytest.mark.parametrize("source", ["twin", "independent"])
+def test_the_95_percent_intervals_contain_the_truth_at_their_rate(source: str) -> None:
+    """scripts/calib_coverage.py over 20 seeds that did not derive the model's resolution (30…49): every
+    parameter's interval holds the truth in at least 17 of 20 (a 95 % interval misses more than 3 times in
+    20 with probability 1.6 %)."""
+    coverage = _coverage_script()
+    runs = [coverage.one(source, seed) for seed in range(30, 50)]
     for name in FIT:
         assert sum(r[name]["inside"] for r in runs) >= 17, (name, [r[name] for r in runs])
