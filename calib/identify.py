@@ -55,7 +55,7 @@ from twin.converters import ball_position_m
 from twin.dcmotor import torque_nm
 from twin.log import LogError
 from twin.output_stage import amplifier_volts
-from twin.parameters import READING, Parameters, declaration, within_bounds
+from twin.parameters import READING, Amplifier, Parameters, declaration, within_bounds
 from twin.reference import EquationCoefficients, rk4_step
 from twin.sensors import angle_count_step_rad, angle_counter_mean, wiper_static_v
 
@@ -605,11 +605,8 @@ class WindowProblem:
         h = win.period_s / self.substeps
         # Ideal DAC (quantization is noise here, see the module's docstring), the twin's amplifier with each
         # row's rail (a fitted or diagnosed ``amplifier.rail_v``).
-        line = dataclasses.replace(
-            p.amplifier, rail_v=float(declaration("amplifier.rail_v")["le"])
-        )  # unclipped
-        v_new = np.clip(np.asarray(amplifier_volts(win.command_v, line)), -cst.rail, cst.rail)
-        v_old = np.clip(np.asarray(amplifier_volts(win.previous_v, line)), -cst.rail, cst.rail)
+        v_new = np.clip(np.asarray(amplifier_volts(win.command_v, _unclipped(p))), -cst.rail, cst.rail)
+        v_old = np.clip(np.asarray(amplifier_volts(win.previous_v, _unclipped(p))), -cst.rail, cst.rail)
         # The new command's share of each sub-step: the part of [k·h, (k+1)·h) after the latency.
         latency = cst.latency[:, None]
         share = np.clip(
@@ -668,6 +665,11 @@ class WindowProblem:
         p = self.base
         x_open = gain * ball_position_m(p.ball_sensor.dropout_voltage_v, p.software) + offset
         return np.where(x_open >= pred_b, 1.0, -1.0)
+
+
+def _unclipped(p: Parameters) -> Amplifier:
+    """``p``'s amplifier without its rail (the line 9.6·(u − 2.5)): the model clips each row at its own."""
+    return dataclasses.replace(p.amplifier, rail_v=float(declaration("amplifier.rail_v")["le"]))
 
 
 def _one_sided(rb: np.ndarray, toward_open: np.ndarray) -> np.ndarray:
@@ -1214,13 +1216,12 @@ def _normalized_condition(information: np.ndarray) -> float:
 def _near_rails(problem: WindowProblem) -> np.ndarray:
     """The ticks (nw, W) within ``NEAR_RAILS_TICKS`` of a command beyond ``NEAR_RAILS_SHARE`` of the
     amplifier's rail: where an amplifier that saturates below its modelled rail makes the model wrong."""
-    amp = problem.base.amplifier
-    line = dataclasses.replace(amp, rail_v=float(declaration("amplifier.rail_v")["le"]))
-    high = (
-        np.abs(np.asarray(amplifier_volts(problem.windows.command_v, line))) >= NEAR_RAILS_SHARE * amp.rail_v
-    )
+    p = problem.base
+    volts = np.abs(np.asarray(amplifier_volts(problem.windows.command_v, _unclipped(p))))
+    high = (volts >= NEAR_RAILS_SHARE * p.amplifier.rail_v).astype(np.int8)
+    # Tick i is near when a command of ticks i − NEAR_RAILS_TICKS + 1 … i was high (a window's ticks only).
     after = scipy.ndimage.maximum_filter1d(
-        high.astype(np.int8), NEAR_RAILS_TICKS, axis=1, origin=-(NEAR_RAILS_TICKS // 2)
+        high, NEAR_RAILS_TICKS, axis=1, origin=NEAR_RAILS_TICKS // 2, mode="constant", cval=0
     )
     return after.astype(bool)
 
@@ -1274,7 +1275,7 @@ def _diagnose(
                 if power <= ticks
                 else (
                     f" ({100 * power:.0f} % of the {worst.channel} residual's power in the {100 * ticks:.0f} % "
-                    f"of ticks within {NEAR_RAILS_TICKS} of a command beyond {NEAR_RAILS_SHARE:.0%} of the "
+                    f"of ticks within {NEAR_RAILS_TICKS} ticks after a command beyond {NEAR_RAILS_SHARE:.0%} of the "
                     f"±{base.amplifier.rail_v:g} V rail)"
                 )
             )
