@@ -130,6 +130,12 @@ def _two_digits_up(x: float) -> float:
     return float(f"{math.ceil(x / unit - 1e-9) * unit:.2g}")
 
 
+def scope() -> dict[str, float]:
+    """What the study's rigs spanned that the fit does not fit (``calib.identify.RESOLUTION_SCOPE``)."""
+    spread = load_spread(SPREAD, START)
+    return {"contact_loss_rate_hz_max": spread.high[spread.names.index("ball_sensor.dropout_rate_hz")]}
+
+
 def write_floors(path: Path, floors: dict[str, dict[str, float]], provenance: str) -> None:
     lines = [
         "# The smooth model's resolution added to each calibration interval (calib/identify.py MODEL_RESOLUTION).",
@@ -140,6 +146,8 @@ def write_floors(path: Path, floors: dict[str, dict[str, float]], provenance: st
             f'"{n}" = {{ relative = {f["relative"]!r}, absolute = {f["absolute"]!r} }}'
             for n, f in floors.items()
         ),
+        "[scope]",
+        *(f"{k} = {v!r}" for k, v in scope().items()),
     ]
     tmp = path.with_name(f".{path.name}.tmp")
     tmp.write_text("\n".join(lines) + "\n", encoding="utf-8")

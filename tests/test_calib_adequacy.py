@@ -237,7 +237,7 @@ def test_the_fit_reports_its_progress_with_json_too(tmp_path: Path, capsys) -> N
     calibrate([rig_log(run.log)], ["motor.resistance_ohm"], NOMINAL, diagnose=False,
               progress=lambda done, total, stage: calls.append((done, total, stage)))  # fmt: skip
     stages = list(dict.fromkeys(stage for _, _, stage in calls))
-    assert stages == ["window states", "parameters and states"]
+    assert stages == ["window states", "parameters and states", "contact losses"]
     for stage in stages:
         done = [d for d, _, s in calls if s == stage]
         assert (
@@ -380,20 +380,42 @@ def test_a_log_ending_with_the_ball_falling_off_is_fitted_without_its_end() -> N
 
 
 @pytest.mark.slow
+def test_contact_losses_are_in_the_noise_model() -> None:
+    """10 contact losses a second lasting up to 1 ms (twice the twin's nominal rate, inside the rigs the
+    model's resolution was derived on): a loss only ever pulls a reading toward the open wiper, and with that
+    in the noise model every interval holds the truth, the fit is trusted, and the loss rate is estimated
+    from the outliers (10.9 per second)."""
+    log = simulate(RIG, duration_s=60.0, seed=1, spike_rate=0.0, dropout_rate_hz=10.0, dropout_max_s=1e-3)
+    cal = _fit(log, FIT + ["ball_sensor.dropout_rate_hz"])
+    assert not cal.problems and not any("contact losses" in w for w in cal.warnings), cal.warnings
+    _assert_recovered(cal, TRUTH)
+    assert (
+        cal.values["ball_sensor.dropout_rate_hz"].ci_low
+        <= 10.0
+        <= cal.values["ball_sensor.dropout_rate_hz"].ci_high
+    )
+
+
+@pytest.mark.slow
 @pytest.mark.parametrize("max_s", [1e-3, 5e-3])
-def test_contact_losses_are_in_the_noise_model(max_s: float, monkeypatch) -> None:
-    """30 contact losses a second lasting up to 1 or 5 ms (six times the twin's nominal rate): a loss only
-    ever pulls a reading toward the open wiper. With that in the noise model every interval holds the truth
-    and the fit is trusted; with the symmetric loss alone the resistance came out +0.22 % against a 0.13 %
-    half-width (1 ms), and with 5 ms losses three seeds of four exited 1 with a false "weak excitation"."""
+def test_contact_losses_beyond_the_studied_rigs_are_told(max_s: float, monkeypatch) -> None:
+    """30 contact losses a second (six times the twin's nominal rate) lasting up to 1 or 5 ms: beyond the
+    10 per second of the coverage study's rigs (calib/resolution.toml's scope), so the intervals are not
+    shown to hold there and the fit says so, naming the rate; the values stay well within tolerance. The
+    one-sided loss is what keeps them there: under the symmetric loss alone the resistance came out +0.22 %
+    (1 ms; one-sided +0.056 %), and with 5 ms losses three seeds of four exited 1 with a false "weak
+    excitation"."""
     log = simulate(RIG, duration_s=60.0, seed=1, spike_rate=0.0, dropout_rate_hz=30.0, dropout_max_s=max_s)
     cal = _fit(log)
     assert not cal.problems, cal.problems
-    _assert_recovered(cal, TRUTH)
-    if max_s == 1e-3:  # the test can fail: the same log under the symmetric loss
+    [told] = [w for w in cal.warnings if "contact losses" in w]
+    assert "beyond the 10 per second" in told and "intervals may be too narrow" in told
+    _assert_recovered(cal, TRUTH, intervals=False)
+    if max_s == 1e-3:  # the noise model's worth: the same log under the symmetric loss
+        one_sided = _error(FIT[0], cal.values[FIT[0]].value, TRUTH[FIT[0]])
         monkeypatch.setattr(calib.identify, "_one_sided", lambda rb, toward_open: rb)
-        symmetric = _fit(log).values[FIT[0]]
-        assert not symmetric.ci_low <= TRUTH[FIT[0]] <= symmetric.ci_high, symmetric
+        symmetric = _error(FIT[0], _fit(log).values[FIT[0]].value, TRUTH[FIT[0]])
+        assert one_sided < 0.5 * symmetric, (one_sided, symmetric)
 
 
 @pytest.mark.slow

@@ -159,7 +159,7 @@ def test_cli_calibrate_writes_a_parameter_file_the_twin_loads(tmp_path: Path, ca
     assert main([*args, "--set", "beam.pivot_damping_nm_s_per_rad=0.001"]) == 0
     report = json.loads(capsys.readouterr().out)
     entry = report["params"]["motor.resistance_ohm"]
-    assert set(entry) == {"value", "ci_low", "ci_high", "initial", "sd", "unit"}
+    assert set(entry) == {"value", "ci_low", "ci_high", "initial", "sd", "statistical_half", "unit"}
     # The interval is Student's t times the standard uncertainty: wider than the normal 1.96 σ, symmetric.
     half = (entry["ci_high"] - entry["ci_low"]) / 2
     assert half / entry["sd"] >= 1.959 and entry["value"] == pytest.approx(entry["ci_low"] + half)
