@@ -43,9 +43,10 @@ def reference(params: Parameters) -> ReferenceModel:
 # suite: a realtime test runs alone) can take both cores; the kernel's pressure-stall information says for what
 # share of the test's wall-clock time some runnable task waited for a CPU. Beyond OVERLOAD_STALL the failure
 # of a realtime test is reported as a skip naming that share: the pace it asserts was not the twin's to keep.
-# Measured (docs/design.md): realtime tests alone on the 2-core machine stall ≤ 5 %, beside a busy-loop on
-# each core 40–90 %.
-OVERLOAD_STALL = 0.25
+# Measured over the 27 realtime tests (docs/design.md): alone on the quiet 2-core machine median 0.9 %, at most
+# 25 % (the browser test's own chromium, view and C client); beside a busy-loop on each core median 5.6 %, at
+# most 84 % (the same test). A test that waits more than it computes stalls little even then.
+OVERLOAD_STALL = 0.5
 _STALL = pytest.StashKey[tuple[float, float]]()
 
 
