@@ -29,11 +29,12 @@ def _defines() -> dict[str, float]:
 
 
 @pytest.mark.quick
-def test_the_firmware_knows_the_rigs_software_calibration() -> None:
+def test_the_firmware_knows_the_rigs_software_calibration_and_its_board() -> None:
     """Every number of the rig software's calibration in examples/avr/rig.h is the twin's
-    (twin.parameters.SoftwareCalibration), and so is the period."""
+    (twin.parameters.SoftwareCalibration), and so are the period and the board's front end, ADC and DAC
+    (twin.parameters.McuIo)."""
     d, p = _defines(), Parameters()
-    s = p.software
+    s, io = p.software, p.mcu_io
     for name, value in {
         "RIG_BALL_GAIN_M_PER_V": s.ball_gain_m_per_v,
         "RIG_BALL_OFFSET_M": s.ball_offset_m,
@@ -47,6 +48,12 @@ def test_the_firmware_knows_the_rigs_software_calibration() -> None:
         "RIG_COMMAND_LOW_V": s.command_low_v,
         "RIG_COMMAND_HIGH_V": s.command_high_v,
         "RIG_PERIOD_S": p.daq.period_s,
+        "IO_INPUT_GAIN_V_PER_V": io.input_gain_v_per_v,
+        "IO_INPUT_OFFSET_V": io.input_offset_v,
+        "IO_ADC_REFERENCE_V": io.adc_reference_v,
+        "IO_ADC_BITS": io.adc_bits,
+        "IO_DAC_BITS": io.dac_bits,
+        "IO_DAC_REFERENCE_V": io.dac_reference_v,
     }.items():
         assert d[name] == value, name
 

@@ -227,11 +227,21 @@ THESIS_DEFAULTS = {
         "command_high_v": 3.75,
     },
     "start": {"free_run_s": 0.01},
+    "mcu_io": {
+        "input_gain_v_per_v": 0.5,
+        "input_offset_v": 2.5,
+        "adc_bits": 10,
+        "adc_reference_v": 5.0,
+        "dac_bits": 12,
+        "dac_reference_v": 5.0,
+    },
 }  # fmt: skip
 
 INTEGER_FIELDS = (
     "daq.adc_bits",
     "daq.dac_bits",
+    "mcu_io.adc_bits",
+    "mcu_io.dac_bits",
     "angle_sensor.counter_bits",
     "angle_sensor.counter_zero_count",
     "angle_sensor.encoder_pulses_per_rev",

@@ -27,6 +27,7 @@ __all__ = [
     "Ball",
     "Beam",
     "Track",
+    "McuIo",
     "Motor",
     "Amplifier",
     "Physics",
@@ -966,6 +967,70 @@ class Start:
         _check_fields(self, "start")
 
 
+@dataclass(frozen=True)
+class McuIo:
+    """An Arduino-class board in place of the PCI-1712 (firmware in the loop, ``twin.avr``): the analog front
+    end that maps each ±5 V sensor signal onto the microcontroller's pin, its ADC, and the SPI DAC that drives
+    the amplifier's 0…5 V command input. The thesis's rig has no such board: each value says where it comes
+    from (a datasheet, or "assumed" with the reason)."""
+
+    input_gain_v_per_v: float = param(
+        0.5,
+        "V/V",
+        "assumed: a resistor divider halves each ±5 V sensor signal (the angle channel spans ±5 V, eq 6.2.4) so "
+        "that, offset by input_offset_v, it spans the ADC's 0…5 V",
+        gt=0.0,
+        le=10.0,
+        why="a front end that amplifies more than 10× saturates the pin on any sensor signal",
+    )
+    input_offset_v: float = param(
+        2.5,
+        "V",
+        "assumed: the divider's foot at half the 5 V supply, so 0 V of signal reads mid-scale",
+        ge=-5.0,
+        le=5.0,
+        why=_CARD_V_WHY,
+    )
+    adc_bits: int = param(
+        10,
+        "bit",
+        "ATmega328P datasheet §24: a 10-bit successive-approximation ADC",
+        ge=8,
+        le=16,
+        integer=True,
+        why="microcontroller ADCs have 8 to 16 bits",
+    )
+    adc_reference_v: float = param(
+        5.0,
+        "V",
+        "assumed: AVcc, an Arduino Uno's 5 V supply, as the reference (REFS0)",
+        gt=0.0,
+        le=5.5,
+        why="the ATmega328P's reference may not exceed AVcc (5.5 V at most)",
+    )
+    dac_bits: int = param(
+        12,
+        "bit",
+        "MCP4921 datasheet: a 12-bit SPI DAC",
+        ge=8,
+        le=16,
+        integer=True,
+        why="SPI DACs for this use have 8 to 16 bits",
+    )
+    dac_reference_v: float = param(
+        5.0,
+        "V",
+        "assumed: the MCP4921's VREF tied to the 5 V supply, so its 0…5 V span is the amplifier's command range "
+        "(§6.4: 2.5 V is 0 V at the motor)",
+        gt=0.0,
+        le=5.5,
+        why="the MCP4921's VREF may not exceed its supply (5.5 V at most)",
+    )
+
+    def __post_init__(self) -> None:
+        _check_fields(self, "mcu_io")
+
+
 # The ball reading's gain and offset relative to the sensor curve, with their units: what a calibration fits of
 # the ball channel beside the parameters; no field, folded into the curve (``Parameters.with_values``). Any
 # value that leaves the curve increasing is physical, so they declare no bounds of their own.
@@ -983,6 +1048,7 @@ _GROUPS: dict[str, type] = {
     "daq": Daq,
     "software": SoftwareCalibration,
     "start": Start,
+    "mcu_io": McuIo,
 }
 
 
@@ -1049,6 +1115,7 @@ class Parameters:
     daq: Daq = field(default_factory=Daq)
     software: SoftwareCalibration = field(default_factory=SoftwareCalibration)
     start: Start = field(default_factory=Start)
+    mcu_io: McuIo = field(default_factory=McuIo)
 
     def __post_init__(self) -> None:
         r, d = self.ball.radius_m, self.track.contact_spacing_m
