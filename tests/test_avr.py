@@ -97,13 +97,14 @@ def _core(firmware: Path):  # type: ignore[no-untyped-def]
 
 def _drive(firmware: Path, inputs_mv: np.ndarray) -> list[tuple[int, int]]:
     """Hold each period's (ball, angle) pin millivolts from 1000 cycles before its interrupt; the frames."""
+    frames = []
     with _core(firmware) as core:
         for k, (ball, angle) in enumerate(inputs_mv, start=1):
-            core.run_until(k * PERIOD_CYCLES - 1000)
+            frames += core.run_until(k * PERIOD_CYCLES - 1000).frames
             core.set_adc_mv(0, float(ball))
             core.set_adc_mv(1, float(angle))
-        core.run_until((len(inputs_mv) + 1) * PERIOD_CYCLES)
-        return [(f.word, f.cycle) for f in core.frames()]
+        frames += core.run_until((len(inputs_mv) + 1) * PERIOD_CYCLES).frames
+    return [(f.word, f.cycle) for f in frames]
 
 
 @pytest.mark.quick
@@ -120,8 +121,9 @@ def test_the_firmware_boots_and_writes_the_dac_every_period(firmware: Path) -> N
     assert all(word >> 12 == 0x3 for word, _ in frames)  # DAC A, unbuffered, gain 1, active
     assert frames == _drive(firmware, inputs)
     with _core(firmware) as core:
-        core.run_until(3 * PERIOD_CYCLES)
-        assert core.ramend == 0x8FF and 0x100 < core.stack_low_water < core.ramend
+        report = core.run_until(3 * PERIOD_CYCLES)
+        assert report.state in (2, 3) and report.resets == 0 and report.bad_frames == 0
+        assert core.ramend == 0x8FF and core.data_end < report.stack_low_water < core.ramend
 
 
 def _host_law(tmp: Path) -> Path:
@@ -179,3 +181,74 @@ def test_the_firmware_computes_the_host_single_precision_law_bit_for_bit(
     got = [word for word, _ in frames[1:]]
     assert len(set(got)) > 50  # the commands move: the law is exercised, not pinned at a rail
     assert got == expected
+
+
+# --- hostile firmware: the core reports what it did, and never takes the twin with it ---------------------
+HOSTILE = {
+    "isr_loop": "#include <avr/io.h>\n#include <avr/interrupt.h>\nISR(TIMER1_COMPA_vect) { for (;;) { } }\n"
+    "int main(void) { TCCR1B = (1 << WGM12) | (1 << CS11) | (1 << CS10); OCR1A = 4999;"
+    " TIMSK1 = (1 << OCIE1A); sei(); for (;;) { } }\n",
+    "stack": "#include <stdint.h>\nvolatile uint8_t sink;\n"
+    "static uint8_t deep(uint8_t n) { volatile uint8_t pad[16]; pad[0] = n; return deep(n + 1) + pad[0]; }\n"
+    "int main(void) { sink = deep(0); for (;;) { } }\n",
+    "reset": "#include <avr/wdt.h>\nint main(void) { wdt_enable(WDTO_15MS); for (;;) { } }\n",
+    "stop": "#include <avr/interrupt.h>\n#include <avr/sleep.h>\n"
+    "int main(void) { cli(); set_sleep_mode(SLEEP_MODE_PWR_DOWN); sleep_enable(); sleep_cpu(); for (;;) { } }\n",
+}
+
+
+def _hostile(name: str, tmp: Path) -> Path:
+    avr_gcc = shutil.which("avr-gcc")
+    if avr_gcc is None:
+        pytest.skip("avr-gcc is not installed (Debian: apt-get install gcc-avr avr-libc)")
+    source = tmp / f"{name}.c"
+    source.write_text(HOSTILE[name])
+    out = tmp / f"{name}.elf"
+    subprocess.run([avr_gcc, "-std=c99", "-Os", "-mmcu=atmega328p", f"-DF_CPU={F_CPU}UL", "-o", str(out), str(source)],
+                   check=True)  # fmt: skip
+    return out
+
+
+def _ten_periods(elf: Path):  # type: ignore[no-untyped-def]
+    from twin.avr.core import STATE_CRASHED, STATE_DONE, STATE_STACK_OVERFLOW
+
+    frames = []
+    with _core(elf) as core:
+        for k in range(1, 11):
+            report = core.run_until(k * PERIOD_CYCLES)
+            frames += report.frames
+            if report.state in (STATE_DONE, STATE_CRASHED, STATE_STACK_OVERFLOW):
+                break
+    return report, frames
+
+
+@pytest.mark.quick
+def test_hostile_firmware_is_reported_by_the_core(tmp_path: Path) -> None:
+    """An interrupt that never returns writes nothing (the core runs on, the host sees no frame); a recursion
+    takes the stack into the static data (stopped at once, the static data's end from the ELF's symbols); a
+    watchdog that is never fed resets the core every 15 ms; a sleep with interrupts off stops it."""
+    from twin.avr.core import STATE_DONE, STATE_STACK_OVERFLOW, data_end
+
+    report, frames = _ten_periods(_hostile("isr_loop", tmp_path))
+    assert frames == [] and report.cycle >= 10 * PERIOD_CYCLES and report.state in (2, 3)
+    elf = _hostile("stack", tmp_path)
+    report, _ = _ten_periods(elf)
+    assert report.state == STATE_STACK_OVERFLOW and report.stack_low_water < data_end(elf)
+    report, _ = _ten_periods(_hostile("reset", tmp_path))
+    assert 10 <= report.resets <= 14  # 200 ms of a 15 ms watchdog (its oscillator's nominal period)
+    report, _ = _ten_periods(_hostile("stop", tmp_path))
+    assert report.state == STATE_DONE and report.cycle < PERIOD_CYCLES
+
+
+@pytest.mark.quick
+def test_a_co_simulation_that_dies_is_an_error_not_a_crash_of_the_twin(firmware: Path) -> None:
+    from twin.avr.core import AvrError
+
+    core = _core(firmware)
+    assert core._proc is not None
+    core._proc.kill()
+    with pytest.raises(AvrError, match="the co-simulation ended"):
+        core.run_until(PERIOD_CYCLES)
+    core.close()
+    with pytest.raises(AvrError, match="no such firmware image"):
+        _core(Path("/nonexistent.elf"))

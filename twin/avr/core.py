@@ -1,30 +1,50 @@
-"""A firmware image on a simulated AVR: simavr (libsimavr) stepped cycle by cycle through ``cosim.c``.
+"""A firmware image on a simulated AVR: simavr (libsimavr) stepped cycle by cycle in a process of its own.
 
-The C side is compiled on first use with the system's C compiler against Debian's ``libsimavr-dev`` and kept in
-a cache keyed by its source (``BALLBEAM_CACHE``, else ``$XDG_CACHE_HOME/ballbeam``, else ``~/.cache/ballbeam``);
-what is missing is named (``AvrUnavailable``). The core knows pins and cycles, not the rig: millivolts go in on
-ADC channels, the 16-bit SPI frames the DAC's chip select latches come out with their cycles, and the stack
-pointer's low-water mark is kept.
+The C side (``cosim.c``) is a small program compiled on first use with the system's C compiler against Debian's
+``libsimavr-dev`` and kept in a cache keyed by its source (``BALLBEAM_CACHE``, else ``$XDG_CACHE_HOME/ballbeam``,
+else ``~/.cache/ballbeam``); what is missing is named (``AvrUnavailable``). It runs as a child process, spoken to
+over its stdin and stdout, because a firmware can take simavr down with it (a crash path that exits, text
+printed on stdout, a fault in the simulator): that ends the child, and the twin reports it. The core knows pins
+and cycles, not the rig: millivolts go in on ADC channels, the 16-bit SPI frames the DAC's chip select latches
+come out with their cycles, and the stack pointer's low-water mark, the resets and a stack that grew into the
+static data are kept.
 """
 
 from __future__ import annotations
 
-import ctypes
 import hashlib
 import os
+import select
 import shutil
+import struct
 import subprocess
 import tempfile
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
-__all__ = ["AvrCore", "AvrError", "AvrUnavailable", "Frame", "STATE_CRASHED", "STATE_DONE"]
+__all__ = [
+    "STATE_CRASHED",
+    "STATE_DONE",
+    "STATE_ERROR",
+    "STATE_STACK_OVERFLOW",
+    "AvrCore",
+    "AvrError",
+    "AvrUnavailable",
+    "Frame",
+    "RunReport",
+]
 
 SOURCE = Path(__file__).with_name("cosim.c")
-# simavr's cpu states (sim_avr.h): the firmware stopped (asleep with interrupts off), or crashed.
+# simavr's cpu states (sim_avr.h): the firmware stopped (asleep with interrupts off), or crashed; and the
+# harness's own: the stack pointer went below the static data.
 STATE_DONE = 6
 STATE_CRASHED = 7
-MAX_FRAMES = 256
+STATE_STACK_OVERFLOW = 100
+STATE_ERROR = 101  # simavr logged an error: an invalid opcode, an access outside memory (RunReport.error)
+# How long one request may take before the child counts as hung (a run to the next physics step is
+# microseconds of work; a whole period of a firmware busy-looping is tens of milliseconds).
+ANSWER_TIMEOUT_S = 30.0
 
 
 class AvrUnavailable(RuntimeError):
@@ -32,14 +52,28 @@ class AvrUnavailable(RuntimeError):
     install."""
 
 
-class AvrError(ValueError):
-    """A firmware image simavr cannot load, named with the reason."""
+class AvrError(RuntimeError):
+    """A firmware image simavr cannot load, or a co-simulation that ended or stopped answering."""
 
 
 @dataclass(frozen=True)
 class Frame:
     word: int  # the 16 bits shifted out while the chip select was low
     cycle: int  # the core's cycle when the chip select rose
+
+
+@dataclass(frozen=True)
+class RunReport:
+    """Where a run to a target cycle left the core."""
+
+    state: int  # simavr's cpu state, or STATE_STACK_OVERFLOW
+    cycle: int
+    pc: int  # byte address
+    stack_low_water: int  # the lowest stack pointer so far (data-space address)
+    resets: int  # returns to the reset vector since the start
+    bad_frames: int  # chip-select pulses that did not carry exactly 16 bits
+    frames: tuple[Frame, ...]  # latched since the last run
+    error: str = ""  # simavr's first error message (STATE_ERROR)
 
 
 def _cache_dir() -> Path:
@@ -49,98 +83,101 @@ def _cache_dir() -> Path:
     return Path(base)
 
 
-def _library() -> ctypes.CDLL:
-    """cosim.c as a shared library, built once per source (atomically: a parallel build cannot tear it)."""
+def executable() -> Path:
+    """cosim.c built once per source (atomically: a parallel build cannot tear it)."""
     source = SOURCE.read_bytes()
-    target = _cache_dir() / f"bbcosim-{hashlib.sha256(source).hexdigest()[:16]}.so"
-    if not target.exists():
-        cc = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
-        if cc is None:
-            raise AvrUnavailable(
-                "the firmware co-simulation needs a C compiler (Debian: apt-get install gcc)"
-            )
-        if not Path("/usr/include/simavr/sim_avr.h").exists() and not _has_simavr_headers(cc):
-            raise AvrUnavailable(
-                "the firmware co-simulation needs simavr's library and headers "
-                "(Debian: apt-get install simavr libsimavr-dev)"
-            )
-        target.parent.mkdir(parents=True, exist_ok=True)
-        with tempfile.TemporaryDirectory(dir=target.parent) as tmp:
-            built = Path(tmp) / target.name
-            done = subprocess.run(
-                [cc, "-O2", "-shared", "-fPIC", "-o", str(built), str(SOURCE), "-lsimavr"],
-                capture_output=True,
-                text=True,
-            )
-            if done.returncode != 0:
+    target = _cache_dir() / f"bbcosim-{hashlib.sha256(source).hexdigest()[:16]}"
+    if target.exists():
+        return target
+    cc = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
+    if cc is None:
+        raise AvrUnavailable("the firmware co-simulation needs a C compiler (Debian: apt-get install gcc)")
+    target.parent.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(dir=target.parent) as tmp:
+        built = Path(tmp) / target.name
+        done = subprocess.run(
+            [cc, "-O2", "-o", str(built), str(SOURCE), "-lsimavr"], capture_output=True, text=True
+        )
+        if done.returncode != 0:
+            if "simavr/" in done.stderr or "lsimavr" in done.stderr:
                 raise AvrUnavailable(
-                    f"building the firmware co-simulation failed: {done.stderr.strip()[-400:]}"
+                    "the firmware co-simulation needs simavr's library and headers "
+                    "(Debian: apt-get install simavr libsimavr-dev)"
                 )
-            os.replace(built, target)
-    return _declare(ctypes.CDLL(str(target)))
+            raise AvrUnavailable(f"building the firmware co-simulation failed: {done.stderr.strip()[-400:]}")
+        os.replace(built, target)
+    return target
 
 
-def _has_simavr_headers(cc: str) -> bool:
-    probe = subprocess.run(
-        [cc, "-E", "-x", "c", "-", "-o", os.devnull],
-        input="#include <simavr/sim_avr.h>\n",
-        capture_output=True,
-        text=True,
-    )
-    return probe.returncode == 0
+# Symbols avr-libc's linker scripts put at the end of the static data (.data, .bss, .noinit).
+DATA_END_SYMBOLS = (b"__bss_end", b"__noinit_end", b"__heap_start")
 
 
-def _declare(lib: ctypes.CDLL) -> ctypes.CDLL:
-    handle, u16, u32, u64 = ctypes.c_void_p, ctypes.c_uint16, ctypes.c_uint32, ctypes.c_uint64
-    lib.bb_new.restype = handle
-    lib.bb_new.argtypes = [ctypes.c_char_p, ctypes.c_char_p, u32, u32, ctypes.c_char_p, ctypes.c_int]
-    lib.bb_free.argtypes = [handle]
-    lib.bb_set_adc_mv.argtypes = [handle, ctypes.c_int, u32]
-    lib.bb_run_until.argtypes = [handle, u64]
-    lib.bb_run_until.restype = ctypes.c_int
-    for name, restype in (("bb_cycle", u64), ("bb_pc", u32), ("bb_min_sp", u16), ("bb_ramend", u16)):
-        getattr(lib, name).argtypes = [handle]
-        getattr(lib, name).restype = restype
-    lib.bb_bad_frames.argtypes = [handle]
-    lib.bb_bad_frames.restype = ctypes.c_int
-    lib.bb_take_frames.argtypes = [handle, ctypes.POINTER(u16), ctypes.POINTER(u64), ctypes.c_int]
-    lib.bb_take_frames.restype = ctypes.c_int
-    return lib
+def data_end(path: Path) -> int:
+    """The first data address above the firmware's static data: the highest of ``DATA_END_SYMBOLS`` in the
+    ELF's symbol table; 0 when it has none (the stack is then not checked against the data)."""
+    found = 0
+    raw = path.read_bytes()[: 16 << 20]
+    try:
+        if raw[:4] != b"\x7fELF" or raw[4] != 1 or raw[5] != 1:  # ELF32, little-endian (AVR)
+            return 0
+        (shoff,) = struct.unpack_from("<I", raw, 0x20)
+        shentsize, shnum = struct.unpack_from("<HH", raw, 0x2E)
+        sections = [struct.unpack_from("<10I", raw, shoff + i * shentsize) for i in range(shnum)]
+        for _, kind, _, _, offset, size, link, _, _, entsize in sections:
+            if kind != 2 or entsize != 16:  # SHT_SYMTAB
+                continue
+            names = sections[link][4]
+            for i in range(size // 16):
+                name_at, value = struct.unpack_from("<II", raw, offset + 16 * i)
+                end = raw.index(b"\0", names + name_at)
+                if raw[names + name_at : end] in DATA_END_SYMBOLS:
+                    found = max(found, value & 0xFFFF)  # data addresses carry avr-gcc's 0x800000 offset
+    except (struct.error, IndexError, ValueError):
+        return 0
+    return found
 
 
-_LIB: ctypes.CDLL | None = None
-
-
-def library() -> ctypes.CDLL:
-    global _LIB
-    if _LIB is None:
-        _LIB = _library()
-    return _LIB
+_REPORT = struct.Struct("<iQIHIiI")
+_FRAME = struct.Struct("<HQ")
 
 
 class AvrCore:
-    """One firmware image on one simulated MCU, from reset."""
+    """One firmware image on one simulated MCU, from reset, in its own process."""
 
     def __init__(
         self, elf: str | Path, *, mcu: str = "atmega328p", frequency_hz: int = 16_000_000, vcc_mv: int = 5000
-    ):
+    ) -> None:
+        self._proc: subprocess.Popen[bytes] | None = None
         path = Path(elf)
         if not path.is_file():
             raise AvrError(f"{path}: no such firmware image")
-        self._lib = library()
-        err = ctypes.create_string_buffer(256)
-        handle = self._lib.bb_new(str(path).encode(), mcu.encode(), frequency_hz, vcc_mv, err, len(err))
-        if not handle:
-            raise AvrError(f"{path}: {err.value.decode(errors='replace')}")
-        self._handle: int | None = handle
-        self.mcu, self.frequency_hz = mcu, frequency_hz
-        self._words = (ctypes.c_uint16 * MAX_FRAMES)()
-        self._cycles = (ctypes.c_uint64 * MAX_FRAMES)()
+        self.path, self.mcu, self.frequency_hz = path, mcu, frequency_hz
+        self._proc = subprocess.Popen(
+            [str(executable()), str(path), mcu, str(frequency_hz), str(vcc_mv), str(data_end(path))],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.DEVNULL,  # simavr's own messages: unbounded in a looping fault, never shown
+        )
+        head = self._read(2)
+        if head != b"OK":
+            reason = self._read_line().decode(errors="replace").strip()
+            self.close()
+            raise AvrError(f"{path}: {reason or 'the co-simulation did not start'}")
+        self.ramend, self.data_end = struct.unpack("<HH", self._read(4))
 
     def close(self) -> None:
-        if self._handle is not None:
-            self._lib.bb_free(self._handle)
-            self._handle = None
+        proc, self._proc = self._proc, None
+        if proc is None:
+            return
+        try:
+            if proc.poll() is None and proc.stdin is not None:
+                proc.stdin.write(b"Q")
+                proc.stdin.close()
+            proc.wait(timeout=5)
+        except (OSError, subprocess.TimeoutExpired):
+            proc.kill()
+            proc.wait()
 
     def __enter__(self) -> AvrCore:
         return self
@@ -153,38 +190,53 @@ class AvrCore:
 
     def set_adc_mv(self, channel: int, millivolts: float) -> None:
         """The voltage at ADC ``channel``'s pin from now on (simavr takes whole millivolts)."""
-        self._lib.bb_set_adc_mv(self._handle, channel, max(0, round(millivolts)))
+        self._send(struct.pack("<cBI", b"A", channel, max(0, min(round(millivolts), 0xFFFFFFFF))))
 
-    def run_until(self, cycle: int) -> int:
-        """Run to ``cycle``; simavr's state after (``STATE_DONE``, ``STATE_CRASHED`` end the firmware)."""
-        return int(self._lib.bb_run_until(self._handle, cycle))
+    def run_until(self, cycle: int) -> RunReport:
+        """Run to ``cycle``; the report's state says whether the firmware goes on."""
+        self._send(struct.pack("<cQ", b"R", cycle))
+        state, now, pc, low, resets, bad, n = _REPORT.unpack(self._read(_REPORT.size))
+        raw = self._read(n * _FRAME.size)
+        frames = tuple(Frame(*_FRAME.unpack_from(raw, i * _FRAME.size)) for i in range(n))
+        (length,) = struct.unpack("<H", self._read(2))
+        error = self._read(length).decode(errors="replace").strip() if length else ""
+        return RunReport(state, now, pc, low, resets, bad, frames, error)
 
-    def frames(self) -> list[Frame]:
-        out: list[Frame] = []
-        while True:
-            n = self._lib.bb_take_frames(self._handle, self._words, self._cycles, MAX_FRAMES)
-            out += [Frame(int(self._words[i]), int(self._cycles[i])) for i in range(n)]
-            if n < MAX_FRAMES:
-                return out
+    def _send(self, data: bytes) -> None:
+        proc = self._alive()
+        assert proc.stdin is not None
+        try:
+            proc.stdin.write(data)
+            proc.stdin.flush()
+        except OSError:
+            raise AvrError(f"{self.path}: the co-simulation ended (exit code {proc.poll()})") from None
 
-    @property
-    def cycle(self) -> int:
-        return int(self._lib.bb_cycle(self._handle))
+    def _alive(self) -> subprocess.Popen[bytes]:
+        if self._proc is None:
+            raise AvrError(f"{self.path}: the co-simulation is closed")
+        return self._proc
 
-    @property
-    def pc(self) -> int:
-        return int(self._lib.bb_pc(self._handle))
+    def _read(self, n: int) -> bytes:
+        proc = self._alive()
+        assert proc.stdout is not None
+        fd, out, deadline = proc.stdout.fileno(), b"", time.monotonic() + ANSWER_TIMEOUT_S
+        while len(out) < n:
+            ready, _, _ = select.select([fd], [], [], max(0.0, deadline - time.monotonic()))
+            if not ready:
+                proc.kill()
+                raise AvrError(f"{self.path}: the co-simulation did not answer within {ANSWER_TIMEOUT_S:g} s")
+            chunk = os.read(fd, n - len(out))
+            if not chunk:
+                code = proc.wait()
+                raise AvrError(f"{self.path}: the co-simulation ended (exit code {code})")
+            out += chunk
+        return out
 
-    @property
-    def stack_low_water(self) -> int:
-        """The lowest stack pointer so far (data-space address)."""
-        return int(self._lib.bb_min_sp(self._handle))
-
-    @property
-    def ramend(self) -> int:
-        return int(self._lib.bb_ramend(self._handle))
-
-    @property
-    def bad_frames(self) -> int:
-        """Chip-select pulses that did not carry exactly 16 bits."""
-        return int(self._lib.bb_bad_frames(self._handle))
+    def _read_line(self) -> bytes:
+        out = b""
+        while not out.endswith(b"\n") and len(out) < 1024:
+            try:
+                out += self._read(1)
+            except AvrError:
+                break
+        return out

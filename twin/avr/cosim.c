@@ -1,6 +1,8 @@
 /* The co-simulation's C side: one ATmega firmware image in simavr, stepped cycle by cycle to a target
- * cycle, its ADC inputs set from outside (millivolts at the pins), its SPI DAC frames and its stack pointer
- * watched. Loaded by twin/avr/core.py through ctypes; nothing here knows the rig.
+ * cycle, its ADC inputs set from outside (millivolts at the pins), its SPI DAC frames, resets and stack
+ * pointer watched. A program of its own (twin/avr/core.py starts it and speaks to it over its stdin and
+ * stdout): whatever a firmware does to simavr — a crash, an exit, text printed by simavr on stdout — ends
+ * or disturbs this process, never the twin's. Nothing here knows the rig.
  *
  * A frame is the 16 bits shifted out on SPI while the DAC's chip select (PB2) is low, latched when it rises
  * (an MCP4921 with LDAC tied low updates its output then). */
@@ -10,10 +12,12 @@
 #include <simavr/sim_avr.h>
 #include <simavr/sim_elf.h>
 #include <simavr/sim_irq.h>
+#include <stdarg.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 #define BB_MAX_FRAMES 256
 #define BB_SPL 0x5D /* SPL in data space (I/O 0x3D + 0x20) */
@@ -30,6 +34,9 @@ typedef struct {
     uint64_t cycles[BB_MAX_FRAMES];
     uint16_t min_sp;
     int bad_frames; /* frames of other than 16 bits */
+    uint16_t data_end; /* the first byte above the static data (__heap_start, from the caller): the stack
+                          must stay above it */
+    uint32_t resets;   /* times the core went back to the reset vector after starting */
 } bb_cosim;
 
 static void on_spi(struct avr_irq_t *irq, uint32_t value, void *param)
@@ -54,7 +61,7 @@ static void on_cs(struct avr_irq_t *irq, uint32_t value, void *param)
     if (!c->cs_low) return;
     c->cs_low = 0;
     if (c->nbytes != 2) {
-        c->bad_frames++;
+        if (c->nbytes) c->bad_frames++; /* a select without bytes (the pin set up high) is no frame */
         return;
     }
     if (c->nframes >= BB_MAX_FRAMES) {
@@ -66,12 +73,22 @@ static void on_cs(struct avr_irq_t *irq, uint32_t value, void *param)
     c->nframes++;
 }
 
+/* simavr's log: not shown, but its first error (an invalid opcode, a bad address) ends the run, told. */
+static char first_error[200];
+
 static void quiet_logger(avr_t *avr, const int level, const char *format, va_list ap)
 {
     (void)avr;
-    (void)level;
-    (void)format;
-    (void)ap;
+    if (level > LOG_ERROR || first_error[0]) return;
+    vsnprintf(first_error, sizeof first_error, format, ap);
+    if (!first_error[0]) snprintf(first_error, sizeof first_error, "error");
+}
+
+/* simavr's default sleeps the host for the time the core sleeps (real-time pacing): the twin paces itself. */
+static void no_sleep(avr_t *avr, avr_cycle_count_t how_long)
+{
+    (void)avr;
+    (void)how_long;
 }
 
 /* NULL with a message in err when the image cannot be read or the MCU is unknown. */
@@ -97,6 +114,8 @@ bb_cosim *bb_new(const char *elf, const char *mcu, uint32_t frequency_hz, uint32
         return NULL;
     }
     avr_init(avr);
+    avr->sleep = no_sleep;
+    avr->log = LOG_ERROR; /* errors reach quiet_logger (AVR_LOG filters by this level first) */
     fw->frequency = frequency_hz;
     fw->vcc = fw->avcc = fw->aref = vcc_mv;
     avr_load_firmware(avr, fw);
@@ -129,35 +148,98 @@ void bb_set_adc_mv(bb_cosim *c, int channel, uint32_t mv)
     if (channel >= 0 && channel < 8 && c->adc[channel]) avr_raise_irq(c->adc[channel], mv);
 }
 
+#define BB_STACK_OVERFLOW 100 /* the stack pointer went below the static data */
+#define BB_ERROR 101          /* simavr logged an error (first_error says which) */
+
 /* Run to the target cycle (or past it by the last instruction's cycles). Returns simavr's state: running
- * or sleeping (2, 3) to go on; done (6: the firmware stopped, asleep with interrupts off) or crashed (7). */
+ * or sleeping (2, 3) to go on; done (6: the firmware stopped, asleep with interrupts off), crashed (7), or
+ * BB_STACK_OVERFLOW. */
 int bb_run_until(bb_cosim *c, uint64_t cycle)
 {
     avr_t *avr = c->avr;
     int state = avr->state;
     while (avr->cycle < cycle) {
+        uint32_t pc = avr->pc;
         state = avr_run(avr);
+        if (avr->pc == 0 && pc != 0) c->resets++; /* a watchdog reset, or a jump to the reset vector */
         uint16_t sp = (uint16_t)(avr->data[BB_SPL] | (avr->data[BB_SPL + 1] << 8));
         if (sp < c->min_sp) c->min_sp = sp;
+        if (c->data_end && sp < c->data_end) return BB_STACK_OVERFLOW;
+        if (first_error[0]) return BB_ERROR;
         if (state == cpu_Done || state == cpu_Crashed) break;
     }
     return state;
 }
 
-uint64_t bb_cycle(const bb_cosim *c) { return c->avr->cycle; }
-uint32_t bb_pc(const bb_cosim *c) { return c->avr->pc; }
-uint16_t bb_min_sp(const bb_cosim *c) { return c->min_sp; }
-uint16_t bb_ramend(const bb_cosim *c) { return c->avr->ramend; }
-int bb_bad_frames(const bb_cosim *c) { return c->bad_frames; }
+/* The protocol, little-endian, on stdin and the process's original stdout (simavr's own printf goes to
+ * stderr): at start "OK" u16 ramend u16 data_end, or "NO" and a line of text. Then requests:
+ *   'A' u8 channel u32 millivolts                       (no answer)
+ *   'R' u64 cycle -> i32 state u64 cycle u32 pc u16 min_sp u32 resets i32 bad_frames u32 n, n × (u16 word,
+ *                    u64 cycle), u16 length, the first error simavr logged (length bytes, none: 0)
+ *   'Q'                                                 (exit) */
+static FILE *out;
 
-/* The frames latched since the last call (at most max; the rest are kept for the next call). */
-int bb_take_frames(bb_cosim *c, uint16_t *words, uint64_t *cycles, int max)
+static int get(void *p, size_t n) { return fread(p, 1, n, stdin) == n; }
+static void put(const void *p, size_t n) { fwrite(p, 1, n, out); }
+
+int main(int argc, char **argv)
 {
-    int n = c->nframes < max ? c->nframes : max;
-    memcpy(words, c->words, (size_t)n * sizeof(uint16_t));
-    memcpy(cycles, c->cycles, (size_t)n * sizeof(uint64_t));
-    memmove(c->words, c->words + n, (size_t)(c->nframes - n) * sizeof(uint16_t));
-    memmove(c->cycles, c->cycles + n, (size_t)(c->nframes - n) * sizeof(uint64_t));
-    c->nframes -= n;
-    return n;
+    if (argc != 6) {
+        fprintf(stderr, "usage: bbcosim FIRMWARE.elf MCU FREQUENCY_HZ VCC_MV DATA_END\n");
+        return 2;
+    }
+    int fd = dup(1);
+    if (fd < 0 || dup2(2, 1) < 0) return 2;
+    out = fdopen(fd, "wb");
+    if (!out) return 2;
+    char err[256] = "";
+    bb_cosim *c = bb_new(argv[1], argv[2], (uint32_t)strtoul(argv[3], NULL, 10),
+                         (uint32_t)strtoul(argv[4], NULL, 10), err, sizeof err);
+    if (!c) {
+        fprintf(out, "NO%s\n", err);
+        fflush(out);
+        return 1;
+    }
+    c->data_end = (uint16_t)strtoul(argv[5], NULL, 0); /* 0: not known, not watched */
+    put("OK", 2);
+    put(&c->avr->ramend, 2);
+    put(&c->data_end, 2);
+    fflush(out);
+    for (;;) {
+        char op;
+        if (!get(&op, 1) || op == 'Q') break;
+        if (op == 'A') {
+            uint8_t channel;
+            uint32_t mv;
+            if (!get(&channel, 1) || !get(&mv, 4)) break;
+            if (channel < 8 && c->adc[channel]) avr_raise_irq(c->adc[channel], mv);
+        } else if (op == 'R') {
+            uint64_t target;
+            if (!get(&target, 8)) break;
+            int32_t state = bb_run_until(c, target);
+            uint64_t now = c->avr->cycle;
+            uint32_t pc = c->avr->pc, n = (uint32_t)c->nframes;
+            int32_t bad = c->bad_frames;
+            put(&state, 4);
+            put(&now, 8);
+            put(&pc, 4);
+            put(&c->min_sp, 2);
+            put(&c->resets, 4);
+            put(&bad, 4);
+            put(&n, 4);
+            for (uint32_t i = 0; i < n; i++) {
+                put(&c->words[i], 2);
+                put(&c->cycles[i], 8);
+            }
+            c->nframes = 0;
+            uint16_t length = (uint16_t)strlen(first_error);
+            put(&length, 2);
+            put(first_error, length);
+            fflush(out);
+        } else {
+            break;
+        }
+    }
+    bb_free(c);
+    return 0;
 }
