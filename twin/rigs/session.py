@@ -156,7 +156,7 @@ def remote_session(
         "rig_identity": printable(rig.config.rig),  # the rig's own words: escaped, a terminal is not its
         "ticks": int(run.log.timem.size),
         "ended": run.ended,
-        "ball_lost": rig.ball_lost,
+        "rig_ball_lost": rig.ball_lost,  # the rig's own flag; "ball_lost" below is the measured verdict's
         "sequence_gaps": rig.sequence_gaps,  # seq numbers that never arrived (blocks lost on the way)
         "verdict_source": "measured (the rig's volts through its calibration: ballbeam judge)",
         **verdict.to_json(),
