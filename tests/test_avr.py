@@ -6,6 +6,7 @@ Needs Debian's gcc-avr, avr-libc and libsimavr-dev (``.ci/run`` installs them); 
 
 from __future__ import annotations
 
+import math
 import re
 import shutil
 import subprocess
@@ -101,8 +102,8 @@ def _drive(firmware: Path, inputs_mv: np.ndarray) -> list[tuple[int, int]]:
     with _core(firmware) as core:
         for k, (ball, angle) in enumerate(inputs_mv, start=1):
             frames += core.run_until(k * PERIOD_CYCLES - 1000).frames
-            core.set_adc_mv(0, float(ball))
-            core.set_adc_mv(1, float(angle))
+            core.set_adc_v(0, float(ball) / 1000)
+            core.set_adc_v(1, float(angle) / 1000)
         frames += core.run_until((len(inputs_mv) + 1) * PERIOD_CYCLES).frames
     return [(f.word, f.cycle) for f in frames]
 
@@ -162,14 +163,14 @@ def _host_law(tmp: Path) -> Path:
 def test_the_firmware_computes_the_host_single_precision_law_bit_for_bit(
     firmware: Path, tmp_path: Path
 ) -> None:
-    """200 periods of changing pin voltages: the counts the firmware converts are simavr's,
-    ⌊mV·1023 / 5000⌋ (sim/avr_adc.c; the datasheet's is ·1024, see docs/design.md), eight per channel;
-    the same sums through the host build give the firmware's DAC frames, every one."""
+    """200 periods of changing pin voltages: the counts the firmware converts are the datasheet's,
+    ⌊V·1024 / 5 V⌋ (twin.avr.core scales simavr's ·1023 to it), eight per channel; the same sums through the
+    host build give the firmware's DAC frames, every one."""
     rng = np.random.default_rng(7)
     ball = 2500 + np.round(1200 * np.sin(np.arange(200) / 9.0)) + rng.integers(-40, 40, 200)
     angle = 2500 + np.round(600 * np.cos(np.arange(200) / 13.0)) + rng.integers(-40, 40, 200)
     frames = _drive(firmware, np.stack([ball, angle], axis=1))
-    counts = np.floor(np.stack([ball, angle], axis=1) * 1023 / 5000).astype(int) * 8
+    counts = np.floor(np.stack([ball, angle], axis=1) * 1024 / 5000).astype(int) * 8
     host = subprocess.run(
         [str(_host_law(tmp_path))],
         input="".join(f"{b} {a}\n" for b, a in counts),
@@ -198,11 +199,16 @@ HOSTILE = {
 
 
 def _hostile(name: str, tmp: Path) -> Path:
+    return _image(name, HOSTILE[name], tmp)
+
+
+def _image(name: str, text: str, tmp: Path) -> Path:
+    """A one-file firmware ``text`` built with avr-gcc for the ATmega328P."""
     avr_gcc = shutil.which("avr-gcc")
     if avr_gcc is None:
         pytest.skip("avr-gcc is not installed (Debian: apt-get install gcc-avr avr-libc)")
     source = tmp / f"{name}.c"
-    source.write_text(HOSTILE[name])
+    source.write_text(text)
     out = tmp / f"{name}.elf"
     subprocess.run([avr_gcc, "-std=c99", "-Os", "-mmcu=atmega328p", f"-DF_CPU={F_CPU}UL", "-o", str(out), str(source)],
                    check=True)  # fmt: skip
@@ -252,3 +258,29 @@ def test_a_co_simulation_that_dies_is_an_error_not_a_crash_of_the_twin(firmware:
     core.close()
     with pytest.raises(AvrError, match="no such firmware image"):
         _core(Path("/nonexistent.elf"))
+
+
+ADC_PROBE = (
+    "#include <avr/io.h>\n#include <stdint.h>\n"
+    "int main(void) { DDRB |= (1 << PB2) | (1 << PB3) | (1 << PB5); PORTB |= (1 << PB2);"
+    " SPCR = (1 << SPE) | (1 << MSTR); ADCSRA = (1 << ADEN) | 7;\n"
+    " for (;;) { ADMUX = (1 << REFS0); ADCSRA |= (1 << ADSC); while (ADCSRA & (1 << ADSC)) { } uint16_t v = ADC;\n"
+    "  PORTB &= ~(1 << PB2); SPDR = v >> 8; while (!(SPSR & (1 << SPIF))) { }"
+    " SPDR = v & 0xFF; while (!(SPSR & (1 << SPIF))) { } PORTB |= (1 << PB2); } }\n"
+)
+
+
+@pytest.mark.quick
+def test_the_simulated_adc_reads_the_datasheets_counts(tmp_path: Path) -> None:
+    """A probe firmware sends each conversion of ADC0 over SPI. At and just below every count's edge
+    (n·V_ref/1024) and at the ends, the count is ⌊V·1024 / V_ref⌋ within 0…1023 — the datasheet's, not simavr's
+    own ⌊mV·1023 / V_ref⌋ (twin.avr.core.ADC_SCALE)."""
+    elf = _image("adc_probe", ADC_PROBE, tmp_path)
+    volts = [0.0, 5.0, 5.2, 4.99999]
+    for n in (1, 2, 511, 512, 716, 1022, 1023):
+        volts += [n * 5.0 / 1024, n * 5.0 / 1024 - 1e-6]
+    with _core(elf) as core:
+        for i, v in enumerate(volts):
+            core.set_adc_v(0, v)
+            frames = core.run_until((i + 1) * 20_000).frames
+            assert frames[-1].word == min(math.floor(min(v, 5.0) * 1024 / 5.0), 1023), v

@@ -13,6 +13,7 @@ static data are kept.
 from __future__ import annotations
 
 import hashlib
+import math
 import os
 import select
 import shutil
@@ -138,6 +139,13 @@ def data_end(path: Path) -> int:
     return found
 
 
+# simavr's ADC converts an integer input u against an integer reference R as ⌊u·1023 / R⌋ (sim/avr_adc.c; the
+# datasheet: ⌊V·1024 / V_ref⌋). With R = 1023·M and u = ⌊V/V_ref · 1024·M⌋ that is ⌊⌊V/V_ref·1024·M⌋ / M⌋ =
+# ⌊V·1024 / V_ref⌋ exactly for any whole M; simavr keeps an input in 16 bits, so 1024·M ≤ 65 535: M = 63
+# (an input resolution of 1/63 count).
+ADC_SCALE = 63
+
+
 _REPORT = struct.Struct("<iQIHIiI")
 _FRAME = struct.Struct("<HQ")
 
@@ -146,15 +154,28 @@ class AvrCore:
     """One firmware image on one simulated MCU, from reset, in its own process."""
 
     def __init__(
-        self, elf: str | Path, *, mcu: str = "atmega328p", frequency_hz: int = 16_000_000, vcc_mv: int = 5000
+        self,
+        elf: str | Path,
+        *,
+        mcu: str = "atmega328p",
+        frequency_hz: int = 16_000_000,
+        adc_reference_v: float = 5.0,
     ) -> None:
         self._proc: subprocess.Popen[bytes] | None = None
         path = Path(elf)
         if not path.is_file():
             raise AvrError(f"{path}: no such firmware image")
         self.path, self.mcu, self.frequency_hz = path, mcu, frequency_hz
+        self.adc_reference_v = adc_reference_v
         self._proc = subprocess.Popen(
-            [str(executable()), str(path), mcu, str(frequency_hz), str(vcc_mv), str(data_end(path))],
+            [
+                str(executable()),
+                str(path),
+                mcu,
+                str(frequency_hz),
+                str(1023 * ADC_SCALE),
+                str(data_end(path)),
+            ],
             stdin=subprocess.PIPE,
             stdout=subprocess.PIPE,
             stderr=subprocess.DEVNULL,  # simavr's own messages: unbounded in a looping fault, never shown
@@ -188,9 +209,13 @@ class AvrCore:
     def __del__(self) -> None:
         self.close()
 
-    def set_adc_mv(self, channel: int, millivolts: float) -> None:
-        """The voltage at ADC ``channel``'s pin from now on (simavr takes whole millivolts)."""
-        self._send(struct.pack("<cBI", b"A", channel, max(0, min(round(millivolts), 0xFFFFFFFF))))
+    def set_adc_v(self, channel: int, volts: float) -> None:
+        """The voltage at ADC ``channel``'s pin from now on: each conversion reads ⌊V·1024 / V_ref⌋ within
+        0…1023, as the datasheet's ADC does (``ADC_SCALE``)."""
+        units = math.floor(
+            min(max(volts, 0.0), self.adc_reference_v) / self.adc_reference_v * 1024 * ADC_SCALE
+        )
+        self._send(struct.pack("<cBI", b"A", channel, units))
 
     def run_until(self, cycle: int) -> RunReport:
         """Run to ``cycle``; the report's state says whether the firmware goes on."""

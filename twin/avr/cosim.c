@@ -92,7 +92,7 @@ static void no_sleep(avr_t *avr, avr_cycle_count_t how_long)
 }
 
 /* NULL with a message in err when the image cannot be read or the MCU is unknown. */
-bb_cosim *bb_new(const char *elf, const char *mcu, uint32_t frequency_hz, uint32_t vcc_mv, char *err,
+bb_cosim *bb_new(const char *elf, const char *mcu, uint32_t frequency_hz, uint32_t vref_units, char *err,
                  int errlen)
 {
     avr_global_logger_set(quiet_logger);
@@ -117,10 +117,10 @@ bb_cosim *bb_new(const char *elf, const char *mcu, uint32_t frequency_hz, uint32
     avr->sleep = no_sleep;
     avr->log = LOG_ERROR; /* errors reach quiet_logger (AVR_LOG filters by this level first) */
     fw->frequency = frequency_hz;
-    fw->vcc = fw->avcc = fw->aref = vcc_mv;
+    fw->vcc = fw->avcc = fw->aref = vref_units;
     avr_load_firmware(avr, fw);
     avr->frequency = frequency_hz;
-    avr->vcc = avr->avcc = avr->aref = vcc_mv;
+    avr->vcc = avr->avcc = avr->aref = vref_units; /* the ADC's scale: the caller's unit, not mV */
     free(fw);
     bb_cosim *c = calloc(1, sizeof(bb_cosim));
     if (!c) {
@@ -173,7 +173,7 @@ int bb_run_until(bb_cosim *c, uint64_t cycle)
 
 /* The protocol, little-endian, on stdin and the process's original stdout (simavr's own printf goes to
  * stderr): at start "OK" u16 ramend u16 data_end, or "NO" and a line of text. Then requests:
- *   'A' u8 channel u32 millivolts                       (no answer)
+ *   'A' u8 channel u32 input, in units of V_ref / VREF_UNITS (no answer)
  *   'R' u64 cycle -> i32 state u64 cycle u32 pc u16 min_sp u32 resets i32 bad_frames u32 n, n × (u16 word,
  *                    u64 cycle), u16 length, the first error simavr logged (length bytes, none: 0)
  *   'Q'                                                 (exit) */
@@ -185,7 +185,7 @@ static void put(const void *p, size_t n) { fwrite(p, 1, n, out); }
 int main(int argc, char **argv)
 {
     if (argc != 6) {
-        fprintf(stderr, "usage: bbcosim FIRMWARE.elf MCU FREQUENCY_HZ VCC_MV DATA_END\n");
+        fprintf(stderr, "usage: bbcosim FIRMWARE.elf MCU FREQUENCY_HZ VREF_UNITS DATA_END\n");
         return 2;
     }
     int fd = dup(1);
