@@ -1,4 +1,5 @@
-"""A served twin for the wire tests: ``twin.wire.server.Server.serve`` in a thread, its session or error kept."""
+"""A served twin for the wire tests: ``twin.wire.server.Server.serve`` in a thread, its session or error kept;
+and a hand-written client's answer to a sample."""
 
 from __future__ import annotations
 
@@ -6,7 +7,19 @@ import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 
+from twin.interface import Controller, DaqSample
+from twin.wire import protocol as p
 from twin.wire.server import Server, SessionResult
+
+
+def answer(controller: Controller, sample: p.Sample) -> float:
+    """The command a hand-written client sends for a SAMPLE: sequence 0 (the held rig) starts the controller
+    and answers the zero command, 2.5 V; every later sample is an update."""
+    block = DaqSample(sample.time_s, sample.ball_v, sample.angle_v)
+    if sample.seq == 0:
+        controller.start(block)
+        return 2.5
+    return controller.update(block)
 
 
 @contextmanager

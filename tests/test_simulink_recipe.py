@@ -9,12 +9,11 @@ import socket
 
 import numpy as np
 import pytest
-from serving import in_thread, session_of
+from serving import answer, in_thread, session_of
 
 from controllers import registry
 from controllers.thesis_numbers import HARDWARE_STARTS
 from twin.engine import run_closed_loop
-from twin.interface import DaqSample
 from twin.log import TRUTH_FIELDS
 from twin.parameters import Parameters
 from twin.wire import protocol as p
@@ -51,12 +50,7 @@ def test_separate_send_and_receive_blocks_complete_a_session() -> None:
             if isinstance(msg, p.Stop):
                 break
             assert isinstance(msg, p.Sample)
-            sample = DaqSample(msg.time_s, msg.ball_v, msg.angle_v)
-            if msg.seq == 0:
-                controller.start(sample)
-                command = 2.5
-            else:
-                command = controller.update(sample)
+            command = answer(controller, msg)
             commands.append(command)
             send.sendto(p.encode(p.Command(msg.seq, command), session), target)
         send.setblocking(False)

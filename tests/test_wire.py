@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from serving import in_thread, session_of
+from serving import answer, in_thread, session_of
 
 from controllers import registry
 from controllers.thesis_numbers import HARDWARE_STARTS
@@ -200,12 +200,7 @@ def test_hostile_datagrams_are_counted_and_change_nothing() -> None:
                 break
             assert isinstance(msg, p.Sample)
             seen[msg.seq] = msg
-            sample = DaqSample(msg.time_s, msg.ball_v, msg.angle_v)
-            if msg.seq == 0:
-                controller.start(sample)
-                command = 2.5
-            else:
-                command = controller.update(sample)
+            command = answer(controller, msg)
             if n_junk < 200:
                 kinds = _junk(rng, raw.session, msg.seq)
                 for i, data in enumerate(kinds):
@@ -666,12 +661,7 @@ def test_in_real_time_a_command_in_time_takes_effect_at_the_next_boundary() -> N
             samples.append(msg)
             if msg.flags & p.FLAG_LAST:
                 continue  # real time: the last sample is not answered
-            block = DaqSample(msg.time_s, msg.ball_v, msg.angle_v)
-            if msg.seq == 0:
-                controller.start(block)
-                command = 2.5
-            else:
-                command = controller.update(block)
+            command = answer(controller, msg)
             time.sleep(0.006)  # answer well into the period
             raw.send(p.Command(msg.seq, command))
         raw.close()
