@@ -608,8 +608,9 @@ class WindowProblem:
         h = win.period_s / self.substeps
         # Ideal DAC (quantization is noise here, see the module's docstring), the twin's amplifier with each
         # row's rail (a fitted or diagnosed ``amplifier.rail_v``).
-        v_new = np.clip(np.asarray(amplifier_volts(win.command_v, _unclipped(p))), -cst.rail, cst.rail)
-        v_old = np.clip(np.asarray(amplifier_volts(win.previous_v, _unclipped(p))), -cst.rail, cst.rail)
+        line = _unclipped(p)
+        v_new = np.clip(np.asarray(amplifier_volts(win.command_v, line)), -cst.rail, cst.rail)
+        v_old = np.clip(np.asarray(amplifier_volts(win.previous_v, line)), -cst.rail, cst.rail)
         # The new command's share of each sub-step: the part of [k·h, (k+1)·h) after the latency.
         latency = cst.latency[:, None]
         share = np.clip(

@@ -123,7 +123,12 @@ def test_the_firmware_boots_and_writes_the_dac_every_period(firmware: Path) -> N
     assert frames == _drive(firmware, inputs)
     with _core(firmware) as core:
         report = core.run_until(3 * PERIOD_CYCLES)
-        assert report.state in (2, 3) and report.resets == 0 and report.bad_frames == 0
+        assert (
+            report.state in (2, 3)
+            and report.resets == 0
+            and report.bad_frames == 0
+            and report.dropped_frames == 0
+        )
         assert core.ramend == 0x8FF and core.data_end < report.stack_low_water < core.ramend
 
 

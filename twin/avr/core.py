@@ -73,6 +73,7 @@ class RunReport:
     stack_low_water: int  # the lowest stack pointer so far (data-space address)
     resets: int  # returns to the reset vector since the start
     bad_frames: int  # chip-select pulses that did not carry exactly 16 bits
+    dropped_frames: int  # frames beyond the 256 one run can hold (a firmware writing without pause)
     frames: tuple[Frame, ...]  # latched since the last run
     error: str = ""  # simavr's first error message (STATE_ERROR)
 
@@ -146,7 +147,7 @@ def data_end(path: Path) -> int:
 ADC_SCALE = 63
 
 
-_REPORT = struct.Struct("<iQIHIiI")
+_REPORT = struct.Struct("<iQIHIiiI")
 _FRAME = struct.Struct("<HQ")
 
 
@@ -220,12 +221,12 @@ class AvrCore:
     def run_until(self, cycle: int) -> RunReport:
         """Run to ``cycle``; the report's state says whether the firmware goes on."""
         self._send(struct.pack("<cQ", b"R", cycle))
-        state, now, pc, low, resets, bad, n = _REPORT.unpack(self._read(_REPORT.size))
+        state, now, pc, low, resets, bad, dropped, n = _REPORT.unpack(self._read(_REPORT.size))
         raw = self._read(n * _FRAME.size)
         frames = tuple(Frame(*_FRAME.unpack_from(raw, i * _FRAME.size)) for i in range(n))
         (length,) = struct.unpack("<H", self._read(2))
         error = self._read(length).decode(errors="replace").strip() if length else ""
-        return RunReport(state, now, pc, low, resets, bad, frames, error)
+        return RunReport(state, now, pc, low, resets, bad, dropped, frames, error)
 
     def _send(self, data: bytes) -> None:
         proc = self._alive()

@@ -143,9 +143,9 @@ void bb_free(bb_cosim *c)
     free(c);
 }
 
-void bb_set_adc_mv(bb_cosim *c, int channel, uint32_t mv)
+static void bb_set_adc(bb_cosim *c, int channel, uint32_t input)
 {
-    if (channel >= 0 && channel < 8 && c->adc[channel]) avr_raise_irq(c->adc[channel], mv);
+    if (channel >= 0 && channel < 8 && c->adc[channel]) avr_raise_irq(c->adc[channel], input);
 }
 
 #define BB_STACK_OVERFLOW 100 /* the stack pointer went below the static data */
@@ -174,8 +174,8 @@ int bb_run_until(bb_cosim *c, uint64_t cycle)
 /* The protocol, little-endian, on stdin and the process's original stdout (simavr's own printf goes to
  * stderr): at start "OK" u16 ramend u16 data_end, or "NO" and a line of text. Then requests:
  *   'A' u8 channel u32 input, in units of V_ref / VREF_UNITS (no answer)
- *   'R' u64 cycle -> i32 state u64 cycle u32 pc u16 min_sp u32 resets i32 bad_frames u32 n, n × (u16 word,
- *                    u64 cycle), u16 length, the first error simavr logged (length bytes, none: 0)
+ *   'R' u64 cycle -> i32 state u64 cycle u32 pc u16 min_sp u32 resets i32 bad_frames i32 dropped u32 n,
+ *                    n × (u16 word, u64 cycle), u16 length, the first error simavr logged (length bytes, none: 0)
  *   'Q'                                                 (exit) */
 static FILE *out;
 
@@ -210,22 +210,23 @@ int main(int argc, char **argv)
         if (!get(&op, 1) || op == 'Q') break;
         if (op == 'A') {
             uint8_t channel;
-            uint32_t mv;
-            if (!get(&channel, 1) || !get(&mv, 4)) break;
-            if (channel < 8 && c->adc[channel]) avr_raise_irq(c->adc[channel], mv);
+            uint32_t input;
+            if (!get(&channel, 1) || !get(&input, 4)) break;
+            bb_set_adc(c, channel, input);
         } else if (op == 'R') {
             uint64_t target;
             if (!get(&target, 8)) break;
             int32_t state = bb_run_until(c, target);
             uint64_t now = c->avr->cycle;
             uint32_t pc = c->avr->pc, n = (uint32_t)c->nframes;
-            int32_t bad = c->bad_frames;
+            int32_t bad = c->bad_frames, dropped = c->dropped;
             put(&state, 4);
             put(&now, 8);
             put(&pc, 4);
             put(&c->min_sp, 2);
             put(&c->resets, 4);
             put(&bad, 4);
+            put(&dropped, 4);
             put(&n, 4);
             for (uint32_t i = 0; i < n; i++) {
                 put(&c->words[i], 2);
