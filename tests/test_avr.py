@@ -8,12 +8,12 @@ from __future__ import annotations
 
 import math
 import re
-import shutil
 import subprocess
 from pathlib import Path
 
 import numpy as np
 import pytest
+from avr_images import build_image, example_image, host_law
 
 from twin.parameters import Parameters
 
@@ -57,34 +57,13 @@ def test_the_firmware_knows_the_rigs_software_calibration_and_its_board() -> Non
         "IO_DAC_REFERENCE_V": io.dac_reference_v,
     }.items():
         assert d[name] == value, name
-
-
-def _makefile_cflags() -> list[str]:
-    text = (AVR_DIR / "Makefile").read_text()
-    flags = re.search(r"^CFLAGS = (.*)$", text, re.M)
-    assert flags is not None
-    return (
-        flags[1]
-        .replace("$(MCU)", "atmega328p")
-        .replace("$(F_CPU)", str(F_CPU))
-        .replace("-I../c", f"-I{C_DIR}")
-        .split()
-    )
+    make = (AVR_DIR / "Makefile").read_text()
+    assert re.search(r"^F_CPU \?= (\d+)$", make, re.M)[1] == str(io.clock_hz)  # type: ignore[index]
 
 
 @pytest.fixture(scope="module")
 def firmware(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """examples/avr's image built with the Makefile's flags into a temporary folder."""
-    avr_gcc = shutil.which("avr-gcc")
-    if avr_gcc is None:
-        pytest.skip("avr-gcc is not installed (Debian: apt-get install gcc-avr avr-libc)")
-    out = tmp_path_factory.mktemp("avr") / "bb_sf.elf"
-    subprocess.run(
-        [avr_gcc, *_makefile_cflags(), "-Werror", "-o", str(out), str(AVR_DIR / "main.c"),
-         str(C_DIR / "appendix_sf.c"), "-lm"],
-        check=True,
-    )  # fmt: skip
-    return out
+    return example_image(tmp_path_factory.mktemp("avr"))
 
 
 def _core(firmware: Path):  # type: ignore[no-untyped-def]
@@ -132,39 +111,6 @@ def test_the_firmware_boots_and_writes_the_dac_every_period(firmware: Path) -> N
         assert core.ramend == 0x8FF and core.data_end < report.stack_low_water < core.ramend
 
 
-def _host_law(tmp: Path) -> Path:
-    """The same law and I/O arithmetic compiled for the host in single precision, reading the firmware's
-    per-period count sums on stdin and printing its frames."""
-    cc = shutil.which("cc") or shutil.which("gcc")
-    if cc is None:
-        pytest.skip("no C compiler")
-    main = tmp / "host_law.c"
-    main.write_text(
-        "#include <math.h>\n#include <stdio.h>\n#include <stdint.h>\n"
-        "#define double float\n"
-        '#include "appendix_sf.c"\n#include "rig_io.h"\n'
-        "int main(void) {\n"
-        "    static const sf_calibration cal = RIG_SF_CALIBRATION;\n"
-        "    sf_state s; unsigned ball, angle; int started = 0;\n"
-        '    while (scanf("%u %u", &ball, &angle) == 2) {\n'
-        "        double b = io_signal_v((uint16_t)ball), a = io_signal_v((uint16_t)angle);\n"
-        "        double command = RIG_COMMAND_ZERO_V;\n"
-        "        if (!started) started = sf_start(&s, &cal, b, a) == 0;\n"
-        "        else if (sf_update(&s, b, a, &command) != 0) command = RIG_COMMAND_ZERO_V;\n"
-        '        printf("%u\\n", (unsigned)io_dac_frame(command));\n'
-        "    }\n"
-        "    return 0;\n"
-        "}\n"
-    )
-    out = tmp / "host_law"
-    subprocess.run(
-        [cc, "-std=c99", "-O2", "-ffp-contract=off", "-fno-fast-math", "-fsingle-precision-constant",
-         f"-I{C_DIR}", f"-I{AVR_DIR}", "-o", str(out), str(main), "-lm"],
-        check=True,
-    )  # fmt: skip
-    return out
-
-
 def test_the_firmware_computes_the_host_single_precision_law_bit_for_bit(
     firmware: Path, tmp_path: Path
 ) -> None:
@@ -177,7 +123,7 @@ def test_the_firmware_computes_the_host_single_precision_law_bit_for_bit(
     frames = _drive(firmware, np.stack([ball, angle], axis=1))
     counts = np.floor(np.stack([ball, angle], axis=1) * 1024 / 5000).astype(int) * 8
     host = subprocess.run(
-        [str(_host_law(tmp_path))],
+        [str(host_law(tmp_path))],
         input="".join(f"{b} {a}\n" for b, a in counts),
         capture_output=True,
         text=True,
@@ -204,20 +150,7 @@ HOSTILE = {
 
 
 def _hostile(name: str, tmp: Path) -> Path:
-    return _image(name, HOSTILE[name], tmp)
-
-
-def _image(name: str, text: str, tmp: Path) -> Path:
-    """A one-file firmware ``text`` built with avr-gcc for the ATmega328P."""
-    avr_gcc = shutil.which("avr-gcc")
-    if avr_gcc is None:
-        pytest.skip("avr-gcc is not installed (Debian: apt-get install gcc-avr avr-libc)")
-    source = tmp / f"{name}.c"
-    source.write_text(text)
-    out = tmp / f"{name}.elf"
-    subprocess.run([avr_gcc, "-std=c99", "-Os", "-mmcu=atmega328p", f"-DF_CPU={F_CPU}UL", "-o", str(out), str(source)],
-                   check=True)  # fmt: skip
-    return out
+    return build_image(name, HOSTILE[name], tmp)
 
 
 def _ten_periods(elf: Path):  # type: ignore[no-untyped-def]
@@ -280,7 +213,7 @@ def test_the_simulated_adc_reads_the_datasheets_counts(tmp_path: Path) -> None:
     """A probe firmware sends each conversion of ADC0 over SPI. At and just below every count's edge
     (n·V_ref/1024) and at the ends, the count is ⌊V·1024 / V_ref⌋ within 0…1023 — the datasheet's, not simavr's
     own ⌊mV·1023 / V_ref⌋ (twin.avr.core.ADC_SCALE)."""
-    elf = _image("adc_probe", ADC_PROBE, tmp_path)
+    elf = build_image("adc_probe", ADC_PROBE, tmp_path)
     volts = [0.0, 5.0, 5.2, 4.99999]
     for n in (1, 2, 511, 512, 716, 1022, 1023):
         volts += [n * 5.0 / 1024, n * 5.0 / 1024 - 1e-6]

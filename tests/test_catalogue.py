@@ -10,7 +10,7 @@ import pytest
 from controllers import registry
 from controllers.batch import batched
 from controllers.loop import TrueStateLaw
-from twin.app.catalogue import WithUserController
+from twin.app.catalogue import with_user_controller
 from twin.engine import CatalogueEntry
 from twin.interface import Controller, DaqSample, Setpoint
 from twin.parameters import Parameters
@@ -121,7 +121,7 @@ class _WithSetpoint(_Plain):
 @pytest.mark.parametrize(("cls", "setpoint"), [(_Plain, False), (_WithSetpoint, True)])
 def test_the_users_controller_is_one_more_entry(cls: type[Controller], setpoint: bool) -> None:
     spec = f"tests.test_catalogue:{cls.__name__}"
-    catalogue = WithUserController(registry, spec, cls)
+    catalogue = with_user_controller(registry, spec, cls)
     assert catalogue.NAMES == (*registry.NAMES, spec) == tuple(catalogue.ENTRIES)
     entry = catalogue.ENTRIES[spec]
     assert (entry.simulation_only, entry.batched, entry.setpoint) == (False, False, setpoint)

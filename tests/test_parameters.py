@@ -234,6 +234,7 @@ THESIS_DEFAULTS = {
         "adc_reference_v": 5.0,
         "dac_bits": 12,
         "dac_reference_v": 5.0,
+        "clock_hz": 16_000_000,
     },
 }  # fmt: skip
 

@@ -34,7 +34,7 @@ from twin.log import THESIS_FIELDS, TRUTH_FIELDS, RunLog
 from twin.parameters import Daq, Parameters
 from twin.physics import PhysicsBlock
 from twin.realtime import TickTiming, arrival_timing
-from twin.rigs.sim import PlantKind, RigError, make_rig, whole_steps
+from twin.rigs.sim import FirmwareBoard, PlantKind, RigError, make_rig, whole_steps
 from twin.verdict import Criteria, Trace, Verdict, evaluate, evaluate_measured
 
 __all__ = [
@@ -42,6 +42,7 @@ __all__ = [
     "CatalogueEntry",
     "ClosedLoop",
     "ControllerError",
+    "Firmware",
     "ENDED_BALL_LOST",
     "ENDED_LAST_SAMPLE",
     "ENDED_TICKS",
@@ -77,12 +78,32 @@ class StateLaw(Protocol):
     def motor_volts(self, state: np.ndarray) -> float: ...
 
 
+@runtime_checkable
+class Firmware(FirmwareBoard, Protocol):
+    """A controller that is firmware on a microcontroller's board (``twin.avr.firmware.AvrFirmware``): its pins
+    get the rig's sensor signals every physics step, its output drives the amplifier, on its own clock.
+    Simulation only: the rig must offer ``read_with_firmware`` (``twin.rigs.sim.SimRig``). ``figures`` is
+    what the target adds to a run's verdict (cycles per update, deadline margin, stack, missed periods)."""
+
+    name: str
+    period_s: float
+
+    @property
+    def telemetry(self) -> Telemetry: ...
+
+    def figures(self) -> dict[str, Any]: ...
+
+    def close(self) -> None: ...
+
+
 @dataclass(frozen=True)
 class CatalogueEntry:
     """One named controller as data: what the CLI lists and the live view offers, without building it."""
 
     name: str
-    build: Callable[[Parameters], Controller | StateLaw]  # designs and builds one for the given rig
+    build: Callable[
+        [Parameters], Controller | StateLaw | Firmware
+    ]  # designs and builds one for the given rig
     description: str  # one line: what it is and where it comes from
     simulation_only: bool  # a law on the true state (chapter 4): it cannot drive the hardware
     batched: bool  # has a vectorized version for the batch engine (twin.rigs.batch)
@@ -95,7 +116,7 @@ class Catalogue(Protocol):
     NAMES: tuple[str, ...]
     ENTRIES: Mapping[str, CatalogueEntry]
 
-    def make(self, name: str, params: Parameters | None = None) -> Controller | StateLaw: ...
+    def make(self, name: str, params: Parameters | None = None) -> Controller | StateLaw | Firmware: ...
 
 
 class Pacer(Protocol):
@@ -248,12 +269,14 @@ class RunResult:
         *,
         ended: str = ENDED_TICKS,
         timing: TickTiming | None = None,
+        firmware: dict[str, Any] | None = None,
     ) -> None:
         self.controller = controller
         self._log = log
         self._verdict = verdict
         self.ended = ended
         self.timing = timing
+        self.firmware = firmware  # a firmware's figures (``Firmware.figures``), else None
 
     @property
     def verdict(self) -> Verdict:
@@ -524,7 +547,7 @@ class ClosedLoop:
     def __init__(
         self,
         rig: Rig,
-        controller: Controller | StateLaw,
+        controller: Controller | StateLaw | Firmware,
         *,
         record: bool = True,
         record_limit: int | None = None,
@@ -545,18 +568,26 @@ class ClosedLoop:
         self.truth: TrueState | None = rig if isinstance(rig, TrueState) else None
         install_interrupt_handler()  # before any user code runs: its KeyboardInterrupt is not the Ctrl-C
         # (a Controller first: the protocol's check reads attributes, which user code may make raise)
-        self.is_state_law = not isinstance(controller, Controller) and isinstance(controller, StateLaw)
+        hardware = isinstance(controller, Controller)
+        self.is_firmware = not hardware and isinstance(controller, Firmware)
+        self.is_state_law = not hardware and not self.is_firmware and isinstance(controller, StateLaw)
         period_s = check_period_s(controller)
         self._name = safe_name(controller)  # read once: user code's property may raise
         if self.is_state_law:
             self._check_state_law(period_s)
+        elif self.is_firmware:
+            self._read_with_firmware: Callable[[Firmware], DaqSample] = self._firmware_rig()
         elif abs(period_s - rig.period_s) > _PERIOD_TOLERANCE_S:
             raise RigError(
                 f"{self._name}: period_s = {period_s!r} s does not match the DAQ's "
                 f"daq.period_s = {rig.period_s!r} s; set daq.period_s to the controller's period (a parameter "
                 f"file) or change the controller"
             )
-        self.guard = None if self.is_state_law else Guard.for_period(rig.period_s, controller_timeout_s)
+        self.guard = (
+            None
+            if self.is_state_law or self.is_firmware
+            else Guard.for_period(rig.period_s, controller_timeout_s)
+        )
         self.recorder = _Recorder(256, self.truth, self._name) if record else None
         self.record_limit = record_limit
         self.last_sample: DaqSample | None = None
@@ -583,9 +614,21 @@ class ClosedLoop:
         self._read_with_law: Callable[..., DaqSample] = read_with_state_law
         self._law_volts = _StateLawVolts(self, self.truth)
 
+    def _firmware_rig(self) -> Callable[[Firmware], DaqSample]:
+        read_with_firmware = getattr(self.rig, "read_with_firmware", None)
+        if self.truth is None or read_with_firmware is None:
+            raise RigError(
+                f"{self._name} is firmware on a simulated microcontroller: it drives the simulated rig only"
+            )
+        return read_with_firmware
+
     @property
     def name(self) -> str:
         return self._name
+
+    def firmware_figures(self) -> dict[str, Any] | None:
+        """What the target adds to the verdict (``Firmware.figures``), for a firmware; else ``None``."""
+        return self.controller.figures() if self.is_firmware else None  # type: ignore[union-attr]
 
     @property
     def recording(self) -> bool:
@@ -599,7 +642,12 @@ class ClosedLoop:
         return sample
 
     def start(self) -> None:
-        """The software's Start/Clear Buffer phase: the held rig's block starts the controller."""
+        """The software's Start/Clear Buffer phase: the held rig's block starts the controller (a firmware's board
+        is powered on as the block begins)."""
+        if self.is_firmware:
+            self.started = True
+            self._firmware_tick()
+            return
         sample = self._read()
         if self.is_state_law:
             try:
@@ -619,6 +667,9 @@ class ClosedLoop:
             self.start()
         if self.is_state_law:
             self._state_law_tick()
+            return
+        if self.is_firmware:
+            self._firmware_tick()
             return
         sample = self.sense()
         self.answer(
@@ -665,6 +716,18 @@ class ClosedLoop:
         self.command_v = float(rig.command_v)
         if self.recorder is not None and self.recording:
             self.recorder.add(sample, self.command_v, self.controller.telemetry, rig.ball_lost)
+
+    def _firmware_tick(self) -> None:
+        """A tick of a firmware: the board runs through the block on the rig's signals; its fault names the tick."""
+        try:
+            sample = self._read_with_firmware(self.controller)  # type: ignore[arg-type]
+        except ControllerError as exc:
+            raise ControllerError(f"{exc} (tick k = {self.reads - 1})") from None
+        self.reads += 1
+        self.last_sample = sample
+        self.command_v = float(self.rig.command_v)
+        if self.recorder is not None and self.recording:
+            self.recorder.add(sample, self.command_v, self.controller.telemetry, self.rig.ball_lost)
 
     def run(
         self, ticks: int | None = None, *, pacer: Pacer | None = None, stop_when_lost: bool = True
@@ -738,7 +801,12 @@ class ClosedLoop:
 
             return RunResult(self.name, log, verdict, ended=ended, timing=self.arrival_timing())
         return RunResult(
-            self.name, log, self.verdict(x0_m, criteria), ended=ended, timing=self.arrival_timing()
+            self.name,
+            log,
+            self.verdict(x0_m, criteria),
+            ended=ended,
+            timing=self.arrival_timing(),
+            firmware=self.firmware_figures(),
         )
 
 
@@ -772,7 +840,7 @@ def update_ticks(duration_s: float, params: Parameters) -> int:
 
 
 def run_closed_loop(
-    controller: Controller | StateLaw,
+    controller: Controller | StateLaw | Firmware,
     *,
     x0_m: float,
     theta0_rad: float,
@@ -799,8 +867,12 @@ def run_closed_loop(
     rig = make_rig(p, plant=plant, ideal_sensors=ideal_sensors, seed=seed, noise=noise)
     rig.reset(x0_m, theta0_rad)
     loop = ClosedLoop(rig, controller, controller_timeout_s=controller_timeout_s)
-    ended = loop.run(update_ticks(duration_s, rig.params), pacer=pacer, stop_when_lost=stop_when_lost)
-    return loop.result(ended, x0_m, criteria)
+    try:
+        ended = loop.run(update_ticks(duration_s, rig.params), pacer=pacer, stop_when_lost=stop_when_lost)
+        return loop.result(ended, x0_m, criteria)
+    finally:
+        if loop.is_firmware:  # its core is a process of its own
+            controller.close()  # type: ignore[union-attr]
 
 
 def run_on_rig(

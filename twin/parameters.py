@@ -1027,6 +1027,17 @@ class McuIo:
         why="the MCP4921's VREF may not exceed its supply (5.5 V at most)",
     )
 
+    clock_hz: int = param(
+        16_000_000,
+        "Hz",
+        "an Arduino Uno's 16 MHz crystal (the ATmega328P's maximum at 5 V, datasheet §29); it must be the F_CPU "
+        "the firmware was built with",
+        ge=1_000_000,
+        le=32_000_000,
+        integer=True,
+        why="AVR cores run at 1 to 32 MHz",
+    )
+
     def __post_init__(self) -> None:
         _check_fields(self, "mcu_io")
 

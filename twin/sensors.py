@@ -378,9 +378,19 @@ class AngleChain:
         self._levels = _level_table(params.angle_sensor, params.daq)
         self._zero_step_0d = (np.array(params.angle_sensor.zeroing_error_rad), np.array(self.step_rad))
         self._zero_count = int(params.angle_sensor.counter_zero_count)
+        self._analog: list[float] = np.asarray(
+            counter_dac_v(np.arange(_counter_modulus(params)), params)
+        ).tolist()
 
     def counter_value(self, theta_rad: float | np.ndarray) -> int | np.ndarray:
         return counter_value(theta_rad, self.params)
+
+    def level_v(self, theta_rad: float) -> float:
+        """The circuit's analog output at one beam angle, before any ADC: ``angle_sensor_v`` of a Python float
+        (a microcontroller's pin sees it every physics step), from a table of the AD561's levels."""
+        s = self.params.angle_sensor
+        count = math.floor((theta_rad - s.zeroing_error_rad) / self.step_rad + 0.5)
+        return self._analog[(self._zero_count + count) % len(self._analog)]
 
     def read_v(self, times_s: np.ndarray, theta_rad: np.ndarray) -> float:
         """The block-mean ADC volts for one block (see ``angle_block_mean_v``)."""

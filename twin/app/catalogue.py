@@ -1,4 +1,5 @@
-"""The controller a command runs: a name from the registry or the user's own ``MODULE:CLASS``.
+"""The controller a command runs: a name from the registry, the user's own ``MODULE:CLASS`` or a firmware image
+``avr:[MCU:]FILE.elf`` (twin.avr: the image on a simulated microcontroller).
 
 ``catalogue_for(spec, params)`` is the catalogue (``twin.engine.Catalogue``) in which ``spec`` names a
 controller; worker processes rebuild it from the same text, so a user's controller runs there too. Failures
@@ -18,12 +19,22 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:
     from collections.abc import Mapping
 
-    from twin.engine import Catalogue, CatalogueEntry, StateLaw
+    from twin.avr.firmware import AvrFirmware
+    from twin.engine import Catalogue, CatalogueEntry, Firmware, StateLaw
     from twin.guard import Fault, Guard
     from twin.interface import Controller
     from twin.parameters import Parameters
 
-__all__ = ["WithUserController", "catalogue_for", "construct", "one_line", "user_controller"]
+__all__ = [
+    "WithController",
+    "build",
+    "catalogue_for",
+    "construct",
+    "firmware",
+    "one_line",
+    "user_controller",
+    "with_user_controller",
+]
 
 
 def one_line(exc: BaseException) -> str:
@@ -159,32 +170,49 @@ def construct(
     return controller
 
 
-class WithUserController:
-    """The registry plus the user's ``MODULE:CLASS`` controller, as a catalogue for the live view."""
+class WithController:
+    """The registry plus one controller more (the user's ``MODULE:CLASS`` or a firmware image), as a catalogue
+    for the live view and the workers."""
 
-    # The base's entries and the user's, built when first read (as the registry's: reading them costs the
+    # The base's entries and the extra one, built when first read (as the registry's: reading them costs the
     # designs, building the parser or a worker must not).
     ENTRIES: Mapping[str, CatalogueEntry]
 
     def __init__(
-        self, base: Catalogue, spec: str, cls: Callable[..., Controller], timeout_s: float | None = None
+        self,
+        base: Catalogue,
+        spec: str,
+        build: Callable[[Parameters], Controller | StateLaw | Firmware],
+        entry: Callable[[], CatalogueEntry],
     ) -> None:
-        self.base, self.spec, self.cls, self.timeout_s = base, spec, cls, timeout_s
+        self.base, self.spec, self._build, self._entry = base, spec, build, entry
         self.NAMES: tuple[str, ...] = (*base.NAMES, spec)
 
     def __getattr__(self, name: str) -> Any:
         if name != "ENTRIES":
             raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
-        self.ENTRIES = {**self.base.ENTRIES, self.spec: self._user_entry()}
+        self.ENTRIES = {**self.base.ENTRIES, self.spec: self._entry()}
         return self.ENTRIES
 
-    def _user_entry(self) -> CatalogueEntry:
-        """The user's controller as one entry; its setpoint flag read from a built one (what it declares)."""
+    def make(self, name: str, params: Parameters | None = None) -> Controller | StateLaw | Firmware:
+        from twin.parameters import Parameters
+
+        if name == self.spec:
+            return self._build(params or Parameters())
+        return self.base.make(name, params)
+
+
+def with_user_controller(
+    base: Catalogue, spec: str, cls: Callable[..., Controller], timeout_s: float | None = None
+) -> WithController:
+    """The registry plus the user's ``MODULE:CLASS`` controller; its setpoint flag read from a built one (what
+    it declares)."""
+
+    def entry() -> CatalogueEntry:
         from twin.engine import CatalogueEntry
         from twin.interface import Setpoint
         from twin.parameters import Parameters
 
-        spec, cls = self.spec, self.cls
         doc = (cls.__doc__ or "").strip().splitlines()
         return CatalogueEntry(
             name=spec,
@@ -195,12 +223,63 @@ class WithUserController:
             setpoint=isinstance(construct(cls, spec, Parameters()), Setpoint),
         )
 
-    def make(self, name: str, params: Parameters | None = None) -> Controller | StateLaw:
-        from twin.parameters import Parameters
+    return WithController(base, spec, lambda params: construct(cls, spec, params, timeout_s), entry)
 
-        if name == self.spec:
-            return construct(self.cls, name, params or Parameters(), self.timeout_s)
-        return self.base.make(name, params)
+
+def firmware(spec: str, params: Parameters) -> AvrFirmware:
+    """The firmware image ``avr:[MCU:]FILE.elf`` names, for a rig of ``params``; a ``ParameterError`` naming the
+    ``--controller`` value when the image cannot be read, is no AVR ELF simavr loads, or the co-simulation
+    cannot be built here."""
+    from twin.avr.core import AvrError, AvrUnavailable
+    from twin.avr.firmware import AvrFirmware, firmware_spec
+    from twin.parameters import ParameterError
+
+    parsed = firmware_spec(spec)
+    assert parsed is not None
+    mcu, path = parsed
+    if not path.name:
+        raise ParameterError(f"--controller {spec!r}: expected avr:FILE.elf or avr:MCU:FILE.elf")
+    try:
+        return AvrFirmware(path, params, mcu=mcu, name=spec)
+    except (AvrError, AvrUnavailable, OSError) as exc:
+        raise ParameterError(f"--controller {spec}: {one_line(exc)}") from None
+
+
+def _firmware_catalogue(base: Catalogue, spec: str, params: Parameters) -> WithController:
+    """The registry plus a firmware image, which is loaded once here (a bad image is refused before any run)."""
+    from twin.avr.core import AvrCore, AvrError, AvrUnavailable
+    from twin.parameters import ParameterError
+
+    made = firmware(spec, params)
+    try:
+        AvrCore(made.path, mcu=made.mcu, frequency_hz=made.clock_hz).close()
+    except (AvrError, AvrUnavailable) as exc:
+        raise ParameterError(f"--controller {spec}: {one_line(exc)}") from None
+
+    def entry() -> CatalogueEntry:
+        from twin.engine import CatalogueEntry
+
+        return CatalogueEntry(
+            name=spec,
+            build=lambda p: firmware(spec, p),
+            description=f"your firmware {spec} on a simulated {made.mcu} at {made.clock_hz / 1e6:g} MHz",
+            simulation_only=True,
+            batched=False,
+            setpoint=False,
+        )
+
+    return WithController(base, spec, lambda p: firmware(spec, p), entry)
+
+
+def build(spec: str, params: Parameters, timeout_s: float | None = None) -> Controller | StateLaw | Firmware:
+    """One controller named by ``spec`` (a registry name, ``MODULE:CLASS`` or ``avr:FILE.elf``) for a rig of
+    ``params``."""
+    from controllers import registry
+
+    if spec.startswith("avr:"):
+        return firmware(spec, params)
+    user = user_controller(spec, timeout_s)
+    return registry.make(spec, params) if user is None else construct(user, spec, params, timeout_s)
 
 
 def catalogue_for(spec: str, params: Parameters, timeout_s: float | None = None) -> Catalogue:
@@ -208,8 +287,10 @@ def catalogue_for(spec: str, params: Parameters, timeout_s: float | None = None)
     that a failing one is refused before any work); ``timeout_s``: the watchdog's budget (``twin.guard``)."""
     from controllers import registry
 
+    if spec.startswith("avr:"):
+        return _firmware_catalogue(registry, spec, params)
     user = user_controller(spec, timeout_s)
     if user is None:
         return registry
     construct(user, spec, params, timeout_s)
-    return WithUserController(registry, spec, user, timeout_s)
+    return with_user_controller(registry, spec, user, timeout_s)

@@ -20,7 +20,6 @@ import shutil
 import struct
 import subprocess
 import tempfile
-import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -32,6 +31,7 @@ __all__ = [
     "AvrCore",
     "AvrError",
     "AvrUnavailable",
+    "Conversion",
     "Frame",
     "RunReport",
 ]
@@ -57,10 +57,22 @@ class AvrError(RuntimeError):
     """A firmware image simavr cannot load, or a co-simulation that ended or stopped answering."""
 
 
+# ``Frame.since_entry`` when no interrupt had been entered before the frame.
+NO_ENTRY = 0xFFFFFFFF
+
+
 @dataclass(frozen=True)
 class Frame:
     word: int  # the 16 bits shifted out while the chip select was low
     cycle: int  # the core's cycle when the chip select rose
+    since_entry: int  # cycles from the latest interrupt's entry to the frame (NO_ENTRY: none entered yet)
+
+
+@dataclass(frozen=True)
+class Conversion:
+    value: int  # the ADC's 16-bit result register as the firmware read it (ADCL, then ADCH)
+    channel: int  # ADMUX's channel bits then
+    cycle: int
 
 
 @dataclass(frozen=True)
@@ -74,7 +86,14 @@ class RunReport:
     resets: int  # returns to the reset vector since the start
     bad_frames: int  # chip-select pulses that did not carry exactly 16 bits
     dropped_frames: int  # frames beyond the 256 one run can hold (a firmware writing without pause)
+    awake_cycles: int  # cycles the core ran (not asleep) since the start
+    isr_cycles: int  # cycles spent in interrupts that have returned, since the start
+    isr_entries: int  # interrupts entered from the main program since the start
+    isr_max_cycles: int  # the longest of them
+    in_isr: bool  # the core is in an interrupt now
     frames: tuple[Frame, ...]  # latched since the last run
+    conversions: tuple[Conversion, ...] = ()  # ADC results the firmware read since the last run
+    conversions_dropped: int = 0  # results beyond the 256 one run can hold
     error: str = ""  # simavr's first error message (STATE_ERROR)
 
 
@@ -121,11 +140,7 @@ def data_end(path: Path) -> int:
     found = 0
     raw = path.read_bytes()[: 16 << 20]
     try:
-        if raw[:4] != b"\x7fELF" or raw[4] != 1 or raw[5] != 1:  # ELF32, little-endian (AVR)
-            return 0
-        (shoff,) = struct.unpack_from("<I", raw, 0x20)
-        shentsize, shnum = struct.unpack_from("<HH", raw, 0x2E)
-        sections = [struct.unpack_from("<10I", raw, shoff + i * shentsize) for i in range(shnum)]
+        sections = _elf_sections(raw)
         for _, kind, _, _, offset, size, link, _, _, entsize in sections:
             if kind != 2 or entsize != 16:  # SHT_SYMTAB
                 continue
@@ -140,6 +155,39 @@ def data_end(path: Path) -> int:
     return found
 
 
+def _elf_sections(raw: bytes) -> list[tuple[int, ...]]:
+    """The section headers of a 32-bit little-endian ELF (an AVR image); ``ValueError`` for anything else."""
+    if raw[:4] != b"\x7fELF" or raw[4] != 1 or raw[5] != 1:
+        raise ValueError("not an ELF32 little-endian image")
+    (shoff,) = struct.unpack_from("<I", raw, 0x20)
+    shentsize, shnum = struct.unpack_from("<HH", raw, 0x2E)
+    return [struct.unpack_from("<10I", raw, shoff + i * shentsize) for i in range(shnum)]
+
+
+def elf_device(path: Path) -> str | None:
+    """The MCU an image was built for, as avr-gcc's ``-mmcu`` wrote it in the note ``.note.gnu.avr.deviceinfo``
+    (its last field: the device name); ``None`` when the image has no such note."""
+    raw = path.read_bytes()[: 16 << 20]
+    try:
+        sections = _elf_sections(raw)
+        names = sections[struct.unpack_from("<H", raw, 0x32)[0]]
+        for name_at, kind, _, _, offset, size, *_ in sections:
+            start = names[4] + name_at
+            if kind != 7 or raw[start : raw.index(b"\0", start)] != b".note.gnu.avr.deviceinfo":
+                continue
+            namesz, descsz, _ = struct.unpack_from("<III", raw, offset)
+            desc = raw[offset + 12 + (namesz + 3) // 4 * 4 : offset + size][:descsz]
+            # flash, SRAM and EEPROM (start, size each), the offset table's length in bytes (itself included)
+            # and its offsets into the string table after it: the first is the device name's
+            table_len, str_offset = struct.unpack_from("<II", desc, 24)
+            table = desc[24 + table_len :]
+            name = table[str_offset : table.index(b"\0", str_offset)].decode("ascii")
+            return name if name.isalnum() else None
+    except (struct.error, IndexError, ValueError, UnicodeDecodeError):
+        return None
+    return None
+
+
 # simavr's ADC converts an integer input u against an integer reference R as ⌊u·1023 / R⌋ (sim/avr_adc.c; the
 # datasheet: ⌊V·1024 / V_ref⌋). With R = 1023·M and u = ⌊V/V_ref · 1024·M⌋ that is ⌊⌊V/V_ref·1024·M⌋ / M⌋ =
 # ⌊V·1024 / V_ref⌋ exactly for any whole M; simavr keeps an input in 16 bits, so 1024·M ≤ 65 535: M = 63
@@ -147,8 +195,9 @@ def data_end(path: Path) -> int:
 ADC_SCALE = 63
 
 
-_REPORT = struct.Struct("<iQIHIiiI")
-_FRAME = struct.Struct("<HQ")
+_REPORT = struct.Struct("<iQIHIiiQQIIBI")
+_FRAME = struct.Struct("<HQI")
+_CONVERSION = struct.Struct("<HBQ")
 
 
 class AvrCore:
@@ -163,6 +212,7 @@ class AvrCore:
         adc_reference_v: float = 5.0,
     ) -> None:
         self._proc: subprocess.Popen[bytes] | None = None
+        self._pending = b""  # answers read from the pipe, not yet taken
         path = Path(elf)
         if not path.is_file():
             raise AvrError(f"{path}: no such firmware image")
@@ -179,6 +229,7 @@ class AvrCore:
             ],
             stdin=subprocess.PIPE,
             stdout=subprocess.PIPE,
+            bufsize=0,  # one write per request: no buffer to flush
             stderr=subprocess.DEVNULL,  # simavr's own messages: unbounded in a looping fault, never shown
         )
         head = self._read(2)
@@ -213,27 +264,53 @@ class AvrCore:
     def set_adc_v(self, channel: int, volts: float) -> None:
         """The voltage at ADC ``channel``'s pin from now on: each conversion reads ⌊V·1024 / V_ref⌋ within
         0…1023, as the datasheet's ADC does (``ADC_SCALE``)."""
+        self._send(self.adc_request(channel, volts))
+
+    def adc_request(self, channel: int, volts: float) -> bytes:
+        """``set_adc_v``'s request, to send with others in one write (``run_until``'s ``before``)."""
         units = math.floor(
             min(max(volts, 0.0), self.adc_reference_v) / self.adc_reference_v * 1024 * ADC_SCALE
         )
-        self._send(struct.pack("<cBI", b"A", channel, units))
+        return struct.pack("<cBI", b"A", channel, units)
 
-    def run_until(self, cycle: int) -> RunReport:
-        """Run to ``cycle``; the report's state says whether the firmware goes on."""
-        self._send(struct.pack("<cQ", b"R", cycle))
-        state, now, pc, low, resets, bad, dropped, n = _REPORT.unpack(self._read(_REPORT.size))
+    def run_until(self, cycle: int, before: bytes = b"") -> RunReport:
+        """Run to ``cycle`` (after the requests ``before``, sent in the same write); the report's state says
+        whether the firmware goes on."""
+        self._send(before + struct.pack("<cQ", b"R", cycle))
+        head = _REPORT.unpack(self._read(_REPORT.size))
+        n = head[-1]
         raw = self._read(n * _FRAME.size)
         frames = tuple(Frame(*_FRAME.unpack_from(raw, i * _FRAME.size)) for i in range(n))
-        (length,) = struct.unpack("<H", self._read(2))
+        (m,) = struct.unpack("<I", self._read(4))
+        raw = self._read(m * _CONVERSION.size)
+        conversions = tuple(Conversion(*_CONVERSION.unpack_from(raw, i * _CONVERSION.size)) for i in range(m))
+        conv_dropped, length = struct.unpack("<IH", self._read(6))
         error = self._read(length).decode(errors="replace").strip() if length else ""
-        return RunReport(state, now, pc, low, resets, bad, dropped, frames, error)
+        state, now, pc, low, resets, bad, dropped, awake, isr, entries, isr_max, in_isr, _ = head
+        return RunReport(
+            state,
+            now,
+            pc,
+            low,
+            resets,
+            bad,
+            dropped,
+            awake,
+            isr,
+            entries,
+            isr_max,
+            bool(in_isr),
+            frames,
+            conversions,
+            conv_dropped,
+            error,
+        )
 
     def _send(self, data: bytes) -> None:
         proc = self._alive()
         assert proc.stdin is not None
         try:
             proc.stdin.write(data)
-            proc.stdin.flush()
         except OSError:
             raise AvrError(f"{self.path}: the co-simulation ended (exit code {proc.poll()})") from None
 
@@ -243,19 +320,22 @@ class AvrCore:
         return self._proc
 
     def _read(self, n: int) -> bytes:
-        proc = self._alive()
-        assert proc.stdout is not None
-        fd, out, deadline = proc.stdout.fileno(), b"", time.monotonic() + ANSWER_TIMEOUT_S
-        while len(out) < n:
-            ready, _, _ = select.select([fd], [], [], max(0.0, deadline - time.monotonic()))
+        """The next ``n`` bytes of the answers, read in as large pieces as the pipe holds (an answer comes in
+        one write: usually one read)."""
+        while len(self._pending) < n:
+            proc = self._alive()
+            assert proc.stdout is not None
+            fd = proc.stdout.fileno()
+            ready, _, _ = select.select([fd], [], [], ANSWER_TIMEOUT_S)
             if not ready:
                 proc.kill()
                 raise AvrError(f"{self.path}: the co-simulation did not answer within {ANSWER_TIMEOUT_S:g} s")
-            chunk = os.read(fd, n - len(out))
+            chunk = os.read(fd, 1 << 16)
             if not chunk:
                 code = proc.wait()
                 raise AvrError(f"{self.path}: the co-simulation ended (exit code {code})")
-            out += chunk
+            self._pending += chunk
+        out, self._pending = self._pending[:n], self._pending[n:]
         return out
 
     def _read_line(self) -> bytes:

@@ -20,6 +20,7 @@
 #include <unistd.h>
 
 #define BB_MAX_FRAMES 256
+#define BB_MAX_CONVERSIONS 256
 #define BB_SPL 0x5D /* SPL in data space (I/O 0x3D + 0x20) */
 
 typedef struct {
@@ -32,12 +33,47 @@ typedef struct {
     int dropped;
     uint16_t words[BB_MAX_FRAMES];
     uint64_t cycles[BB_MAX_FRAMES];
+    uint32_t since_entry[BB_MAX_FRAMES]; /* cycles from the latest interrupt's entry to the frame */
     uint16_t min_sp;
     int bad_frames; /* frames of other than 16 bits */
     uint16_t data_end; /* the first byte above the static data (__heap_start, from the caller): the stack
                           must stay above it */
     uint32_t resets;   /* times the core went back to the reset vector after starting */
+    /* The interrupts the core served (simavr's nesting depth going from 0 to 1 and back): how long each
+       took, how many, and the cycles the core was awake (running, not asleep). */
+    int depth;
+    uint64_t entry_cycle;
+    int entered; /* an interrupt was entered at least once */
+    uint32_t entries;
+    uint32_t isr_max_cycles;
+    uint64_t isr_cycles;
+    uint64_t awake_cycles;
+    /* The ADC results the firmware read (its ADCL reads), with the channel and the cycle: what it saw. */
+    avr_adc_t *adc_port;
+    avr_io_read_t adcl_read;
+    void *adcl_param;
+    int nconv;
+    int conv_dropped;
+    uint16_t conv_value[BB_MAX_CONVERSIONS];
+    uint8_t conv_channel[BB_MAX_CONVERSIONS];
+    uint64_t conv_cycle[BB_MAX_CONVERSIONS];
 } bb_cosim;
+
+/* simavr's own ADCL read (which converts and fills ADCH), then the result kept. */
+static uint8_t on_adcl(struct avr_t *avr, avr_io_addr_t addr, void *param)
+{
+    bb_cosim *c = (bb_cosim *)param;
+    uint8_t low = c->adcl_read(avr, addr, c->adcl_param);
+    if (c->nconv >= BB_MAX_CONVERSIONS) {
+        c->conv_dropped++;
+        return low;
+    }
+    c->conv_value[c->nconv] = (uint16_t)(low | (avr->data[c->adc_port->r_adch] << 8));
+    c->conv_channel[c->nconv] = avr->data[c->adc_port->r_admux] & 0x0F;
+    c->conv_cycle[c->nconv] = avr->cycle;
+    c->nconv++;
+    return low;
+}
 
 static void on_spi(struct avr_irq_t *irq, uint32_t value, void *param)
 {
@@ -70,6 +106,7 @@ static void on_cs(struct avr_irq_t *irq, uint32_t value, void *param)
     }
     c->words[c->nframes] = (uint16_t)(c->shift & 0xFFFF);
     c->cycles[c->nframes] = c->avr->cycle;
+    c->since_entry[c->nframes] = c->entered ? (uint32_t)(c->avr->cycle - c->entry_cycle) : UINT32_MAX;
     c->nframes++;
 }
 
@@ -131,6 +168,18 @@ bb_cosim *bb_new(const char *elf, const char *mcu, uint32_t frequency_hz, uint32
     c->min_sp = 0xFFFF;
     for (int i = 0; i < 8; i++) c->adc[i] = avr_io_getirq(avr, AVR_IOCTL_ADC_GETIRQ, ADC_IRQ_ADC0 + i);
     avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_SPI_GETIRQ(0), SPI_IRQ_OUTPUT), on_spi, c);
+    for (avr_io_t *port = avr->io_port; port; port = port->next) {
+        if (strcmp(port->kind, "adc") != 0) continue;
+        avr_adc_t *adc = (avr_adc_t *)port;
+        int slot = AVR_DATA_TO_IO(adc->r_adcl);
+        if (slot < 0 || slot >= MAX_IOs || !avr->io[slot].r.c) break;
+        c->adc_port = adc;
+        c->adcl_read = avr->io[slot].r.c;
+        c->adcl_param = avr->io[slot].r.param;
+        avr->io[slot].r.c = on_adcl;
+        avr->io[slot].r.param = c;
+        break;
+    }
     avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ('B'), IOPORT_IRQ_PIN2), on_cs, c);
     return c;
 }
@@ -160,7 +209,20 @@ int bb_run_until(bb_cosim *c, uint64_t cycle)
     int state = avr->state;
     while (avr->cycle < cycle) {
         uint32_t pc = avr->pc;
+        uint64_t before = avr->cycle;
         state = avr_run(avr);
+        if (state == cpu_Running) c->awake_cycles += avr->cycle - before;
+        int depth = avr->interrupts.running_ptr;
+        if (depth > 0 && c->depth == 0) { /* an interrupt entered from the main program */
+            c->entry_cycle = before;
+            c->entered = 1;
+            c->entries++;
+        } else if (depth == 0 && c->depth > 0) { /* its RETI */
+            uint64_t took = avr->cycle - c->entry_cycle;
+            c->isr_cycles += took;
+            if (took > c->isr_max_cycles) c->isr_max_cycles = (uint32_t)(took > UINT32_MAX ? UINT32_MAX : took);
+        }
+        c->depth = depth;
         if (avr->pc == 0 && pc != 0) c->resets++; /* a watchdog reset, or a jump to the reset vector */
         uint16_t sp = (uint16_t)(avr->data[BB_SPL] | (avr->data[BB_SPL + 1] << 8));
         if (sp < c->min_sp) c->min_sp = sp;
@@ -174,8 +236,11 @@ int bb_run_until(bb_cosim *c, uint64_t cycle)
 /* The protocol, little-endian, on stdin and the process's original stdout (simavr's own printf goes to
  * stderr): at start "OK" u16 ramend u16 data_end, or "NO" and a line of text. Then requests:
  *   'A' u8 channel u32 input, in units of V_ref / VREF_UNITS (no answer)
- *   'R' u64 cycle -> i32 state u64 cycle u32 pc u16 min_sp u32 resets i32 bad_frames i32 dropped u32 n,
- *                    n × (u16 word, u64 cycle), u16 length, the first error simavr logged (length bytes, none: 0)
+ *   'R' u64 cycle -> i32 state u64 cycle u32 pc u16 min_sp u32 resets i32 bad_frames i32 dropped
+ *                    u64 awake_cycles u64 isr_cycles u32 isr_entries u32 isr_max_cycles u8 in_isr u32 n,
+ *                    n × (u16 word, u64 cycle, u32 cycles since the latest interrupt's entry, all ones: none),
+ *                    u32 m, m × (u16 ADC result, u8 channel, u64 cycle) the firmware read, u32 results dropped,
+ *                    u16 length, the first error simavr logged (length bytes, none: 0)
  *   'Q'                                                 (exit) */
 static FILE *out;
 
@@ -227,12 +292,29 @@ int main(int argc, char **argv)
             put(&c->resets, 4);
             put(&bad, 4);
             put(&dropped, 4);
+            put(&c->awake_cycles, 8);
+            put(&c->isr_cycles, 8);
+            put(&c->entries, 4);
+            put(&c->isr_max_cycles, 4);
+            uint8_t in_isr = c->depth > 0;
+            put(&in_isr, 1);
             put(&n, 4);
             for (uint32_t i = 0; i < n; i++) {
                 put(&c->words[i], 2);
                 put(&c->cycles[i], 8);
+                put(&c->since_entry[i], 4);
             }
             c->nframes = 0;
+            uint32_t m = (uint32_t)c->nconv, conv_dropped = (uint32_t)c->conv_dropped;
+            put(&m, 4);
+            for (uint32_t i = 0; i < m; i++) {
+                put(&c->conv_value[i], 2);
+                put(&c->conv_channel[i], 1);
+                put(&c->conv_cycle[i], 8);
+            }
+            put(&conv_dropped, 4);
+            c->nconv = 0;
+            c->conv_dropped = 0;
             uint16_t length = (uint16_t)strlen(first_error);
             put(&length, 2);
             put(first_error, length);

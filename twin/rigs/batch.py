@@ -34,7 +34,6 @@ from twin.engine import (
     Catalogue,
     ControllerError,
     RunResult,
-    StateLaw,
     check_period_s,
     checked_start,
     checked_update,
@@ -220,8 +219,8 @@ def run_batch(
     if n == 0:
         return []
     probe = catalogue.make(name, run_params[0])
-    if plant != "twin" or (not isinstance(probe, Controller) and isinstance(probe, StateLaw)):
-        # The reference plant and the 1 kHz laws on the true state stay on the single-run path.
+    if plant != "twin" or not isinstance(probe, Controller):
+        # The reference plant, the 1 kHz laws on the true state and firmware stay on the single-run path.
         singles = []
         for i in range(n):
             singles.append(

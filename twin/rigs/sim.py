@@ -23,13 +23,13 @@ takes effect) is ``twin.daq.TickSchedule``, which the batch (``twin.rigs.batch``
 from __future__ import annotations
 
 import math
-from typing import Literal
+from typing import Literal, Protocol
 
 import numpy as np
 
 from twin.daq import TickSchedule, block_span_s
 from twin.interface import DaqSample, Rig
-from twin.output_stage import ideal_motor_volts, motor_volts_of
+from twin.output_stage import amplifier_volts, ideal_motor_volts, motor_volts_of
 from twin.parameters import Parameters
 from twin.physics import PhysicsBackend, PhysicsBlock
 from twin.plant import Plant
@@ -131,6 +131,37 @@ class SimRig(Rig):
         state: ``law_volts(state) -> terminal volts`` (clamped to the amplifier's rails, no DAC). This is
         the chapter 4 designs' path (all four states measured): simulation only, never a ``Controller``."""
         return self._read((law_volts, whole_steps(law_period_s, self.params.physics.timestep_s, "period_s")))
+
+    def read_with_firmware(self, firmware: FirmwareBoard) -> DaqSample:
+        """One tick of a rig whose controller is firmware on a microcontroller (``twin.engine.Firmware``): every
+        physics step its pins see the sensor signals in time (the ball chain's RC output, the angle counter's
+        DAC level: no card's block means) and the motor the mean terminal volts of the board's output over the
+        step. The first tick after ``reset`` powers the board on (the core leaves reset as the first block
+        begins: its first period reads the held rig, as the software's Start does). The block returned is
+        what the PCI-1712 would read beside it (for the log). Simulation only; ``daq.output_latency_s`` does not
+        apply (the firmware's own timing is its latency)."""
+        schedule = self._schedule
+        if self._ticks == 0:
+            firmware.boot(self._step_time(schedule.next_start_step))
+        plan = schedule.next_block()
+        drive = _FirmwareDrive(self, firmware)
+        if plan.free_steps:  # released before this block begins: the board runs on, the card does not read
+            drive.physics(plan.free_steps)
+        pieces: list[PhysicsBlock] = []
+        t_start = self._step_time(plan.start_step) if plan.start_step < 0 else self.physics.time_s
+        if plan.held_end_step is not None:
+            pieces.append(drive.held(plan.start_step, plan.held_end_step))
+        if plan.observed_steps:
+            pieces.append(drive.physics(plan.observed_steps))
+        block = self.last_block = _join(pieces)
+        if self.ideal_sensors:
+            ball_v, angle_v = self._ideal.read_v(float(block.x_m[-1]), float(block.theta_rad[-1]))
+        else:
+            angle_v = self._angle.read_block_v(block)
+            ball_v = self._ball.reading_v
+        self._ticks += 1
+        self.command_v = firmware.command_v
+        return DaqSample(time_s=t_start + self._block_span_s, ball_v=ball_v, angle_v=angle_v)
 
     def reset(
         self,
@@ -323,6 +354,114 @@ class SimRig(Rig):
             ball_v = self._ball.advance_block(block)
         self._ticks += 1
         return DaqSample(time_s=t_start + self._block_span_s, ball_v=ball_v, angle_v=angle_v)
+
+
+class FirmwareBoard(Protocol):
+    """What the rig asks of a firmware's board (``twin.engine.Firmware`` is one)."""
+
+    @property
+    def command_v(self) -> float: ...
+
+    def boot(self, time_s: float) -> None: ...
+
+    def pins(
+        self, time_s: float, ball_signal_v: float, angle_signal_v: float, until_s: float
+    ) -> list[tuple[float, float]]: ...
+
+
+_CONTACT_2 = np.array([True, True])
+
+
+class _FirmwareDrive:
+    """A tick's physics steps with a firmware's board in the loop (``SimRig.read_with_firmware``): at each
+    step's start the pins get the signals at that instant (held over the step), the board runs to the step's
+    end, and the motor gets the mean of the amplifier's volts over the board's outputs in the step (the
+    firmware cannot see the step's physics before its end: this is causal)."""
+
+    def __init__(self, rig: SimRig, firmware: FirmwareBoard) -> None:
+        self.rig, self.firmware = rig, firmware
+        self.dt = rig.params.physics.timestep_s
+        self.amplifier = rig.params.amplifier
+        self.ideal = rig.ideal_sensors
+        self.ball, self.angle = rig._ball, rig._angle
+        self.t_s = 0.0
+        self.x_m = 0.0
+
+    def _ball_to(self, t_s: float, x_m: float) -> None:
+        """The ball chain from its last point to (t, x), the wiper linear between."""
+        if not self.ideal:
+            x0 = self.x_m
+            self.ball.advance_rig_block(
+                np.array((self.t_s, t_s)),
+                np.array((x0, x_m)),
+                _CONTACT_2,
+                True,
+                (min(x0, x_m), max(x0, x_m)),
+                True,
+            )
+        self.t_s, self.x_m = t_s, x_m
+
+    def _volts(self, theta_rad: float) -> float:
+        """The board for one step from (self.t_s, self.x_m, θ): the step's mean motor volts."""
+        if self.ideal:
+            ball_v, angle_v = self.rig._ideal.read_v(self.x_m, theta_rad)
+        else:
+            ball_v, angle_v = self.ball.filtered_v, self.angle.level_v(theta_rad)
+        pieces = self.firmware.pins(self.t_s, ball_v, angle_v, self.t_s + self.dt)
+        volts = 0.0
+        for share, command_v in pieces:
+            volts += share * float(amplifier_volts(command_v, self.amplifier))
+        self.rig._applied_motor_v = self.rig._pending_motor_v = volts
+        return volts
+
+    def held(self, start_step: int, end_step: int) -> PhysicsBlock:
+        """The held rig from ``start_step`` to ``end_step``, a step at a time (the board runs; the rig does not)."""
+        rig = self.rig
+        x, theta = float(rig._held[0]), float(rig._held[1])
+        self.t_s, self.x_m = rig._step_time(start_step), x
+        for step in range(start_step, end_step):
+            self._volts(theta)
+            self._ball_to(rig._step_time(step + 1), x)
+        t0, t1 = rig._step_time(start_step), rig._step_time(end_step)
+        return PhysicsBlock(
+            time_s=np.array([t0, t1]),
+            x_m=np.array([x, x]),
+            theta_rad=np.array([theta, theta]),
+            on_track=np.array([True, True]),
+        )
+
+    def physics(self, n: int) -> PhysicsBlock:
+        """``n`` physics steps, the board in the loop at each."""
+        physics = self.rig.physics
+        self.t_s = physics.time_s
+        self.x_m = float(physics.state()[0])
+        first = [True]
+
+        def volts(x_m: float, theta_rad: float, xdot_m_s: float, thetadot_rad_s: float) -> float:
+            if first[0]:
+                first[0] = False
+            else:
+                self._ball_to(self.t_s + self.dt, x_m)
+            return self._volts(theta_rad)
+
+        if isinstance(physics, Plant):
+            block, _ = physics.advance_with_law(n, volts, 1)
+        else:
+            parts = []
+            for _ in range(n):
+                state = physics.state().tolist()
+                parts.append(physics.advance(np.full(1, volts(*state))))
+            block = _join(parts)
+        # the last step's end: the chain to the block's end (its contact as the block says)
+        if not self.ideal:
+            x0 = self.x_m
+            self.ball.advance_rig_block(
+                np.array((self.t_s, float(block.time_s[-1]))),
+                np.array((x0, float(block.x_m[-1]))),
+                block.on_track[-2:],
+                True,
+            )
+        return block
 
 
 def _join(parts: list[PhysicsBlock]) -> PhysicsBlock:

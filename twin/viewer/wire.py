@@ -32,7 +32,7 @@ import time
 from collections.abc import Mapping
 from typing import Any, Literal
 
-from twin.engine import Catalogue, CatalogueEntry, StateLaw
+from twin.engine import Catalogue, CatalogueEntry, Firmware, StateLaw
 from twin.interface import Controller, DaqSample
 from twin.parameters import Parameters
 from twin.rigs.sim import SimRig
@@ -240,7 +240,7 @@ class WireCatalogue:
         self.ENTRIES = {self.name: self._entry, **self.inner.ENTRIES}
         return self.ENTRIES
 
-    def make(self, name: str, params: Parameters | None = None) -> Controller | StateLaw:
+    def make(self, name: str, params: Parameters | None = None) -> Controller | StateLaw | Firmware:
         if name == self.name:
             return WireClient(self.server, self.name, (params or self.server.settings.params).daq.period_s)
         return self.inner.make(name, params)

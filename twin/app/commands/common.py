@@ -224,7 +224,15 @@ def inputs(args: argparse.Namespace) -> list[tuple[str, str]]:
         found += [
             ("--calibration", str(Path(calibration) / name)) for name in ("params.toml", "calibration.json")
         ]
-    module_name, colon, _ = str(getattr(args, "controller", "")).partition(":")
+    spec = str(getattr(args, "controller", ""))
+    module_name, colon, _ = spec.partition(":")
+    if module_name == "avr":  # a firmware image: avr:[MCU:]FILE
+        from twin.avr.firmware import firmware_spec
+
+        parsed = firmware_spec(spec)
+        if parsed is not None:
+            found.append(("--controller", str(parsed[1])))
+        return found
     module_file = getattr(sys.modules.get(module_name), "__file__", None) if colon else None
     if module_file:
         found.append(("--controller", module_file))
@@ -417,6 +425,11 @@ def hardware_controller(spec: str, params: Parameters) -> Callable[[], Controlle
     from controllers import registry
     from twin.parameters import ParameterError
 
+    if spec.startswith("avr:"):
+        raise ParameterError(
+            f"--controller {spec}: a firmware image drives the simulated rig through its pins; a log is replayed "
+            "with a hardware controller (raw volts in, DAC volts out)"
+        )
     user = user_controller(spec)
     if user is None:
         if registry.simulation_only(spec):

@@ -138,6 +138,14 @@ def run(args: argparse.Namespace) -> int:
         **({} if args.setpoint is None else {"setpoint_m": args.setpoint}),
         **result.verdict.to_json(),
     }
+    if result.firmware is not None:
+        from twin.avr.firmware import stuck_output
+
+        summary["firmware"] = result.firmware
+        stuck = None if result.verdict.held else stuck_output(result.firmware, params.daq.period_s)
+        if stuck:
+            summary["firmware_warning"] = stuck
+            print(f"ballbeam run: {stuck}", file=sys.stderr)
     if pacer is not None:
         summary["realtime"] = pacer.timing().to_json()
     from twin.plant import through_stops  # the physics' own module: loaded once a run has run
@@ -159,12 +167,11 @@ def _run_in_process(
 ) -> int | tuple[RunResult, dict[str, Path], WallClockPacer | None]:
     """The controller built and run on the twin: (the result, the checked output paths, the pacer), or the
     exit code of a failure (reported)."""
-    from controllers import registry
+    from twin.app.catalogue import build
     from twin.engine import ControllerError, run_closed_loop
     from twin.plant import NumericalError
     from twin.realtime import WallClockPacer
 
-    user = user_controller(args.controller)
     paths = check_outputs(
         [
             ("--log", args.log, LOG_SUFFIXES, log_bytes(args.log, args.duration, params)),
@@ -173,9 +180,7 @@ def _run_in_process(
         overwrite=args.overwrite,
         inputs=inputs(args),
     )
-    controller = (
-        registry.make(args.controller, params) if user is None else construct(user, args.controller, params)
-    )
+    controller = build(args.controller, params)
     if args.setpoint is not None:
         _apply_setpoint(controller, args.controller, args.setpoint, params)
     pacer = WallClockPacer(params.daq.period_s) if args.realtime else None
@@ -258,6 +263,11 @@ def _run_on_remote_rig(args: argparse.Namespace, params: Parameters) -> int:
         parse_url(args.rig)
     except ValueError as exc:
         raise ValueError(f"--rig {exc}") from None
+    if args.controller.startswith("avr:"):
+        raise ValueError(
+            f"--controller {args.controller}: a firmware image drives the simulated rig through its pins, not "
+            "a rig over the wire (flash it to drive the rig itself)"
+        )
     if args.sessions != 1 and args.log is not None:
         raise ValueError(
             "--log keeps one session's log: with --sessions other than 1 the server keeps every run (its "

@@ -7,7 +7,7 @@ import json
 import sys
 from typing import TYPE_CHECKING
 
-from twin.app.catalogue import WithUserController, construct, user_controller
+from twin.app.catalogue import catalogue_for
 from twin.app.commands.common import (
     add_controller_timeout,
     add_params_options,
@@ -92,11 +92,8 @@ def run(args: argparse.Namespace) -> int:
     params = load_params(args)
     if args.no_noise:  # the view's noise switch starts off
         params = params.with_overrides({"ball_sensor.noise_enabled": False})
-    user = user_controller(args.controller) if args.controller is not None else None
-    catalogue: Catalogue = registry
-    if user is not None:
-        construct(user, args.controller, params)  # a failing constructor is refused here, not in the view
-        catalogue = WithUserController(registry, args.controller, user)
+    # a failing constructor or a bad image is refused here, not in the view
+    catalogue: Catalogue = registry if args.controller is None else catalogue_for(args.controller, params)
     # With --serve the wire client starts unless --controller names another (both are in the menu).
     controller = args.controller or (None if args.serve is not None else "appendix-clp")
     try:

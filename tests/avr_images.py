@@ -1,0 +1,115 @@
+"""Firmware images the co-simulation tests build with avr-gcc (skipped, saying so, where it is not installed)."""
+
+from __future__ import annotations
+
+import re
+import shutil
+import subprocess
+from pathlib import Path
+
+import pytest
+
+F_CPU = 16_000_000
+ROOT = Path(__file__).resolve().parents[1]
+AVR_DIR = ROOT / "examples" / "avr"
+C_DIR = ROOT / "examples" / "c"
+
+# The board's DAC write (examples/avr/main.c's dac_write) and a 20 ms Timer1 interrupt, for small firmware.
+BOARD = (
+    "#include <avr/interrupt.h>\n#include <avr/io.h>\n#include <avr/sleep.h>\n#include <avr/wdt.h>\n"
+    "#include <stdint.h>\n"
+    "static void dac(uint16_t w) { PORTB &= ~(1 << PB2); SPDR = w >> 8; while (!(SPSR & (1 << SPIF))) { }\n"
+    "  SPDR = w & 0xFF; while (!(SPSR & (1 << SPIF))) { } PORTB |= (1 << PB2); }\n"
+    "static void board(void) { DDRB |= (1 << PB2) | (1 << PB3) | (1 << PB5); PORTB |= (1 << PB2);\n"
+    "  SPCR = (1 << SPE) | (1 << MSTR); TCCR1B = (1 << WGM12) | (1 << CS11) | (1 << CS10); OCR1A = 4999;\n"
+    "  TIMSK1 = (1 << OCIE1A); }\n"
+    "static volatile uint16_t period;\n"
+)
+
+
+def build_image(name: str, text: str, tmp: Path) -> Path:
+    """A one-file firmware ``text`` built with avr-gcc for the ATmega328P at 16 MHz."""
+    avr_gcc = shutil.which("avr-gcc")
+    if avr_gcc is None:
+        pytest.skip("avr-gcc is not installed (Debian: apt-get install gcc-avr avr-libc)")
+    source = tmp / f"{name}.c"
+    source.write_text(text)
+    out = tmp / f"{name}.elf"
+    subprocess.run([avr_gcc, "-std=c99", "-Os", "-mmcu=atmega328p", f"-DF_CPU={F_CPU}UL", "-o", str(out), str(source)],
+                   check=True)  # fmt: skip
+    return out
+
+
+def board_image(name: str, isr: str, tmp: Path, main: str = "", *, prefix: str = "") -> Path:
+    """A firmware on the board: ``isr`` is the body of the 20 ms interrupt (``period`` counts them), ``main``
+    what main does before it sleeps with interrupts on, ``prefix`` C before the interrupt."""
+    text = (
+        BOARD
+        + prefix
+        + "ISR(TIMER1_COMPA_vect) { period++; "
+        + isr
+        + " }\nint main(void) { board(); "
+        + main
+        + " set_sleep_mode(SLEEP_MODE_IDLE); sei(); for (;;) sleep_mode(); }\n"
+    )
+    return build_image(name, text, tmp)
+
+
+def _makefile_cflags() -> list[str]:
+    text = (AVR_DIR / "Makefile").read_text()
+    flags = re.search(r"^CFLAGS = (.*)$", text, re.M)
+    assert flags is not None
+    return (
+        flags[1]
+        .replace("$(MCU)", "atmega328p")
+        .replace("$(F_CPU)", str(F_CPU))
+        .replace("-I../c", f"-I{C_DIR}")
+        .split()
+    )
+
+
+def example_image(tmp: Path) -> Path:
+    """examples/avr's image built with the Makefile's flags into ``tmp``."""
+    avr_gcc = shutil.which("avr-gcc")
+    if avr_gcc is None:
+        pytest.skip("avr-gcc is not installed (Debian: apt-get install gcc-avr avr-libc)")
+    out = tmp / "bb_sf.elf"
+    subprocess.run(
+        [avr_gcc, *_makefile_cflags(), "-Werror", "-o", str(out), str(AVR_DIR / "main.c"),
+         str(C_DIR / "appendix_sf.c"), "-lm"],
+        check=True,
+    )  # fmt: skip
+    return out
+
+
+def host_law(tmp: Path) -> Path:
+    """The same law and I/O arithmetic compiled for the host in single precision, reading the firmware's
+    per-period count sums on stdin and printing its frames."""
+    cc = shutil.which("cc") or shutil.which("gcc")
+    if cc is None:
+        pytest.skip("no C compiler")
+    main = tmp / "host_law.c"
+    main.write_text(
+        "#include <math.h>\n#include <stdio.h>\n#include <stdint.h>\n"
+        "#define double float\n"
+        '#include "appendix_sf.c"\n#include "rig_io.h"\n'
+        "int main(void) {\n"
+        "    static const sf_calibration cal = RIG_SF_CALIBRATION;\n"
+        "    sf_state s; unsigned ball, angle; int started = 0;\n"
+        '    while (scanf("%u %u", &ball, &angle) == 2) {\n'
+        "        double b = io_signal_v((uint16_t)ball), a = io_signal_v((uint16_t)angle);\n"
+        "        double command = RIG_COMMAND_ZERO_V;\n"
+        "        if (!started) started = sf_start(&s, &cal, b, a) == 0;\n"
+        "        else if (sf_update(&s, b, a, &command) != 0) command = RIG_COMMAND_ZERO_V;\n"
+        '        printf("%u\\n", (unsigned)io_dac_frame(command));\n'
+        "    }\n"
+        "    return 0;\n"
+        "}\n"
+    )
+    out = tmp / "host_law"
+    subprocess.run(
+        [cc, "-std=c99", "-O2", "-ffp-contract=off", "-fno-fast-math", "-fsingle-precision-constant",
+         f"-I{C_DIR}", f"-I{AVR_DIR}", "-o", str(out), str(main), "-lm"],
+        check=True,
+    )  # fmt: skip
+    return out
