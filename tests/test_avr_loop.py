@@ -203,3 +203,34 @@ def test_run_result_carries_no_firmware_figures_for_a_python_controller() -> Non
 
     r: RunResult = run_closed_loop(registry.make("appendix-sf"), x0_m=0.1, theta0_rad=0.0, duration_s=0.2)
     assert r.firmware is None
+
+
+@pytest.mark.quick
+def test_the_live_view_runs_the_firmware_shows_its_load_and_closes_it(image: Path) -> None:
+    """The view (a tick per frame) runs what ``ballbeam run`` runs, bit for bit; its status line gives the
+    firmware's load, longest update and stack; Reset replaces the co-simulation (the old process ends)."""
+    from twin.app.catalogue import catalogue_for
+    from twin.engine import update_ticks
+    from twin.viewer import LiveTwin
+
+    _firmware(image)  # skips without simavr
+    spec = f"avr:{image}"
+    p = Parameters()
+    live = LiveTwin(p, catalogue_for(spec, p), spec, seed=0, speed=1.0)
+    for _ in range(update_ticks(2.0, p)):
+        live.tick()
+    fw = _firmware(image)
+    reference = run_closed_loop(fw, x0_m=live.x0_m, theta0_rad=live.theta0_rad, duration_s=2.0, seed=0)
+    np.testing.assert_array_equal(live.loop.log().true_x_m, reference.log.true_x_m)
+    status = live.status_markdown()
+    f = live.loop.firmware_figures()
+    assert (
+        f is not None
+        and f"load {100 * f['load']:.1f} %" in status
+        and f"stack {f['stack_high_water_bytes']} of" in status
+    )
+    first = live.loop.controller
+    live.apply("reset")
+    assert first._core is None and live.loop.controller is not first
+    live.close()
+    assert live.loop.controller._core is None

@@ -226,10 +226,10 @@ def with_user_controller(
     return WithController(base, spec, lambda params: construct(cls, spec, params, timeout_s), entry)
 
 
-def firmware(spec: str, params: Parameters) -> AvrFirmware:
+def firmware(spec: str, params: Parameters, *, check: bool = False) -> AvrFirmware:
     """The firmware image ``avr:[MCU:]FILE.elf`` names, for a rig of ``params``; a ``ParameterError`` naming the
-    ``--controller`` value when the image cannot be read, is no AVR ELF simavr loads, or the co-simulation
-    cannot be built here."""
+    ``--controller`` value when the image cannot be read, is no AVR ELF or, with ``check``, simavr cannot load it
+    (a core is started once) or the co-simulation cannot be built here."""
     from twin.avr.core import AvrError, AvrUnavailable
     from twin.avr.firmware import AvrFirmware, firmware_spec
     from twin.parameters import ParameterError
@@ -240,21 +240,17 @@ def firmware(spec: str, params: Parameters) -> AvrFirmware:
     if not path.name:
         raise ParameterError(f"--controller {spec!r}: expected avr:FILE.elf or avr:MCU:FILE.elf")
     try:
-        return AvrFirmware(path, params, mcu=mcu, name=spec)
+        made = AvrFirmware(path, params, mcu=mcu, name=spec)
+        if check:
+            made.core().close()
     except (AvrError, AvrUnavailable, OSError) as exc:
         raise ParameterError(f"--controller {spec}: {one_line(exc)}") from None
+    return made
 
 
 def _firmware_catalogue(base: Catalogue, spec: str, params: Parameters) -> WithController:
     """The registry plus a firmware image, which is loaded once here (a bad image is refused before any run)."""
-    from twin.avr.core import AvrCore, AvrError, AvrUnavailable
-    from twin.parameters import ParameterError
-
-    made = firmware(spec, params)
-    try:
-        AvrCore(made.path, mcu=made.mcu, frequency_hz=made.clock_hz).close()
-    except (AvrError, AvrUnavailable) as exc:
-        raise ParameterError(f"--controller {spec}: {one_line(exc)}") from None
+    made = firmware(spec, params, check=True)
 
     def entry() -> CatalogueEntry:
         from twin.engine import CatalogueEntry
@@ -277,7 +273,7 @@ def build(spec: str, params: Parameters, timeout_s: float | None = None) -> Cont
     from controllers import registry
 
     if spec.startswith("avr:"):
-        return firmware(spec, params)
+        return firmware(spec, params, check=True)
     user = user_controller(spec, timeout_s)
     return registry.make(spec, params) if user is None else construct(user, spec, params, timeout_s)
 

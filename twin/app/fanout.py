@@ -174,14 +174,32 @@ def _records(
         progress=report,
     )
     return [
-        _record(chunk.x0_m[i], chunk.theta0_rad[i], chunk.seeds[i], result.verdict)
+        _record(chunk.x0_m[i], chunk.theta0_rad[i], chunk.seeds[i], result.verdict, result.firmware)
         for i, result in zip(pick, results, strict=True)
     ]
 
 
-def _record(x0_m: float, theta0_rad: float, seed: int, verdict: Verdict) -> dict[str, Any]:
-    """The record of a run (in process or served): its start, seed and verdict as JSON values."""
-    return {"x0_m": x0_m, "theta0_rad": theta0_rad, "seed": seed, "failed": False, **verdict.to_json()}
+# What a many-run job keeps of a firmware's figures per run (``twin.avr.firmware.AvrFirmware.figures``).
+FIRMWARE_RECORD = (
+    "update_cycles_max",
+    "update_cycles_mean",
+    "deadline_margin_s",
+    "missed_periods",
+    "stack_high_water_bytes",
+    "stack_room_bytes",
+    "load",
+)
+
+
+def _record(
+    x0_m: float, theta0_rad: float, seed: int, verdict: Verdict, firmware: dict[str, Any] | None = None
+) -> dict[str, Any]:
+    """The record of a run (in process or served): its start, seed and verdict as JSON values, and a firmware's
+    timing and stack figures (``FIRMWARE_RECORD``)."""
+    record = {"x0_m": x0_m, "theta0_rad": theta0_rad, "seed": seed, "failed": False, **verdict.to_json()}
+    if firmware is not None:
+        record["firmware"] = {name: firmware[name] for name in FIRMWARE_RECORD}
+    return record
 
 
 def _failed(chunk: _Chunk, i: int, reason: str) -> dict[str, Any]:

@@ -175,9 +175,12 @@ def check_criteria_for(criteria: ValidationCriteria, params: Parameters) -> None
     _sensitivity_cases(c, params)
 
 
-def _sensitivity_cases(c: ValidationCriteria, params: Parameters) -> list[tuple[str, str, Parameters]]:
+def _sensitivity_cases(
+    c: ValidationCriteria, params: Parameters, firmware: bool = False
+) -> list[tuple[str, str, Parameters]]:
     """Each sensitivity case: (parameter, label, the parameters with that value); a value the rig cannot
-    take is refused naming the criterion (the largest zeroing error first: its count may be huge)."""
+    take is refused naming the criterion (the largest zeroing error first: its count may be huge). For a
+    ``firmware`` no output latency: its DAC writes at its own cycles."""
     count = angle_count_step_rad(params)
     values: list[tuple[str, str, str, float]] = []
     if c.zeroing_counts:
@@ -191,7 +194,8 @@ def _sensitivity_cases(c: ValidationCriteria, params: Parameters) -> list[tuple[
             for k in range(-c.zeroing_counts, c.zeroing_counts + 1)
             if k
         ]
-    values += [("latencies_s", "daq.output_latency_s", f"{1e3 * v:g} ms", v) for v in c.latencies_s]
+    if not firmware:  # a firmware's output timing is its own (the card's latency does not apply)
+        values += [("latencies_s", "daq.output_latency_s", f"{1e3 * v:g} ms", v) for v in c.latencies_s]
     values += [("free_runs_s", "start.free_run_s", f"{1e3 * v:g} ms", v) for v in c.free_runs_s]
     cases = []
     for criterion, name, label, value in values:
@@ -307,7 +311,7 @@ def _validate(
     started = time.perf_counter()
     runs = Runs(controller, params, c.duration_s, True, "twin", False)
     starts = [*T.CHAPTER4_STARTS, *T.HARDWARE_STARTS.values()]
-    cases = _sensitivity_cases(c, params)
+    cases = _sensitivity_cases(c, params, controller.startswith("avr:"))
     x_required, theta_required = _required_grid(c)
     # One progress over the four stages' runs (the region's corner states join its count when it starts).
     stages = Stages(
@@ -395,7 +399,31 @@ def _nominal_stage(b: _Battery, starts: list[tuple[float, float]]) -> bool:
             f"at most {100 * saturated:.1f} %",
         )
     )
+    target = [r for r in records if r and r.get("firmware")]
+    if target:
+        b.checks.append(_target_check(target))
     return True
+
+
+def _target_check(records: list[dict[str, Any]]) -> Check:
+    """A firmware's timing and stack over the nominal runs: no update past its period (a positive deadline
+    margin), no period without an output, the stack's high-water mark below the room above the static data."""
+    figures = [r["firmware"] for r in records]
+    margin = min(f["deadline_margin_s"] for f in figures)
+    missed = sum(f["missed_periods"] for f in figures)
+    stack = max(f["stack_high_water_bytes"] for f in figures)
+    room = min(f["stack_room_bytes"] for f in figures)
+    cycles = max(f["update_cycles_max"] for f in figures)
+    stack_ok = stack < room if math.isfinite(room) else True
+    return Check(
+        "target",
+        margin > 0 and missed == 0 and stack_ok,
+        "every update within its period (deadline margin > 0), no period missed, the stack's high-water mark "
+        "below the room above the static data, in every nominal run",
+        f"longest update {cycles:g} cycles (margin {1e3 * margin:.2f} ms), {missed} periods missed, stack "
+        f"{stack} of {room:g} bytes",
+        [{"x0_m": r["x0_m"], "theta0_rad": r["theta0_rad"], "seed": r["seed"], **r["firmware"]} for r in records],
+    )
 
 
 def _region_stage(b: _Battery, settings: SweepSettings) -> SweepResult | None:

@@ -129,9 +129,14 @@ class AvrFirmware:
     ) -> None:
         """``record``: keep every DAC frame and ADC result of the run (``frames``, ``conversions``): what the
         firmware saw and wrote, to replay through another build of its law."""
+        self._core: AvrCore | None = None
         path = Path(elf)
         if not path.is_file():
             raise AvrError(f"{path}: no such firmware image")
+        head = path.read_bytes()[:20]
+        # ELF, 32-bit, little-endian, e_machine 83 (EM_AVR)
+        if head[:6] != b"\x7fELF\x01\x01" or head[18:20] != b"\x53\x00":
+            raise AvrError(f"{path}: not an AVR ELF image (build it with avr-gcc)")
         self.path = path
         self.mcu = mcu or elf_device(path) or DEFAULT_MCU
         self.io = params.mcu_io
@@ -145,7 +150,6 @@ class AvrFirmware:
         self.record = record
         self.frames: list[Frame] = []
         self.conversions: list[Conversion] = []
-        self._core: AvrCore | None = None
         self._boot_s = 0.0
         self._report: RunReport | None = None
 
@@ -153,9 +157,10 @@ class AvrFirmware:
     def boot(self, time_s: float) -> None:
         """Power on: the core leaves reset at ``time_s`` (s from the rig's release)."""
         self.close()
-        self._core = AvrCore(
-            self.path, mcu=self.mcu, frequency_hz=self.clock_hz, adc_reference_v=self.io.adc_reference_v
-        )
+        try:
+            self._core = self.core()
+        except AvrError as exc:
+            raise ControllerError(f"{self.name}: {exc}") from None
         self._boot_s = time_s
         self._report = None
         self._units: list[bytes] = [b"", b""]
@@ -210,6 +215,12 @@ class AvrFirmware:
         pieces.append(((end - at) / span, self._command_v))
         self._check_output(until_s)
         return pieces
+
+    def core(self) -> AvrCore:
+        """A core with this image, out of reset (``AvrError`` when simavr cannot load it)."""
+        return AvrCore(
+            self.path, mcu=self.mcu, frequency_hz=self.clock_hz, adc_reference_v=self.io.adc_reference_v
+        )
 
     @property
     def command_v(self) -> float:

@@ -240,6 +240,7 @@ class LiveTwin:
         old = self.wire if hasattr(self, "loop") else None
         if old is not None:  # the run is replaced: its client's session is over (STOP 0, the run is done)
             old.end(p.STOP_DONE, "the run was replaced (Reset, another controller): STOP 0")
+        self._close_firmware()
         self.runs += 1
         self.error = None
         if self.lost_paused:  # the pause was the lost ball's, not the user's: the new run goes
@@ -615,8 +616,15 @@ class LiveTwin:
         except Exception as exc:  # noqa: BLE001 - the link's failure fails the run, not the server
             self._fail(exc)
 
+    def _close_firmware(self) -> None:
+        """A firmware's co-simulation (a process of its own) ends with its run."""
+        loop = getattr(self, "loop", None)
+        if loop is not None and loop.is_firmware:
+            loop.controller.close()
+
     def close(self) -> None:
         """The view shuts down: a wire client's session ends with STOP 4; the shadow stops."""
+        self._close_firmware()
         if self.shadow is not None:
             self.shadow.stop()
         wire = self.wire
@@ -685,6 +693,8 @@ class LiveTwin:
             error += f"  \nrig drift: motor resistance +{self.drift_pct:g} %" + (
                 "" if drifted else " (from the next Reset)"
             )
+        if self.loop.is_firmware:
+            error += f"  \n{firmware_text(self.loop.firmware_figures() or {})}"
         notice = ""
         if self.notice is not None and time.monotonic() - self.notice[0] < NOTICE_S:
             notice = f"  \n**refused**: {_markdown_text(self.notice[1])}"
@@ -731,6 +741,19 @@ class LiveTwin:
             "border-radius:6px;"
             f'font-weight:600;font-size:0.9em">{html.escape(text)}</div>'
         )
+
+
+def firmware_text(f: dict[str, Any]) -> str:
+    """A firmware's load and timing for the status line (``twin.avr.firmware.AvrFirmware.figures``)."""
+    if not f.get("updates"):
+        return f"firmware on a simulated {f.get('mcu', 'MCU')}: booting"
+    clock = f["clock_hz"]
+    return (
+        f"firmware on a simulated {f['mcu']} at {clock / 1e6:g} MHz: load {100 * f['load']:.1f} % · longest "
+        f"update {f['update_cycles_max']:.0f} cycles ({1e3 * f['update_max_s']:.2f} ms, margin "
+        f"{1e3 * f['deadline_margin_s']:.2f} ms) · stack {f['stack_high_water_bytes']} of "
+        f"{f['stack_room_bytes']:g} bytes · {f['missed_periods']} periods missed"
+    )
 
 
 def verdict_text(v: Verdict, setpoint_m: float = 0.0, criteria: Criteria | None = None) -> str:
