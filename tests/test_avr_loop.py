@@ -230,7 +230,9 @@ def test_the_live_view_runs_the_firmware_shows_its_load_and_closes_it(image: Pat
         and f"stack {f['stack_high_water_bytes']} of" in status
     )
     first = live.loop.controller
+    assert isinstance(first, AvrFirmware)
     live.apply("reset")
-    assert first._core is None and live.loop.controller is not first
+    second = live.loop.controller
+    assert first._core is None and isinstance(second, AvrFirmware) and second is not first
     live.close()
-    assert live.loop.controller._core is None
+    assert second._core is None
