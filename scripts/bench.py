@@ -3,7 +3,7 @@
     python scripts/bench.py [--json] [--repeats 15] [--batch-side 41] [--skip-batch] [--skip-peers]
                             [--skip-calibration] [--skip-view] [--view-seconds 60] [--skip-wire] [--only-wire]
                             [--skip-vector-env] [--only-vector-env] [--skip-sweep-command] [--only-sweep-command]
-                            [--skip-batched-laws] [--only-batched-laws]
+                            [--skip-batched-laws] [--only-batched-laws] [--skip-firmware] [--only-firmware]
 
 One run measures, on the same work (a 10 s episode from x0 = 0.2 m, θ0 = 0.3 rad, noise on, seed 0):
 
@@ -34,6 +34,10 @@ One run measures, on the same work (a 10 s episode from x0 = 0.2 m, θ0 = 0.3 ra
 - (h) batched laws: a 16 × 16 grid of 10 s runs (noise on) of clp, thesis-clp and smc through the batch engine
   on 2 threads, their controllers in numpy (``controllers.batch``) against one scalar controller per run
   (``vectorized=False``: the same bits), interleaved, the best of two;
+- (i) firmware: examples/avr's image (built with its Makefile) in closed loop on a simulated ATmega328P
+  (``--controller avr:…``) over the same episode: wall time against the episode's simulated time (the real-time
+  factor; target ≥ 5×) and against appendix-sf in process (the same law in Python), interleaved, the best of
+  ``--repeats``;
 - view: the live view's tick rate at speed 1.0 over the given wall time (target 50 Hz ± 1 %) and its CPU
   time per tick, with a client attached (a websocket speaking viser's protocol, draining every frame).
 
@@ -592,6 +596,36 @@ def bench_batched_laws(side: int = 16, repeats: int = 2, nthread: int = 2) -> di
     return out
 
 
+def bench_firmware(repeats: int) -> dict[str, float]:
+    """(i): the firmware in the loop, against the rig's time and the same law in process."""
+    import subprocess
+
+    from twin.avr.firmware import AvrFirmware
+
+    folder = Path(__file__).resolve().parents[1] / "examples" / "avr"
+    subprocess.run(["make", "-s", "-C", str(folder)], check=True)
+    params = Parameters()
+
+    def firmware() -> RunResult:
+        fw = AvrFirmware(folder / "bb_sf.elf", params)
+        return run_closed_loop(fw, x0_m=X0_M, theta0_rad=THETA0_RAD, duration_s=DURATION_S, seed=0)
+
+    best_fw, best_py, cpu_fw = np.inf, np.inf, np.inf
+    for _ in range(repeats):
+        wall, cpu = _timed(firmware)
+        best_fw, cpu_fw = min(best_fw, wall), min(cpu_fw, cpu)
+        best_py = min(best_py, _timed(lambda: _episode("appendix-sf"))[0])
+    simulated_s = firmware().log.timem[-1]
+    return {
+        "simulated_s": float(simulated_s),
+        "firmware_run_s": best_fw,
+        "firmware_cpu_s": cpu_fw,  # this process's only: simavr's own process is not counted
+        "real_time_factor": float(simulated_s) / best_fw,
+        "appendix_sf_run_s": best_py,
+        "firmware_over_appendix_sf": best_fw / best_py,
+    }
+
+
 def ratios(results: dict[str, Any]) -> dict[str, float]:
     """(b)/(a), (c)/(a, 2 threads), (d)/(b) and (d)/(c per episode), wall time (CPU time where noted)."""
     episode = results["episodes"]["appendix-sf"]
@@ -620,6 +654,10 @@ def ratios(results: dict[str, Any]) -> dict[str, float]:
     vector = results.get("vector_env")
     if vector is not None:
         out["f_vector_env_over_batch_engine"] = vector["vector_env_over_batch_engine"]
+    target = results.get("firmware")
+    if target is not None:
+        out["i_firmware_real_time_factor"] = target["real_time_factor"]
+        out["i_firmware_over_appendix_sf"] = target["firmware_over_appendix_sf"]
     laws = results.get("batched_laws")
     if laws is not None:
         for name in BATCHED_LAWS:
@@ -644,6 +682,8 @@ def main() -> None:
     parser.add_argument("--only-vector-env", action="store_true", help="measure (f) only")
     parser.add_argument("--skip-batched-laws", action="store_true")
     parser.add_argument("--only-batched-laws", action="store_true", help="measure (h) only")
+    parser.add_argument("--skip-firmware", action="store_true")
+    parser.add_argument("--only-firmware", action="store_true", help="measure (i) only")
     parser.add_argument("--batch-side", type=int, default=41, help="the batch grid's points per side")
     args = parser.parse_args()
     if args.only_wire:
@@ -660,6 +700,10 @@ def main() -> None:
         return
     if args.only_batched_laws:
         got = bench_batched_laws()
+        print(json.dumps(got) if args.json else "\n".join(f"{k:40s} {v:12.4f}" for k, v in got.items()))
+        return
+    if args.only_firmware:
+        got = bench_firmware(max(1, min(args.repeats, 5)))
         print(json.dumps(got) if args.json else "\n".join(f"{k:40s} {v:12.4f}" for k, v in got.items()))
         return
     if args.only_vector_env:
@@ -684,6 +728,8 @@ def main() -> None:
         results["sweep_command"] = bench_sweep_command(args.batch_side)
     if not args.skip_batched_laws:
         results["batched_laws"] = bench_batched_laws()
+    if not args.skip_firmware:
+        results["firmware"] = bench_firmware(max(1, min(args.repeats, 5)))
     results["ratios"] = ratios(results)
     if args.json:
         print(json.dumps(results))

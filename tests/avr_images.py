@@ -83,33 +83,9 @@ def example_image(tmp: Path) -> Path:
 
 
 def host_law(tmp: Path) -> Path:
-    """The same law and I/O arithmetic compiled for the host in single precision, reading the firmware's
-    per-period count sums on stdin and printing its frames."""
-    cc = shutil.which("cc") or shutil.which("gcc")
-    if cc is None:
+    """The law and I/O arithmetic compiled for the host in single precision (twin.app.firmware_forms.host_law)."""
+    from twin.app.firmware_forms import host_law as build
+
+    if shutil.which("cc") is None and shutil.which("gcc") is None:
         pytest.skip("no C compiler")
-    main = tmp / "host_law.c"
-    main.write_text(
-        "#include <math.h>\n#include <stdio.h>\n#include <stdint.h>\n"
-        "#define double float\n"
-        '#include "appendix_sf.c"\n#include "rig_io.h"\n'
-        "int main(void) {\n"
-        "    static const sf_calibration cal = RIG_SF_CALIBRATION;\n"
-        "    sf_state s; unsigned ball, angle; int started = 0;\n"
-        '    while (scanf("%u %u", &ball, &angle) == 2) {\n'
-        "        double b = io_signal_v((uint16_t)ball), a = io_signal_v((uint16_t)angle);\n"
-        "        double command = RIG_COMMAND_ZERO_V;\n"
-        "        if (!started) started = sf_start(&s, &cal, b, a) == 0;\n"
-        "        else if (sf_update(&s, b, a, &command) != 0) command = RIG_COMMAND_ZERO_V;\n"
-        '        printf("%u\\n", (unsigned)io_dac_frame(command));\n'
-        "    }\n"
-        "    return 0;\n"
-        "}\n"
-    )
-    out = tmp / "host_law"
-    subprocess.run(
-        [cc, "-std=c99", "-O2", "-ffp-contract=off", "-fno-fast-math", "-fsingle-precision-constant",
-         f"-I{C_DIR}", f"-I{AVR_DIR}", "-o", str(out), str(main), "-lm"],
-        check=True,
-    )  # fmt: skip
-    return out
+    return build(tmp, single=True)

@@ -121,6 +121,8 @@ HOSTILE = {
     # 8 bits per chip select
     "garbage": ("PORTB &= ~(1 << PB2); SPDR = 0x55; while (!(SPSR & (1 << SPIF))) { } PORTB |= (1 << PB2);", "",
                 r"garbage on SPI"),
+    # an undefined opcode at the 10th period
+    "illegal": ('if (period == 10) __asm__ volatile (".word 0x0001"); ' + ZERO, "", r"Invalid Opcode"),
     # the DAC shut down (SHDN = 0)
     "shutdown": ("dac(0x2000 | 2048);", "", r"shuts the DAC's output down"),
 }  # fmt: skip

@@ -422,7 +422,10 @@ def _target_check(records: list[dict[str, Any]]) -> Check:
         "below the room above the static data, in every nominal run",
         f"longest update {cycles:g} cycles (margin {1e3 * margin:.2f} ms), {missed} periods missed, stack "
         f"{stack} of {room:g} bytes",
-        [{"x0_m": r["x0_m"], "theta0_rad": r["theta0_rad"], "seed": r["seed"], **r["firmware"]} for r in records],
+        [
+            {"x0_m": r["x0_m"], "theta0_rad": r["theta0_rad"], "seed": r["seed"], **r["firmware"]}
+            for r in records
+        ],
     )
 
 

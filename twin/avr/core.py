@@ -15,6 +15,7 @@ from __future__ import annotations
 import hashlib
 import math
 import os
+import re
 import select
 import shutil
 import struct
@@ -33,7 +34,12 @@ __all__ = [
     "AvrUnavailable",
     "Conversion",
     "Frame",
+    "NO_ENTRY",
     "RunReport",
+    "data_end",
+    "elf_device",
+    "elf_sections",
+    "executable",
 ]
 
 SOURCE = Path(__file__).with_name("cosim.c")
@@ -140,7 +146,7 @@ def data_end(path: Path) -> int:
     found = 0
     raw = path.read_bytes()[: 16 << 20]
     try:
-        sections = _elf_sections(raw)
+        sections = elf_sections(raw)
         for _, kind, _, _, offset, size, link, _, _, entsize in sections:
             if kind != 2 or entsize != 16:  # SHT_SYMTAB
                 continue
@@ -155,12 +161,14 @@ def data_end(path: Path) -> int:
     return found
 
 
-def _elf_sections(raw: bytes) -> list[tuple[int, ...]]:
+def elf_sections(raw: bytes) -> list[tuple[int, ...]]:
     """The section headers of a 32-bit little-endian ELF (an AVR image); ``ValueError`` for anything else."""
     if raw[:4] != b"\x7fELF" or raw[4] != 1 or raw[5] != 1:
         raise ValueError("not an ELF32 little-endian image")
     (shoff,) = struct.unpack_from("<I", raw, 0x20)
     shentsize, shnum = struct.unpack_from("<HH", raw, 0x2E)
+    if shoff + shentsize * shnum > len(raw):
+        raise ValueError("the section headers lie beyond the file's end")
     return [struct.unpack_from("<10I", raw, shoff + i * shentsize) for i in range(shnum)]
 
 
@@ -169,7 +177,7 @@ def elf_device(path: Path) -> str | None:
     (its last field: the device name); ``None`` when the image has no such note."""
     raw = path.read_bytes()[: 16 << 20]
     try:
-        sections = _elf_sections(raw)
+        sections = elf_sections(raw)
         names = sections[struct.unpack_from("<H", raw, 0x32)[0]]
         for name_at, kind, _, _, offset, size, *_ in sections:
             start = names[4] + name_at
@@ -198,6 +206,11 @@ ADC_SCALE = 63
 _REPORT = struct.Struct("<iQIHIiiQQIIBI")
 _FRAME = struct.Struct("<HQI")
 _CONVERSION = struct.Struct("<HBQ")
+
+
+def _plain(message: str) -> str:
+    """simavr's log line without its terminal colours and its "CORE: *** " prefix."""
+    return re.sub(r"\x1b\[[0-9;]*m", "", message).replace("CORE: *** ", "").strip()
 
 
 class AvrCore:
@@ -285,7 +298,7 @@ class AvrCore:
         raw = self._read(m * _CONVERSION.size)
         conversions = tuple(Conversion(*_CONVERSION.unpack_from(raw, i * _CONVERSION.size)) for i in range(m))
         conv_dropped, length = struct.unpack("<IH", self._read(6))
-        error = self._read(length).decode(errors="replace").strip() if length else ""
+        error = _plain(self._read(length).decode(errors="replace")) if length else ""
         state, now, pc, low, resets, bad, dropped, awake, isr, entries, isr_max, in_isr, _ = head
         return RunReport(
             state,

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import hashlib
 import math
+import struct
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -33,6 +34,7 @@ from twin.avr.core import (
     Frame,
     RunReport,
     elf_device,
+    elf_sections,
 )
 from twin.engine import ControllerError
 from twin.interface import Telemetry
@@ -133,17 +135,21 @@ class AvrFirmware:
         path = Path(elf)
         if not path.is_file():
             raise AvrError(f"{path}: no such firmware image")
-        head = path.read_bytes()[:20]
+        raw = path.read_bytes()
         # ELF, 32-bit, little-endian, e_machine 83 (EM_AVR)
-        if head[:6] != b"\x7fELF\x01\x01" or head[18:20] != b"\x53\x00":
+        if raw[:6] != b"\x7fELF\x01\x01" or raw[18:20] != b"\x53\x00":
             raise AvrError(f"{path}: not an AVR ELF image (build it with avr-gcc)")
+        try:
+            elf_sections(raw)
+        except (struct.error, ValueError):
+            raise AvrError(f"{path}: a truncated ELF image ({len(raw)} bytes)") from None
         self.path = path
         self.mcu = mcu or elf_device(path) or DEFAULT_MCU
         self.io = params.mcu_io
         self.clock_hz = int(params.mcu_io.clock_hz)
         self.period_s = params.daq.period_s
         self.name = name or f"avr:{path.name}"
-        self.sha256 = hashlib.sha256(path.read_bytes()).hexdigest()
+        self.sha256 = hashlib.sha256(raw).hexdigest()
         self.telemetry = Telemetry()  # the firmware reports nothing of its estimates
         self._zero_v = params.amplifier.zero_command_v
         self._command_v = self._zero_v

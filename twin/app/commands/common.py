@@ -31,6 +31,10 @@ CONTROLLER_HELP = (
     "MODULE (the current directory is searched first); it is built as CLASS(software=params.software), with "
     "the rig software's calibration, if its constructor has a parameter named 'software', else as CLASS()"
 )
+FIRMWARE_HELP = (
+    "; or avr:FILE.elf (avr:MCU:FILE.elf), a firmware image run on a simulated microcontroller against the twin "
+    "(README: Validate your firmware)"
+)
 SERVED_CONTROLLER = (
     "; required unless --serve, where it only names what the client runs (never built here; the region "
     "claims about that name are then judged) and the report names the client from its HELLO without it"
@@ -48,11 +52,12 @@ JOB_RUN_S = finite_float(
 WORKERS = count(1, MAX_WORKERS, unit="local processes")
 
 
-def controller_help() -> str:
-    """The help of ``--controller``: the registry's names (importing it loads no design code) and MODULE:CLASS."""
+def controller_help(firmware: bool = True) -> str:
+    """The help of ``--controller``: the registry's names (importing it loads no design code), MODULE:CLASS and,
+    where the twin runs it (``firmware``), avr:FILE.elf."""
     from controllers import registry
 
-    return CONTROLLER_HELP.format(names=", ".join(registry.NAMES))
+    return CONTROLLER_HELP.format(names=", ".join(registry.NAMES)) + (FIRMWARE_HELP if firmware else "")
 
 
 def add_params_options(parser: argparse.ArgumentParser) -> None:

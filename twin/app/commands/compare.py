@@ -44,7 +44,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--controller",
         metavar="NAME|MODULE:CLASS",
         help="the hardware controller that ran: the twin then runs it from each log's first block. "
-        + controller_help(),
+        + controller_help(firmware=False),
     )
     parser.add_argument(
         "--window",

@@ -42,7 +42,7 @@ def _mc_max_runs() -> float:
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
-        "--controller", metavar="NAME|MODULE:CLASS", help=controller_help() + SERVED_CONTROLLER
+        "--controller", metavar="NAME|MODULE:CLASS|avr:FILE.elf", help=controller_help() + SERVED_CONTROLLER
     )
     parser.add_argument("--n", type=count(1, _mc_max_runs), default=200, help="runs (default 200)")
     add_spread_options(parser, "for the perturbed rigs")

@@ -38,7 +38,9 @@ HELP = "run a controller in closed loop and report the verdict (exit 0 held, 1 l
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--controller", required=True, metavar="NAME|MODULE:CLASS", help=controller_help())
+    parser.add_argument(
+        "--controller", required=True, metavar="NAME|MODULE:CLASS|avr:FILE.elf", help=controller_help()
+    )
     parser.add_argument(
         "--x0", type=finite_float(), metavar="M", help="initial ball position (m; required unless --rig)"
     )

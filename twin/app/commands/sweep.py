@@ -49,7 +49,7 @@ def _sweep_max_points() -> float:
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
-        "--controller", metavar="NAME|MODULE:CLASS", help=controller_help() + SERVED_CONTROLLER
+        "--controller", metavar="NAME|MODULE:CLASS|avr:FILE.elf", help=controller_help() + SERVED_CONTROLLER
     )
     parser.add_argument(
         "--x0",

@@ -34,7 +34,7 @@ HELP = (
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
-        "--controller", metavar="NAME|MODULE:CLASS", help=controller_help() + SERVED_CONTROLLER
+        "--controller", metavar="NAME|MODULE:CLASS|avr:FILE.elf", help=controller_help() + SERVED_CONTROLLER
     )
     add_spread_options(parser, "for the robust-region and Monte Carlo checks")
     parser.add_argument(

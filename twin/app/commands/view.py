@@ -43,7 +43,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--controller",
-        metavar="NAME|MODULE:CLASS",
+        metavar="NAME|MODULE:CLASS|avr:FILE.elf",
         help=f"the controller to start with (default appendix-clp; with --serve the wire client): {controller_help()}",
     )
     parser.add_argument(
