@@ -8,13 +8,13 @@ from __future__ import annotations
 
 import math
 import re
-import subprocess
 from pathlib import Path
 
 import numpy as np
 import pytest
 from avr_images import build_image, example_image, host_law
 
+from twin.app.firmware_forms import host_words
 from twin.parameters import Parameters
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -122,14 +122,7 @@ def test_the_firmware_computes_the_host_single_precision_law_bit_for_bit(
     angle = 2500 + np.round(600 * np.cos(np.arange(200) / 13.0)) + rng.integers(-40, 40, 200)
     frames = _drive(firmware, np.stack([ball, angle], axis=1))
     counts = np.floor(np.stack([ball, angle], axis=1) * 1024 / 5000).astype(int) * 8
-    host = subprocess.run(
-        [str(host_law(tmp_path))],
-        input="".join(f"{b} {a}\n" for b, a in counts),
-        capture_output=True,
-        text=True,
-        check=True,
-    )
-    expected = [int(w) for w in host.stdout.split()]
+    expected = host_words(host_law(tmp_path), [(int(b), int(a)) for b, a in counts])
     got = [word for word, _ in frames[1:]]
     assert len(set(got)) > 50  # the commands move: the law is exercised, not pinned at a rail
     assert got == expected

@@ -10,13 +10,13 @@ from __future__ import annotations
 
 import math
 import re
-import subprocess
 from pathlib import Path
 
 import numpy as np
 import pytest
 from avr_images import F_CPU, board_image, example_image, host_law
 
+from twin.app.firmware_forms import host_words, period_inputs
 from twin.avr.firmware import AvrFirmware
 from twin.engine import ControllerError, RunResult, run_closed_loop
 from twin.parameters import Parameters
@@ -86,21 +86,12 @@ def test_the_firmwares_words_are_the_host_builds_from_the_adc_results_it_read(
     assert result.verdict.held
     frames = fw.frames[1:]  # the first is main's zero command, before any interrupt
     sums = []
-    conversions = fw.conversions
-    for k, frame in enumerate(frames):
-        inside = [c for c in conversions if (frames[k - 1].cycle if k else 0) < c.cycle < frame.cycle]
+    for inside in period_inputs(frames, fw.conversions):
         assert [c.channel for c in inside] == [0] * 8 + [1] * 8
         sums.append((sum(c.value for c in inside[:8]), sum(c.value for c in inside[8:])))
-    host = subprocess.run(
-        [str(host_law(tmp_path))],
-        input="".join(f"{b} {a}\n" for b, a in sums),
-        capture_output=True,
-        text=True,
-        check=True,
-    )
     got = [f.word for f in frames]
     assert len(set(got)) > 50
-    assert got == [int(w) for w in host.stdout.split()]
+    assert got == host_words(host_law(tmp_path), sums)
 
 
 # --- hostile firmware: each fails its run, saying what happened where -----------------------------------

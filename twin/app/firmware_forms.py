@@ -24,7 +24,7 @@ import math
 import shutil
 import subprocess
 import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -33,9 +33,19 @@ import numpy as np
 from controllers import thesis_numbers as T
 from twin.app.fanout import Runs, Served, run_starts
 from twin.app.sweep import point_seeds
+from twin.avr.core import Conversion, Frame
 from twin.parameters import Parameters
 
-__all__ = ["FIGURES", "board_input_grid", "compare", "host_law", "render", "starts"]
+__all__ = [
+    "FIGURES",
+    "board_input_grid",
+    "compare",
+    "host_law",
+    "host_words",
+    "period_inputs",
+    "render",
+    "starts",
+]
 
 ROOT = Path(__file__).resolve().parents[2]
 C_DIR = ROOT / "examples" / "c"
@@ -107,6 +117,22 @@ def starts() -> list[tuple[str, float, float]]:
     return named + [(f"chapter 4 ({x:+g}, {th:+g})", x, th) for x, th in T.CHAPTER4_STARTS]
 
 
+def period_inputs(frames: Sequence[Frame], conversions: Sequence[Conversion]) -> list[list[Conversion]]:
+    """The ADC results the firmware read before each frame (after the one before): each update's inputs."""
+    out, last = [], 0
+    for frame in frames:
+        out.append([c for c in conversions if last < c.cycle < frame.cycle])
+        last = frame.cycle
+    return out
+
+
+def host_words(law: Path, sums: Sequence[tuple[int, int]]) -> list[int]:
+    """The DAC words a ``host_law`` build writes for per-period (ball, angle) count sums."""
+    text = "".join(f"{b} {a}\n" for b, a in sums)
+    done = subprocess.run([str(law)], input=text, capture_output=True, text=True, check=True)
+    return [int(w) for w in done.stdout.split()]
+
+
 def _replay(elf: Path, params: Parameters, x0_m: float, theta0_rad: float, seed: int, duration_s: float,
             laws: tuple[Path, Path]) -> dict[str, Any]:  # fmt: skip
     """The firmware's run with its ADC results kept, replayed through the host's float and double builds."""
@@ -115,26 +141,17 @@ def _replay(elf: Path, params: Parameters, x0_m: float, theta0_rad: float, seed:
 
     fw = AvrFirmware(elf, params, record=True)
     run_closed_loop(fw, x0_m=x0_m, theta0_rad=theta0_rad, duration_s=duration_s, seed=seed, params=params)
-    frames, sums, last = fw.frames[1:], [], 0
-    for (
-        frame
-    ) in frames:  # each interrupt's conversions: eight of the ball, eight of the angle, then its frame
-        inside = [c for c in fw.conversions if last < c.cycle < frame.cycle]
-        sums.append(
-            (sum(c.value for c in inside if c.channel == 0), sum(c.value for c in inside if c.channel == 1))
-        )
-        last = frame.cycle
-    text = "".join(f"{b} {a}\n" for b, a in sums)
-    words = [
-        np.array([int(w) for w in subprocess.run([str(law)], input=text, capture_output=True, text=True,
-                                                 check=True).stdout.split()])
-        for law in laws
-    ]  # fmt: skip
+    frames = fw.frames[1:]  # the first is main's zero command, before any interrupt
+    sums = [
+        (sum(c.value for c in inside if c.channel == 0), sum(c.value for c in inside if c.channel == 1))
+        for inside in period_inputs(frames, fw.conversions)
+    ]
+    single, double = (np.array(host_words(law, sums)) for law in laws)
     firmware = np.array([f.word for f in frames])
-    codes = np.abs((words[0] & 0x0FFF) - (words[1] & 0x0FFF))
+    codes = np.abs((single & 0x0FFF) - (double & 0x0FFF))
     return {
         "words": len(firmware),
-        "float_equal": bool(np.array_equal(firmware, words[0])),
+        "float_equal": bool(np.array_equal(firmware, single)),
         "differ": int(np.count_nonzero(codes)),
         "max_codes": int(codes.max(initial=0)),
     }
