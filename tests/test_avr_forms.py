@@ -47,8 +47,8 @@ def test_the_card_on_the_boards_input_grid_reads_what_the_firmware_reads() -> No
 
 def test_the_comparison_recomputes_the_published_json(tmp_path: Path) -> None:
     """The three forms, the single-cause runs and the precision replay from the same starts and seeds give the
-    published records bit for bit (the validation batteries, 4 minutes, are the script's alone); the firmware's float replay equals its words in every run; the C client's
-    records are the Python form's."""
+    published records bit for bit (the validation batteries, 4 minutes, are the script's alone); the firmware's
+    float replay equals its words in every run; the C client's records are the Python form's."""
     from test_c_controller import build_bb_sf
 
     published = json.loads(FORMS.read_text())
