@@ -682,6 +682,7 @@ def test_the_command_table_is_one_module_per_command() -> None:
         calibrate_static,
         compare,
         experiment,
+        export_fmu,
         judge,
         linearize,
         montecarlo,
@@ -696,7 +697,7 @@ def test_the_command_table_is_one_module_per_command() -> None:
 
     modules = [
         linearize, run, serve, shadow, judge, sweep, montecarlo, validate, view, calibrate, compare,
-        calibrate_static, experiment, params,
+        calibrate_static, experiment, params, export_fmu,
     ]  # fmt: skip
     rows = commands.COMMANDS
     assert sorted(m.__name__ for _, m, _ in rows) == sorted(m.__name__ for m in modules)

@@ -16,6 +16,7 @@ from twin.app.commands import (
     calibrate_static,
     compare,
     experiment,
+    export_fmu,
     judge,
     linearize,
     montecarlo,
@@ -53,4 +54,5 @@ COMMANDS: tuple[tuple[str, Command, str], ...] = (
     ("calibrate-static", calibrate_static, calibrate_static.HELP),
     ("experiment", experiment, experiment.HELP),
     ("params", params, params.HELP),
+    ("export-fmu", export_fmu, export_fmu.HELP),
 )

@@ -1,0 +1,187 @@
+"""The rig as an FMI 3.0 co-simulation unit (``ballbeam export-fmu``, twin.fmi): FMPy's validation of its model
+description passes; driven from FMPy with the commands an in-process ``appendix-sf`` run wrote, it gives that
+run's readings and true state bit for bit; a reset or a new instance repeats it; two instances in one process
+keep their own state; a step of another size than the period is refused; its parameters are the twin's."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from controllers import registry
+from twin.app.cli import main
+from twin.engine import run_closed_loop
+from twin.log import RunLog
+from twin.parameters import Parameters
+
+fmpy = pytest.importorskip("fmpy")
+from fmpy.fmi3 import FMU3Slave  # noqa: E402
+
+OUTPUTS = ("time_s", "ball_v", "angle_v", "x_m", "theta_rad", "xdot_m_s", "thetadot_rad_s", "motor_v")
+LOGGED = ("timem", "datam1", "datam2", "true_x_m", "true_theta_rad", "true_xdot_m_s", "true_thetadot_rad_s")
+
+
+@pytest.fixture(scope="module")
+def unit(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("fmu") / "BallBeam.fmu"
+    assert main(["export-fmu", "--out", str(out), "--json"]) == 0
+    return out
+
+
+class Driver:
+    """One instance of the unit, stepped by hand as an importer steps it."""
+
+    def __init__(self, path: Path, name: str = "rig") -> None:
+        md = fmpy.read_model_description(str(path))
+        self.vr = {v.name: v.valueReference for v in md.modelVariables}
+        self.fmu = FMU3Slave(
+            guid=md.guid,
+            unzipDirectory=fmpy.extract(str(path)),
+            modelIdentifier=md.coSimulation.modelIdentifier,
+            instanceName=name,
+        )
+        self.fmu.instantiate()
+
+    def start(self, x0_m: float, theta0_rad: float, seed: int, **floats: float) -> None:
+        f = self.fmu
+        f.enterInitializationMode()
+        names = ["x0_m", "theta0_rad", *floats]
+        f.setFloat64([self.vr[n] for n in names], [x0_m, theta0_rad, *floats.values()])
+        f.setInt64([self.vr["seed"]], [seed])
+        f.exitInitializationMode()
+        self.t = 0.0
+
+    def outputs(self) -> list[float]:
+        return list(self.fmu.getFloat64([self.vr[n] for n in OUTPUTS]))
+
+    def step(self, dac_v: float, h: float = 0.02) -> None:
+        self.fmu.setFloat64([self.vr["dac_v"]], [dac_v])
+        self.fmu.doStep(self.t, h)
+        self.t += h
+
+    def replay(self, log: RunLog) -> np.ndarray:
+        rows = []
+        for k, command in enumerate(log.aout):
+            rows.append(self.outputs())
+            if k < len(log.aout) - 1:
+                self.step(float(command))
+        return np.array(rows)
+
+
+def _reference(seed: int = 0, duration_s: float = 4.0, **overrides: Any) -> RunLog:
+    params = Parameters().with_overrides(overrides) if overrides else None
+    ref = run_closed_loop(
+        registry.make("appendix-sf", params), x0_m=0.14, theta0_rad=-0.2, duration_s=duration_s, seed=seed,
+        params=params,
+    )  # fmt: skip
+    return ref.log
+
+
+def _same(rows: np.ndarray, log: RunLog) -> None:
+    for i, name in enumerate(LOGGED):
+        assert np.array_equal(rows[:, i], getattr(log, name)), name
+    # motor_v is the volts the step was driven with: the log's, one tick later (it logs them after the write)
+    assert np.array_equal(rows[1:, 7], log.motor_volts_v[:-1])
+
+
+@pytest.mark.quick
+def test_the_unit_validates_and_replays_an_in_process_run_bit_for_bit(unit: Path) -> None:
+    from fmpy.validation import validate_fmu
+
+    assert validate_fmu(str(unit)) == []
+    log = _reference()
+    d = Driver(unit)
+    d.start(0.14, -0.2, 0)
+    _same(d.replay(log), log)
+    d.fmu.reset()  # FMI reset: instantiated again from its start values
+    d.start(0.14, -0.2, 0)
+    _same(d.replay(log), log)
+    d.fmu.terminate()
+    d.fmu.freeInstance()
+
+
+def test_two_instances_in_one_process_keep_their_own_state(unit: Path) -> None:
+    """Stepped in turn, two seeds: each equals its own in-process run."""
+    logs = [_reference(seed) for seed in (0, 1)]
+    drivers = [Driver(unit, f"rig{seed}") for seed in (0, 1)]
+    for seed, d in enumerate(drivers):
+        d.start(0.14, -0.2, seed)
+    rows: list[list[list[float]]] = [[], []]
+    for k in range(len(logs[0].aout)):
+        for i, d in enumerate(drivers):
+            rows[i].append(d.outputs())
+            if k < len(logs[0].aout) - 1:
+                d.step(float(logs[i].aout[k]))
+    for i in range(2):
+        _same(np.array(rows[i]), logs[i])
+
+
+def test_a_step_of_another_size_is_refused_and_parameters_are_the_twins(unit: Path) -> None:
+    d = Driver(unit)
+    d.start(0.14, -0.2, 0)
+    with pytest.raises(Exception, match="(?i)error|fmi3"):
+        d.step(2.5, 0.01)
+    log = _reference(**{"motor.resistance_ohm": 9.0})
+    e = Driver(unit, "warm")
+    e.start(0.14, -0.2, 0, **{"motor.resistance_ohm": 9.0})
+    _same(e.replay(log), log)
+
+
+@pytest.mark.quick
+def test_the_unit_carries_its_parameters_and_provenance(unit: Path, tmp_path: Path) -> None:
+    import zipfile
+
+    with zipfile.ZipFile(unit) as z:
+        rig = json.loads(z.read("resources/rig.json"))
+        assert z.read("resources/requirements.txt").decode().startswith("ballbeam-twin==")
+    assert rig["values"] == json.loads(json.dumps(Parameters().to_dict()))
+    assert rig["source"] == "the defaults (thesis values)"
+    md = fmpy.read_model_description(str(unit))
+    starts = {v.name: v.start for v in md.modelVariables if v.causality == "parameter"}
+    assert float(starts["motor.resistance_ohm"]) == Parameters().motor.resistance_ohm
+    assert md.coSimulation.modelIdentifier == "BallBeam"
+
+
+def test_a_controller_stepping_the_unit_runs_what_ballbeam_run_runs(unit: Path) -> None:
+    """The README's loop: the controller starts on the outputs after initialization, each doStep then its
+    update on the new outputs sets dac_v — the same commands and true state as ``run_closed_loop``."""
+    from twin.interface import DaqSample
+
+    log = _reference(duration_s=6.0)
+    d = Driver(unit)
+    d.start(0.14, -0.2, 0)
+    controller = registry.make("appendix-sf")
+
+    def read() -> DaqSample:
+        return DaqSample(*d.fmu.getFloat64([d.vr["time_s"], d.vr["ball_v"], d.vr["angle_v"]]))
+
+    controller.start(read())  # type: ignore[union-attr]
+    commands, xs = [], []
+    for _ in range(len(log.aout) - 1):
+        d.fmu.doStep(d.t, 0.02)
+        d.t += 0.02
+        command = controller.update(read())  # type: ignore[union-attr]
+        d.fmu.setFloat64([d.vr["dac_v"]], [command])
+        commands.append(command)
+        xs.append(d.fmu.getFloat64([d.vr["x_m"]])[0])
+    assert np.array_equal(commands, log.aout[1:]) and np.array_equal(xs, log.true_x_m[1:])
+
+
+@pytest.mark.quick
+def test_the_description_names_every_parameter_with_its_unit_source_and_a_calibrations_uncertainty() -> None:
+    from twin.app.commands import export_fmu
+    from twin.fmi import ballbeam_fmu
+    from twin.fmi.export import rig_description
+    from twin.parameters import declaration
+
+    d = rig_description(Parameters(), version="9", source="s", uncertainty={"motor.resistance_ohm": 0.125})
+    assert set(d["declared"]) == {row["name"] for row in Parameters.describe()}
+    resistance = d["declared"]["motor.resistance_ohm"]
+    assert resistance["unit"] == declaration("motor.resistance_ohm")["unit"]
+    assert resistance["source"].startswith("calibrated (standard uncertainty 0.125); ")
+    assert [name for name, *_ in ballbeam_fmu.OUTPUTS][:3] == ["time_s", "ball_v", "angle_v"]
+    assert "FMI 3.0" in export_fmu.HELP

@@ -1,0 +1,71 @@
+"""``ballbeam export-fmu``: the rig as an FMI 3.0 co-simulation unit (twin.fmi)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from twin.app.commands.common import add_params_options, inputs, load_params, package_version, params_source
+
+HELP = "export the rig as an FMI 3.0 co-simulation unit (.fmu) for Simulink, OpenModelica, FMPy"
+
+# The unit is about 1 MB (pythonfmu3's libraries for two platforms and the scripts).
+_FMU_BYTES = 1 << 20
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--out", required=True, metavar="FILE.fmu", help="the unit to write (atomically)")
+    parser.add_argument("--overwrite", action="store_true", help="replace an existing --out file")
+    parser.add_argument(
+        "--calibration",
+        metavar="DIR",
+        help="a calibration's values (calibrate --out): the unit's parameters start at them, their standard "
+        "uncertainties in the descriptions",
+    )
+    add_params_options(parser)
+    parser.add_argument("--json", action="store_true", help="print what was written as JSON")
+
+
+def run(args: argparse.Namespace) -> int:
+    from twin.app.commands.common import compare_params
+    from twin.fmi.export import export_fmu, rig_description
+    from twin.outputs import check_outputs
+
+    paths = check_outputs(
+        [("--out", args.out, (".fmu",), _FMU_BYTES)], overwrite=args.overwrite, inputs=inputs(args)
+    )
+    uncertainty: dict[str, float] = {}
+    if args.calibration is not None:
+        params, source = compare_params(args)
+        uncertainty = _uncertainties(Path(args.calibration) / "calibration.json")
+    else:
+        params = load_params(args)
+        source = params_source(args) or "the defaults (thesis values)"
+    description = rig_description(params, version=package_version(), source=source, uncertainty=uncertainty)
+    out = export_fmu(paths["--out"], description, overwrite=args.overwrite)
+    summary = {
+        "fmu": str(out),
+        "bytes": out.stat().st_size,
+        "version": description["version"],
+        "source": source,
+    }
+    print(
+        json.dumps(summary) if args.json else f"wrote {out} ({summary['bytes']} bytes): parameters {source}"
+    )
+    return 0
+
+
+def _uncertainties(path: Path) -> dict[str, float]:
+    """Each fitted parameter's standard uncertainty in a calibration.json (none when it has none)."""
+    from twin.parameters import ParameterError
+
+    try:
+        fitted = json.loads(path.read_text())["params"]
+        return {name: float(entry["sd"]) for name, entry in fitted.items()}
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        print(f"ballbeam export-fmu: {path}: no uncertainties read ({type(exc).__name__})", file=sys.stderr)
+        if isinstance(exc, OSError):
+            raise ParameterError(f"--calibration: {path}: {exc.strerror or exc}") from None
+        return {}

@@ -1,0 +1,60 @@
+"""``export_fmu``: the rig, with a set of parameters, as an FMI 3.0 co-simulation unit (``BallBeam.fmu``).
+
+The unit is ``ballbeam_fmu.py`` packed by pythonfmu3 with ``resources/rig.json``: every parameter's value (the
+curves included), each one's unit and source, where the values come from, the exporting version and, for a
+calibration, each fitted value's standard uncertainty. Written atomically; an existing file is kept unless
+``overwrite``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import shutil
+import tempfile
+from pathlib import Path
+from typing import Any
+
+from twin.parameters import _GROUPS, Parameters
+
+__all__ = ["MODEL", "SCRIPT", "export_fmu", "rig_description"]
+
+SCRIPT = Path(__file__).with_name("ballbeam_fmu.py")
+MODEL = "BallBeam"  # the unit's model identifier: the slave's class
+
+
+def rig_description(
+    params: Parameters, *, version: str, source: str, uncertainty: dict[str, float] | None = None
+) -> dict[str, Any]:
+    """What ``resources/rig.json`` holds (see the module's doc)."""
+    declared = {
+        f"{group}.{f.name}": {"unit": str(f.metadata["unit"]), "source": str(f.metadata["source"])}
+        for group, cls in _GROUPS.items()
+        for f in dataclasses.fields(cls)
+    }
+    for name, sd in (uncertainty or {}).items():
+        if name in declared:
+            declared[name]["source"] = (
+                f"calibrated (standard uncertainty {sd:.6g}); " + declared[name]["source"]
+            )
+    return {"version": version, "source": source, "values": params.to_dict(), "declared": declared}
+
+
+def export_fmu(out: Path, description: dict[str, Any], *, overwrite: bool = False) -> Path:
+    """Build the unit into ``out`` (atomically)."""
+    from pythonfmu3 import FmuBuilder
+
+    from twin.outputs import write_atomic
+
+    with tempfile.TemporaryDirectory(prefix="ballbeam_fmu_") as tmp:
+        rig = Path(tmp) / "rig.json"
+        rig.write_text(json.dumps(description, indent=1) + "\n")
+        # what the unit's Python needs (``pythonfmu3 deploy -f BallBeam.fmu`` installs it)
+        requirements = Path(tmp) / "requirements.txt"
+        requirements.write_text(f"ballbeam-twin=={description['version']}\n")
+        script = Path(tmp) / "script" / SCRIPT.name
+        script.parent.mkdir()
+        shutil.copy2(SCRIPT, script)
+        built = FmuBuilder.build_FMU(script, dest=Path(tmp) / "out", project_files={rig, requirements})
+        write_atomic(out, built.read_bytes(), overwrite=overwrite)
+    return out
