@@ -185,3 +185,117 @@ def test_the_description_names_every_parameter_with_its_unit_source_and_a_calibr
     assert resistance["source"].startswith("calibrated (standard uncertainty 0.125); ")
     assert [name for name, *_ in ballbeam_fmu.OUTPUTS][:3] == ["time_s", "ball_v", "angle_v"]
     assert "FMI 3.0" in export_fmu.HELP
+
+
+# --- controllers as FMUs ---------------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def controller_unit(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    from fmu_units import example_unit
+
+    return example_unit(tmp_path_factory.mktemp("ctl"))
+
+
+@pytest.mark.quick
+def test_the_example_controller_unit_gives_the_c_clients_commands_bit_for_bit(controller_unit: Path) -> None:
+    """examples/fmu (the appendix law's C source with FMPy's FMI 3.0 headers) validates, and run as
+    ``fmu:…`` (its own process) it writes the commands of the Python ``appendix-sf``, which the C client writes
+    bit for bit (tests/test_c_controller.py)."""
+    from fmpy.validation import validate_fmu
+
+    from twin.app.catalogue import build
+
+    assert validate_fmu(str(controller_unit)) == []
+    log = _reference(duration_s=6.0)
+    controller = build(f"fmu:{controller_unit}", Parameters())
+    got = run_closed_loop(controller, x0_m=0.14, theta0_rad=-0.2, duration_s=6.0, seed=0)
+    assert np.array_equal(got.log.aout, log.aout) and got.verdict.held
+
+
+def test_the_twin_unit_and_the_controller_unit_alone_reach_ballbeam_runs_verdict(
+    unit: Path, controller_unit: Path
+) -> None:
+    """FMPy alone steps both units (no ballbeam loop): at each communication point the controller gets the rig's
+    readings and steps, the rig gets its command and steps. The commands and the true state are the run's bit
+    for bit, so the verdict is."""
+    from twin.engine import judge
+    from twin.verdict import Trace
+
+    log = _reference(duration_s=8.0)
+    rig = Driver(unit)
+    rig.start(0.14, -0.2, 0)
+    ctl = Driver(controller_unit, "controller")
+    ctl.fmu.enterInitializationMode()
+    ctl.fmu.exitInitializationMode()
+    rows, commands = [], []
+    for k in range(len(log.aout)):
+        rows.append(rig.outputs())
+        ctl.fmu.setFloat64([ctl.vr["ball_v"], ctl.vr["angle_v"]], rows[-1][1:3])
+        ctl.fmu.doStep(0.02 * k, 0.02)
+        commands.append(ctl.fmu.getFloat64([ctl.vr["dac_v"]])[0])
+        if k < len(log.aout) - 1:
+            rig.step(commands[-1])
+    table = np.array(rows)
+    _same(table, log)
+    assert np.array_equal(commands, log.aout)
+    ours = run_closed_loop(registry.make("appendix-sf"), x0_m=0.14, theta0_rad=-0.2, duration_s=8.0, seed=0)
+    theirs = judge(
+        Parameters(),
+        Trace(
+            table[:, 0], table[:, 3], table[:, 4], log.motor_volts_v, np.array([ours.verdict.peak_theta_rad])
+        ),
+        x0_m=0.14,
+        ball_lost_time_s=None,
+    )
+    assert theirs.to_json() == ours.verdict.to_json()
+
+
+HOSTILE_UNITS = {
+    "error_status": ("if (u->steps == 10) return fmi3Error;", r"fmi3DoStep|Error|error"),
+    "nan": ("u->dac_v = u->steps == 10 ? NAN : 2.5;", r"nan"),
+    "crash": ("if (u->steps == 10) raise(SIGSEGV);", r"process ended \(signal SIGSEGV\)"),
+    "exit": ("if (u->steps == 10) exit(3);", r"process ended \(exit code 3\)"),
+    "hang": ("if (u->steps == 10) for (;;) { }", r"did not return within"),
+}
+
+
+@pytest.mark.parametrize("name", sorted(HOSTILE_UNITS))
+def test_a_failing_controller_unit_fails_its_run_naming_the_tick(name: str, tmp_path: Path) -> None:
+    from fmu_units import hostile_unit
+
+    from twin.app.catalogue import build
+    from twin.engine import ControllerError
+
+    body, message = HOSTILE_UNITS[name]
+    spec = f"fmu:{hostile_unit(tmp_path, name, body)}"
+    with pytest.raises(ControllerError, match=message) as caught:
+        run_closed_loop(build(spec, Parameters()), x0_m=0.1, theta0_rad=0.0, duration_s=2.0)
+    assert "tick k = " in str(caught.value)
+
+
+@pytest.mark.quick
+def test_a_unit_without_the_conventions_variables_is_refused_naming_it(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from cli_checks import refused
+    from fmu_units import FMU_DIR, hostile_unit
+
+    renamed = (FMU_DIR / "modelDescription.xml").read_text().replace('name="dac_v"', 'name="command_v"')
+    spec = f"fmu:{hostile_unit(tmp_path, 'renamed', '', renamed)}"
+    refused(capsys, ["run", "--controller", spec, "--x0", "0", "--theta0", "0"], "no variable 'dac_v'")
+    refused(capsys, ["run", "--controller", "fmu:/no/such.fmu", "--x0", "0", "--theta0", "0"], "no such FMU")
+
+
+@pytest.mark.quick
+def test_the_controller_process_frames_and_names_are_the_documented_ones(tmp_path: Path) -> None:
+    """twin.fmi.host's request is four doubles (time, step, ball_v, angle_v); the convention's names; a file that
+    is no FMU is refused by the process, saying so."""
+    from twin.fmi import host
+    from twin.fmi.controller import FmuController, FmuError
+
+    assert host.REQUEST.format == "<4d" and host.INPUTS == ("ball_v", "angle_v") and host.OUTPUT == "dac_v"
+    with pytest.raises(FmuError, match="no such FMU"):
+        FmuController(tmp_path / "missing.fmu")
+    junk = tmp_path / "junk.fmu"
+    junk.write_bytes(b"not a zip")
+    with pytest.raises(FmuError, match="junk.fmu: "):
+        FmuController(junk)

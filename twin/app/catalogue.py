@@ -1,5 +1,6 @@
-"""The controller a command runs: a name from the registry, the user's own ``MODULE:CLASS`` or a firmware image
-``avr:[MCU:]FILE.elf`` (twin.avr: the image on a simulated microcontroller).
+"""The controller a command runs: a name from the registry, the user's own ``MODULE:CLASS``, a firmware image
+``avr:[MCU:]FILE.elf`` (twin.avr: the image on a simulated microcontroller) or a controller FMU ``fmu:FILE.fmu``
+(twin.fmi.controller: in a process of its own).
 
 ``catalogue_for(spec, params)`` is the catalogue (``twin.engine.Catalogue``) in which ``spec`` names a
 controller; worker processes rebuild it from the same text, so a user's controller runs there too. Failures
@@ -31,6 +32,7 @@ __all__ = [
     "catalogue_for",
     "construct",
     "firmware",
+    "fmu_controller",
     "one_line",
     "user_controller",
     "with_user_controller",
@@ -248,6 +250,42 @@ def firmware(spec: str, params: Parameters, *, check: bool = False) -> AvrFirmwa
     return made
 
 
+def fmu_controller(spec: str, params: Parameters) -> Controller:
+    """The controller FMU ``fmu:FILE.fmu`` names, in a process of its own, stepping at the rig's period; a
+    ``ParameterError`` naming the ``--controller`` value when it cannot be loaded (not an FMU, not co-simulation,
+    a variable of the convention missing, an instantiation that failed)."""
+    from twin.fmi.controller import FmuController, FmuError
+    from twin.parameters import ParameterError
+
+    path = spec.removeprefix("fmu:")
+    if not path:
+        raise ParameterError(f"--controller {spec!r}: expected fmu:FILE.fmu")
+    try:
+        return FmuController(path, params.software, params.daq.period_s)
+    except (FmuError, OSError) as exc:
+        raise ParameterError(f"--controller {spec}: {one_line(exc)}") from None
+
+
+def _fmu_catalogue(base: Catalogue, spec: str, params: Parameters) -> WithController:
+    """The registry plus a controller FMU, loaded once here (a bad unit is refused before any run)."""
+    made = fmu_controller(spec, params)
+    made.close()  # type: ignore[attr-defined]
+
+    def entry() -> CatalogueEntry:
+        from twin.engine import CatalogueEntry
+
+        return CatalogueEntry(
+            name=spec,
+            build=lambda p: fmu_controller(spec, p),
+            description=f"your controller FMU {spec} (its own process)",
+            simulation_only=False,
+            batched=False,
+            setpoint=False,
+        )
+
+    return WithController(base, spec, lambda p: fmu_controller(spec, p), entry)
+
+
 def _firmware_catalogue(base: Catalogue, spec: str, params: Parameters) -> WithController:
     """The registry plus a firmware image, which is loaded once here (a bad image is refused before any run)."""
     made = firmware(spec, params, check=True)
@@ -274,6 +312,8 @@ def build(spec: str, params: Parameters, timeout_s: float | None = None) -> Cont
 
     if spec.startswith("avr:"):
         return firmware(spec, params, check=True)
+    if spec.startswith("fmu:"):
+        return fmu_controller(spec, params)
     user = user_controller(spec, timeout_s)
     return registry.make(spec, params) if user is None else construct(user, spec, params, timeout_s)
 
@@ -285,6 +325,8 @@ def catalogue_for(spec: str, params: Parameters, timeout_s: float | None = None)
 
     if spec.startswith("avr:"):
         return _firmware_catalogue(registry, spec, params)
+    if spec.startswith("fmu:"):
+        return _fmu_catalogue(registry, spec, params)
     user = user_controller(spec, timeout_s)
     if user is None:
         return registry

@@ -31,6 +31,10 @@ CONTROLLER_HELP = (
     "MODULE (the current directory is searched first); it is built as CLASS(software=params.software), with "
     "the rig software's calibration, if its constructor has a parameter named 'software', else as CLASS()"
 )
+FMU_HELP = (
+    "; or fmu:FILE.fmu, a co-simulation FMU with inputs ball_v, angle_v and output dac_v, run in a process of its "
+    "own (README: The twin in Simulink, OpenModelica and FMPy)"
+)
 FIRMWARE_HELP = (
     "; or avr:FILE.elf (avr:MCU:FILE.elf), a firmware image run on a simulated microcontroller against the twin "
     "(README: Validate your firmware)"
@@ -57,7 +61,11 @@ def controller_help(firmware: bool = True) -> str:
     where the twin runs it (``firmware``), avr:FILE.elf."""
     from controllers import registry
 
-    return CONTROLLER_HELP.format(names=", ".join(registry.NAMES)) + (FIRMWARE_HELP if firmware else "")
+    return (
+        CONTROLLER_HELP.format(names=", ".join(registry.NAMES))
+        + FMU_HELP
+        + (FIRMWARE_HELP if firmware else "")
+    )
 
 
 def add_params_options(parser: argparse.ArgumentParser) -> None:
@@ -231,6 +239,9 @@ def inputs(args: argparse.Namespace) -> list[tuple[str, str]]:
         ]
     spec = str(getattr(args, "controller", ""))
     module_name, colon, _ = spec.partition(":")
+    if module_name == "fmu" and colon:  # a controller FMU
+        found.append(("--controller", spec.removeprefix("fmu:")))
+        return found
     if module_name == "avr":  # a firmware image: avr:[MCU:]FILE
         from twin.avr.firmware import firmware_spec
 
@@ -435,6 +446,11 @@ def hardware_controller(spec: str, params: Parameters) -> Callable[[], Controlle
             f"--controller {spec}: a firmware image drives the simulated rig through its pins; a log is replayed "
             "with a hardware controller (raw volts in, DAC volts out)"
         )
+    if spec.startswith("fmu:"):
+        from twin.app.catalogue import fmu_controller
+
+        fmu_controller(spec, params).close()  # type: ignore[attr-defined]  # a bad unit is refused here
+        return lambda: fmu_controller(spec, params)
     user = user_controller(spec)
     if user is None:
         if registry.simulation_only(spec):

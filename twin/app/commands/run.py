@@ -275,7 +275,7 @@ def _run_on_remote_rig(args: argparse.Namespace, params: Parameters) -> int:
             "--log keeps one session's log: with --sessions other than 1 the server keeps every run (its "
             "job's report, or serve --log)"
         )
-    user = user_controller(args.controller)
+    user = None if args.controller.startswith("fmu:") else user_controller(args.controller)
     paths = check_outputs(
         [("--log", args.log, LOG_SUFFIXES, log_bytes(args.log, args.duration, params))],
         overwrite=args.overwrite,
@@ -284,6 +284,10 @@ def _run_on_remote_rig(args: argparse.Namespace, params: Parameters) -> int:
     many = args.sessions != 1
 
     def make_controller(rig_params: Parameters) -> object:
+        if args.controller.startswith("fmu:"):
+            from twin.app.catalogue import fmu_controller
+
+            return fmu_controller(args.controller, rig_params)
         if user is None:
             return registry.make(args.controller, rig_params)
         return construct(user, args.controller, rig_params)
