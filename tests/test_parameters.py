@@ -243,6 +243,7 @@ INTEGER_FIELDS = (
     "daq.dac_bits",
     "mcu_io.adc_bits",
     "mcu_io.dac_bits",
+    "mcu_io.clock_hz",
     "angle_sensor.counter_bits",
     "angle_sensor.counter_zero_count",
     "angle_sensor.encoder_pulses_per_rev",
@@ -281,13 +282,16 @@ def test_every_number_has_bounds_on_both_sides_and_a_reason() -> None:
 
 @pytest.mark.parametrize("name", INTEGER_FIELDS)
 def test_integer_fields_refuse_fractions_and_take_whole_floats(name: str) -> None:
+    from twin.parameters import declaration
+
+    whole = max(12, int(declaration(name).get("ge") or 0))  # within the field's bounds
     with pytest.raises(ParameterError) as err:
-        Parameters().with_overrides({name: 12.5})
-    assert f"{name} = 12.5" in str(err.value)
+        Parameters().with_overrides({name: whole + 0.5})
+    assert f"{name} = {whole + 0.5}" in str(err.value)
     assert "whole number" in str(err.value)
     group, field_name = name.split(".")
-    value = getattr(getattr(Parameters().with_overrides({name: 12.0}), group), field_name)
-    assert value == 12 and type(value) is int
+    value = getattr(getattr(Parameters().with_overrides({name: float(whole)}), group), field_name)
+    assert value == whole and type(value) is int
 
 
 @pytest.mark.parametrize(
