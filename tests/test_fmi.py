@@ -25,41 +25,58 @@ OUTPUTS = ("time_s", "ball_v", "angle_v", "x_m", "theta_rad", "xdot_m_s", "theta
 LOGGED = ("timem", "datam1", "datam2", "true_x_m", "true_theta_rad", "true_xdot_m_s", "true_thetadot_rad_s")
 
 
-@pytest.fixture(scope="module")
-def unit(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    out = tmp_path_factory.mktemp("fmu") / "BallBeam.fmu"
-    assert main(["export-fmu", "--out", str(out), "--json"]) == 0
+def _export(folder: Path, *extra: str) -> Path:
+    out = folder / "BallBeam.fmu"
+    assert main(["export-fmu", "--out", str(out), "--json", *extra]) == 0
     return out
 
 
+@pytest.fixture(scope="module")
+def unit(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return _export(tmp_path_factory.mktemp("fmu"))
+
+
+@pytest.fixture(scope="module")
+def unit2(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return _export(tmp_path_factory.mktemp("fmu2"), "--fmi", "2")
+
+
 class Driver:
-    """One instance of the unit, stepped by hand as an importer steps it."""
+    """One instance of a unit (FMI 3.0 or 2.0), stepped by hand as an importer steps it."""
 
     def __init__(self, path: Path, name: str = "rig") -> None:
         md = fmpy.read_model_description(str(path))
         self.vr = {v.name: v.valueReference for v in md.modelVariables}
-        self.fmu = FMU3Slave(
-            guid=md.guid,
-            unzipDirectory=fmpy.extract(str(path)),
-            modelIdentifier=md.coSimulation.modelIdentifier,
-            instanceName=name,
-        )
-        self.fmu.instantiate()
+        self.three = md.fmiVersion.startswith("3")
+        if self.three:
+            self.fmu = FMU3Slave(
+                guid=md.guid,
+                unzipDirectory=fmpy.extract(str(path)),
+                modelIdentifier=md.coSimulation.modelIdentifier,
+                instanceName=name,
+            )
+            self.fmu.instantiate()
+        else:
+            self.fmu = fmpy.instantiate_fmu(fmpy.extract(str(path)), md, fmi_type="CoSimulation")
+        self.get = self.fmu.getFloat64 if self.three else self.fmu.getReal
+        self.set = self.fmu.setFloat64 if self.three else self.fmu.setReal
 
     def start(self, x0_m: float, theta0_rad: float, seed: int, **floats: float) -> None:
         f = self.fmu
+        if not self.three:
+            f.setupExperiment(startTime=0.0)
         f.enterInitializationMode()
         names = ["x0_m", "theta0_rad", *floats]
-        f.setFloat64([self.vr[n] for n in names], [x0_m, theta0_rad, *floats.values()])
-        f.setInt64([self.vr["seed"]], [seed])
+        self.set([self.vr[n] for n in names], [x0_m, theta0_rad, *floats.values()])
+        (f.setInt64 if self.three else f.setInteger)([self.vr["seed"]], [seed])
         f.exitInitializationMode()
         self.t = 0.0
 
     def outputs(self) -> list[float]:
-        return list(self.fmu.getFloat64([self.vr[n] for n in OUTPUTS]))
+        return list(self.get([self.vr[n] for n in OUTPUTS]))
 
     def step(self, dac_v: float, h: float = 0.02) -> None:
-        self.fmu.setFloat64([self.vr["dac_v"]], [dac_v])
+        self.set([self.vr["dac_v"]], [dac_v])
         self.fmu.doStep(self.t, h)
         self.t += h
 
@@ -102,6 +119,17 @@ def test_the_unit_validates_and_replays_an_in_process_run_bit_for_bit(unit: Path
     _same(d.replay(log), log)
     d.fmu.terminate()
     d.fmu.freeInstance()
+
+
+def test_the_fmi_2_unit_validates_and_replays_the_run_bit_for_bit(unit2: Path) -> None:
+    """``--fmi 2`` (pythonfmu): the same rig behind FMI 2.0's calls; its description validates."""
+    from fmpy.validation import validate_fmu
+
+    assert validate_fmu(str(unit2)) == [] and fmpy.read_model_description(str(unit2)).fmiVersion == "2.0"
+    log = _reference()
+    d = Driver(unit2)
+    d.start(0.14, -0.2, 0)
+    _same(d.replay(log), log)
 
 
 def test_two_instances_in_one_process_keep_their_own_state(unit: Path) -> None:
@@ -174,7 +202,7 @@ def test_a_controller_stepping_the_unit_runs_what_ballbeam_run_runs(unit: Path) 
 @pytest.mark.quick
 def test_the_description_names_every_parameter_with_its_unit_source_and_a_calibrations_uncertainty() -> None:
     from twin.app.commands import export_fmu
-    from twin.fmi import ballbeam_fmu
+    from twin.fmi import ballbeam_fmu, ballbeam_fmu2, unit
     from twin.fmi.export import rig_description
     from twin.parameters import declaration
 
@@ -183,7 +211,8 @@ def test_the_description_names_every_parameter_with_its_unit_source_and_a_calibr
     resistance = d["declared"]["motor.resistance_ohm"]
     assert resistance["unit"] == declaration("motor.resistance_ohm")["unit"]
     assert resistance["source"].startswith("calibrated (standard uncertainty 0.125); ")
-    assert [name for name, *_ in ballbeam_fmu.OUTPUTS][:3] == ["time_s", "ball_v", "angle_v"]
+    assert [name for name, *_ in unit.OUTPUTS][:3] == ["time_s", "ball_v", "angle_v"]
+    assert ballbeam_fmu.BallBeam.__name__ == ballbeam_fmu2.BallBeam.__name__ == "BallBeam"
     assert "FMI 3.0" in export_fmu.HELP
 
 
@@ -299,3 +328,22 @@ def test_the_controller_process_frames_and_names_are_the_documented_ones(tmp_pat
     junk.write_bytes(b"not a zip")
     with pytest.raises(FmuError, match="junk.fmu: "):
         FmuController(junk)
+
+
+@pytest.mark.quick
+def test_an_export_from_a_calibration_starts_at_its_values_with_their_uncertainties(tmp_path: Path) -> None:
+    import zipfile
+
+    cal = tmp_path / "cal"
+    cal.mkdir()
+    Parameters().with_overrides({"motor.resistance_ohm": 9.1}).save(cal / "params.toml")
+    (cal / "calibration.json").write_text(json.dumps({"params": {"motor.resistance_ohm": {"value": 9.1, "sd": 0.05}}}))
+    out = tmp_path / "MyRig.fmu"
+    assert main(["export-fmu", "--out", str(out), "--calibration", str(cal)]) == 0
+    with zipfile.ZipFile(out) as z:
+        rig = json.loads(z.read("resources/rig.json"))
+    assert rig["values"]["motor"]["resistance_ohm"] == 9.1 and rig["source"].startswith("--calibration")
+    assert rig["declared"]["motor.resistance_ohm"]["source"].startswith("calibrated (standard uncertainty 0.05); ")
+    starts = {v.name: v.start for v in fmpy.read_model_description(str(out)).modelVariables}
+    assert float(starts["motor.resistance_ohm"]) == 9.1
+    assert main(["export-fmu", "--out", str(out), "--calibration", str(cal)]) == 2  # kept: no --overwrite

@@ -1,6 +1,7 @@
-"""``export_fmu``: the rig, with a set of parameters, as an FMI 3.0 co-simulation unit (``BallBeam.fmu``).
+"""``export_fmu``: the rig, with a set of parameters, as an FMI 3.0 or 2.0 co-simulation unit (``BallBeam.fmu``).
 
-The unit is ``ballbeam_fmu.py`` packed by pythonfmu3 with ``resources/rig.json``: every parameter's value (the
+The unit is ``ballbeam_fmu.py`` packed by pythonfmu3 (FMI 3.0; ``ballbeam_fmu2.py`` by pythonfmu for FMI 2.0)
+with ``resources/rig.json``: every parameter's value (the
 curves included), each one's unit and source, where the values come from, the exporting version and, for a
 calibration, each fitted value's standard uncertainty. Written atomically; an existing file is kept unless
 ``overwrite``.
@@ -17,9 +18,10 @@ from typing import Any
 
 from twin.parameters import _GROUPS, Parameters
 
-__all__ = ["MODEL", "SCRIPT", "export_fmu", "rig_description"]
+__all__ = ["MODEL", "SCRIPT", "SCRIPTS", "export_fmu", "rig_description"]
 
 SCRIPT = Path(__file__).with_name("ballbeam_fmu.py")
+SCRIPTS = {3: SCRIPT, 2: Path(__file__).with_name("ballbeam_fmu2.py")}
 MODEL = "BallBeam"  # the unit's model identifier: the slave's class
 
 
@@ -40,11 +42,16 @@ def rig_description(
     return {"version": version, "source": source, "values": params.to_dict(), "declared": declared}
 
 
-def export_fmu(out: Path, description: dict[str, Any], *, overwrite: bool = False) -> Path:
-    """Build the unit into ``out`` (atomically)."""
-    from pythonfmu3 import FmuBuilder
-
+def export_fmu(
+    out: Path, description: dict[str, Any], *, overwrite: bool = False, fmi_version: int = 3
+) -> Path:
+    """Build the unit into ``out`` (atomically), FMI ``fmi_version`` 3 or 2."""
     from twin.outputs import write_atomic
+
+    if fmi_version == 3:
+        from pythonfmu3 import FmuBuilder
+    else:
+        from pythonfmu import FmuBuilder
 
     with tempfile.TemporaryDirectory(prefix="ballbeam_fmu_") as tmp:
         rig = Path(tmp) / "rig.json"
@@ -52,9 +59,9 @@ def export_fmu(out: Path, description: dict[str, Any], *, overwrite: bool = Fals
         # what the unit's Python needs (``pythonfmu3 deploy -f BallBeam.fmu`` installs it)
         requirements = Path(tmp) / "requirements.txt"
         requirements.write_text(f"ballbeam-twin=={description['version']}\n")
-        script = Path(tmp) / "script" / SCRIPT.name
+        script = Path(tmp) / "script" / SCRIPTS[fmi_version].name  # the module's name: one per version
         script.parent.mkdir()
-        shutil.copy2(SCRIPT, script)
+        shutil.copy2(SCRIPTS[fmi_version], script)
         built = FmuBuilder.build_FMU(script, dest=Path(tmp) / "out", project_files={rig, requirements})
         write_atomic(out, built.read_bytes(), overwrite=overwrite)
     return out

@@ -1,4 +1,4 @@
-"""``ballbeam export-fmu``: the rig as an FMI 3.0 co-simulation unit (twin.fmi)."""
+"""``ballbeam export-fmu``: the rig as an FMI 3.0 (or 2.0) co-simulation unit (twin.fmi)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from pathlib import Path
 
 from twin.app.commands.common import add_params_options, inputs, load_params, package_version, params_source
 
-HELP = "export the rig as an FMI 3.0 co-simulation unit (.fmu) for Simulink, OpenModelica, FMPy"
+HELP = "export the rig as an FMI 3.0 (or 2.0) co-simulation unit (.fmu) for Simulink, OpenModelica, FMPy"
 
 # The unit is about 1 MB (pythonfmu3's libraries for two platforms and the scripts).
 _FMU_BYTES = 1 << 20
@@ -23,6 +23,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="DIR",
         help="a calibration's values (calibrate --out): the unit's parameters start at them, their standard "
         "uncertainties in the descriptions",
+    )
+    parser.add_argument(
+        "--fmi",
+        type=int,
+        choices=(3, 2),
+        default=3,
+        help="the FMI version: 3 (default; pythonfmu3) or 2 (pythonfmu: most importers in labs read 2.0)",
     )
     add_params_options(parser)
     parser.add_argument("--json", action="store_true", help="print what was written as JSON")
@@ -44,9 +51,10 @@ def run(args: argparse.Namespace) -> int:
         params = load_params(args)
         source = params_source(args) or "the defaults (thesis values)"
     description = rig_description(params, version=package_version(), source=source, uncertainty=uncertainty)
-    out = export_fmu(paths["--out"], description, overwrite=args.overwrite)
+    out = export_fmu(paths["--out"], description, overwrite=args.overwrite, fmi_version=args.fmi)
     summary = {
         "fmu": str(out),
+        "fmi": f"{args.fmi}.0",
         "bytes": out.stat().st_size,
         "version": description["version"],
         "source": source,
