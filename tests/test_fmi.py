@@ -337,13 +337,17 @@ def test_an_export_from_a_calibration_starts_at_its_values_with_their_uncertaint
     cal = tmp_path / "cal"
     cal.mkdir()
     Parameters().with_overrides({"motor.resistance_ohm": 9.1}).save(cal / "params.toml")
-    (cal / "calibration.json").write_text(json.dumps({"params": {"motor.resistance_ohm": {"value": 9.1, "sd": 0.05}}}))
+    (cal / "calibration.json").write_text(
+        json.dumps({"params": {"motor.resistance_ohm": {"value": 9.1, "sd": 0.05}}})
+    )
     out = tmp_path / "MyRig.fmu"
     assert main(["export-fmu", "--out", str(out), "--calibration", str(cal)]) == 0
     with zipfile.ZipFile(out) as z:
         rig = json.loads(z.read("resources/rig.json"))
     assert rig["values"]["motor"]["resistance_ohm"] == 9.1 and rig["source"].startswith("--calibration")
-    assert rig["declared"]["motor.resistance_ohm"]["source"].startswith("calibrated (standard uncertainty 0.05); ")
+    assert rig["declared"]["motor.resistance_ohm"]["source"].startswith(
+        "calibrated (standard uncertainty 0.05); "
+    )
     starts = {v.name: v.start for v in fmpy.read_model_description(str(out)).modelVariables}
     assert float(starts["motor.resistance_ohm"]) == 9.1
     assert main(["export-fmu", "--out", str(out), "--calibration", str(cal)]) == 2  # kept: no --overwrite
