@@ -4,6 +4,7 @@
                             [--skip-calibration] [--skip-view] [--view-seconds 60] [--skip-wire] [--only-wire]
                             [--skip-vector-env] [--only-vector-env] [--skip-sweep-command] [--only-sweep-command]
                             [--skip-batched-laws] [--only-batched-laws] [--skip-firmware] [--only-firmware]
+                            [--skip-fmi] [--only-fmi]
 
 One run measures, on the same work (a 10 s episode from x0 = 0.2 m, θ0 = 0.3 rad, noise on, seed 0):
 
@@ -38,6 +39,10 @@ One run measures, on the same work (a 10 s episode from x0 = 0.2 m, θ0 = 0.3 ra
   (``--controller avr:…``) over the same episode: wall time against the episode's simulated time (the real-time
   factor; target ≥ 5×) and against appendix-sf in process (the same law in Python), interleaved, the best of
   ``--repeats``;
+- (j) FMI: the exported unit (``ballbeam export-fmu``) stepped from FMPy over the same episode with the commands
+  the in-process appendix-sf run wrote (the same trajectory, bit for bit), against that run; and
+  examples/fmu's controller unit (``--controller fmu:…``, its own process) against appendix-sf in process;
+  interleaved, the best of ``--repeats`` (at most 5); the unit's size;
 - view: the live view's tick rate at speed 1.0 over the given wall time (target 50 Hz ± 1 %) and its CPU
   time per tick, with a client attached (a websocket speaking viser's protocol, draining every frame).
 
@@ -626,6 +631,64 @@ def bench_firmware(repeats: int) -> dict[str, float]:
     }
 
 
+def bench_fmi(repeats: int) -> dict[str, float]:
+    """(j): the rig as an FMU and a controller FMU, against the engine in process."""
+    import subprocess
+    import sys
+    import tempfile
+
+    import fmpy
+    from fmpy.fmi3 import FMU3Slave
+
+    from twin.app.catalogue import build
+
+    root = Path(__file__).resolve().parents[1]
+    subprocess.run(
+        ["make", "-s", "-C", str(root / "examples" / "fmu"), f"PYTHON={sys.executable}"], check=True
+    )
+    controller_unit = f"fmu:{root / 'examples' / 'fmu' / 'BbStateFeedback.fmu'}"
+    log = _episode("appendix-sf").log
+    with tempfile.TemporaryDirectory() as tmp:
+        unit = Path(tmp) / "BallBeam.fmu"
+        subprocess.run([sys.executable, "-m", "twin.app.cli", "export-fmu", "--out", str(unit)], check=True)
+        md = fmpy.read_model_description(str(unit))
+        vr = {v.name: v.valueReference for v in md.modelVariables}
+        unzipped = fmpy.extract(str(unit))
+
+        def rig_unit() -> None:
+            fmu = FMU3Slave(
+                guid=md.guid, unzipDirectory=unzipped, modelIdentifier="BallBeam", instanceName="b"
+            )
+            fmu.instantiate()
+            fmu.enterInitializationMode()
+            fmu.setFloat64([vr["x0_m"], vr["theta0_rad"]], [X0_M, THETA0_RAD])
+            fmu.exitInitializationMode()
+            for k, command in enumerate(log.aout[:-1]):
+                fmu.setFloat64([vr["dac_v"]], [float(command)])
+                fmu.doStep(0.02 * k, 0.02)
+            fmu.terminate()
+            fmu.freeInstance()
+
+        def controller() -> RunResult:
+            made = build(controller_unit, Parameters())
+            return run_closed_loop(made, x0_m=X0_M, theta0_rad=THETA0_RAD, duration_s=DURATION_S, seed=0)
+
+        best = {"in_process": np.inf, "rig_unit": np.inf, "controller_unit": np.inf}
+        for _ in range(repeats):
+            best["in_process"] = min(best["in_process"], _timed(lambda: _episode("appendix-sf"))[0])
+            best["rig_unit"] = min(best["rig_unit"], _timed(rig_unit)[0])
+            best["controller_unit"] = min(best["controller_unit"], _timed(controller)[0])
+        size = unit.stat().st_size
+    return {
+        "rig_unit_bytes": float(size),
+        "in_process_s": best["in_process"],
+        "rig_unit_s": best["rig_unit"],
+        "rig_unit_over_in_process": best["rig_unit"] / best["in_process"],
+        "controller_unit_s": best["controller_unit"],
+        "controller_unit_over_in_process": best["controller_unit"] / best["in_process"],
+    }
+
+
 def ratios(results: dict[str, Any]) -> dict[str, float]:
     """(b)/(a), (c)/(a, 2 threads), (d)/(b) and (d)/(c per episode), wall time (CPU time where noted)."""
     episode = results["episodes"]["appendix-sf"]
@@ -654,6 +717,10 @@ def ratios(results: dict[str, Any]) -> dict[str, float]:
     vector = results.get("vector_env")
     if vector is not None:
         out["f_vector_env_over_batch_engine"] = vector["vector_env_over_batch_engine"]
+    fmi = results.get("fmi")
+    if fmi is not None:
+        out["j_rig_unit_over_in_process"] = fmi["rig_unit_over_in_process"]
+        out["j_controller_unit_over_in_process"] = fmi["controller_unit_over_in_process"]
     target = results.get("firmware")
     if target is not None:
         out["i_firmware_real_time_factor"] = target["real_time_factor"]
@@ -683,33 +750,29 @@ def main() -> None:
     parser.add_argument("--skip-batched-laws", action="store_true")
     parser.add_argument("--only-batched-laws", action="store_true", help="measure (h) only")
     parser.add_argument("--skip-firmware", action="store_true")
+    parser.add_argument("--skip-fmi", action="store_true")
+    parser.add_argument("--only-fmi", action="store_true", help="measure (j) only")
     parser.add_argument("--only-firmware", action="store_true", help="measure (i) only")
     parser.add_argument("--batch-side", type=int, default=41, help="the batch grid's points per side")
     args = parser.parse_args()
-    if args.only_wire:
-        only = {"wire": bench_wire(max(1, args.repeats))}
-        print(
-            json.dumps(only)
-            if args.json
-            else "\n".join(f"{k:40s} {v:12.4f}" for k, v in only["wire"].items())
-        )
-        return
-    if args.only_sweep_command:
-        got = bench_sweep_command(args.batch_side)
-        print(json.dumps(got) if args.json else "\n".join(f"{k:40s} {v:12.4f}" for k, v in got.items()))
-        return
-    if args.only_batched_laws:
-        got = bench_batched_laws()
-        print(json.dumps(got) if args.json else "\n".join(f"{k:40s} {v:12.4f}" for k, v in got.items()))
-        return
-    if args.only_firmware:
-        got = bench_firmware(max(1, min(args.repeats, 5)))
-        print(json.dumps(got) if args.json else "\n".join(f"{k:40s} {v:12.4f}" for k, v in got.items()))
-        return
-    if args.only_vector_env:
-        got = bench_vector_env()
-        print(json.dumps(got) if args.json else "\n".join(f"{k:40s} {v:12.4f}" for k, v in got.items()))
-        return
+    # One measurement alone: (option, what it runs); the wire's JSON keeps its section's name.
+    few = max(1, min(args.repeats, 5))
+    alone: dict[str, Callable[[], dict[str, float]]] = {
+        "only_wire": lambda: bench_wire(max(1, args.repeats)),
+        "only_sweep_command": lambda: bench_sweep_command(args.batch_side),
+        "only_batched_laws": bench_batched_laws,
+        "only_fmi": lambda: bench_fmi(few),
+        "only_firmware": lambda: bench_firmware(few),
+        "only_vector_env": bench_vector_env,
+    }
+    for option, measure in alone.items():
+        if getattr(args, option):
+            got = measure()
+            if args.json:
+                print(json.dumps({"wire": got} if option == "only_wire" else got))
+            else:
+                print("\n".join(f"{k:40s} {v:12.4f}" for k, v in got.items()))
+            return
     episodes = {name: bench_episode(name, max(1, args.repeats)) for name in EPISODES}
     results: dict[str, Any] = {"physics": bench_physics(), "episodes": episodes}
     if not args.skip_batch:
@@ -730,6 +793,8 @@ def main() -> None:
         results["batched_laws"] = bench_batched_laws()
     if not args.skip_firmware:
         results["firmware"] = bench_firmware(max(1, min(args.repeats, 5)))
+    if not args.skip_fmi:
+        results["fmi"] = bench_fmi(max(1, min(args.repeats, 5)))
     results["ratios"] = ratios(results)
     if args.json:
         print(json.dumps(results))
