@@ -28,6 +28,7 @@ __all__ = [
     "STATE_CRASHED",
     "STATE_DONE",
     "STATE_ERROR",
+    "STATE_SLEEPING",
     "STATE_STACK_OVERFLOW",
     "AvrCore",
     "AvrError",
@@ -45,6 +46,7 @@ __all__ = [
 SOURCE = Path(__file__).with_name("cosim.c")
 # simavr's cpu states (sim_avr.h): the firmware stopped (asleep with interrupts off), or crashed; and the
 # harness's own: the stack pointer went below the static data.
+STATE_SLEEPING = 3  # asleep until an interrupt: simavr runs the clock ahead to the next timer event
 STATE_DONE = 6
 STATE_CRASHED = 7
 STATE_STACK_OVERFLOW = 100

@@ -27,6 +27,7 @@ from twin.avr.core import (
     STATE_CRASHED,
     STATE_DONE,
     STATE_ERROR,
+    STATE_SLEEPING,
     STATE_STACK_OVERFLOW,
     AvrCore,
     AvrError,
@@ -175,6 +176,7 @@ class AvrFirmware:
         self._words: set[int] = set()
         self._updates = _Updates()
         self._now_cycle = 0
+        self._asleep_until = -1  # the core's cycle when a run ended with it asleep beyond its target
         self.frames, self.conversions = [], []
 
     def pins(
@@ -186,20 +188,26 @@ class AvrFirmware:
         if core is None:
             raise ControllerError(f"{self.name}: pins before boot")
         io = self.io
+        start = self._now_cycle
+        end = self._now_cycle = round((until_s - self._boot_s) * self.clock_hz)
+        if self._asleep_until >= end:
+            # The core sleeps through this step (simavr ran it ahead to the event that wakes it): nothing in it
+            # reads a pin or writes the DAC, so the step needs no request; the pins go with the run that wakes it.
+            self._check_output(until_s)
+            return [(1.0, self._command_v)]
         before = b""
         for channel, signal_v in ((BALL_CHANNEL, ball_signal_v), (ANGLE_CHANNEL, angle_signal_v)):
             request = core.adc_request(channel, io.input_offset_v + io.input_gain_v_per_v * signal_v)
             if request != self._units[channel]:
                 before += request
                 self._units[channel] = request
-        start = self._now_cycle
-        end = self._now_cycle = round((until_s - self._boot_s) * self.clock_hz)
         try:
             report = core.run_until(end, before)
         except AvrError as exc:
             raise ControllerError(f"{self.name}: {exc} at t = {time_s:.4f} s") from None
         self._report = report
         self._check(report, time_s)
+        self._asleep_until = report.cycle if report.state == STATE_SLEEPING else -1
         if self.record:
             self.frames += report.frames
             self.conversions += report.conversions
@@ -338,7 +346,7 @@ class AvrFirmware:
         if time_s - since > NO_OUTPUT_PERIODS * self.period_s:
             r = self._report
             assert r is not None
-            doing = "in an interrupt" if r.in_isr else ("asleep" if r.state == 3 else "running")
+            doing = "in an interrupt" if r.in_isr else ("asleep" if r.state == STATE_SLEEPING else "running")
             what = "never wrote its DAC" if math.isnan(u.last_time_s) else "stopped writing its DAC"
             raise ControllerError(
                 self._where(
