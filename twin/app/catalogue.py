@@ -266,43 +266,43 @@ def fmu_controller(spec: str, params: Parameters) -> Controller:
         raise ParameterError(f"--controller {spec}: {one_line(exc)}") from None
 
 
-def _fmu_catalogue(base: Catalogue, spec: str, params: Parameters) -> WithController:
-    """The registry plus a controller FMU, loaded once here (a bad unit is refused before any run)."""
-    made = fmu_controller(spec, params)
-    made.close()  # type: ignore[attr-defined]
+def _with_one(
+    base: Catalogue,
+    spec: str,
+    make: Callable[[Parameters], Controller | StateLaw | Firmware],
+    description: str,
+    simulation_only: bool,
+) -> WithController:
+    """The registry plus one controller that ``make`` builds (no batched form, no setpoint)."""
 
     def entry() -> CatalogueEntry:
         from twin.engine import CatalogueEntry
 
         return CatalogueEntry(
             name=spec,
-            build=lambda p: fmu_controller(spec, p),
-            description=f"your controller FMU {spec} (its own process)",
-            simulation_only=False,
+            build=make,
+            description=description,
+            simulation_only=simulation_only,
             batched=False,
             setpoint=False,
         )
 
-    return WithController(base, spec, lambda p: fmu_controller(spec, p), entry)
+    return WithController(base, spec, make, entry)
+
+
+def _fmu_catalogue(base: Catalogue, spec: str, params: Parameters) -> WithController:
+    """The registry plus a controller FMU, loaded once here (a bad unit is refused before any run)."""
+    fmu_controller(spec, params).close()  # type: ignore[attr-defined]
+    return _with_one(
+        base, spec, lambda p: fmu_controller(spec, p), f"your controller FMU {spec} (its own process)", False
+    )
 
 
 def _firmware_catalogue(base: Catalogue, spec: str, params: Parameters) -> WithController:
     """The registry plus a firmware image, which is loaded once here (a bad image is refused before any run)."""
     made = firmware(spec, params, check=True)
-
-    def entry() -> CatalogueEntry:
-        from twin.engine import CatalogueEntry
-
-        return CatalogueEntry(
-            name=spec,
-            build=lambda p: firmware(spec, p),
-            description=f"your firmware {spec} on a simulated {made.mcu} at {made.clock_hz / 1e6:g} MHz",
-            simulation_only=True,
-            batched=False,
-            setpoint=False,
-        )
-
-    return WithController(base, spec, lambda p: firmware(spec, p), entry)
+    text = f"your firmware {spec} on a simulated {made.mcu} at {made.clock_hz / 1e6:g} MHz"
+    return _with_one(base, spec, lambda p: firmware(spec, p), text, True)
 
 
 def build(spec: str, params: Parameters, timeout_s: float | None = None) -> Controller | StateLaw | Firmware:

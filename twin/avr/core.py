@@ -16,13 +16,14 @@ import hashlib
 import math
 import os
 import re
-import select
 import shutil
 import struct
 import subprocess
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
+
+from twin.childproc import Child
 
 __all__ = [
     "STATE_CRASHED",
@@ -226,46 +227,38 @@ class AvrCore:
         frequency_hz: int = 16_000_000,
         adc_reference_v: float = 5.0,
     ) -> None:
-        self._proc: subprocess.Popen[bytes] | None = None
-        self._pending = b""  # answers read from the pipe, not yet taken
+        self._child: Child | None = None
         path = Path(elf)
         if not path.is_file():
             raise AvrError(f"{path}: no such firmware image")
         self.path, self.mcu, self.frequency_hz = path, mcu, frequency_hz
         self.adc_reference_v = adc_reference_v
-        self._proc = subprocess.Popen(
-            [
-                str(executable()),
-                str(path),
-                mcu,
-                str(frequency_hz),
-                str(1023 * ADC_SCALE),
-                str(data_end(path)),
-            ],
-            stdin=subprocess.PIPE,
-            stdout=subprocess.PIPE,
-            bufsize=0,  # one write per request: no buffer to flush
-            stderr=subprocess.DEVNULL,  # simavr's own messages: unbounded in a looping fault, never shown
+        argv = [
+            str(executable()),
+            str(path),
+            mcu,
+            str(frequency_hz),
+            str(1023 * ADC_SCALE),
+            str(data_end(path)),
+        ]
+        self._child = Child(
+            argv, name=str(path), what="the co-simulation", error=AvrError, timeout_s=ANSWER_TIMEOUT_S
         )
-        head = self._read(2)
+        head = self._child.read(2)
         if head != b"OK":
-            reason = self._read_line().decode(errors="replace").strip()
+            reason = self._child.line().decode(errors="replace").strip()
             self.close()
             raise AvrError(f"{path}: {reason or 'the co-simulation did not start'}")
-        self.ramend, self.data_end = struct.unpack("<HH", self._read(4))
+        self.ramend, self.data_end = struct.unpack("<HH", self._child.read(4))
+
+    @property
+    def _proc(self) -> subprocess.Popen[bytes] | None:
+        return self._child.proc if self._child is not None else None
 
     def close(self) -> None:
-        proc, self._proc = self._proc, None
-        if proc is None:
-            return
-        try:
-            if proc.poll() is None and proc.stdin is not None:
-                proc.stdin.write(b"Q")
-                proc.stdin.close()
-            proc.wait(timeout=5)
-        except (OSError, subprocess.TimeoutExpired):
-            proc.kill()
-            proc.wait()
+        child, self._child = self._child, None
+        if child is not None:
+            child.close(b"Q")
 
     def __enter__(self) -> AvrCore:
         return self
@@ -291,16 +284,18 @@ class AvrCore:
     def run_until(self, cycle: int, before: bytes = b"") -> RunReport:
         """Run to ``cycle`` (after the requests ``before``, sent in the same write); the report's state says
         whether the firmware goes on."""
-        self._send(before + struct.pack("<cQ", b"R", cycle))
-        head = _REPORT.unpack(self._read(_REPORT.size))
+        child = self._alive()
+        child.write(before + struct.pack("<cQ", b"R", cycle))
+        read = child.read
+        head = _REPORT.unpack(read(_REPORT.size))
         n = head[-1]
-        raw = self._read(n * _FRAME.size)
+        raw = read(n * _FRAME.size)
         frames = tuple(Frame(*_FRAME.unpack_from(raw, i * _FRAME.size)) for i in range(n))
-        (m,) = struct.unpack("<I", self._read(4))
-        raw = self._read(m * _CONVERSION.size)
+        (m,) = struct.unpack("<I", read(4))
+        raw = read(m * _CONVERSION.size)
         conversions = tuple(Conversion(*_CONVERSION.unpack_from(raw, i * _CONVERSION.size)) for i in range(m))
-        conv_dropped, length = struct.unpack("<IH", self._read(6))
-        error = _plain(self._read(length).decode(errors="replace")) if length else ""
+        conv_dropped, length = struct.unpack("<IH", read(6))
+        error = _plain(read(length).decode(errors="replace")) if length else ""
         state, now, pc, low, resets, bad, dropped, awake, isr, entries, isr_max, in_isr, _ = head
         return RunReport(
             state,
@@ -322,42 +317,9 @@ class AvrCore:
         )
 
     def _send(self, data: bytes) -> None:
-        proc = self._alive()
-        assert proc.stdin is not None
-        try:
-            proc.stdin.write(data)
-        except OSError:
-            raise AvrError(f"{self.path}: the co-simulation ended (exit code {proc.poll()})") from None
+        self._alive().write(data)
 
-    def _alive(self) -> subprocess.Popen[bytes]:
-        if self._proc is None:
+    def _alive(self) -> Child:
+        if self._child is None:
             raise AvrError(f"{self.path}: the co-simulation is closed")
-        return self._proc
-
-    def _read(self, n: int) -> bytes:
-        """The next ``n`` bytes of the answers, read in as large pieces as the pipe holds (an answer comes in
-        one write: usually one read)."""
-        while len(self._pending) < n:
-            proc = self._alive()
-            assert proc.stdout is not None
-            fd = proc.stdout.fileno()
-            ready, _, _ = select.select([fd], [], [], ANSWER_TIMEOUT_S)
-            if not ready:
-                proc.kill()
-                raise AvrError(f"{self.path}: the co-simulation did not answer within {ANSWER_TIMEOUT_S:g} s")
-            chunk = os.read(fd, 1 << 16)
-            if not chunk:
-                code = proc.wait()
-                raise AvrError(f"{self.path}: the co-simulation ended (exit code {code})")
-            self._pending += chunk
-        out, self._pending = self._pending[:n], self._pending[n:]
-        return out
-
-    def _read_line(self) -> bytes:
-        out = b""
-        while not out.endswith(b"\n") and len(out) < 1024:
-            try:
-                out += self._read(1)
-            except AvrError:
-                break
-        return out
+        return self._child

@@ -46,23 +46,8 @@ class BallBeam(Fmi3Slave):
         self.register_variable(
             Float64("time", causality=Fmi3Causality.independent, variability=Fmi3Variability.continuous)
         )
-        values = self.rig.values
-        for v in self.rig.variables:
-            extra = {"unit": v.unit} if v.kind == "float" and v.unit not in ("", "-") else {}
-            self.register_variable(
-                _KINDS[v.kind](
-                    v.name,
-                    causality=_CAUSALITY[v.causality],
-                    variability=_VARIABILITY[v.causality],
-                    description=v.description,
-                    getter=lambda name=v.name: values[name],
-                    setter=None
-                    if v.causality == "output"
-                    else lambda x, name=v.name: values.__setitem__(name, x),
-                    **extra,
-                ),
-                nested=False,
-            )
+        for var in self.rig.build_variables(_KINDS, _CAUSALITY, _VARIABILITY, units=True):
+            self.register_variable(var, nested=False)
         self.register_units([Unit(name) for name in self.rig.units()])
 
     def exit_initialization_mode(self) -> None:

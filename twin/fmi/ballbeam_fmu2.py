@@ -33,21 +33,8 @@ class BallBeam(Fmi2Slave):
         self.author = "ballbeam-twin"
         self.description = self.rig.description
         self.version = self.rig.version
-        values = self.rig.values
-        for v in self.rig.variables:
-            self.register_variable(
-                _KINDS[v.kind](
-                    v.name,
-                    causality=_CAUSALITY[v.causality],
-                    variability=_VARIABILITY[v.causality],
-                    description=v.description,
-                    getter=lambda name=v.name: values[name],
-                    setter=None
-                    if v.causality == "output"
-                    else lambda x, name=v.name: values.__setitem__(name, x),
-                ),
-                nested=False,
-            )
+        for var in self.rig.build_variables(_KINDS, _CAUSALITY, _VARIABILITY, units=False):
+            self.register_variable(var, nested=False)
 
     def to_xml(self, model_options: dict[str, str] | None = None) -> Any:
         """pythonfmu's description plus the InitialUnknowns FMI 2.0 requires (§2.2.8): every output, whose

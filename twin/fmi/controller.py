@@ -9,14 +9,11 @@ run fails with a message naming what happened (the engine adds the tick).
 
 from __future__ import annotations
 
-import os
-import select
-import signal
 import struct
-import subprocess
 import sys
 from pathlib import Path
 
+from twin.childproc import Child
 from twin.fmi.host import REQUEST
 from twin.interface import Controller, DaqSample
 from twin.parameters import SoftwareCalibration
@@ -41,8 +38,7 @@ class FmuController(Controller):
         self.path = Path(path)
         self.name = f"fmu:{self.path.name}"
         self.period_s = period_s
-        self._proc: subprocess.Popen[bytes] | None = None
-        self._pending = b""
+        self._child: Child | None = None
         self._t = 0.0
         if not self.path.is_file():
             raise FmuError(f"{self.path}: no such FMU")
@@ -50,15 +46,15 @@ class FmuController(Controller):
 
     def _spawn(self) -> None:
         self.close()
-        self._pending = b""
-        self._proc = subprocess.Popen(
+        self._child = Child(
             [sys.executable, "-m", "twin.fmi.host", str(self.path)],
-            stdin=subprocess.PIPE,
-            stdout=subprocess.PIPE,
-            stderr=subprocess.DEVNULL,
-            bufsize=0,
+            name=self.path.name,
+            what="the unit's process",
+            error=FmuError,
+            timeout_s=ANSWER_TIMEOUT_S,
+            hint=": a crash in its library, or an exit",
         )
-        line = self._line()
+        line = self._child.line()
         if line != b"OK":
             self.close()
             reason = (
@@ -77,70 +73,24 @@ class FmuController(Controller):
         return self._step(sample)
 
     def close(self) -> None:
-        proc, self._proc = self._proc, None
-        if proc is None:
-            return
-        try:
-            if proc.stdin is not None:
-                proc.stdin.close()
-            proc.wait(timeout=1)  # it ends when its input does, unless the unit hangs
-        except (OSError, subprocess.TimeoutExpired):
-            proc.kill()
-            proc.wait()
+        child, self._child = self._child, None
+        if child is not None:
+            child.close(wait_s=1.0)  # it ends when its input does, unless the unit hangs
 
     def __del__(self) -> None:
         self.close()
 
     # --- internals ----------------------------------------------------------------------------------------
     def _step(self, sample: DaqSample) -> float:
-        proc = self._alive()
-        assert proc.stdin is not None
-        try:
-            proc.stdin.write(REQUEST.pack(self._t, self.period_s, sample.ball_v, sample.angle_v))
-        except OSError:
-            raise FmuError(self._ended()) from None
+        if self._child is None:
+            raise FmuError(f"{self.path}: the unit's process is closed")
+        child = self._child
+        child.write(REQUEST.pack(self._t, self.period_s, sample.ball_v, sample.angle_v))
         self._t += self.period_s
-        kind = self._read(1)
+        kind = child.read(1)
         if kind == b"K":
-            (dac_v,) = struct.unpack("<d", self._read(8))
+            (dac_v,) = struct.unpack("<d", child.read(8))
             self.telemetry.u_computed = dac_v
             return float(dac_v)
-        (length,) = struct.unpack("<H", self._read(2))
-        raise FmuError(f"{self.path.name}: {self._read(length).decode(errors='replace')}")
-
-    def _alive(self) -> subprocess.Popen[bytes]:
-        if self._proc is None:
-            raise FmuError(f"{self.path}: the unit's process is closed")
-        return self._proc
-
-    def _ended(self) -> str:
-        proc = self._alive()
-        code = proc.wait()
-        how = f"signal {signal.Signals(-code).name}" if code < 0 else f"exit code {code}"
-        self._proc = None
-        return f"{self.path.name}: the unit's process ended ({how}): a crash in its library, or an exit"
-
-    def _line(self) -> bytes:
-        out = b""
-        while not out.endswith(b"\n") and len(out) < 1024:
-            try:
-                out += self._read(1)
-            except FmuError:
-                break
-        return out.strip()
-
-    def _read(self, n: int) -> bytes:
-        while len(self._pending) < n:
-            proc = self._alive()
-            assert proc.stdout is not None
-            fd = proc.stdout.fileno()
-            ready, _, _ = select.select([fd], [], [], ANSWER_TIMEOUT_S)
-            if not ready:
-                proc.kill()
-                raise FmuError(f"{self.path.name}: the unit did not answer within {ANSWER_TIMEOUT_S:g} s")
-            chunk = os.read(fd, 1 << 16)
-            if not chunk:
-                raise FmuError(self._ended())
-            self._pending += chunk
-        out, self._pending = self._pending[:n], self._pending[n:]
-        return out
+        (length,) = struct.unpack("<H", child.read(2))
+        raise FmuError(f"{self.path.name}: {child.read(length).decode(errors='replace')}")

@@ -8,8 +8,10 @@ in the README, "The twin in Simulink, OpenModelica and FMPy".
 
 from __future__ import annotations
 
+import functools
 import json
 import math
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -98,6 +100,36 @@ class RigUnit:
             f"The ball-and-beam rig's twin, ballbeam-twin {self.version}; parameters: {self.source}. One step of "
             f"{self.period_s} s is one DAQ tick; dac_v is held over the step."
         )
+
+    def build_variables(
+        self,
+        kinds: Mapping[str, Any],
+        causality: Mapping[str, Any],
+        variability: Mapping[str, Any],
+        units: bool,
+    ) -> list[Any]:
+        """Each variable as an FMI library's classes build it: ``kinds`` maps float/int/bool to its classes,
+        ``causality`` and ``variability`` map a causality to its enums; ``units``: floats carry their unit. Reads
+        and writes go to ``values`` (outputs are not written)."""
+        values = self.values
+        out = []
+        for v in self.variables:
+            setter: Callable[[Any], None] | None = None
+            if v.causality != "output":
+                setter = functools.partial(values.__setitem__, v.name)
+            unit = {"unit": v.unit} if units and v.kind == "float" and v.unit not in ("", "-") else {}
+            out.append(
+                kinds[v.kind](
+                    v.name,
+                    causality=causality[v.causality],
+                    variability=variability[v.causality],
+                    description=v.description,
+                    getter=functools.partial(values.__getitem__, v.name),
+                    setter=setter,
+                    **unit,
+                )
+            )
+        return out
 
     def units(self) -> list[str]:
         return sorted({v.unit for v in self.variables if v.unit not in ("", "-")})
