@@ -351,3 +351,28 @@ def test_an_export_from_a_calibration_starts_at_its_values_with_their_uncertaint
     starts = {v.name: v.start for v in fmpy.read_model_description(str(out)).modelVariables}
     assert float(starts["motor.resistance_ohm"]) == 9.1
     assert main(["export-fmu", "--out", str(out), "--calibration", str(cal)]) == 2  # kept: no --overwrite
+
+
+@pytest.mark.quick
+def test_a_helper_process_that_ends_or_hangs_is_told_not_fatal() -> None:
+    """twin.childproc.Child: an exit is named with its code, a signal with its name, silence with the deadline."""
+    import sys
+
+    from twin.childproc import Child
+
+    def child(code: str, timeout_s: float = 5.0) -> Child:
+        return Child(
+            [sys.executable, "-c", code], name="probe", what="the probe", error=OSError, timeout_s=timeout_s
+        )
+
+    with pytest.raises(OSError, match=r"^probe: the probe ended \(exit code 3\)$"):
+        child("import sys; sys.exit(3)").read(1)
+    with pytest.raises(OSError, match=r"\(signal SIGSEGV\)"):
+        child("import os, signal; os.kill(os.getpid(), signal.SIGSEGV)").read(1)
+    quiet = child("import time; time.sleep(30)", timeout_s=0.2)
+    with pytest.raises(OSError, match="did not answer within 0.2 s"):
+        quiet.read(1)
+    quiet.close()
+    echo = child("import sys; sys.stdout.buffer.write(b'OK\\n'); sys.stdout.flush()")
+    assert echo.line() == b"OK"
+    echo.close()
