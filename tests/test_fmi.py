@@ -376,3 +376,35 @@ def test_a_helper_process_that_ends_or_hangs_is_told_not_fatal() -> None:
     echo = child("import sys; sys.stdout.buffer.write(b'OK\\n'); sys.stdout.flush()")
     assert echo.line() == b"OK"
     echo.close()
+
+
+def test_a_controller_unit_drives_a_served_rig_and_the_live_view(
+    controller_unit: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``run --rig udp://…`` with ``fmu:…`` (the served twin: a session over the wire) holds the ball; the live
+    view runs the unit as it runs any controller, the same commands as ``ballbeam run``."""
+    import subprocess
+    import sys
+
+    from twin.app.catalogue import catalogue_for
+    from twin.engine import update_ticks
+    from twin.viewer import LiveTwin
+
+    spec = f"fmu:{controller_unit}"
+    start = ["--x0", "0.14", "--theta0", "-0.2", "--duration", "8", "--seed", "0", "--wait-client", "60"]
+    serve = [sys.executable, "-m", "twin.app.cli", "serve", *start, "--json"]
+    server = subprocess.Popen(serve, stdout=subprocess.PIPE, text=True)
+    assert server.stdout is not None
+    url = json.loads(server.stdout.readline())["serving_on"]
+    assert main(["run", "--rig", url, "--controller", spec, "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert summary["held"] and summary["ended"] == "last sample" and summary["ticks"] == 402
+    server.communicate(timeout=60)
+    p = Parameters()
+    live = LiveTwin(p, catalogue_for(spec, p), spec, seed=0, speed=1.0)
+    for _ in range(update_ticks(2.0, p)):
+        live.tick()
+    reference = run_closed_loop(registry.make("appendix-sf"), x0_m=live.x0_m, theta0_rad=live.theta0_rad,
+                                duration_s=2.0, seed=0)  # fmt: skip
+    assert np.array_equal(live.loop.log().aout, reference.log.aout)
+    live.close()
