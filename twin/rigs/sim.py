@@ -260,6 +260,16 @@ class SimRig(Rig):
         """Time of a physics step index relative to release: after release the physics clock itself."""
         return step * self.params.physics.timestep_s
 
+    def _held_block(self, t0_s: float, t1_s: float) -> PhysicsBlock:
+        """The held rig from ``t0_s`` to ``t1_s`` as a block (two knots: the state does not move)."""
+        x, th = float(self._held[0]), float(self._held[1])
+        return PhysicsBlock(
+            time_s=np.array([t0_s, t1_s]),
+            x_m=np.array([x, x]),
+            theta_rad=np.array([th, th]),
+            on_track=np.array([True, True]),
+        )
+
     def _motor_volts_for(self, command_v: float) -> float:
         if self.ideal_sensors:
             return float(ideal_motor_volts(command_v, self.params))
@@ -330,16 +340,7 @@ class SimRig(Rig):
                 self._ball.advance(pre.time_s, pre.x_m, pre.on_track)
         pieces: list[PhysicsBlock] = []
         if plan.held_end_step is not None:  # the held rig, until release at t = 0 (or the block's end)
-            x, th = float(self._held[0]), float(self._held[1])
-            held_end = self._step_time(plan.held_end_step)
-            pieces.append(
-                PhysicsBlock(
-                    time_s=np.array([t_start, held_end]),
-                    x_m=np.array([x, x]),
-                    theta_rad=np.array([th, th]),
-                    on_track=np.array([True, True]),
-                )
-            )
+            pieces.append(self._held_block(t_start, self._step_time(plan.held_end_step)))
         if plan.observed_steps:
             if law is None:
                 pieces.append(self.physics.advance(self._step_volts(plan.observed_steps)))
@@ -422,13 +423,7 @@ class _FirmwareDrive:
         for step in range(start_step, end_step):
             self._volts(theta)
             self._ball_to(rig._step_time(step + 1), x)
-        t0, t1 = rig._step_time(start_step), rig._step_time(end_step)
-        return PhysicsBlock(
-            time_s=np.array([t0, t1]),
-            x_m=np.array([x, x]),
-            theta_rad=np.array([theta, theta]),
-            on_track=np.array([True, True]),
-        )
+        return rig._held_block(rig._step_time(start_step), rig._step_time(end_step))
 
     def physics(self, n: int) -> PhysicsBlock:
         """``n`` physics steps, the board in the loop at each."""
