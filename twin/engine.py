@@ -42,10 +42,10 @@ __all__ = [
     "CatalogueEntry",
     "ClosedLoop",
     "ControllerError",
-    "Firmware",
     "ENDED_BALL_LOST",
     "ENDED_LAST_SAMPLE",
     "ENDED_TICKS",
+    "Firmware",
     "RunResult",
     "TrueState",
     "block_peak_abs_theta_rad",
@@ -101,9 +101,8 @@ class CatalogueEntry:
     """One named controller as data: what the CLI lists and the live view offers, without building it."""
 
     name: str
-    build: Callable[
-        [Parameters], Controller | StateLaw | Firmware
-    ]  # designs and builds one for the given rig
+    # designs and builds one for the given rig
+    build: Callable[[Parameters], Controller | StateLaw | Firmware]
     description: str  # one line: what it is and where it comes from
     simulation_only: bool  # a law on the true state (chapter 4): it cannot drive the hardware
     batched: bool  # has a vectorized version for the batch engine (twin.rigs.batch)
