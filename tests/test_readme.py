@@ -26,11 +26,23 @@ def test_the_controller_example_holds_the_ball() -> None:
 
 @pytest.mark.quick
 def test_the_parameter_file_example_loads(tmp_path: Path) -> None:
-    (text,) = _blocks("toml")
+    (text,) = [b for b in _blocks("toml") if "[requirements]" not in b]
     path = tmp_path / "rig.toml"
     path.write_text(text)
     params = Parameters.from_file(path)
     assert params.beam.pivot_friction_nm == 1e-3 and params.ball_sensor.curve_volts_v == (-4.62, 0.0, 4.60)
+
+
+def test_the_requirements_example_parses_and_holds_for_the_hardware_start(tmp_path: Path) -> None:
+    """The "Requirements and counterexamples" file as written: each formula parses; appendix-sf from the README's
+    start meets all three."""
+    from twin.app.cli import main
+
+    (text,) = [b for b in _blocks("toml") if "[requirements]" in b]
+    path = tmp_path / "requirements.toml"
+    path.write_text(text)
+    argv = ["run", "--controller", "appendix-sf", "--x0", "0.14", "--theta0", "-0.2", "--duration", "10"]
+    assert main([*argv, "--spec", str(path), "--json"]) == 0
 
 
 def test_the_python_surface_example_runs_the_one_loop() -> None:

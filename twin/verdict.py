@@ -35,6 +35,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "Criteria",
+    "at_rail",
     "Trace",
     "Verdict",
     "ball_step_bound_m",
@@ -148,6 +149,11 @@ class Trace:
     peak_abs_theta_rad: np.ndarray
 
 
+def at_rail(motor_volts_v: np.ndarray, rail_v: float) -> np.ndarray:
+    """Where the motor's volts are at the amplifier's rails (to the volts' rounding): the saturation's ticks."""
+    return np.abs(motor_volts_v) >= rail_v - 1e-9
+
+
 def evaluate(
     trace: Trace,
     *,
@@ -165,7 +171,7 @@ def evaluate(
     released = t >= 0.0
     volts = np.abs(np.asarray(motor_volts_v, dtype=float)[released])
     peak_v = float(volts.max()) if volts.size else 0.0
-    saturated = float(np.mean(volts >= rail_v - 1e-9)) if volts.size else 0.0
+    saturated = float(np.mean(at_rail(volts, rail_v))) if volts.size else 0.0
     peak_theta = float(np.max(peak_abs_theta_rad)) if len(peak_abs_theta_rad) else 0.0
     common = dict(
         ball_lost=ball_lost_time_s is not None,

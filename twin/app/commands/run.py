@@ -71,6 +71,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="with --rig: how long HELLO is repeated before the server counts as gone (default 5)",
     )
     parser.add_argument(
+        "--spec",
+        metavar="FILE",
+        help='requirements in signal temporal logic (TOML [requirements] name = "formula"; README: '
+        "Requirements and counterexamples): each one's robustness in the summary; exit 1 when one is violated",
+    )
+    parser.add_argument(
         "--setpoint",
         type=finite_float(unit="m"),
         metavar="M",
@@ -98,6 +104,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     params = load_params(args)
+    requirements = None
+    if args.spec is not None:
+        from twin.requirements import load_requirements
+
+        if args.rig is not None:
+            raise ValueError("--spec judges the twin's true state: not with --rig (a rig's measured signals)")
+        requirements = load_requirements(args.spec)
     if args.rig is not None:
         return _run_on_remote_rig(args, params)
     if args.sessions != 1 or args.wait_server is not None:
@@ -156,12 +169,23 @@ def run(args: argparse.Namespace) -> int:
     if warning:
         summary["warning"] = warning
         print(f"ballbeam run: warning: {warning}", file=sys.stderr)
+    held = result.verdict.held
+    if requirements is not None:
+        from twin.requirements import robustness, run_signals
+
+        signals = run_signals(result.log, params, args.setpoint or 0.0)
+        margins = robustness(requirements, signals, params.daq.period_s)
+        summary["requirements"] = margins
+        violated = [name for name, value in margins.items() if not value >= 0]
+        held = held and not violated
+        if violated:
+            print(f"ballbeam run: requirements violated: {', '.join(violated)}", file=sys.stderr)
     if args.json:
         print(json.dumps(summary), file=out)
     else:
         for key, value in summary.items():
             print(f"{key:<26} {value}")
-    return 0 if result.verdict.held else 1
+    return 0 if held else 1
 
 
 def _run_in_process(
