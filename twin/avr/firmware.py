@@ -113,7 +113,6 @@ class _Updates:
     timed: int = 0  # frames written within an interrupt's reach (since_entry known)
     missed_periods: int = 0
     last_time_s: float = math.nan
-    distinct_words: int = 0
     constant_since_s: float = math.nan  # when the output last changed
     constant_longest_s: float = 0.0
 
@@ -158,6 +157,7 @@ class AvrFirmware:
         self.frames: list[Frame] = []
         self.conversions: list[Conversion] = []
         self._boot_s = 0.0
+        self._ramend = self._data_end = 0
         self._report: RunReport | None = None
 
     # --- the Firmware protocol -------------------------------------------------------------------------
@@ -169,6 +169,7 @@ class AvrFirmware:
         except AvrError as exc:
             raise ControllerError(f"{self.name}: {exc}") from None
         self._boot_s = time_s
+        self._ramend, self._data_end = self._core.ramend, self._core.data_end  # the figures outlive the core
         self._report = None
         self._units: list[bytes] = [b"", b""]
         self._command_v = self._zero_v  # assumed: the motor off until the firmware's first frame (held then)
@@ -206,7 +207,7 @@ class AvrFirmware:
         except AvrError as exc:
             raise ControllerError(f"{self.name}: {exc} at t = {time_s:.4f} s") from None
         self._report = report
-        self._check(report, time_s)
+        self._check(report)
         self._asleep_until = report.cycle if report.state == STATE_SLEEPING else -1
         if self.record:
             self.frames += report.frames
@@ -246,8 +247,7 @@ class AvrFirmware:
         u, r = self._updates, self._report
         period_cycles = self.period_s * self.clock_hz
         worst = u.cycles_max if u.timed else math.nan
-        room = (r_end := self._core.ramend if self._core else 0) - (self._core.data_end if self._core else 0)
-        high = r_end - r.stack_low_water if r is not None and r.stack_low_water <= r_end else 0
+        high = self._ramend - r.stack_low_water if r is not None and r.stack_low_water <= self._ramend else 0
         total = r.cycle if r is not None else 0
         return {
             "image": str(self.path),
@@ -262,7 +262,8 @@ class AvrFirmware:
             "deadline_margin": 1.0 - worst / period_cycles,
             "missed_periods": u.missed_periods,
             "stack_high_water_bytes": high,
-            "stack_room_bytes": room if self._core and self._core.data_end else math.nan,
+            # the room above the static data (unknown when the image names no end of it)
+            "stack_room_bytes": self._ramend - self._data_end if self._data_end else math.nan,
             "load": r.awake_cycles / total if r is not None and total else math.nan,
             "interrupts": r.isr_entries if r is not None else 0,
             "interrupt_max_cycles": r.isr_max_cycles if r is not None else 0,
@@ -288,14 +289,12 @@ class AvrFirmware:
     def _where(self, what: str, cycle: int) -> str:
         return f"{self.name}: {what} at cycle {cycle} (t = {self._time_s(cycle):.4f} s)"
 
-    def _check(self, r: RunReport, time_s: float) -> None:
+    def _check(self, r: RunReport) -> None:
         if r.state == STATE_STACK_OVERFLOW:
-            core = self._core
-            data_end = core.data_end if core else 0
             raise ControllerError(
                 self._where(
                     f"stack overflow into the static data (the stack pointer reached 0x{r.stack_low_water:04X}, "
-                    f"the data end at 0x{data_end:04X}; pc 0x{r.pc:04X})",
+                    f"the data end at 0x{self._data_end:04X}; pc 0x{r.pc:04X})",
                     r.cycle,
                 )
             )
