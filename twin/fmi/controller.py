@@ -16,7 +16,6 @@ from pathlib import Path
 from twin.childproc import Child
 from twin.fmi.host import REQUEST
 from twin.interface import Controller, DaqSample
-from twin.parameters import SoftwareCalibration
 
 __all__ = ["ANSWER_TIMEOUT_S", "FmuController", "FmuError"]
 
@@ -31,9 +30,7 @@ class FmuError(RuntimeError):
 class FmuController(Controller):
     """The unit at ``path`` stepping once per ``period_s``."""
 
-    def __init__(
-        self, path: str | Path, software: SoftwareCalibration | None = None, period_s: float = 0.02
-    ) -> None:
+    def __init__(self, path: str | Path, period_s: float = 0.02) -> None:
         super().__init__()
         self.path = Path(path)
         self.name = f"fmu:{self.path.name}"
