@@ -39,13 +39,10 @@ def _load(path: str) -> tuple[Any, Any, list[int], int, str]:
             raise ValueError(f"variable {name!r} is an {v.causality}, not an {causality}")
     unit = fmpy.instantiate_fmu(fmpy.extract(path), md, fmi_type="CoSimulation")
     version = md.fmiVersion
-    if version.startswith("3"):
-        unit.enterInitializationMode()
-        unit.exitInitializationMode()
-    else:
-        unit.setupExperiment(startTime=0.0)
-        unit.enterInitializationMode()
-        unit.exitInitializationMode()
+    if not version.startswith("3"):
+        unit.setupExperiment(startTime=0.0)  # FMI 2.0's step before initialization
+    unit.enterInitializationMode()
+    unit.exitInitializationMode()
     refs = [variables[name].valueReference for name in INPUTS]
     return unit, md, refs, variables[OUTPUT].valueReference, version
 
