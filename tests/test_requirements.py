@@ -94,3 +94,51 @@ def test_run_spec_prints_each_robustness_and_fails_a_violated_one(
     assert summary["held"] and summary["requirements"]["kept"] > 0 > summary["requirements"]["tight"]
     assert "requirements violated: tight" in captured.err
     refused(capsys, [*argv, "--spec", str(tmp_path / "missing.toml")], "missing.toml")
+
+
+@pytest.mark.quick
+def test_the_windowed_signals_at_the_last_tick_are_the_verdicts_final_window(run: tuple) -> None:
+    result, s = run
+    v = result.verdict
+    assert s["x_mean_m"][-1] == v.steady_x_m and s["theta_mean_rad"][-1] == v.steady_theta_rad
+    assert s["x_pp_m"][-1] == v.limit_cycle_x_pp_m and s["theta_pp_rad"][-1] == v.limit_cycle_theta_pp_rad
+    assert s["rail_share"][-1] == v.saturated_fraction
+    # at an earlier tick: the ticks within the window before it, by hand
+    t = result.log.true_time_s[result.log.true_time_s >= 0]
+    i = 300
+    window = (t >= t[i] - 3.0) & (np.arange(t.size) <= i)
+    assert s["x_mean_m"][i] == np.mean(s["x_m"][window]) and s["x_pp_m"][i] == np.ptp(s["x_m"][window])
+    assert s["rail_share"][i] == np.mean(s["at_rail"][: i + 1])
+
+
+EXAMPLE = Path(__file__).parents[1] / "docs" / "examples" / "requirements.toml"
+
+
+@pytest.mark.parametrize("controller", ["appendix-sf", "appendix-clp"])
+def test_the_example_requirements_give_the_default_validations_verdicts_run_for_run(controller: str) -> None:
+    """docs/examples/requirements.toml is validate's checks in STL: over every run of the default validation,
+    each run meets the file's held requirements exactly when its verdict held, kept exactly when the ball was
+    kept, saturation exactly when its share of ticks at the rails is within the bound; and the checks pass
+    and fail as without the file."""
+    from twin.app.validate import SPEC_CHECKS, ValidationCriteria, validate
+    from twin.requirements import load_spec
+
+    spec = load_spec(EXAMPLE, SPEC_CHECKS)
+    report = validate(controller, Parameters(), spec=spec, workers=2)
+    held_names = spec.checks["nominal"]
+    runs = [
+        r for check in report.checks if check.name.startswith(("nominal", "sensitivity")) for r in check.rows
+    ]
+    assert len(runs) == 18 + 28
+    for r in runs:
+        margins = r["requirements"]
+        assert all(margins[n] >= 0 for n in held_names) == r["held"], r
+        assert (margins["saturation"] >= 0) == (r["saturated_fraction"] <= 0.2), r
+    assert report.region is not None and len(report.region.points) == 255
+    for p in report.region.points:
+        assert (p["requirements"]["kept"] >= 0) == (not p["ball_lost"]), p
+    lost = sum(p["ball_lost"] for p in report.region.points)
+    assert 0 < lost < 255  # both classes occur: the comparison can fail
+    plain = validate(controller, Parameters(), ValidationCriteria(), workers=2)
+    assert [(c.name, c.passed) for c in report.checks] == [(c.name, c.passed) for c in plain.checks]
+    assert report.to_json()["spec"] == str(EXAMPLE)

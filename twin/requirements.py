@@ -13,15 +13,22 @@ what the software measured (the block's readings through the rig software's cali
 motor and DAC volts, whether the motor is at its rails and whether the ball is lost. Time in a formula is seconds
 from the first released tick; the 1 kHz physics between ticks is not seen by the monitor (a requirement on an
 excursion shorter than a period is checked at the ticks only). The robustness is the formula's at time 0.
+
+Five signals are statistics over the trailing window (``WINDOWED`` and ``rail_share``): at the last tick they
+are the verdict's final-window mean, peak-to-peak and saturated share. On a finite run ``eventually always P``
+is P at the last tick (its robustness too), so the verdict's checks are formulas
+(docs/examples/requirements.toml); a run shorter than the window has windows of what there is.
 """
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
+import re
 import tomllib
 import warnings
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -34,7 +41,19 @@ if TYPE_CHECKING:
     from twin.log import RunLog
     from twin.parameters import Parameters
 
-__all__ = ["SIGNALS", "Requirement", "load_requirements", "parse_requirements", "robustness", "run_signals"]
+__all__ = [
+    "SIGNALS",
+    "Requirement",
+    "Spec",
+    "load_requirements",
+    "load_spec",
+    "margins",
+    "named",
+    "parse_requirements",
+    "robustness",
+    "run_signals",
+    "violated",
+]
 
 # The signals a formula may name: unit and meaning.
 SIGNALS: Mapping[str, tuple[str, str]] = {
@@ -49,6 +68,20 @@ SIGNALS: Mapping[str, tuple[str, str]] = {
     "dac_v": ("V", "the DAC command"),
     "at_rail": ("0/1", "1 while the motor is at the amplifier's rails"),
     "lost": ("0/1", "1 from the tick the ball is lost on"),
+    # Over the trailing window (the verdict's final window, twin.verdict.Criteria.window_s): at the last tick
+    # these are the verdict's steady state, limit cycle and saturated share, bit for bit.
+    "x_mean_m": ("m", "mean of x_m over the trailing window (the ticks within window_s before)"),
+    "theta_mean_rad": ("rad", "mean of theta_rad over the trailing window"),
+    "x_pp_m": ("m", "peak-to-peak of x_m over the trailing window"),
+    "theta_pp_rad": ("rad", "peak-to-peak of theta_rad over the trailing window"),
+    "rail_share": ("0…1", "share of the ticks since release with the motor at its rails"),
+}
+# The signals computed from the others over the trailing window, only when a formula names them.
+WINDOWED: dict[str, tuple[str, Callable[[np.ndarray], Any]]] = {
+    "x_mean_m": ("x_m", np.mean),
+    "theta_mean_rad": ("theta_rad", np.mean),
+    "x_pp_m": ("x_m", np.ptp),
+    "theta_pp_rad": ("theta_rad", np.ptp),
 }
 MAX_REQUIREMENTS = 100
 MAX_FORMULA_CHARS = 2000
@@ -85,14 +118,57 @@ def parse_requirements(data: Any, where: str) -> tuple[Requirement, ...]:
     return tuple(out)
 
 
-def load_requirements(path: str | Path) -> tuple[Requirement, ...]:
-    """The requirements of a TOML file (see the module's doc)."""
+@dataclass(frozen=True)
+class Spec:
+    """A requirements file: its requirements and, from its optional ``[validate]`` table, which of them each
+    of validate's checks asks of its runs (``check = ["name", …]``; a check not listed asks all)."""
+
+    requirements: tuple[Requirement, ...]
+    checks: Mapping[str, tuple[str, ...]]
+    source: str
+
+    def asked(self, check: str) -> tuple[Requirement, ...]:
+        names = self.checks.get(check)
+        return self.requirements if names is None else tuple(r for r in self.requirements if r.name in names)
+
+
+def load_spec(path: str | Path, checks: tuple[str, ...] = ()) -> Spec:
+    """A requirements file (see the module's doc); ``checks``: the names its ``[validate]`` table may use."""
     raw = read_input_file(path, "requirements file", "a few kB")
     try:
         data = tomllib.loads(raw.decode("utf-8-sig"))
     except (UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
         raise ParameterError(f"{path}: not a TOML requirements file: {exc}") from None
-    return parse_requirements(data, str(path))
+    requirements = parse_requirements(data, str(path))
+    extra = sorted(set(data) - {"requirements", "validate"})
+    if extra:
+        raise ParameterError(
+            f"{path}: unknown table {extra[0]!r}; a requirements file has [requirements], [validate]"
+        )
+    names = {r.name for r in requirements}
+    table = data.get("validate", {})
+    if not isinstance(table, dict):
+        raise ParameterError(f'{path}: [validate] is a table of check = ["requirement", …]')
+    asked: dict[str, tuple[str, ...]] = {}
+    for check, listed in table.items():
+        if checks and check not in checks:
+            raise ParameterError(
+                f"{path}: [validate] {check!r} is not a check; the checks: {', '.join(checks)}"
+            )
+        if not isinstance(listed, list) or not all(isinstance(n, str) for n in listed):
+            raise ParameterError(f"{path}: [validate] {check} = {listed!r}: a list of requirement names")
+        unknown = [n for n in listed if n not in names]
+        if unknown:
+            raise ParameterError(
+                f"{path}: [validate] {check}: no requirement {unknown[0]!r} in [requirements]"
+            )
+        asked[check] = tuple(listed)
+    return Spec(requirements, asked, str(path))
+
+
+def load_requirements(path: str | Path) -> tuple[Requirement, ...]:
+    """The requirements of a TOML file (see the module's doc)."""
+    return load_spec(path).requirements
 
 
 def _say(exc: BaseException) -> str:
@@ -104,8 +180,14 @@ def _say(exc: BaseException) -> str:
 
 
 def _monitor(requirement: Requirement, period_s: float) -> Any:
-    """rtamt's discrete-time monitor of one formula over ``SIGNALS`` sampled every ``period_s``. A name that is
-    not a signal is rtamt's ``KeyError`` (after a warning on the root logger, which is kept quiet here)."""
+    """rtamt's discrete-time monitor of one formula over ``SIGNALS`` sampled every ``period_s`` (parsed once per
+    process: a parse costs ~90 ms, an evaluation of 750 ticks ~2 ms, and rtamt's offline evaluation keeps no
+    state between runs). A name that is not a signal is rtamt's ``KeyError``."""
+    return _parsed(requirement.formula, float(period_s))
+
+
+@functools.lru_cache(maxsize=256)
+def _parsed(formula: str, period_s: float) -> Any:
     with warnings.catch_warnings():  # rtamt's generated parser imports typing.io (deprecated)
         warnings.simplefilter("ignore", DeprecationWarning)
         import rtamt  # type: ignore[import-untyped]
@@ -114,9 +196,9 @@ def _monitor(requirement: Requirement, period_s: float) -> Any:
     for name in SIGNALS:
         spec.declare_var(name, "float")
     spec.set_sampling_period(period_s, "s", 0.1)
-    spec.spec = requirement.formula
+    spec.spec = formula
     previous = logging.root.manager.disable
-    logging.disable(logging.WARNING)
+    logging.disable(logging.WARNING)  # rtamt warns on the root logger before its KeyError
     try:
         spec.parse()
     finally:
@@ -124,30 +206,52 @@ def _monitor(requirement: Requirement, period_s: float) -> Any:
     return spec
 
 
-def run_signals(log: RunLog, params: Parameters, setpoint_m: float = 0.0) -> dict[str, np.ndarray]:
-    """The signals of a run the twin recorded (its log has the true state), at its released ticks."""
-    from twin.converters import ball_position_m, beam_angle_rad
-    from twin.verdict import at_rail
+def named(requirements: tuple[Requirement, ...]) -> set[str]:
+    """The signals the formulas name."""
+    words = set(re.findall(r"[A-Za-z_][A-Za-z0-9_]*", " ".join(r.formula for r in requirements)))
+    return words & set(SIGNALS)
 
-    t = np.asarray(log.true_time_s, dtype=float)
-    released = t >= 0.0
+
+def run_signals(
+    log: RunLog, params: Parameters, setpoint_m: float = 0.0, names: set[str] | None = None
+) -> dict[str, np.ndarray]:
+    """The signals of a run the twin recorded (its log has the true state), at its released ticks. The
+    trailing-window signals (``WINDOWED``) are computed only when in ``names`` (None: all); the others are
+    zeros then (a formula that names them gets them)."""
+    from twin.converters import ball_position_m, beam_angle_rad
+    from twin.verdict import Criteria, at_rail
+
+    t_all = np.asarray(log.true_time_s, dtype=float)
+    released = t_all >= 0.0
+    t = t_all[released]
     sw = params.software
     motor = np.asarray(log.motor_volts_v, dtype=float)[released]
     lost = np.asarray(log.ball_lost, dtype=bool)[released]
-    return {
-        "time": t[released] - t[released][0] if released.any() else t[released],
+    rails = at_rail(motor, params.amplifier.rail_v).astype(float)
+    out = {
+        "time": t - t[0] if t.size else t,
         "x_m": np.asarray(log.true_x_m, dtype=float)[released],
         "xdot_m_s": np.asarray(log.true_xdot_m_s, dtype=float)[released],
         "theta_rad": np.asarray(log.true_theta_rad, dtype=float)[released],
         "thetadot_rad_s": np.asarray(log.true_thetadot_rad_s, dtype=float)[released],
         "x_meas_m": np.asarray(ball_position_m(np.asarray(log.datam1, dtype=float), sw))[released],
         "theta_meas_rad": np.asarray(beam_angle_rad(np.asarray(log.datam2, dtype=float), sw))[released],
-        "setpoint_m": np.full(int(released.sum()), float(setpoint_m)),
+        "setpoint_m": np.full(t.size, float(setpoint_m)),
         "motor_v": motor,
         "dac_v": np.asarray(log.aout, dtype=float)[released],
-        "at_rail": at_rail(motor, params.amplifier.rail_v).astype(float),
+        "at_rail": rails,
         "lost": np.maximum.accumulate(lost).astype(float),
+        "rail_share": np.cumsum(rails) / np.arange(1, t.size + 1),
     }
+    # The window's first tick for each tick, by the verdict's own test (t ≥ t_i − window_s).
+    first = np.searchsorted(t, t - Criteria().window_s, side="left")
+    for name, (source, statistic) in WINDOWED.items():
+        if names is not None and name not in names:
+            out[name] = np.zeros(t.size)
+            continue
+        x = out[source]
+        out[name] = np.array([statistic(x[j : i + 1]) for i, j in enumerate(first.tolist())], dtype=float)
+    return out
 
 
 def robustness(
@@ -165,3 +269,16 @@ def robustness(
         values = _monitor(r, period_s).evaluate(data)
         out[r.name] = float(values[0][1])
     return out
+
+
+def margins(
+    requirements: tuple[Requirement, ...], log: RunLog, params: Parameters, setpoint_m: float = 0.0
+) -> dict[str, float]:
+    """Each requirement's robustness over the run of ``log`` (``run_signals`` then ``robustness``)."""
+    signals = run_signals(log, params, setpoint_m, named(requirements))
+    return robustness(requirements, signals, params.daq.period_s)
+
+
+def violated(values: Mapping[str, float]) -> list[str]:
+    """The requirements whose robustness is negative (or NaN: a run with nothing to judge)."""
+    return [name for name, value in values.items() if not value >= 0]

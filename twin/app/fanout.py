@@ -28,6 +28,8 @@ import numpy as np
 from twin.parameters import ParameterError, Parameters
 
 if TYPE_CHECKING:
+    from twin.engine import RunResult
+    from twin.requirements import Requirement
     from twin.verdict import Verdict
     from twin.wire.server import Server
 
@@ -102,6 +104,12 @@ class Runs:
     noise: bool
     plant: str
     ideal_sensors: bool
+    # Judged by these too: each record gains each requirement's robustness (``twin.requirements``).
+    requirements: tuple[Requirement, ...] = ()
+
+
+# Runs per batch when each run's log is kept for its requirements (17 columns a tick: ~100 kB a 15 s run).
+RECORDED_CHUNK_RUNS = 512
 
 
 @dataclass(frozen=True)
@@ -170,13 +178,30 @@ def _records(
         plant=r.plant,  # type: ignore[arg-type]
         ideal_sensors=r.ideal_sensors,
         nthread=chunk.nthread,
+        record=bool(r.requirements),
         controller_timeout_s=chunk.controller_timeout_s,
         progress=report,
     )
     return [
-        _record(chunk.x0_m[i], chunk.theta0_rad[i], chunk.seeds[i], result.verdict, result.firmware)
+        _record(
+            chunk.x0_m[i],
+            chunk.theta0_rad[i],
+            chunk.seeds[i],
+            result.verdict,
+            result.firmware,
+            _margins(r, result, chunk.params[i] if chunk.params is not None else r.params),
+        )
         for i, result in zip(pick, results, strict=True)
     ]
+
+
+def _margins(runs: Runs, result: RunResult, params: Parameters) -> dict[str, float] | None:
+    """Each of the job's requirements' robustness over a run (None: the job has none)."""
+    if not runs.requirements:
+        return None
+    from twin.requirements import margins
+
+    return margins(runs.requirements, result.log, params)
 
 
 # What a many-run job keeps of a firmware's figures per run (``twin.avr.firmware.AvrFirmware.figures``).
@@ -192,13 +217,20 @@ FIRMWARE_RECORD = (
 
 
 def _record(
-    x0_m: float, theta0_rad: float, seed: int, verdict: Verdict, firmware: dict[str, Any] | None = None
+    x0_m: float,
+    theta0_rad: float,
+    seed: int,
+    verdict: Verdict,
+    firmware: dict[str, Any] | None = None,
+    requirements: dict[str, float] | None = None,
 ) -> dict[str, Any]:
-    """The record of a run (in process or served): its start, seed and verdict as JSON values, and a firmware's
-    timing and stack figures (``FIRMWARE_RECORD``)."""
+    """The record of a run (in process or served): its start, seed and verdict as JSON values, a firmware's
+    timing and stack figures (``FIRMWARE_RECORD``) and each requirement's robustness."""
     record = {"x0_m": x0_m, "theta0_rad": theta0_rad, "seed": seed, "failed": False, **verdict.to_json()}
     if firmware is not None:
         record["firmware"] = {name: firmware[name] for name in FIRMWARE_RECORD}
+    if requirements is not None:
+        record["requirements"] = requirements
     return record
 
 
@@ -366,7 +398,14 @@ def run_served(
         else:
             served.clients.append(session.client)
             if session.stop_reason in (protocol.STOP_DONE, protocol.STOP_BALL_LOST):
-                results[i] = _record(x0, th0, seed, session.result.verdict)
+                results[i] = _record(
+                    x0,
+                    th0,
+                    seed,
+                    session.result.verdict,
+                    None,
+                    _margins(runs, session.result, settings.params),
+                )
             else:  # the client quit or went silent: its run failed, as a failing controller's does
                 results[i] = _failed_record(x0, th0, seed, f"{session.client!r}: {session.stop_detail}")
         if progress is not None:
@@ -413,6 +452,8 @@ def run_starts(
 
     here = progress is not None and scheduler is None and workers <= 1
     size = chunk_runs(n, workers, scheduler)
+    if runs.requirements:
+        size = min(size, RECORDED_CHUNK_RUNS)
     chunks = [
         (
             lo,

@@ -18,9 +18,9 @@ import itertools
 import math
 import time
 from collections.abc import Callable, Hashable, Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from fractions import Fraction
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -30,6 +30,9 @@ from twin.app.options import MAX_LOCATE
 from twin.outputs import JobFiles
 from twin.parameters import ParameterError, Parameters
 from twin.physics import check_initial_state
+
+if TYPE_CHECKING:
+    from twin.requirements import Requirement
 
 __all__ = [
     "CLAIMS",
@@ -210,8 +213,10 @@ def run_sweep(
     nthread: int | None = None,
     progress: Progress | None = None,
     serve: Served | None = None,
+    requirements: tuple[Requirement, ...] = (),
 ) -> SweepResult:
-    """Run the grid (and the claims' corner states) and judge the claims. ``workers`` local processes
+    """Run the grid (and the claims' corner states) and judge the claims; ``requirements``: each point's record
+    gains their robustness. ``workers`` local processes
     (1: this process), or a Dask ``scheduler`` address; ``nthread``: rollout threads per batch (default:
     the cores, divided among the local workers); ``serve``: every start a session to a client over the
     wire (``fanout.run_served``; ``settings.controller`` names what the client runs)."""
@@ -236,7 +241,7 @@ def run_sweep(
         raise ParameterError("--refine and --locate run here or on workers, not as served sessions")
     if not 0 <= settings.locate <= MAX_LOCATE:
         raise ParameterError(f"--locate {settings.locate}: at most {MAX_LOCATE} bisections of a grid step")
-    runs = settings.runs(p)
+    runs = replace(settings.runs(p), requirements=requirements)
 
     def run_batch(
         batch: np.ndarray, batch_seeds: np.ndarray, progress: Progress | None = None

@@ -38,6 +38,7 @@ from twin.app.sweep import MAX_POINTS, Grid, SweepResult, SweepSettings, point_s
 from twin.outputs import JobFiles
 from twin.parameters import ParameterError, Parameters
 from twin.physics import check_initial_state
+from twin.requirements import Requirement, Spec, violated
 from twin.sensors import angle_count_step_rad
 
 __all__ = ["ValidationCriteria", "ValidationReport", "load_criteria", "validate"]
@@ -256,6 +257,7 @@ class ValidationReport:
     criteria: ValidationCriteria
     complete: bool = True  # False: interrupted (Ctrl-C); the checks done so far
     served: dict[str, Any] | None = None  # a served job: where, and the clients (fanout.Served.to_json)
+    spec: str | None = None  # the requirements file the checks asked (None: the verdict's fields)
 
     @property
     def passed(self) -> bool:
@@ -267,15 +269,11 @@ class ValidationReport:
             **({"served": self.served} if self.served is not None else {}),
             "passed": self.passed,
             "complete": self.complete,
+            **({"spec": self.spec} if self.spec is not None else {}),
             "criteria": asdict(self.criteria),
             "checks": [asdict(c) for c in self.checks],
             "wall_s": round(self.wall_s, 1),
         }
-
-
-def _runs_held(records: list[dict[str, Any] | None]) -> tuple[int, int]:
-    done = [r for r in records if r]
-    return sum(bool(r["held"]) for r in done), len(done)
 
 
 def validate(
@@ -288,10 +286,14 @@ def validate(
     workers: int = 1,
     progress: Progress | None = None,
     serve: Served | None = None,
+    spec: Spec | None = None,
 ) -> ValidationReport:
     """The battery; ``serve``: every run a session to a client over the wire (``fanout.run_served``), the
-    stages one after the other on its one server (``controller`` then only names what the client runs)."""
-    report = _validate(controller, params, criteria, spread, seed, workers, progress, serve)
+    stages one after the other on its one server (``controller`` then only names what the client runs).
+    ``spec``: the nominal, saturation, region and sensitivity checks ask its requirements of their runs
+    (``SPEC_CHECKS``; its ``[validate]`` table says which each asks) instead of the verdict's fields."""
+    report = _validate(controller, params, criteria, spread, seed, workers, progress, serve, spec)
+    report.spec = spec.source if spec is not None else None
     report.served = serve.to_json() if serve is not None else None
     return report
 
@@ -305,11 +307,14 @@ def _validate(
     workers: int,
     progress: Progress | None,
     serve: Served | None,
+    spec: Spec | None,
 ) -> ValidationReport:
     c = criteria or ValidationCriteria()
     check_criteria_for(c, params)  # before any run
     started = time.perf_counter()
-    runs = Runs(controller, params, c.duration_s, True, "twin", False)
+    runs = Runs(
+        controller, params, c.duration_s, True, "twin", False, spec.requirements if spec is not None else ()
+    )
     starts = [*T.CHAPTER4_STARTS, *T.HARDWARE_STARTS.values()]
     cases = _sensitivity_cases(c, params, controller.startswith("avr:"))
     x_required, theta_required = _required_grid(c)
@@ -324,7 +329,7 @@ def _validate(
             "monte carlo": c.montecarlo_runs if spread is not None else 0,
         },
     )
-    b = _Battery(controller, params, c, spread, seed, workers, serve, runs, stages, started)
+    b = _Battery(controller, params, c, spread, seed, workers, serve, runs, stages, started, _Judge(c, spec))
     # The stages in order; the first one interrupted ends the battery with the checks done so far.
     if not _nominal_stage(b, starts):
         return b.report(None, complete=False)
@@ -348,6 +353,48 @@ def _validate(
     return b.report(region)
 
 
+# The checks a requirements file's [validate] table may name (what each asks of which runs: README).
+SPEC_CHECKS = ("nominal", "saturation", "region", "sensitivity")
+
+
+@dataclass(frozen=True)
+class _Judge:
+    """What a check asks of a run's record: the verdict's fields, or (with a requirements file) that the
+    run meets the requirements the check asks (each robustness ≥ 0; a failed run meets none)."""
+
+    c: ValidationCriteria
+    spec: Spec | None
+
+    def meets(self, check: str, record: dict[str, Any]) -> bool:
+        if self.spec is None:
+            if check == "region":
+                return not record["ball_lost"]
+            if check == "saturation":
+                return record.get("saturated_fraction") is None or (
+                    record["saturated_fraction"] <= self.c.max_saturated_fraction
+                )
+            return bool(record["held"])
+        margins = record.get("requirements")
+        if margins is None:  # the controller failed: no signals to judge
+            return False
+        return not violated({r.name: margins[r.name] for r in self.spec.asked(check)})
+
+    def worst(self, check: str, records: list[dict[str, Any]]) -> str:
+        """With a requirements file: each requirement the check asks, its least robustness and where."""
+        if self.spec is None:
+            return ""
+        parts = []
+        judged = [r for r in records if r.get("requirements")]
+        for req in self.spec.asked(check):
+            if not judged:
+                break
+            r = min(judged, key=lambda r: r["requirements"][req.name])
+            parts.append(
+                f"{req.name} {r['requirements'][req.name]:+.4g} at ({r['x0_m']:+.2f}, {r['theta0_rad']:+.2f})"
+            )
+        return "; least robust: " + ", ".join(parts) if parts else ""
+
+
 @dataclass
 class _Battery:
     """What every stage of a validation shares, and the checks done so far (in the stages' order)."""
@@ -362,6 +409,7 @@ class _Battery:
     runs: Runs
     stages: Stages
     started: float
+    judge: _Judge
     checks: list[Check] = field(default_factory=list)
 
     def report(self, region: SweepResult | None, *, complete: bool = True) -> ValidationReport:
@@ -379,24 +427,29 @@ def _nominal_stage(b: _Battery, starts: list[tuple[float, float]]) -> bool:
     )
     if not complete:
         return False
-    held, n = _runs_held(records)
+    done = [r for r in records if r]
+    held = sum(b.judge.meets("nominal", r) for r in done)
+    asked = _asked(b, "nominal")
     b.checks.append(
         Check(
             "nominal",
-            held == n,
-            f"every run held from the thesis's {len(starts)} starts × {c.nominal_seeds} noise seeds",
-            f"held {held} of {n}",
-            [r for r in records if r],
+            held == len(done),
+            f"every run {asked or 'held'} from the thesis's {len(starts)} starts × {c.nominal_seeds} noise seeds",
+            f"{'met' if asked else 'held'} {held} of {len(done)}" + b.judge.worst("nominal", done),
+            done,
         )
     )
     # A run whose controller failed has no figures (it already fails the nominal check).
     saturated = max((r["saturated_fraction"] for r in records if r and not r.get("failed")), default=0.0)
+    asked = _asked(b, "saturation")
     b.checks.append(
         Check(
             "saturation",
-            saturated <= c.max_saturated_fraction,
-            f"at most {100 * c.max_saturated_fraction:g} % of the ticks at the ±12 V rails in any nominal run",
-            f"at most {100 * saturated:.1f} %",
+            all(b.judge.meets("saturation", r) for r in done if not r.get("failed")),
+            f"every nominal run {asked}"
+            if asked
+            else f"at most {100 * c.max_saturated_fraction:g} % of the ticks at the ±12 V rails in any nominal run",
+            f"at most {100 * saturated:.1f} %" + b.judge.worst("saturation", done),
         )
     )
     target = [r for r in records if r and r.get("firmware")]
@@ -432,20 +485,28 @@ def _target_check(records: list[dict[str, Any]]) -> Check:
 def _region_stage(b: _Battery, settings: SweepSettings) -> SweepResult | None:
     """The region of attraction over the criteria's grid: the region check. None: interrupted."""
     region = run_sweep(
-        settings, b.params, workers=b.workers, progress=b.stages.stage("region"), serve=b.serve
+        settings,
+        b.params,
+        workers=b.workers,
+        progress=b.stages.stage("region"),
+        serve=b.serve,
+        requirements=b.runs.requirements,
     )
     if not region.complete:
         return None
     (xlo, xhi), (tlo, thi) = b.c.required_x0_m, b.c.required_theta0_rad
     inside = [p for p in region.points if p and xlo <= p["x0_m"] <= xhi and tlo <= p["theta0_rad"] <= thi]
-    lost_inside = [(p["x0_m"], p["theta0_rad"]) for p in inside if p["ball_lost"]]
+    lost_inside = [(p["x0_m"], p["theta0_rad"]) for p in inside if not b.judge.meets("region", p)]
     kept_all = sum(not p["ball_lost"] for p in region.points if p)
+    asked = _asked(b, "region")
     b.checks.append(
         Check(
             "region",
             bool(inside) and not lost_inside,
-            f"every grid start with x0 ∈ [{xlo:g}, {xhi:g}] m, θ0 ∈ [{tlo:g}, {thi:g}] rad keeps the ball",
-            f"{len(inside) - len(lost_inside)} of {len(inside)} required starts keep it"
+            f"every grid start with x0 ∈ [{xlo:g}, {xhi:g}] m, θ0 ∈ [{tlo:g}, {thi:g}] rad "
+            + (asked or "keeps the ball"),
+            f"{len(inside) - len(lost_inside)} of {len(inside)} required starts {'meet them' if asked else 'keep it'}"
+            + b.judge.worst("region", inside)
             + (
                 f" (lost from {', '.join(f'({x:+.2f}, {t:+.2f})' for x, t in lost_inside[:5])})"
                 if lost_inside
@@ -484,9 +545,10 @@ def _sensitivity_stage(b: _Battery, cases: list[tuple[str, str, Parameters]]) ->
             by_param.setdefault(name, []).append((label, record))
     for name, rows in by_param.items():
         bad = [
-            f"{label} from ({r['x0_m']:+.2f}, {r['theta0_rad']:+.2f}): {r['reason']}"
+            f"{label} from ({r['x0_m']:+.2f}, {r['theta0_rad']:+.2f}): "
+            + (r["reason"] if b.judge.spec is None else _unmet(r, b.judge.spec.asked("sensitivity")))
             for label, r in rows
-            if not r["held"]
+            if not b.judge.meets("sensitivity", r)
         ]
         b.checks.append(
             Check(
@@ -494,7 +556,9 @@ def _sensitivity_stage(b: _Battery, cases: list[tuple[str, str, Parameters]]) ->
                 not bad,
                 f"held at every value ({', '.join(dict.fromkeys(label for label, _ in rows))}) "
                 "from the chapter 4 starts",
-                "held at every value" if not bad else "; ".join(bad[:4]),
+                ("met at every value" if b.judge.spec else "held at every value")
+                if not bad
+                else "; ".join(bad[:4]),
                 [{"value": label, **r} for label, r in rows],
             )
         )
@@ -592,6 +656,20 @@ def _montecarlo_stage(b: _Battery) -> bool:
         )
     )
     return True
+
+
+def _asked(b: _Battery, check: str) -> str:
+    """What a check asks in words, with a requirements file ("" without one)."""
+    if b.judge.spec is None:
+        return ""
+    return "meets " + ", ".join(r.name for r in b.judge.spec.asked(check))
+
+
+def _unmet(record: dict[str, Any], asked: tuple[Requirement, ...]) -> str:
+    margins = record.get("requirements")
+    if margins is None:
+        return record["reason"]
+    return ", ".join(f"{r.name} {margins[r.name]:+.4g}" for r in asked if not margins[r.name] >= 0)
 
 
 def _required_grid(c: ValidationCriteria) -> tuple[Grid, Grid]:

@@ -171,15 +171,14 @@ def run(args: argparse.Namespace) -> int:
         print(f"ballbeam run: warning: {warning}", file=sys.stderr)
     held = result.verdict.held
     if requirements is not None:
-        from twin.requirements import robustness, run_signals
+        from twin.requirements import margins, violated
 
-        signals = run_signals(result.log, params, args.setpoint or 0.0)
-        margins = robustness(requirements, signals, params.daq.period_s)
-        summary["requirements"] = margins
-        violated = [name for name, value in margins.items() if not value >= 0]
-        held = held and not violated
-        if violated:
-            print(f"ballbeam run: requirements violated: {', '.join(violated)}", file=sys.stderr)
+        values = margins(requirements, result.log, params, args.setpoint or 0.0)
+        summary["requirements"] = values
+        bad = violated(values)
+        held = held and not bad
+        if bad:
+            print(f"ballbeam run: requirements violated: {', '.join(bad)}", file=sys.stderr)
     if args.json:
         print(json.dumps(summary), file=out)
     else:

@@ -40,6 +40,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--criteria", metavar="FILE", help="TOML overriding the pass criteria (see the report)"
     )
+    parser.add_argument(
+        "--spec",
+        metavar="FILE",
+        help="requirements in signal temporal logic (TOML; docs/examples/requirements.toml): the nominal, "
+        "saturation, region and sensitivity checks ask them of their runs instead of the verdict's fields",
+    )
     parser.add_argument("--seed", type=seed(), default=0, help="base seed of every run's noise")
     add_params_options(parser)
     parser.add_argument(
@@ -67,6 +73,12 @@ def run(args: argparse.Namespace) -> int:
     check_served(args)
     params, spread = params_and_spread(args)
     criteria = load_criteria(args.criteria) if args.criteria else ValidationCriteria()
+    spec = None
+    if args.spec is not None:
+        from twin.app.validate import SPEC_CHECKS
+        from twin.requirements import load_spec
+
+        spec = load_spec(args.spec, SPEC_CHECKS)
     try:
         check_criteria_for(criteria, params)
     except ParameterError as exc:
@@ -82,6 +94,7 @@ def run(args: argparse.Namespace) -> int:
             workers=args.workers,
             progress=progress_bar("validate"),
             serve=served,
+            spec=spec,
         )
     if (client := client_name(args, served)) is not None:
         report.controller = client
