@@ -57,6 +57,7 @@ __all__ = [
     "OUTPUT_FILES",
     "MonteCarloResult",
     "MonteCarloSettings",
+    "apply_values",
     "load_calibration_spread",
     "load_spread",
     "run_montecarlo",
@@ -102,6 +103,22 @@ class Distribution:
         uniform = rng.random(len(self.names))
         mean, sd, low, high = (np.array(v) for v in (self.mean, self.sd, self.low, self.high))
         return np.where(np.isnan(sd), low + (high - low) * uniform, mean + sd * normal)
+
+    def at(self, u: np.ndarray, tail_sd: float) -> np.ndarray:
+        """The parameters at point ``u`` of the unit cube (one coordinate each): a uniform's ``low + (high −
+        low)·u``, a normal's quantile within ±``tail_sd`` standard deviations; a multivariate normal's
+        independent quantiles through the square root of its covariance (its eigenvectors)."""
+        from scipy.stats import norm
+
+        q = float(norm.cdf(-tail_sd))
+        z = norm.ppf(q + (1.0 - 2.0 * q) * np.clip(np.asarray(u, dtype=float), 0.0, 1.0))
+        mean = np.array(self.mean)
+        if self.kind == "multivariate":
+            w, v = np.linalg.eigh(np.array(self.cov))
+            return mean + v @ (np.sqrt(np.clip(w, 0.0, None)) * z)
+        sd, low, high = (np.array(x) for x in (self.sd, self.low, self.high))
+        uniform = low + (high - low) * np.clip(np.asarray(u, dtype=float), 0.0, 1.0)
+        return np.where(np.isnan(sd), uniform, mean + sd * z)
 
 
 def _nominal(params: Parameters, name: str) -> float:
@@ -254,6 +271,12 @@ def _apply(
         b = reading.get("ball_reading.offset_m", b0) - b0 * g
         out = out.with_values({"ball_reading.gain": g, "ball_reading.offset_m": b})
     return out
+
+
+def apply_values(base: Parameters, spread: Distribution, values: np.ndarray) -> Parameters:
+    """``base`` with the spread's parameters at ``values`` (as a Monte Carlo sample is applied)."""
+    fitted = dict(zip(spread.names, spread.mean, strict=True)) if spread.kind == "multivariate" else {}
+    return _apply(base, spread.names, values, fitted)
 
 
 def sample_parameters(

@@ -205,6 +205,7 @@ def serve(
     wire: tuple[str, int] | None = None,
     rig_name: str = "ballbeam-twin",
     monitor: MonitorFactory | None = None,
+    initial: tuple[float, float] | None = None,
 ) -> dict[str, float]:
     """Start the live view and block until interrupted, ``stop`` is set or ``duration_s`` of wall time passed.
 
@@ -217,7 +218,8 @@ def serve(
     ``wire=(host, port)`` serves the twin on protocol 1 over UDP there (port 0: a free one) to a controller in
     any language (``ballbeam view --serve``): the menu's first entry, "wire client (udp://host:port)", the
     one started unless ``controller`` names another (twin.viewer.wire); ``rig_name`` is CONFIG's rig.
-    ``monitor`` builds the shadow (twin.viewer.monitor) when the panel's "Shadow the rig" is ticked."""
+    ``monitor`` builds the shadow (twin.viewer.monitor) when the panel's "Shadow the rig" is ticked.
+    ``initial``: the first run's (x0, θ0) (a replayed run's; default the panel's)."""
     if not (isinstance(speed, (int, float)) and math.isfinite(speed) and SPEED_MIN <= speed <= SPEED_MAX):
         raise ViewerError(
             f"--speed = {speed!r} must be within {SPEED_MIN:g} … {SPEED_MAX:g} (the speed slider)"
@@ -253,6 +255,7 @@ def serve(
             stop=stop,
             on_ready=on_ready,
             monitor=monitor,
+            initial=initial,
         )
     finally:
         if wire_server is not None:
@@ -279,6 +282,7 @@ def _serve(
     stop: threading.Event | None,
     on_ready: Callable[[Viewer], None] | None,
     monitor: MonitorFactory | None,
+    initial: tuple[float, float] | None = None,
 ) -> dict[str, float]:
     if controller is None:
         controller = catalogue.NAMES[0] if wire_server is not None else DEFAULT_CONTROLLER
@@ -294,6 +298,7 @@ def _serve(
         ideal_sensors=ideal_sensors,
         wait_for_client=wait_for_client,
         monitor=monitor,
+        initial=initial,
     )
     try:
         viewer = Viewer(live, host, port, allowed_origins, params_source)

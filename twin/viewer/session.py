@@ -158,6 +158,7 @@ class LiveTwin:
         wait_for_client: bool = False,
         criteria: Criteria | None = None,
         monitor: MonitorFactory | None = None,
+        initial: tuple[float, float] | None = None,
     ) -> None:
         self.params = params
         # The shadow (twin.viewer.monitor): off until asked for; it follows the runs at ``params``, while the
@@ -176,6 +177,12 @@ class LiveTwin:
         # The default start, inside a track or stops that a parameter file narrowed.
         self.x0_m = min(0.15, 0.5 * params.track.half_length_m)
         self.theta0_rad = min(0.1, 0.5 * params.beam.stop_angle_rad)
+        if initial is not None:  # a replayed run's start (ballbeam view --replay), checked as the rig's
+            try:
+                check_initial_state(params, initial[0], initial[1], 0.0, 0.0)
+            except ValueError as exc:
+                raise ViewerError(f"the initial state: {exc}") from None
+            self.x0_m, self.theta0_rad = float(initial[0]), float(initial[1])
         self.noise = params.ball_sensor.noise_enabled
         self.reference_x_m = 0.0
         self.flick_m_s = FLICK_DEFAULT_M_S  # the last flick speed accepted (the slider is put back to it)

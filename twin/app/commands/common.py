@@ -224,7 +224,7 @@ def inputs(args: argparse.Namespace) -> list[tuple[str, str]]:
     """The files a command reads, as (option, path): no output may replace one. A calibration folder brings
     its two files; a user controller its module's file (imported by then)."""
     found: list[tuple[str, str]] = []
-    for option in ("params", "spread", "criteria", "table"):
+    for option in ("params", "spread", "criteria", "table", "spec", "replay"):
         value = getattr(args, option, None)
         if value:
             found.append((f"--{option}" if option != "table" else "TABLE", value))

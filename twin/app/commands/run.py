@@ -26,6 +26,7 @@ from twin.app.options import count, finite_float
 from twin.outputs import check_outputs, writing
 
 if TYPE_CHECKING:
+    from twin.app.replay import Replay
     from twin.engine import RunResult
     from twin.parameters import Parameters
     from twin.realtime import WallClockPacer
@@ -39,7 +40,16 @@ HELP = "run a controller in closed loop and report the verdict (exit 0 held, 1 l
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
-        "--controller", required=True, metavar="NAME|MODULE:CLASS|avr:FILE.elf", help=controller_help()
+        "--controller",
+        metavar="NAME|MODULE:CLASS|avr:FILE.elf",
+        help=controller_help() + " (required unless --replay)",
+    )
+    parser.add_argument(
+        "--replay",
+        metavar="FILE",
+        help="repeat a run bit for bit: falsify --out's falsify.json (its counterexample, else its least robust "
+        "run) or certify's certify.json (its failing run): controller, start, seed, noise, duration, parameters "
+        "and requirements from the file; the summary says whether each robustness is the one the file states",
     )
     parser.add_argument(
         "--x0", type=finite_float(), metavar="M", help="initial ball position (m; required unless --rig)"
@@ -55,6 +65,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "its state and duration are the server's; the verdict is judged from the measured signals",
     )
     add_episode_options(parser)
+    parser.set_defaults(duration=None, seed=None)  # 15 s and seed 0 unless --replay brings its own
     parser.add_argument(
         "--sessions",
         type=count(0, 10_000_000),
@@ -103,8 +114,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    params = load_params(args)
-    requirements = None
+    replay = _replayed(args) if args.replay is not None else None
+    if replay is None:
+        if args.controller is None:
+            print("ballbeam run: error: --controller is required (unless --replay)", file=sys.stderr)
+            return 2
+        args.duration = 15.0 if args.duration is None else args.duration
+        args.seed = 0 if args.seed is None else args.seed
+    params = replay.params if replay is not None else load_params(args)
+    requirements = replay.requirements if replay is not None else None
     if args.spec is not None:
         from twin.requirements import load_requirements
 
@@ -175,6 +193,14 @@ def run(args: argparse.Namespace) -> int:
 
         values = margins(requirements, result.log, params, args.setpoint or 0.0)
         summary["requirements"] = values
+        if replay is not None:
+            summary["replayed"] = {
+                "file": replay.source,
+                "robustness_stated": replay.robustness,
+                "same": values == replay.robustness,
+            }
+            if values != replay.robustness:
+                print(f"ballbeam run: the robustness differs from {replay.source}'s", file=sys.stderr)
         bad = violated(values)
         held = held and not bad
         if bad:
@@ -185,6 +211,31 @@ def run(args: argparse.Namespace) -> int:
         for key, value in summary.items():
             print(f"{key:<26} {value}")
     return 0 if held else 1
+
+
+def _replayed(args: argparse.Namespace) -> Replay:
+    """``--replay FILE``: the run it names, put into ``args`` (options the file sets are refused)."""
+    from twin.app.replay import load_replay, refuse_given
+
+    refuse_given(
+        [
+            ("--controller", args.controller),
+            ("--x0", args.x0),
+            ("--theta0", args.theta0),
+            ("--duration", args.duration),
+            ("--seed", args.seed),
+            ("--no-noise", args.no_noise),
+            ("--params", args.params),
+            ("--set", args.set),
+            ("--spec", args.spec),
+            ("--rig", args.rig),
+            ("--setpoint", args.setpoint),
+        ]
+    )
+    replay = load_replay(args.replay)
+    args.controller, args.x0, args.theta0 = replay.controller, replay.x0_m, replay.theta0_rad
+    args.seed, args.no_noise, args.duration = replay.seed, not replay.noise, replay.duration_s
+    return replay
 
 
 def _run_in_process(

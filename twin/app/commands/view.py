@@ -65,7 +65,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=1.0,
         help=f"simulated seconds per wall second, {SPEED_MIN:g}…{SPEED_MAX:g} (default 1.0)",
     )
-    parser.add_argument("--seed", type=seed(), default=0, help="seed of the sensor noise (default 0)")
+    parser.add_argument("--seed", type=seed(), default=None, help="seed of the sensor noise (default 0)")
+    parser.add_argument(
+        "--replay",
+        metavar="FILE",
+        help="open a run to repeat (falsify.json's counterexample, certify.json's failing run): its controller, "
+        "start, seed, noise and parameters; Reset repeats it",
+    )
     parser.add_argument(
         "--no-noise", action="store_true", help="start with the ball sensor's contact noise off (the switch)"
     )
@@ -89,7 +95,26 @@ def run(args: argparse.Namespace) -> int:
     from twin.app.shadow import view_monitor
     from twin.viewer import ViewerError, serve
 
-    params = load_params(args)
+    initial = None
+    if args.replay is not None:
+        from twin.app.replay import load_replay, refuse_given
+
+        refuse_given(
+            [
+                ("--controller", args.controller),
+                ("--seed", args.seed),
+                ("--params", args.params),
+                ("--set", args.set),
+                ("--no-noise", args.no_noise),
+            ]
+        )
+        replay = load_replay(args.replay)
+        params = replay.params
+        args.controller, args.seed, args.no_noise = replay.controller, replay.seed, not replay.noise
+        initial = (replay.x0_m, replay.theta0_rad)
+    else:
+        params = load_params(args)
+    args.seed = 0 if args.seed is None else args.seed
     if args.no_noise:  # the view's noise switch starts off
         params = params.with_overrides({"ball_sensor.noise_enabled": False})
     # a failing constructor or a bad image is refused here, not in the view
@@ -113,6 +138,7 @@ def run(args: argparse.Namespace) -> int:
             params_source=params_source(args),
             wire=args.serve,
             rig_name=f"ballbeam-twin {package_version()} {args.plant}",
+            initial=initial,
         )
     except ViewerError as exc:
         print(f"ballbeam view: error: {exc}", file=sys.stderr)

@@ -1,0 +1,119 @@
+"""``ballbeam falsify`` (twin.app.falsify) and ``run --replay``: the search finds the ball-losing starts of a box
+that crosses appendix-sf's region of attraction, its counterexample repeats bit for bit and loses the ball as
+stated; inside the region it finds none and reports the least robust run; the same seed gives the same search,
+with workers too; bad inputs are refused naming the option or the file's field."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from cli_checks import refused
+
+from twin.app.cli import main
+from twin.app.falsify import Axis, FalsifySettings, falsify, uniform_search
+from twin.app.fanout import Runs, run_starts
+from twin.app.montecarlo import load_spread
+from twin.parameters import Parameters
+from twin.requirements import load_spec
+
+ROOT = Path(__file__).parents[1]
+SPEC = ROOT / "docs" / "examples" / "falsify.toml"
+
+
+def _settings(x: tuple[float, float], th: tuple[float, float], **kw: object) -> FalsifySettings:
+    return FalsifySettings(
+        "appendix-sf", (Axis("x0_m", *x), Axis("theta0_rad", *th)), duration_s=4.0, noise=False, **kw
+    )  # type: ignore[arg-type]
+
+
+def test_a_box_across_the_boundary_gives_a_counterexample_that_replays_bit_for_bit(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "fz"
+    argv = ["falsify", "--controller", "appendix-sf", "--spec", str(SPEC), "--x0", "0.10:0.32"]
+    argv += ["--theta0", "-0.70:-0.30", "--no-noise", "--budget", "60", "--duration", "4", "--out", str(out)]
+    assert main(argv) == 1  # a counterexample: exit 1
+    data = json.loads((out / "falsify.json").read_text())
+    cx = data["counterexample"]
+    assert data["found"] and cx["objective"] < 0 and cx["ball_lost"]
+    assert data["runs_to_first_violation"] <= data["runs_spent"] <= 60
+    assert (out / "falsify.png").stat().st_size > 10_000
+    # every violation the search reports is one: the trace's objectives are the runs' least robustness
+    assert min(t["objective"] for t in data["trace"]) == cx["objective"]
+    capsys.readouterr()
+    assert main(["run", "--replay", str(out / "falsify.json"), "--json"]) == 1
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["ball_lost"] and summary["replayed"]["same"]
+    assert summary["requirements"] == cx["robustness"]
+    assert (summary["x0_m"], summary["theta0_rad"]) == (cx["x0_m"], cx["theta0_rad"])
+
+
+def test_inside_the_region_none_is_found_and_the_least_robust_run_is_reported() -> None:
+    spec = load_spec(SPEC)
+    result = falsify(_settings((-0.05, 0.05), (-0.1, 0.1), budget=20), Parameters(), spec)
+    out = result.to_json()
+    assert not out["found"] and out["counterexample"] is None and out["runs_spent"] == 20
+    least = out["least_robust"]
+    assert least["objective"] == min(t["objective"] for t in out["trace"]) > 0
+    # the least robust run's robustness is 0.323 − its largest |x| (the ball is kept): recomputed here
+    records, _ = run_starts(
+        Runs("appendix-sf", Parameters(), 4.0, False, "twin", False, spec.requirements),
+        np.array([[least["x0_m"], least["theta0_rad"]]]),
+        np.array([least["seed"]], dtype=np.int64),
+    )
+    assert records[0] is not None and records[0]["requirements"]["on_track"] == least["objective"]
+
+
+def test_the_same_seed_gives_the_same_search_with_workers_too() -> None:
+    spec = load_spec(SPEC)
+    settings = _settings((0.0, 0.16), (-0.7, -0.2), budget=30, seed=5, keep_going=True)
+    a = falsify(settings, Parameters(), spec).to_json()
+    b = falsify(settings, Parameters(), spec, workers=2).to_json()
+    for out in (a, b):
+        out.pop("wall_s")
+    assert a == b and a["runs_spent"] == 30
+    c = falsify(FalsifySettings(**{**settings.__dict__, "seed": 6}), Parameters(), spec).to_json()
+    assert [t["x0_m"] for t in c["trace"]][5:] != [t["x0_m"] for t in a["trace"]][5:]
+
+
+def test_a_spread_is_searched_and_its_rig_replays(tmp_path: Path) -> None:
+    """A rig of the spread at a searched point: the run's parameters in the file repeat the run."""
+    p = Parameters()
+    spread = load_spread(ROOT / "docs" / "examples" / "spread.toml", p)
+    settings = FalsifySettings(
+        "appendix-sf", (), x0_m=0.12, theta0_rad=-0.5, duration_s=3.0, noise=True, budget=12
+    )
+    result = falsify(settings, p, load_spec(SPEC), spread)
+    assert len(result.runs) == 12
+    run = result.runs[3]
+    assert set(run["values"]) == set(spread.names)
+    for name, value in run["values"].items():
+        group, field = name.split(".")
+        assert getattr(getattr(Parameters().with_overrides(run["parameters"]), group), field) == value
+    uniform = uniform_search(settings, p, load_spec(SPEC), spread, batch=6)
+    assert len(uniform.runs) == 12
+
+
+@pytest.mark.quick
+def test_bad_falsify_and_replay_inputs_are_refused(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    base = ["falsify", "--controller", "appendix-sf", "--spec", str(SPEC)]
+    refused(capsys, [*base, "--x0", "0.3:0.1"], "--x0", "A ≤ B")
+    refused(capsys, [*base, "--x0", "a:b"], "--x0", "numbers")
+    refused(capsys, [*base, "--x0", "0.1:0.5"], "--x0/--theta0")
+    refused(capsys, [*base, "--latency", "0:0.05"], "--latency")
+    refused(capsys, [*base, "--x0", "0.1", "--theta0", "0.2"], "nothing to search")
+    refused(capsys, [*base, "--budget", "0"], "--budget")
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"counterexample": {"controller": "appendix-sf", "x0_m": "0.1"}}')
+    refused(capsys, ["run", "--replay", str(bad)], str(bad), "parameters")
+    bad.write_text("not json")
+    refused(capsys, ["run", "--replay", str(bad)], str(bad), "JSON")
+    bad.write_text("{}")
+    refused(capsys, ["run", "--replay", str(bad)], "no run to repeat")
+    refused(capsys, ["run", "--replay", str(bad), "--x0", "0.1"], "--replay brings", "--x0")
+    refused(capsys, ["view", "--replay", str(bad), "--seed", "3"], "--replay brings", "--seed")

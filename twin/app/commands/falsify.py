@@ -1,0 +1,186 @@
+"""``ballbeam falsify``: search for the run that violates a requirement (``twin.app.falsify``)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from twin.app.commands.common import (
+    JOB_RUN_S,
+    WORKERS,
+    add_controller_timeout,
+    add_params_options,
+    add_spread_options,
+    check_job,
+    controller_help,
+    params_and_spread,
+    progress_bar,
+    write_out,
+)
+from twin.app.options import count, seed
+
+HELP = (
+    "search starts, rigs, latency and zeroing for a run that violates a requirement; the counterexample "
+    "(or the least robust run) in falsify.json, repeatable with run --replay; exit 1 when one is found"
+)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--controller", required=True, metavar="NAME|MODULE:CLASS|avr:FILE.elf", help=controller_help()
+    )
+    parser.add_argument(
+        "--spec",
+        required=True,
+        metavar="FILE",
+        help="requirements in signal temporal logic (TOML; README: Requirements and counterexamples): the "
+        "search minimises their least robustness",
+    )
+    parser.add_argument(
+        "--x0", default="-0.2", metavar="A:B|M", help="initial ball position (m): a range or a value"
+    )
+    parser.add_argument(
+        "--theta0", default="0.3", metavar="A:B|RAD", help="initial beam angle (rad): a range or a value"
+    )
+    parser.add_argument(
+        "--latency",
+        metavar="A:B",
+        help="output latency (s; daq.output_latency_s, whole physics steps, below a period): a range or a value",
+    )
+    parser.add_argument(
+        "--zeroing", metavar="A:B", help="the counter's zeroing error (rad; angle_sensor.zeroing_error_rad)"
+    )
+    add_spread_options(parser, "searched over (a normal within ±3 standard deviations)")
+    parser.add_argument(
+        "--duration", type=JOB_RUN_S, default=10.0, metavar="S", help="seconds per run (default 10)"
+    )
+    parser.add_argument("--no-noise", action="store_true", help="switch the ball sensor's contact noise off")
+    parser.add_argument(
+        "--budget", type=count(1, _max_budget), default=300, metavar="N", help="runs at most (default 300)"
+    )
+    parser.add_argument(
+        "--population",
+        type=count(2, 1000),
+        metavar="N",
+        help="runs per CMA-ES generation (default 4 + 3 ln d)",
+    )
+    parser.add_argument(
+        "--keep-going",
+        action="store_true",
+        help="spend the whole budget on the least robust point instead of stopping at the first violation",
+    )
+    parser.add_argument(
+        "--seed", type=seed(), default=0, help="the search's seed (its points and noise seeds)"
+    )
+    add_params_options(parser)
+    parser.add_argument(
+        "--workers", type=WORKERS, default=1, help="local processes (default 1: this process)"
+    )
+    parser.add_argument(
+        "--scheduler", metavar="ADDRESS", help="a Dask distributed scheduler to fan each batch out to"
+    )
+    parser.add_argument("--out", metavar="DIR", help="write DIR/falsify.json and DIR/falsify.png")
+    parser.add_argument("--overwrite", action="store_true", help="replace its own files in an existing --out")
+    parser.add_argument("--json", action="store_true", help="print the whole result as JSON")
+    add_controller_timeout(parser)
+
+
+def _max_budget() -> float:
+    from twin.app.falsify import MAX_BUDGET
+
+    return MAX_BUDGET
+
+
+def run(args: argparse.Namespace) -> int:
+    from twin.app.falsify import OUTPUT_FILES, Axis, FalsifySettings, falsify, parse_range
+    from twin.parameters import ParameterError
+    from twin.physics import check_initial_state
+    from twin.requirements import load_spec
+
+    args.serve = None  # a search runs here (check_job's served case does not apply)
+    base, spread = params_and_spread(args)
+    spec = load_spec(args.spec)
+    x = parse_range(args.x0, "--x0")
+    th = parse_range(args.theta0, "--theta0")
+    for a, b in ((x[0], th[0]), (x[1], th[1]), (x[0], th[1]), (x[1], th[0])):
+        try:
+            check_initial_state(base, a, b, 0.0, 0.0)
+        except ValueError as exc:
+            raise ParameterError(f"--x0/--theta0: {exc}") from None
+    axes = [Axis("x0_m", *x), Axis("theta0_rad", *th)]
+    step = base.physics.timestep_s
+    for option, text, name, grid in (
+        ("--latency", args.latency, "daq.output_latency_s", step),
+        ("--zeroing", args.zeroing, "angle_sensor.zeroing_error_rad", 0.0),
+    ):
+        if text is not None:
+            lo, hi = parse_range(text, option)
+            for v in (lo, hi):
+                try:
+                    base.with_overrides({name: v}, origin=option)
+                except ParameterError as exc:
+                    raise ParameterError(f"{option} {text}: {exc}") from None
+            axes.append(Axis(name, lo, hi, grid))
+    searched = tuple(a for a in axes if a.high > a.low)
+    fixed = {a.name: a.low for a in axes if a.high <= a.low}
+    if "daq.output_latency_s" in fixed or "angle_sensor.zeroing_error_rad" in fixed:
+        base = base.with_overrides({k: v for k, v in fixed.items() if "." in k}, origin="falsify")
+    check_job(args, base, OUTPUT_FILES)
+    settings = FalsifySettings(
+        controller=args.controller,
+        axes=searched,
+        x0_m=x[0],
+        theta0_rad=th[0],
+        duration_s=args.duration,
+        noise=not args.no_noise,
+        budget=args.budget,
+        seed=args.seed,
+        population=args.population or 0,
+        keep_going=args.keep_going,
+    )
+    result = falsify(
+        settings,
+        base,
+        spec,
+        spread,
+        workers=args.workers,
+        scheduler=args.scheduler,
+        progress=progress_bar("falsify"),
+    )
+    from twin.app.falsify_render import write_falsify  # matplotlib: after the runs
+
+    write_out(args, write_falsify, result)
+    out = result.to_json()
+    if args.json:
+        print(json.dumps(out))
+    else:
+        _print(out, args)
+    if not result.complete:
+        print("ballbeam falsify: interrupted: the runs done so far are reported", file=sys.stderr)
+        return 130
+    return 1 if out["found"] else 0
+
+
+def _print(out: dict, args: argparse.Namespace) -> None:
+    best = out["least_robust"]
+    if best is None:
+        print("no run")
+        return
+    where = ", ".join(f"{k} = {v:.6g}" for k, v in best["searched"].items())
+    margins = ", ".join(f"{k} {v:+.4g}" for k, v in best["robustness"].items())
+    if out["found"]:
+        print(
+            f"counterexample after {out['runs_to_first_violation']} runs ({out['runs_spent']} spent of "
+            f"{args.budget}): {where}; seed {best['seed']}; robustness {margins}"
+            + ("; the ball is lost" if best["ball_lost"] else "")
+        )
+    else:
+        print(
+            f"no violation in {out['runs_spent']} runs (budget {args.budget}); the least robust: {where}; "
+            f"robustness {margins}"
+        )
+    if args.out is not None:
+        path = Path(args.out) / "falsify.json"
+        print(f"wrote {path}; repeat it: ballbeam run --replay {path}")

@@ -1,0 +1,381 @@
+"""``ballbeam falsify``: search a space of runs for the one that violates a requirement.
+
+The space is a box of inputs (``Axis``: the start, the output latency, the zeroing error) and, optionally, the
+rigs of a spread or calibration (``Distribution``). A point of the search is a point of the unit cube, one
+coordinate per axis and per spread parameter (its quantile: a normal is searched within ±3 standard deviations,
+``NORMAL_TAIL``); with noise on, each run gets its own noise seed from the search's seed (recorded, not
+searched). The objective is the least robustness over the file's requirements: negative is a counterexample.
+
+The search (``falsify``): a first batch of the cube's corners and its centre (at most ``CORNER_DIMS``
+dimensions; more: a scrambled Sobol set), since a requirement is most often violated at the edges of the
+space its inputs may take; then CMA-ES (``cma``: a maintained implementation of the method falsification
+tools use for continuous searches; pure Python, seeded) from the least robust point so far, restarted with
+a fresh spread when it converges. Each batch is one job of the batch engine (``twin.app.fanout``: workers
+and Dask as every other job, the same records). It stops at the first batch with a counterexample or at the
+budget. Every number comes from the runs' records; ``uniform_search`` samples the same cube uniformly
+(the baseline the bench compares with).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+
+from twin.app.fanout import Progress, Runs, run_starts
+from twin.app.montecarlo import Distribution, apply_values
+from twin.app.replay import replay_entry
+from twin.outputs import JobFiles
+from twin.parameters import ParameterError, Parameters
+from twin.requirements import Spec
+
+__all__ = ["Axis", "FalsifyResult", "FalsifySettings", "OUTPUT_FILES", "falsify", "uniform_search"]
+
+CORNER_DIMS = 5  # up to 2^5 = 32 corners in the first batch; beyond, a Sobol set of one population
+NORMAL_TAIL = 3.0  # a normal parameter is searched within ±3 standard deviations (99.73 % of its mass)
+MAX_BUDGET = 100_000
+SIGMA0 = 0.3  # CMA-ES's first step, in the unit cube (a third of every axis)
+
+# What ``Axis.name`` may be: the start, or a parameter by dotted name.
+START_AXES = ("x0_m", "theta0_rad")
+
+
+@dataclass(frozen=True)
+class Axis:
+    """One searched input: ``x0_m``, ``theta0_rad`` or a parameter (``group.name``) from ``low`` to ``high``;
+    ``step``: values are whole steps (the output latency: whole physics steps)."""
+
+    name: str
+    low: float
+    high: float
+    step: float = 0.0
+
+    def at(self, u: float) -> float:
+        v = self.low + (self.high - self.low) * float(u)
+        if self.step > 0:
+            v = min(max(round(v / self.step) * self.step, self.low), self.high)
+        return float(v)
+
+
+@dataclass(frozen=True)
+class FalsifySettings:
+    """Everything a search's result depends on (written into falsify.json)."""
+
+    controller: str
+    axes: tuple[Axis, ...]
+    x0_m: float = 0.0  # the start where it is not an axis
+    theta0_rad: float = 0.0
+    duration_s: float = 10.0
+    noise: bool = True
+    budget: int = 300
+    seed: int = 0  # the search's: its first batch, CMA-ES, the runs' noise seeds
+    population: int = 0  # runs per CMA-ES generation (0: CMA-ES's default, 4 + 3 ln d)
+    keep_going: bool = False  # search the whole budget for the least robust point, past the first violation
+
+
+@dataclass
+class FalsifyResult:
+    settings: FalsifySettings
+    spec: Spec
+    spread: Distribution | None
+    runs: list[dict[str, Any]]  # in the order run: record, its inputs, its objective and batch
+    complete: bool
+    wall_s: float = 0.0
+    base: dict[str, Any] = field(default_factory=dict)  # the base parameters' changes from the defaults
+
+    @property
+    def first_violation(self) -> int | None:
+        """The index of the first run that violated a requirement (None: none did)."""
+        return next((i for i, r in enumerate(self.runs) if r["objective"] < 0), None)
+
+    @property
+    def least_robust(self) -> dict[str, Any] | None:
+        return min(self.runs, key=lambda r: r["objective"]) if self.runs else None
+
+    def replay(self, run: dict[str, Any]) -> dict[str, Any]:
+        """What ``ballbeam run --replay`` needs to repeat ``run`` bit for bit."""
+        s = self.settings
+        return {
+            **replay_entry(s.controller, run, s.noise, s.duration_s, self.spec),
+            "searched": run["values"],
+            "objective": run["objective"],
+        }
+
+    def to_json(self) -> dict[str, Any]:
+        first, best = self.first_violation, self.least_robust
+        s = self.settings
+        return {
+            "settings": {**asdict(s), "axes": [asdict(a) for a in s.axes]},
+            "spec": self.spec.source,
+            "requirements": {r.name: r.formula for r in self.spec.requirements},
+            "spread": None if self.spread is None else self.spread.source,
+            "base_parameters": self.base,
+            "complete": self.complete,
+            "found": first is not None,
+            "runs_spent": len(self.runs),
+            "runs_to_first_violation": None if first is None else first + 1,
+            "counterexample": None if first is None or best is None else self.replay(best),
+            "least_robust": None if best is None else self.replay(best),
+            "trace": [
+                {k: r[k] for k in ("batch", "x0_m", "theta0_rad", "seed", "values", "objective", "worst")}
+                for r in self.runs
+            ],
+            "wall_s": round(self.wall_s, 2),
+        }
+
+
+class _Space:
+    """The unit cube's points as runs: a start, a noise seed, the rig's parameters."""
+
+    def __init__(self, settings: FalsifySettings, base: Parameters, spread: Distribution | None) -> None:
+        self.s, self.base, self.spread = settings, base, spread
+        self.dims = len(settings.axes) + (len(spread.names) if spread is not None else 0)
+        if self.dims == 0:
+            raise ParameterError("nothing to search: give a range (A:B) to at least one input, or a spread")
+        names = [a.name for a in settings.axes]
+        if len(set(names)) != len(names):
+            raise ParameterError(f"an input is searched twice: {names}")
+        if spread is not None:
+            both = sorted(set(names) & set(spread.names))
+            if both:
+                raise ParameterError(f"{both[0]} is both a searched range and in the spread {spread.source}")
+
+    def run_of(self, u: np.ndarray) -> tuple[float, float, dict[str, float], Parameters]:
+        """The start, the searched values by name and the parameters of point ``u``."""
+        s = self.s
+        values = {a.name: a.at(x) for a, x in zip(s.axes, u[: len(s.axes)], strict=True)}
+        overrides = {k: v for k, v in values.items() if k not in START_AXES}
+        params = self.base.with_overrides(overrides, origin="falsify") if overrides else self.base
+        if self.spread is not None:
+            drawn = self.spread.at(u[len(s.axes) :], NORMAL_TAIL)
+            params = apply_values(params, self.spread, drawn)
+            values.update({n: float(v) for n, v in zip(self.spread.names, drawn, strict=True)})
+        return values.get("x0_m", s.x0_m), values.get("theta0_rad", s.theta0_rad), values, params
+
+
+def _objective(record: dict[str, Any]) -> tuple[float, str]:
+    """The least robustness of a run and the requirement that has it; a failed controller is −inf."""
+    margins = record.get("requirements")
+    if record.get("failed") or not margins:
+        return -math.inf, "the controller failed" if record.get("failed") else "no signals"
+    name = min(margins, key=lambda k: margins[k] if not math.isnan(margins[k]) else -math.inf)
+    value = margins[name]
+    return (-math.inf if math.isnan(value) else float(value)), name
+
+
+@dataclass
+class _Search:
+    """The runs so far, shared by the search strategies."""
+
+    space: _Space
+    runs_job: Runs
+    rng: np.random.Generator
+    workers: int
+    scheduler: str | None
+    progress: Progress | None
+    runs: list[dict[str, Any]] = field(default_factory=list)
+    complete: bool = True
+
+    @property
+    def left(self) -> int:
+        return self.space.s.budget - len(self.runs)
+
+    def found(self) -> bool:
+        return not self.space.s.keep_going and any(r["objective"] < 0 for r in self.runs)
+
+    def evaluate(self, points: np.ndarray) -> list[float]:
+        """Run the points (one batch) and return their objectives; points the rig cannot take are +inf."""
+        batch = len({r["batch"] for r in self.runs})
+        rows: list[dict[str, Any]] = []
+        starts, params, seeds = [], [], []
+        for u in points[: self.left]:
+            u = np.clip(np.asarray(u, dtype=float), 0.0, 1.0)
+            seed = int(self.rng.integers(2**31)) if self.space.s.noise else 0
+            try:
+                x0, th0, values, p = self.space.run_of(u)
+            except ParameterError as exc:  # a point outside a parameter's bounds: no rig, no run
+                rows.append({"infeasible": str(exc)})
+                continue
+            rows.append({"values": values, "seed": seed, "u": u.tolist(), "p": p})
+            starts.append((x0, th0))
+            params.append(p)
+            seeds.append(seed)
+        records, complete = (
+            run_starts(
+                self.runs_job,
+                np.array(starts, dtype=float).reshape(-1, 2),
+                np.array(seeds, dtype=np.int64),
+                params=params,
+                workers=self.workers,
+                scheduler=self.scheduler,
+            )
+            if starts
+            else ([], True)
+        )
+        self.complete = self.complete and complete
+        done = iter(records)
+        objectives = []
+        for row in rows:
+            if "infeasible" in row:
+                objectives.append(math.inf)
+                continue
+            record = next(done)
+            if record is None:
+                objectives.append(math.inf)
+                continue
+            value, worst = _objective(record)
+            p = row.pop("p")
+            self.runs.append(
+                {
+                    **record,
+                    **row,
+                    "objective": value,
+                    "worst": worst,
+                    "batch": batch,
+                    "parameters": p.changed(),
+                }
+            )
+            objectives.append(value)
+        if self.progress is not None:
+            self.progress(len(self.runs), self.space.s.budget)
+        return objectives
+
+
+def _first_batch(dims: int, rng: np.random.Generator, population: int) -> np.ndarray:
+    """The cube's corners and centre (``CORNER_DIMS`` dimensions at most), else a scrambled Sobol set."""
+    if dims <= CORNER_DIMS:
+        corners = np.array(np.meshgrid(*[[0.0, 1.0]] * dims, indexing="ij")).reshape(dims, -1).T
+        return np.vstack([corners, np.full((1, dims), 0.5)])
+    from scipy.stats import qmc
+
+    return qmc.Sobol(dims, scramble=True, seed=rng).random_base2(math.ceil(math.log2(max(population, 8))))
+
+
+def falsify(
+    settings: FalsifySettings,
+    base: Parameters,
+    spec: Spec,
+    spread: Distribution | None = None,
+    *,
+    workers: int = 1,
+    scheduler: str | None = None,
+    progress: Progress | None = None,
+) -> FalsifyResult:
+    """The search (see the module's doc): the runs in order, each with its objective."""
+    if not 1 <= settings.budget <= MAX_BUDGET:
+        raise ParameterError(f"--budget {settings.budget}: 1 … {MAX_BUDGET} runs")
+    space = _Space(settings, base, spread)
+    search = _new_search(settings, base, spec, space, workers, scheduler, progress)
+    started = time.perf_counter()
+    _cma_search(search)
+    return _result(search, spec, spread, base, started)
+
+
+def uniform_search(
+    settings: FalsifySettings,
+    base: Parameters,
+    spec: Spec,
+    spread: Distribution | None = None,
+    *,
+    workers: int = 1,
+    batch: int = 64,
+) -> FalsifyResult:
+    """The baseline: the same cube sampled uniformly at random (seeded), in batches of ``batch``, to the
+    first violation or the budget."""
+    space = _Space(settings, base, spread)
+    search = _new_search(settings, base, spec, space, workers, None, None)
+    started = time.perf_counter()
+    while search.left > 0 and not search.found() and search.complete:
+        search.evaluate(search.rng.random((min(batch, search.left), space.dims)))
+    return _result(search, spec, spread, base, started)
+
+
+def _new_search(
+    settings: FalsifySettings,
+    base: Parameters,
+    spec: Spec,
+    space: _Space,
+    workers: int,
+    scheduler: str | None,
+    progress: Progress | None,
+) -> _Search:
+    runs = Runs(
+        settings.controller, base, settings.duration_s, settings.noise, "twin", False, spec.requirements
+    )
+    rng = np.random.default_rng(np.random.SeedSequence([settings.seed, 0x46414C]))  # "FAL"
+    return _Search(space, runs, rng, workers, scheduler, progress)
+
+
+def _result(
+    search: _Search, spec: Spec, spread: Distribution | None, base: Parameters, started: float
+) -> FalsifyResult:
+    return FalsifyResult(
+        search.space.s,
+        spec,
+        spread,
+        search.runs,
+        search.complete,
+        time.perf_counter() - started,
+        base.changed(),
+    )
+
+
+def _cma_search(search: _Search) -> None:
+    """Corners first, then CMA-ES from the least robust point, restarted when it converges."""
+    import cma  # type: ignore[import-untyped]
+
+    s, d = search.space.s, search.space.dims
+    population = s.population or 4 + int(3 * math.log(max(d, 2)))
+    first = _first_batch(d, search.rng, population)
+    search.evaluate(first)
+    while search.left > 0 and not search.found() and search.complete:
+        best = min(search.runs, key=lambda r: r["objective"]) if search.runs else None
+        x0 = np.array(best["u"]) if best is not None else np.full(d, 0.5)
+        es = _strategy(cma, x0, population, int(search.rng.integers(2**31)))
+        while search.left > 0 and not search.found() and search.complete and not es.stop():
+            points = np.asarray(es.ask(), dtype=float)
+            values = search.evaluate(points)
+            if len(values) < len(points):  # the budget's last, partial generation: nothing to learn
+                break
+            es.tell(list(points), [_finite(v) for v in values])
+
+
+def _strategy(cma: Any, x0: np.ndarray, population: int, seed: int) -> Any:
+    if len(x0) == 1:  # CMA-ES needs two dimensions: a dummy second one that changes nothing
+        raise ParameterError("a one-dimensional search: give a second range (CMA-ES searches ≥ 2 inputs)")
+    options = {"bounds": [0.0, 1.0], "popsize": population, "seed": seed + 1, "verbose": -9}
+    options.update({"tolx": 1e-4, "tolfun": 1e-9})
+    return cma.CMAEvolutionStrategy(list(np.clip(x0, 0.02, 0.98)), SIGMA0, options)
+
+
+def _finite(v: float) -> float:
+    """CMA-ES ranks finite numbers: a failed run the worst-but-finite low, a point without a rig high."""
+    return -1e9 if v == -math.inf else 1e9 if v == math.inf else float(v)
+
+
+def parse_range(text: str, option: str) -> tuple[float, float]:
+    """``A:B`` (a range) or ``A`` (a value): (low, high)."""
+    lo, sep, hi = text.partition(":")
+    try:
+        a = float(lo)
+        b = float(hi) if sep else a
+    except ValueError:
+        raise ParameterError(f"{option} {text!r}: a value or a range A:B (numbers)") from None
+    if not (math.isfinite(a) and math.isfinite(b)) or a > b:
+        raise ParameterError(f"{option} {text!r}: A:B with finite A ≤ B")
+    return a, b
+
+
+def axes_of(ranges: Sequence[tuple[str, tuple[float, float], float]]) -> tuple[Axis, ...]:
+    """The searched axes of (name, (low, high), step): those with low < high."""
+    return tuple(Axis(name, lo, hi, step) for name, (lo, hi), step in ranges if hi > lo)
+
+
+ProgressFn = Callable[[int, int], None]
+
+# What write_falsify (twin.app.falsify_render) puts into its folder (checked before the search).
+OUTPUT_FILES = JobFiles("falsify", ("falsify.json", "falsify.png"))
