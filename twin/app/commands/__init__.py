@@ -14,6 +14,7 @@ from typing import Protocol
 from twin.app.commands import (
     calibrate,
     calibrate_static,
+    certify,
     compare,
     experiment,
     export_fmu,
@@ -50,6 +51,7 @@ COMMANDS: tuple[tuple[str, Command, str], ...] = (
     ("montecarlo", montecarlo, montecarlo.HELP),
     ("validate", validate, validate.HELP),
     ("falsify", falsify, falsify.HELP),
+    ("certify", certify, certify.HELP),
     ("view", view, view.HELP),
     ("calibrate", calibrate, calibrate.HELP),
     ("compare", compare, compare.HELP),

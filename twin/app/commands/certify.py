@@ -1,0 +1,155 @@
+"""``ballbeam certify``: every requirement holds with probability ≥ P at confidence C over rigs drawn from a
+spread or calibration, or the run that violates one (``twin.app.certify``)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+from twin.app.commands.common import (
+    JOB_RUN_S,
+    WORKERS,
+    add_controller_timeout,
+    add_params_options,
+    add_spread_options,
+    check_job,
+    controller_help,
+    params_and_spread,
+    progress_bar,
+    write_out,
+)
+from twin.app.options import count, finite_float, seed
+
+HELP = (
+    "a guarantee: every requirement holds with probability ≥ P at confidence C over rigs from a spread or "
+    "calibration and starts from a box (exact binomial bound), or the run that violates one; exit 0 pass"
+)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--controller", required=True, metavar="NAME|MODULE:CLASS|avr:FILE.elf", help=controller_help()
+    )
+    parser.add_argument(
+        "--spec", required=True, metavar="FILE", help="requirements in signal temporal logic (TOML)"
+    )
+    add_spread_options(parser, "the rigs drawn (one of them is required)")
+    parser.add_argument(
+        "--x0",
+        default="-0.2:0.2",
+        metavar="A:B",
+        help="the starts' ball positions (m), drawn uniformly (default -0.2:0.2)",
+    )
+    parser.add_argument(
+        "--theta0",
+        default="-0.3:0.3",
+        metavar="A:B",
+        help="the starts' beam angles (rad), drawn uniformly (default -0.3:0.3)",
+    )
+    parser.add_argument(
+        "--guarantee",
+        type=finite_float(0, 1, lo_open=True),
+        default=0.99,
+        metavar="P",
+        help="the probability stated (default 0.99)",
+    )
+    parser.add_argument(
+        "--confidence",
+        type=finite_float(0, 1, lo_open=True),
+        default=0.99,
+        metavar="C",
+        help="its confidence (default 0.99: 459 runs without a violation for P = 0.99)",
+    )
+    parser.add_argument(
+        "--duration", type=JOB_RUN_S, default=15.0, metavar="S", help="seconds per run (default 15)"
+    )
+    parser.add_argument("--no-noise", action="store_true", help="switch the ball sensor's contact noise off")
+    parser.add_argument("--seed", type=seed(), default=0, help="seed of the rigs, starts and noise drawn")
+    parser.add_argument(
+        "--batch",
+        type=count(1, 100_000),
+        default=64,
+        metavar="N",
+        help="runs per batch (a violation ends the job after its batch; default 64)",
+    )
+    add_params_options(parser)
+    parser.add_argument(
+        "--workers", type=WORKERS, default=1, help="local processes (default 1: this process)"
+    )
+    parser.add_argument("--scheduler", metavar="ADDRESS", help="a Dask distributed scheduler")
+    parser.add_argument("--out", metavar="DIR", help="write DIR/certify.json")
+    parser.add_argument("--overwrite", action="store_true", help="replace its own files in an existing --out")
+    parser.add_argument("--json", action="store_true", help="print the whole result as JSON")
+    add_controller_timeout(parser)
+
+
+def run(args: argparse.Namespace) -> int:
+    from twin.app.certify import OUTPUT_FILES, CertifySettings, certify, runs_needed
+    from twin.app.falsify import parse_range
+    from twin.parameters import ParameterError
+    from twin.physics import check_initial_state
+    from twin.requirements import load_spec
+
+    args.serve = None
+    if (args.spread is None) == (args.calibration is None):
+        raise ParameterError(
+            "give one of --spread FILE or --calibration DIR (the rigs the statement is over)"
+        )
+    base, spread = params_and_spread(args)
+    assert spread is not None
+    spec = load_spec(args.spec)
+    x, th = parse_range(args.x0, "--x0"), parse_range(args.theta0, "--theta0")
+    for a in x:
+        for b in th:
+            try:
+                check_initial_state(base, a, b, 0.0, 0.0)
+            except ValueError as exc:
+                raise ParameterError(f"--x0/--theta0: {exc}") from None
+    runs_needed(args.guarantee, args.confidence)  # refused here if it cannot be stated
+    check_job(args, base, OUTPUT_FILES)
+    settings = CertifySettings(
+        args.controller,
+        x,
+        th,
+        args.guarantee,
+        args.confidence,
+        args.duration,
+        not args.no_noise,
+        args.seed,
+        args.batch,
+    )
+    result = certify(
+        settings,
+        base,
+        spec,
+        spread,
+        workers=args.workers,
+        scheduler=args.scheduler,
+        progress=progress_bar("certify"),
+    )
+    write_out(args, _write, result)
+    out = result.to_json()
+    if args.json:
+        print(json.dumps(out))
+    else:
+        print(out["statement"])
+        for name, r in out["requirements"].items():
+            sd = f", noise sd {r['noise_sd']:.3g}" if "noise_reruns" in r else ""
+            print(f"  {name}: {r['status']}, least robustness {r['least_robustness']:+.4g}{sd}")
+        if result.counterexample is not None and args.out is not None:
+            print(f"repeat it: ballbeam run --replay {Path(args.out) / 'certify.json'}")
+    if result.outcome == "interrupted":
+        print("ballbeam certify: interrupted: no statement", file=sys.stderr)
+        return 130
+    return 0 if result.outcome == "pass" else 1
+
+
+def _write(result: Any, out_dir: str, *, overwrite: bool = False) -> None:
+    from twin.app.certify import OUTPUT_FILES
+    from twin.outputs import atomic_directory
+
+    with atomic_directory(out_dir, OUTPUT_FILES, overwrite=overwrite) as tmp:
+        (tmp / "certify.json").write_text(json.dumps(result.to_json(), indent=1) + "\n")
