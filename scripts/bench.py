@@ -4,7 +4,7 @@
                             [--skip-calibration] [--skip-view] [--view-seconds 60] [--skip-wire] [--only-wire]
                             [--skip-vector-env] [--only-vector-env] [--skip-sweep-command] [--only-sweep-command]
                             [--skip-batched-laws] [--only-batched-laws] [--skip-firmware] [--only-firmware]
-                            [--skip-fmi] [--only-fmi]
+                            [--skip-fmi] [--only-fmi] [--skip-falsify] [--only-falsify]
 
 One run measures, on the same work (a 10 s episode from x0 = 0.2 m, θ0 = 0.3 rad, noise on, seed 0):
 
@@ -43,6 +43,11 @@ One run measures, on the same work (a 10 s episode from x0 = 0.2 m, θ0 = 0.3 ra
   the in-process appendix-sf run wrote (the same trajectory, bit for bit), against that run; and
   examples/fmu's controller unit (``--controller fmu:…``, its own process) against appendix-sf in process;
   interleaved, the best of ``--repeats`` (at most 5); the unit's size;
+- (k) falsification: runs to the first counterexample, median over 20 search seeds, of ``ballbeam falsify``'s
+  search against uniform random sampling of the same space with the same budget (300), on two problems whose
+  answer a brute-force map gives (a start box crossing appendix-sf's region at a corner; a start near its
+  edge over docs/examples/spread.toml's rigs, whose tail loses the ball); and a falsification of budget 500 at
+  10 s against a 500-run batch;
 - view: the live view's tick rate at speed 1.0 over the given wall time (target 50 Hz ± 1 %) and its CPU
   time per tick, with a client attached (a websocket speaking viser's protocol, draining every frame).
 
@@ -57,11 +62,12 @@ from __future__ import annotations
 import argparse
 import functools
 import json
+import math
 import os
 import socket
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -689,6 +695,117 @@ def bench_fmi(repeats: int) -> dict[str, float]:
     }
 
 
+REPO = Path(__file__).resolve().parents[1]
+
+# (k) the falsifier's problems: a start box whose corner leaves appendix-sf's region (the map of
+# docs/examples/falsify.toml's requirement, 5 s, noise off, puts its lost starts in a corner triangle), and a
+# start near the region's edge over the spread's rigs (its tail loses the ball).
+FALSIFY_SECONDS = 5.0
+FALSIFY_BUDGET = 300
+FALSIFY_SEEDS = 20
+
+
+def _falsify_problems() -> list[tuple[str, Any, Any]]:
+    from twin.app.falsify import Axis, FalsifySettings
+    from twin.app.montecarlo import load_spread
+    from twin.parameters import Parameters
+
+    corner = FalsifySettings(
+        "appendix-sf",
+        (Axis("x0_m", -0.05, 0.105), Axis("theta0_rad", -0.70, 0.0)),
+        duration_s=FALSIFY_SECONDS,
+        noise=False,
+        budget=FALSIFY_BUDGET,
+    )
+    tail = FalsifySettings(
+        "appendix-sf",
+        (),
+        x0_m=0.12,
+        theta0_rad=-0.535,
+        duration_s=FALSIFY_SECONDS,
+        noise=False,
+        budget=FALSIFY_BUDGET,
+    )
+    spread = load_spread(REPO / "docs" / "examples" / "spread.toml", Parameters())
+    return [("corner", corner, None), ("spread_tail", tail, spread)]
+
+
+def bench_falsify(seeds: int = FALSIFY_SEEDS) -> dict[str, float]:
+    """(k) runs to the first counterexample, median over ``seeds`` search seeds: the falsifier against uniform
+    random sampling of the same space with the same budget (a search without one counts budget + 1); each
+    problem's violating share by brute force (the corner: a 41 × 41 map of the box; the tail: 2000 uniform
+    draws), and what that share makes uniform sampling's median (ln 2 / −ln(1 − p)). Then a falsification of
+    budget 500 at 10 s against a 500-run batch of the engine, interleaved, the best of two."""
+    from twin.app.falsify import falsify, uniform_search
+    from twin.parameters import Parameters
+    from twin.requirements import load_spec
+
+    spec = load_spec(REPO / "docs" / "examples" / "falsify.toml")
+    p = Parameters()
+    out: dict[str, float] = {}
+    for name, settings, spread in _falsify_problems():
+        share = _violating_share(name, settings, spread, spec)
+        found: dict[str, list[int]] = {"falsifier": [], "uniform": []}
+        for seed in range(seeds):
+            s = replace(settings, seed=seed)
+            for method, search in (("falsifier", falsify), ("uniform", uniform_search)):
+                first = search(s, p, spec, spread).first_violation
+                found[method].append(FALSIFY_BUDGET + 1 if first is None else first + 1)
+        for method, runs in found.items():
+            out[f"{name}_{method}_median_runs"] = float(np.median(runs))
+            out[f"{name}_{method}_found_of_{seeds}"] = float(sum(r <= FALSIFY_BUDGET for r in runs))
+        out[f"{name}_violating_share"] = share
+        out[f"{name}_uniform_expected_median_runs"] = math.log(2) / -math.log1p(-share) if share else math.inf
+        out[f"{name}_uniform_over_falsifier"] = (
+            out[f"{name}_uniform_median_runs"] / out[f"{name}_falsifier_median_runs"]
+        )
+    out.update(_falsify_speed(spec))
+    return out
+
+
+def _violating_share(name: str, settings: Any, spread: Any, spec: Any) -> float:
+    from twin.app.falsify import uniform_search
+    from twin.app.fanout import Runs, run_starts
+    from twin.parameters import Parameters
+
+    if spread is None:
+        (xa, xb), (ta, tb) = ((a.low, a.high) for a in settings.axes)
+        grid = np.array([(x, t) for x in np.linspace(xa, xb, 41) for t in np.linspace(ta, tb, 41)])
+        job = Runs(
+            settings.controller, Parameters(), settings.duration_s, False, "twin", False, spec.requirements
+        )
+        records, _ = run_starts(job, grid, np.zeros(len(grid), dtype=np.int64))
+        return float(np.mean([min(r["requirements"].values()) < 0 for r in records if r]))
+    wide = uniform_search(
+        replace(settings, budget=2000, keep_going=True, seed=999), Parameters(), spec, spread
+    )
+    return float(np.mean([r["objective"] < 0 for r in wide.runs]))
+
+
+def _falsify_speed(spec: Any) -> dict[str, float]:
+    """A falsification of 500 runs of 10 s (to the end of its budget) against 500 runs of one batch."""
+    from twin.app.falsify import Axis, FalsifySettings, falsify
+    from twin.app.fanout import Runs, run_starts
+    from twin.parameters import Parameters
+
+    settings = FalsifySettings(
+        "appendix-sf", (Axis("x0_m", -0.2, 0.2), Axis("theta0_rad", -0.3, 0.3)), budget=500, keep_going=True
+    )
+    rng = np.random.default_rng(0)
+    starts = np.column_stack([rng.uniform(-0.2, 0.2, 500), rng.uniform(-0.3, 0.3, 500)])
+    job = Runs("appendix-sf", Parameters(), 10.0, True, "twin", False, spec.requirements)
+    best = {"falsify_500_s": math.inf, "batch_500_s": math.inf}
+    for _ in range(2):
+        t = time.perf_counter()
+        falsify(settings, Parameters(), spec)
+        best["falsify_500_s"] = min(best["falsify_500_s"], time.perf_counter() - t)
+        t = time.perf_counter()
+        run_starts(job, starts, np.arange(500, dtype=np.int64))
+        best["batch_500_s"] = min(best["batch_500_s"], time.perf_counter() - t)
+    best["falsify_over_batch"] = best["falsify_500_s"] / best["batch_500_s"]
+    return best
+
+
 def ratios(results: dict[str, Any]) -> dict[str, float]:
     """(b)/(a), (c)/(a, 2 threads), (d)/(b) and (d)/(c per episode), wall time (CPU time where noted)."""
     episode = results["episodes"]["appendix-sf"]
@@ -725,6 +842,11 @@ def ratios(results: dict[str, Any]) -> dict[str, float]:
     if target is not None:
         out["i_firmware_real_time_factor"] = target["real_time_factor"]
         out["i_firmware_over_appendix_sf"] = target["firmware_over_appendix_sf"]
+    search = results.get("falsify")
+    if search is not None:
+        for name in ("corner", "spread_tail"):
+            out[f"k_{name}_uniform_over_falsifier"] = search[f"{name}_uniform_over_falsifier"]
+        out["k_falsify_500_over_batch_500"] = search["falsify_over_batch"]
     laws = results.get("batched_laws")
     if laws is not None:
         for name in BATCHED_LAWS:
@@ -753,6 +875,8 @@ def main() -> None:
     parser.add_argument("--skip-fmi", action="store_true")
     parser.add_argument("--only-fmi", action="store_true", help="measure (j) only")
     parser.add_argument("--only-firmware", action="store_true", help="measure (i) only")
+    parser.add_argument("--skip-falsify", action="store_true")
+    parser.add_argument("--only-falsify", action="store_true", help="measure (k) only")
     parser.add_argument("--batch-side", type=int, default=41, help="the batch grid's points per side")
     args = parser.parse_args()
     # One measurement alone: (option, what it runs); the wire's JSON keeps its section's name.
@@ -764,6 +888,7 @@ def main() -> None:
         "only_fmi": lambda: bench_fmi(few),
         "only_firmware": lambda: bench_firmware(few),
         "only_vector_env": bench_vector_env,
+        "only_falsify": bench_falsify,
     }
     for option, measure in alone.items():
         if getattr(args, option):
@@ -795,6 +920,8 @@ def main() -> None:
         results["firmware"] = bench_firmware(max(1, min(args.repeats, 5)))
     if not args.skip_fmi:
         results["fmi"] = bench_fmi(max(1, min(args.repeats, 5)))
+    if not args.skip_falsify:
+        results["falsify"] = bench_falsify()
     results["ratios"] = ratios(results)
     if args.json:
         print(json.dumps(results))

@@ -680,9 +680,11 @@ def test_the_command_table_is_one_module_per_command() -> None:
     from twin.app.commands import (
         calibrate,
         calibrate_static,
+        certify,
         compare,
         experiment,
         export_fmu,
+        falsify,
         judge,
         linearize,
         montecarlo,
@@ -697,7 +699,7 @@ def test_the_command_table_is_one_module_per_command() -> None:
 
     modules = [
         linearize, run, serve, shadow, judge, sweep, montecarlo, validate, view, calibrate, compare,
-        calibrate_static, experiment, params, export_fmu,
+        calibrate_static, experiment, params, export_fmu, falsify, certify,
     ]  # fmt: skip
     rows = commands.COMMANDS
     assert sorted(m.__name__ for _, m, _ in rows) == sorted(m.__name__ for m in modules)

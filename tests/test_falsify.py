@@ -14,8 +14,10 @@ from cli_checks import refused
 
 from twin.app.cli import main
 from twin.app.falsify import Axis, FalsifySettings, falsify, uniform_search
+from twin.app.falsify_render import write_falsify
 from twin.app.fanout import Runs, run_starts
 from twin.app.montecarlo import load_spread
+from twin.app.replay import load_replay
 from twin.parameters import Parameters
 from twin.requirements import load_spec
 
@@ -29,6 +31,7 @@ def _settings(x: tuple[float, float], th: tuple[float, float], **kw: object) -> 
     )  # type: ignore[arg-type]
 
 
+@pytest.mark.quick
 def test_a_box_across_the_boundary_gives_a_counterexample_that_replays_bit_for_bit(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -41,6 +44,13 @@ def test_a_box_across_the_boundary_gives_a_counterexample_that_replays_bit_for_b
     assert data["found"] and cx["objective"] < 0 and cx["ball_lost"]
     assert data["runs_to_first_violation"] <= data["runs_spent"] <= 60
     assert (out / "falsify.png").stat().st_size > 10_000
+    replay = load_replay(out / "falsify.json")
+    assert (replay.x0_m, replay.theta0_rad, replay.seed, replay.noise) == (
+        cx["x0_m"],
+        cx["theta0_rad"],
+        0,
+        False,
+    )
     # every violation the search reports is one: the trace's objectives are the runs' least robustness
     assert min(t["objective"] for t in data["trace"]) == cx["objective"]
     capsys.readouterr()
@@ -51,10 +61,13 @@ def test_a_box_across_the_boundary_gives_a_counterexample_that_replays_bit_for_b
     assert (summary["x0_m"], summary["theta0_rad"]) == (cx["x0_m"], cx["theta0_rad"])
 
 
-def test_inside_the_region_none_is_found_and_the_least_robust_run_is_reported() -> None:
+@pytest.mark.quick
+def test_inside_the_region_none_is_found_and_the_least_robust_run_is_reported(tmp_path: Path) -> None:
     spec = load_spec(SPEC)
     result = falsify(_settings((-0.05, 0.05), (-0.1, 0.1), budget=20), Parameters(), spec)
     out = result.to_json()
+    write_falsify(result, tmp_path / "out")
+    assert json.loads((tmp_path / "out" / "falsify.json").read_text())["least_robust"] == out["least_robust"]
     assert not out["found"] and out["counterexample"] is None and out["runs_spent"] == 20
     least = out["least_robust"]
     assert least["objective"] == min(t["objective"] for t in out["trace"]) > 0
@@ -103,7 +116,7 @@ def test_bad_falsify_and_replay_inputs_are_refused(
 ) -> None:
     base = ["falsify", "--controller", "appendix-sf", "--spec", str(SPEC)]
     refused(capsys, [*base, "--x0", "0.3:0.1"], "--x0", "A ≤ B")
-    refused(capsys, [*base, "--x0", "a:b"], "--x0", "numbers")
+    refused(capsys, [*base, "--x0", "a:b"], "--x0", "not a number")
     refused(capsys, [*base, "--x0", "0.1:0.5"], "--x0/--theta0")
     refused(capsys, [*base, "--latency", "0:0.05"], "--latency")
     refused(capsys, [*base, "--x0", "0.1", "--theta0", "0.2"], "nothing to search")

@@ -28,7 +28,7 @@ from typing import Any, NoReturn
 from twin.app.catalogue import one_line
 from twin.app.commands import COMMANDS
 from twin.app.commands.common import package_version
-from twin.app.options import GridType, NumberType
+from twin.app.options import GridType, NumberType, SpanType
 
 
 class _HelpFormatter(argparse.HelpFormatter):
@@ -83,7 +83,7 @@ def _option_strings(parser: argparse.ArgumentParser) -> tuple[set[str], set[str]
     while parsers:
         for action in parsers.pop()._actions:
             every.update(action.option_strings)
-            if action.option_strings and isinstance(action.type, (NumberType, GridType)):
+            if action.option_strings and isinstance(action.type, (NumberType, GridType, SpanType)):
                 numeric.update(action.option_strings)
             if isinstance(action, argparse._SubParsersAction):
                 parsers.extend(action.choices.values())

@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -356,26 +355,6 @@ def _finite(v: float) -> float:
     """CMA-ES ranks finite numbers: a failed run the worst-but-finite low, a point without a rig high."""
     return -1e9 if v == -math.inf else 1e9 if v == math.inf else float(v)
 
-
-def parse_range(text: str, option: str) -> tuple[float, float]:
-    """``A:B`` (a range) or ``A`` (a value): (low, high)."""
-    lo, sep, hi = text.partition(":")
-    try:
-        a = float(lo)
-        b = float(hi) if sep else a
-    except ValueError:
-        raise ParameterError(f"{option} {text!r}: a value or a range A:B (numbers)") from None
-    if not (math.isfinite(a) and math.isfinite(b)) or a > b:
-        raise ParameterError(f"{option} {text!r}: A:B with finite A ≤ B")
-    return a, b
-
-
-def axes_of(ranges: Sequence[tuple[str, tuple[float, float], float]]) -> tuple[Axis, ...]:
-    """The searched axes of (name, (low, high), step): those with low < high."""
-    return tuple(Axis(name, lo, hi, step) for name, (lo, hi), step in ranges if hi > lo)
-
-
-ProgressFn = Callable[[int, int], None]
 
 # What write_falsify (twin.app.falsify_render) puts into its folder (checked before the search).
 OUTPUT_FILES = JobFiles("falsify", ("falsify.json", "falsify.png"))

@@ -157,6 +157,29 @@ class GridType:
         return text
 
 
+class SpanType:
+    """An argparse ``type`` for ``A:B`` (a range searched or drawn from) or ``A`` (a value) of ``option``: finite,
+    A ≤ B. Returns (A, B)."""
+
+    __name__ = "span"
+
+    def __init__(self, option: str) -> None:
+        self.option = option
+
+    def __call__(self, text: str) -> tuple[float, float]:
+        parts = text.split(":")
+        shown = f"{self.option} {text if len(text) <= 40 else text[:37] + '...'!r}"
+        if len(parts) not in (1, 2):
+            raise argparse.ArgumentTypeError(f"{shown}: expected A:B (e.g. -0.7:-0.3) or one value")
+        try:
+            lo, hi = finite_float()(parts[0]), finite_float()(parts[-1])
+        except argparse.ArgumentTypeError as exc:
+            raise argparse.ArgumentTypeError(f"{shown}: {exc}") from None
+        if lo > hi:
+            raise argparse.ArgumentTypeError(f"{shown}: A:B with A ≤ B ({lo:g} is above {hi:g})")
+        return lo, hi
+
+
 _HOST_NAME = re.compile(
     r"(?=.{1,253}$)[A-Za-z0-9](?:[A-Za-z0-9-]{0,61}[A-Za-z0-9])?(?:\.[A-Za-z0-9](?:[A-Za-z0-9-]{0,61}[A-Za-z0-9])?)*\.?"
 )

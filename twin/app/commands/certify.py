@@ -21,7 +21,7 @@ from twin.app.commands.common import (
     progress_bar,
     write_out,
 )
-from twin.app.options import count, finite_float, seed
+from twin.app.options import SpanType, count, finite_float, seed
 
 HELP = (
     "a guarantee: every requirement holds with probability ≥ P at confidence C over rigs from a spread or "
@@ -39,13 +39,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_spread_options(parser, "the rigs drawn (one of them is required)")
     parser.add_argument(
         "--x0",
-        default="-0.2:0.2",
+        type=SpanType("--x0"),
+        default=(-0.2, 0.2),
         metavar="A:B",
         help="the starts' ball positions (m), drawn uniformly (default -0.2:0.2)",
     )
     parser.add_argument(
         "--theta0",
-        default="-0.3:0.3",
+        type=SpanType("--theta0"),
+        default=(-0.3, 0.3),
         metavar="A:B",
         help="the starts' beam angles (rad), drawn uniformly (default -0.3:0.3)",
     )
@@ -88,7 +90,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from twin.app.certify import OUTPUT_FILES, CertifySettings, certify, runs_needed
-    from twin.app.falsify import parse_range
     from twin.parameters import ParameterError
     from twin.physics import check_initial_state
     from twin.requirements import load_spec
@@ -101,7 +102,7 @@ def run(args: argparse.Namespace) -> int:
     base, spread = params_and_spread(args)
     assert spread is not None
     spec = load_spec(args.spec)
-    x, th = parse_range(args.x0, "--x0"), parse_range(args.theta0, "--theta0")
+    x, th = args.x0, args.theta0
     for a in x:
         for b in th:
             try:

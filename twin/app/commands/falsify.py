@@ -19,7 +19,7 @@ from twin.app.commands.common import (
     progress_bar,
     write_out,
 )
-from twin.app.options import count, seed
+from twin.app.options import SpanType, count, seed
 
 HELP = (
     "search starts, rigs, latency and zeroing for a run that violates a requirement; the counterexample "
@@ -39,18 +39,30 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "search minimises their least robustness",
     )
     parser.add_argument(
-        "--x0", default="-0.2", metavar="A:B|M", help="initial ball position (m): a range or a value"
+        "--x0",
+        type=SpanType("--x0"),
+        default="-0.2",
+        metavar="A:B|M",
+        help="initial ball position (m): a range or a value",
     )
     parser.add_argument(
-        "--theta0", default="0.3", metavar="A:B|RAD", help="initial beam angle (rad): a range or a value"
+        "--theta0",
+        type=SpanType("--theta0"),
+        default="0.3",
+        metavar="A:B|RAD",
+        help="initial beam angle (rad): a range or a value",
     )
     parser.add_argument(
         "--latency",
+        type=SpanType("--latency"),
         metavar="A:B",
         help="output latency (s; daq.output_latency_s, whole physics steps, below a period): a range or a value",
     )
     parser.add_argument(
-        "--zeroing", metavar="A:B", help="the counter's zeroing error (rad; angle_sensor.zeroing_error_rad)"
+        "--zeroing",
+        type=SpanType("--zeroing"),
+        metavar="A:B",
+        help="the counter's zeroing error (rad; angle_sensor.zeroing_error_rad)",
     )
     add_spread_options(parser, "searched over (a normal within ±3 standard deviations)")
     parser.add_argument(
@@ -94,7 +106,7 @@ def _max_budget() -> float:
 
 
 def run(args: argparse.Namespace) -> int:
-    from twin.app.falsify import OUTPUT_FILES, Axis, FalsifySettings, falsify, parse_range
+    from twin.app.falsify import OUTPUT_FILES, Axis, FalsifySettings, falsify
     from twin.parameters import ParameterError
     from twin.physics import check_initial_state
     from twin.requirements import load_spec
@@ -102,8 +114,7 @@ def run(args: argparse.Namespace) -> int:
     args.serve = None  # a search runs here (check_job's served case does not apply)
     base, spread = params_and_spread(args)
     spec = load_spec(args.spec)
-    x = parse_range(args.x0, "--x0")
-    th = parse_range(args.theta0, "--theta0")
+    x, th = args.x0, args.theta0
     for a, b in ((x[0], th[0]), (x[1], th[1]), (x[0], th[1]), (x[1], th[0])):
         try:
             check_initial_state(base, a, b, 0.0, 0.0)
@@ -116,12 +127,12 @@ def run(args: argparse.Namespace) -> int:
         ("--zeroing", args.zeroing, "angle_sensor.zeroing_error_rad", 0.0),
     ):
         if text is not None:
-            lo, hi = parse_range(text, option)
+            lo, hi = text
             for v in (lo, hi):
                 try:
                     base.with_overrides({name: v}, origin=option)
                 except ParameterError as exc:
-                    raise ParameterError(f"{option} {text}: {exc}") from None
+                    raise ParameterError(f"{option} {lo:g}:{hi:g}: {exc}") from None
             axes.append(Axis(name, lo, hi, grid))
     searched = tuple(a for a in axes if a.high > a.low)
     fixed = {a.name: a.low for a in axes if a.high <= a.low}
