@@ -142,3 +142,35 @@ def test_the_example_requirements_give_the_default_validations_verdicts_run_for_
     plain = validate(controller, Parameters(), ValidationCriteria(), workers=2)
     assert [(c.name, c.passed) for c in report.checks] == [(c.name, c.passed) for c in plain.checks]
     assert report.to_json()["spec"] == str(EXAMPLE)
+
+
+@pytest.mark.quick
+def test_a_bad_validate_table_is_refused_naming_the_file(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from twin.app.validate import SPEC_CHECKS
+    from twin.requirements import load_spec
+
+    path = tmp_path / "spec.toml"
+    for text, needle in (
+        (
+            '[requirements]\nkept = "always (lost < 0.5)"\n[validate]\nnominl = ["kept"]\n',
+            "'nominl' is not a check",
+        ),
+        (
+            '[requirements]\nkept = "always (lost < 0.5)"\n[validate]\nregion = ["held"]\n',
+            "no requirement 'held'",
+        ),
+        (
+            '[requirements]\nkept = "always (lost < 0.5)"\n[validate]\nregion = "kept"\n',
+            "a list of requirement names",
+        ),
+        ('[requirements]\nkept = "always (lost < 0.5)"\n[checks]\n', "unknown table 'checks'"),
+    ):
+        path.write_text(text)
+        with pytest.raises(ParameterError, match=needle):
+            load_spec(path, SPEC_CHECKS)
+        refused(capsys, ["validate", "--controller", "appendix-sf", "--spec", str(path)], str(path), needle)
+    spec = load_spec(EXAMPLE, SPEC_CHECKS)
+    assert [r.name for r in spec.asked("region")] == ["kept"]
+    assert len(spec.asked("nominal")) == 5 and len(spec.requirements) == 6
