@@ -760,7 +760,25 @@ def bench_falsify(seeds: int = FALSIFY_SEEDS) -> dict[str, float]:
             out[f"{name}_uniform_median_runs"] / out[f"{name}_falsifier_median_runs"]
         )
     out.update(_falsify_speed(spec))
+    out["seeds"], out["budget"] = float(seeds), float(FALSIFY_BUDGET)
     return out
+
+
+def write_falsify_table(bench: dict[str, float]) -> None:
+    """(k) into docs/validation/falsify_bench.json and the README's table between its falsify-table markers."""
+    from twin.app.falsify_render import render_table
+    from twin.outputs import write_atomic
+
+    write_atomic(
+        REPO / "docs" / "validation" / "falsify_bench.json",
+        json.dumps(bench, indent=1) + "\n",
+        overwrite=True,
+    )
+    readme = REPO / "README.md"
+    begin, end = "<!-- falsify-table -->\n", "<!-- /falsify-table -->"
+    head, _, rest = readme.read_text().partition(begin)
+    _, _, tail = rest.partition(end)
+    write_atomic(readme, head + begin + render_table(bench) + end + tail, overwrite=True)
 
 
 def _violating_share(name: str, settings: Any, spread: Any, spec: Any) -> float:
@@ -804,6 +822,12 @@ def _falsify_speed(spec: Any) -> dict[str, float]:
         best["batch_500_s"] = min(best["batch_500_s"], time.perf_counter() - t)
     best["falsify_over_batch"] = best["falsify_500_s"] / best["batch_500_s"]
     return best
+
+
+def _and_write(bench: dict[str, float], write: bool) -> dict[str, float]:
+    if write:
+        write_falsify_table(bench)
+    return bench
 
 
 def ratios(results: dict[str, Any]) -> dict[str, float]:
@@ -877,6 +901,11 @@ def main() -> None:
     parser.add_argument("--only-firmware", action="store_true", help="measure (i) only")
     parser.add_argument("--skip-falsify", action="store_true")
     parser.add_argument("--only-falsify", action="store_true", help="measure (k) only")
+    parser.add_argument(
+        "--write-docs",
+        action="store_true",
+        help="with (k): write its table into the README and docs/validation/",
+    )
     parser.add_argument("--batch-side", type=int, default=41, help="the batch grid's points per side")
     args = parser.parse_args()
     # One measurement alone: (option, what it runs); the wire's JSON keeps its section's name.
@@ -888,7 +917,7 @@ def main() -> None:
         "only_fmi": lambda: bench_fmi(few),
         "only_firmware": lambda: bench_firmware(few),
         "only_vector_env": bench_vector_env,
-        "only_falsify": bench_falsify,
+        "only_falsify": lambda: _and_write(bench_falsify(), args.write_docs),
     }
     for option, measure in alone.items():
         if getattr(args, option):

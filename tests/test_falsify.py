@@ -130,3 +130,20 @@ def test_bad_falsify_and_replay_inputs_are_refused(
     refused(capsys, ["run", "--replay", str(bad)], "no run to repeat")
     refused(capsys, ["run", "--replay", str(bad), "--x0", "0.1"], "--replay brings", "--x0")
     refused(capsys, ["view", "--replay", str(bad), "--seed", "3"], "--replay brings", "--seed")
+
+
+@pytest.mark.quick
+def test_the_readmes_falsifier_table_is_the_benchs_json_rendered() -> None:
+    import re
+
+    from twin.app.falsify_render import render_table
+
+    bench = json.loads((ROOT / "docs" / "validation" / "falsify_bench.json").read_text())
+    block = re.search(
+        r"<!-- falsify-table -->\n(.*?)<!-- /falsify-table -->", (ROOT / "README.md").read_text(), re.S
+    )
+    assert block is not None and block[1] == render_table(bench)
+    # the table's ratio is the medians' (a search without a violation counts budget + 1)
+    for key in ("corner", "spread_tail"):
+        ratio = bench[f"{key}_uniform_median_runs"] / bench[f"{key}_falsifier_median_runs"]
+        assert bench[f"{key}_uniform_over_falsifier"] == ratio

@@ -15,7 +15,13 @@ import numpy as np  # noqa: E402
 from twin.app.falsify import OUTPUT_FILES, FalsifyResult  # noqa: E402
 from twin.outputs import atomic_directory  # noqa: E402
 
-__all__ = ["render_falsify", "write_falsify"]
+__all__ = ["render_falsify", "render_table", "write_falsify"]
+
+# The bench's problems (scripts/bench.py, (k)) as the README's table names them.
+PROBLEMS = {
+    "corner": "start box across appendix-sf's region at a corner (x0 −0.05…0.105 m, θ0 −0.70…0 rad)",
+    "spread_tail": "appendix-sf from (0.12 m, −0.535 rad) over docs/examples/spread.toml's rigs",
+}
 
 
 def write_falsify(result: FalsifyResult, out_dir: str | Path, *, overwrite: bool = False) -> Path:
@@ -61,3 +67,31 @@ def render_falsify(result: FalsifyResult, path: Path) -> None:
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)
+
+
+def render_table(bench: dict[str, float]) -> str:
+    """The README's falsifier-against-sampling table from the bench's (k) figures (``bench.py --only-falsify``)."""
+    seeds = int(bench["seeds"])
+    budget = int(bench["budget"])
+    lines = [
+        f"| problem (5 s runs, noise off) | violating share (brute force) | falsifier: median runs (found of {seeds}) "
+        f"| uniform: median runs (found of {seeds}) | uniform ÷ falsifier |",
+        "|---|---|---|---|---|",
+    ]
+    for key, what in PROBLEMS.items():
+        uniform = bench[f"{key}_uniform_median_runs"]
+        shown = f"> {budget}" if uniform > budget else f"{uniform:g}"
+        found = bench[f"{key}_uniform_found_of_{seeds}"]
+        lines.append(
+            f"| {what} | {100 * bench[f'{key}_violating_share']:.2f} % (uniform's expected median "
+            f"{bench[f'{key}_uniform_expected_median_runs']:.0f}) | {bench[f'{key}_falsifier_median_runs']:g} "
+            f"({bench[f'{key}_falsifier_found_of_{seeds}']:.0f}) | {shown} ({found:.0f}) "
+            f"| {'≥ ' if uniform > budget else ''}{bench[f'{key}_uniform_over_falsifier']:.1f}× |"
+        )
+    lines.append("")
+    lines.append(
+        f"A search without a violation counts {budget} + 1. A falsification of budget 500 at 10 s took "
+        f"{bench['falsify_over_batch']:.2f}× the time of a 500-run batch ({bench['falsify_500_s']:.1f} s against "
+        f"{bench['batch_500_s']:.1f} s, interleaved, the best of two)."
+    )
+    return "\n".join(lines) + "\n"

@@ -76,7 +76,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--population",
         type=count(2, 1000),
         metavar="N",
-        help="runs per CMA-ES generation (default 4 + 3 ln d)",
+        help="runs per CMA-ES generation, one batch of the engine each (default: a tenth of the budget, at least "
+        "4 + 3 ln d)",
     )
     parser.add_argument(
         "--keep-going",
@@ -183,7 +184,7 @@ def _print(out: dict, args: argparse.Namespace) -> None:
     margins = ", ".join(f"{k} {v:+.4g}" for k, v in best["robustness"].items())
     if out["found"]:
         print(
-            f"counterexample after {out['runs_to_first_violation']} runs ({out['runs_spent']} spent of "
+            f"counterexample at run {out['runs_to_first_violation']} ({out['runs_spent']} spent of "
             f"{args.budget}): {where}; seed {best['seed']}; robustness {margins}"
             + ("; the ball is lost" if best["ball_lost"] else "")
         )
