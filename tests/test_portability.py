@@ -68,6 +68,18 @@ for k in range(300):
     times = 0.02 * k + knots
     chain.advance_rig_block(times, 0.05 + 0.1 * np.sin(3 * times), np.ones(21, dtype=bool), True)
     digest.update(np.float64(chain.filtered_v).tobytes())
+# a falsification over a spread (a Sobol batch, the linear model's corner, CMA-ES's generations): its points and
+# objectives
+import json
+from twin.app.falsify import FalsifySettings, falsify
+from twin.app.montecarlo import load_spread
+from twin.requirements import load_spec
+
+spread = load_spread("docs/examples/spread.toml", Parameters())
+search = FalsifySettings("appendix-sf", (), x0_m=0.12, theta0_rad=-0.5, duration_s=1.0, budget=120, population=8,
+                         keep_going=True)
+found = falsify(search, Parameters(), load_spec("docs/examples/falsify.toml"), spread)
+digest.update(json.dumps([(r["u"], r["objective"]) for r in found.runs]).encode())
 print([i["architecture"] for i in threadpool_info() if i["internal_api"] == "openblas"], digest.hexdigest())
 """
 
