@@ -11,12 +11,12 @@ from typing import Any
 
 from twin.app.commands.common import (
     JOB_RUN_S,
-    WORKERS,
     add_controller_timeout,
+    add_job_outputs,
     add_params_options,
-    add_spread_options,
+    add_requirements_job,
     check_job,
-    controller_help,
+    check_start_box,
     params_and_spread,
     progress_bar,
     write_out,
@@ -30,13 +30,7 @@ HELP = (
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument(
-        "--controller", required=True, metavar="NAME|MODULE:CLASS|avr:FILE.elf", help=controller_help()
-    )
-    parser.add_argument(
-        "--spec", required=True, metavar="FILE", help="requirements in signal temporal logic (TOML)"
-    )
-    add_spread_options(parser, "the rigs drawn (one of them is required)")
+    add_requirements_job(parser, "each must hold", "the rigs drawn (one of them is required)")
     parser.add_argument(
         "--x0",
         type=SpanType("--x0"),
@@ -78,20 +72,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="runs per batch (a violation ends the job after its batch; default 64)",
     )
     add_params_options(parser)
-    parser.add_argument(
-        "--workers", type=WORKERS, default=1, help="local processes (default 1: this process)"
-    )
-    parser.add_argument("--scheduler", metavar="ADDRESS", help="a Dask distributed scheduler")
-    parser.add_argument("--out", metavar="DIR", help="write DIR/certify.json")
-    parser.add_argument("--overwrite", action="store_true", help="replace its own files in an existing --out")
-    parser.add_argument("--json", action="store_true", help="print the whole result as JSON")
+    add_job_outputs(parser, "DIR/certify.json")
     add_controller_timeout(parser)
 
 
 def run(args: argparse.Namespace) -> int:
     from twin.app.certify import OUTPUT_FILES, CertifySettings, certify, runs_needed
     from twin.parameters import ParameterError
-    from twin.physics import check_initial_state
     from twin.requirements import load_spec
 
     args.serve = None
@@ -103,12 +90,7 @@ def run(args: argparse.Namespace) -> int:
     assert spread is not None
     spec = load_spec(args.spec)
     x, th = args.x0, args.theta0
-    for a in x:
-        for b in th:
-            try:
-                check_initial_state(base, a, b, 0.0, 0.0)
-            except ValueError as exc:
-                raise ParameterError(f"--x0/--theta0: {exc}") from None
+    check_start_box(base, x, th)
     runs_needed(args.guarantee, args.confidence)  # refused here if it cannot be stated
     check_job(args, base, OUTPUT_FILES)
     settings = CertifySettings(

@@ -491,3 +491,45 @@ def package_version() -> str:
             return str(tomllib.load(fh)["project"]["version"])
     except (OSError, KeyError, tomllib.TOMLDecodeError):
         return "unknown"
+
+
+def add_requirements_job(parser: argparse.ArgumentParser, spec_use: str, spread_use: str) -> None:
+    """What a job judged by requirements takes (falsify, certify): the controller, the requirements file and the
+    rigs (``--spread``/``--calibration``)."""
+    parser.add_argument(
+        "--controller", required=True, metavar="NAME|MODULE:CLASS|avr:FILE.elf", help=controller_help()
+    )
+    parser.add_argument(
+        "--spec",
+        required=True,
+        metavar="FILE",
+        help=f"requirements in signal temporal logic (TOML; README: Requirements and counterexamples): {spec_use}",
+    )
+    add_spread_options(parser, spread_use)
+
+
+def add_job_outputs(parser: argparse.ArgumentParser, files: str) -> None:
+    """Where a many-run job runs (--workers, --scheduler) and what it writes (--out DIR: ``files``, --overwrite,
+    --json)."""
+    parser.add_argument(
+        "--workers", type=WORKERS, default=1, help="local processes (default 1: this process)"
+    )
+    parser.add_argument(
+        "--scheduler", metavar="ADDRESS", help="a Dask distributed scheduler to fan the runs out to"
+    )
+    parser.add_argument("--out", metavar="DIR", help=f"write {files}")
+    parser.add_argument("--overwrite", action="store_true", help="replace its own files in an existing --out")
+    parser.add_argument("--json", action="store_true", help="print the whole result as JSON")
+
+
+def check_start_box(params: Parameters, x0_m: tuple[float, float], theta0_rad: tuple[float, float]) -> None:
+    """Every corner of a box of starts on the track and within the stops (a ParameterError naming the options)."""
+    from twin.parameters import ParameterError
+    from twin.physics import check_initial_state
+
+    for x in x0_m:
+        for theta in theta0_rad:
+            try:
+                check_initial_state(params, x, theta, 0.0, 0.0)
+            except ValueError as exc:
+                raise ParameterError(f"--x0/--theta0: {exc}") from None

@@ -9,12 +9,12 @@ from pathlib import Path
 
 from twin.app.commands.common import (
     JOB_RUN_S,
-    WORKERS,
     add_controller_timeout,
+    add_job_outputs,
     add_params_options,
-    add_spread_options,
+    add_requirements_job,
     check_job,
-    controller_help,
+    check_start_box,
     params_and_spread,
     progress_bar,
     write_out,
@@ -28,15 +28,8 @@ HELP = (
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument(
-        "--controller", required=True, metavar="NAME|MODULE:CLASS|avr:FILE.elf", help=controller_help()
-    )
-    parser.add_argument(
-        "--spec",
-        required=True,
-        metavar="FILE",
-        help="requirements in signal temporal logic (TOML; README: Requirements and counterexamples): the "
-        "search minimises their least robustness",
+    add_requirements_job(
+        parser, "the search minimises their least robustness", "searched over (a normal within ±3 sd)"
     )
     parser.add_argument(
         "--x0",
@@ -64,7 +57,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="A:B",
         help="the counter's zeroing error (rad; angle_sensor.zeroing_error_rad)",
     )
-    add_spread_options(parser, "searched over (a normal within ±3 standard deviations)")
     parser.add_argument(
         "--duration", type=JOB_RUN_S, default=10.0, metavar="S", help="seconds per run (default 10)"
     )
@@ -88,15 +80,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--seed", type=seed(), default=0, help="the search's seed (its points and noise seeds)"
     )
     add_params_options(parser)
-    parser.add_argument(
-        "--workers", type=WORKERS, default=1, help="local processes (default 1: this process)"
-    )
-    parser.add_argument(
-        "--scheduler", metavar="ADDRESS", help="a Dask distributed scheduler to fan each batch out to"
-    )
-    parser.add_argument("--out", metavar="DIR", help="write DIR/falsify.json and DIR/falsify.png")
-    parser.add_argument("--overwrite", action="store_true", help="replace its own files in an existing --out")
-    parser.add_argument("--json", action="store_true", help="print the whole result as JSON")
+    add_job_outputs(parser, "DIR/falsify.json and DIR/falsify.png")
     add_controller_timeout(parser)
 
 
@@ -109,18 +93,13 @@ def _max_budget() -> float:
 def run(args: argparse.Namespace) -> int:
     from twin.app.falsify import OUTPUT_FILES, Axis, FalsifySettings, falsify
     from twin.parameters import ParameterError
-    from twin.physics import check_initial_state
     from twin.requirements import load_spec
 
     args.serve = None  # a search runs here (check_job's served case does not apply)
     base, spread = params_and_spread(args)
     spec = load_spec(args.spec)
     x, th = args.x0, args.theta0
-    for a, b in ((x[0], th[0]), (x[1], th[1]), (x[0], th[1]), (x[1], th[0])):
-        try:
-            check_initial_state(base, a, b, 0.0, 0.0)
-        except ValueError as exc:
-            raise ParameterError(f"--x0/--theta0: {exc}") from None
+    check_start_box(base, x, th)
     axes = [Axis("x0_m", *x), Axis("theta0_rad", *th)]
     step = base.physics.timestep_s
     for option, text, name, grid in (
