@@ -70,6 +70,10 @@ def test_a_violation_ends_the_job_with_a_counterexample_that_replays(
     cx = data["counterexample"]
     first = next(r for r in data["runs"] if r["requirements"]["near_centre"] < 0)
     assert cx["robustness"] == first["requirements"] and cx["x0_m"] == first["x0_m"]
+    assert data["runs"].index(first) + 1 == data["runs_to_first_violation"]
+    assert data["statement"].startswith(
+        f"FAIL: run {data['runs_to_first_violation']} of 4 run violates near_centre"
+    )
     capsys.readouterr()
     assert main(["run", "--replay", str(out / "certify.json"), "--json"]) == 1
     summary = json.loads(capsys.readouterr().out)

@@ -79,7 +79,9 @@ class CertifyResult:
         s = self.settings
         over = self.over()
         if self.outcome == "fail":
-            return f"FAIL after {len(self.runs)} runs: a run violates {self.counterexample_names()} ({over})"
+            first = self.first_violation
+            where = f"run {first + 1} of {len(self.runs)} run" if first is not None else "a noise re-run"
+            return f"FAIL: {where} violates {self.counterexample_names()} ({over})"
         if self.outcome == "interrupted":
             return f"interrupted after {len(self.runs)} of {self.needed} runs: no statement"
         names = [n for n, r in self.requirements.items() if r["status"] == "holds"]
@@ -91,6 +93,11 @@ class CertifyResult:
         if unsure:
             text += f"; INCONCLUSIVE: {', '.join(unsure)} (within the sensor noise of violation)"
         return text
+
+    @property
+    def first_violation(self) -> int | None:
+        """The index of the first drawn run that violated a requirement (None: none of them did)."""
+        return next((i for i, r in enumerate(self.runs) if _fails(r)), None)
 
     def counterexample_names(self) -> str:
         cx = self.counterexample or {}
@@ -120,6 +127,7 @@ class CertifyResult:
             ),
             "runs_needed": self.needed,
             "runs_spent": len(self.runs),
+            "runs_to_first_violation": None if self.first_violation is None else self.first_violation + 1,
             "requirements": self.requirements,
             "counterexample": self.counterexample,
             "runs": [
