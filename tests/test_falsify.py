@@ -147,3 +147,28 @@ def test_the_readmes_falsifier_table_is_the_benchs_json_rendered() -> None:
     for key in ("corner", "spread_tail"):
         ratio = bench[f"{key}_uniform_median_runs"] / bench[f"{key}_falsifier_median_runs"]
         assert bench[f"{key}_uniform_over_falsifier"] == ratio
+
+
+def test_view_replay_opens_the_counterexample(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """``view --replay``: the view gets the file's controller, start, seed, noise and rig, and the live twin's
+    first run starts there."""
+    import twin.viewer
+    from controllers import registry
+    from twin.viewer.session import LiveTwin
+
+    spec = load_spec(SPEC)
+    p = Parameters().with_overrides({"motor.resistance_ohm": 9.9})
+    result = falsify(_settings((0.10, 0.32), (-0.70, -0.30), budget=10), p, spec)
+    write_falsify(result, tmp_path / "fz")
+    seen: dict[str, object] = {}
+    monkeypatch.setattr(twin.viewer, "serve", lambda catalogue, **kwargs: seen.update(kwargs) or {})
+    assert main(["view", "--replay", str(tmp_path / "fz" / "falsify.json"), "--duration", "1"]) == 0
+    cx = result.to_json()["counterexample"]
+    assert seen["initial"] == (cx["x0_m"], cx["theta0_rad"]) and seen["controller"] == "appendix-sf"
+    assert seen["seed"] == cx["seed"] and seen["params"].motor.resistance_ohm == 9.9  # type: ignore[attr-defined]
+    assert seen["params"].ball_sensor.noise_enabled is False  # type: ignore[attr-defined]
+    live = LiveTwin(seen["params"], registry, "appendix-sf", cx["seed"], 1.0, initial=seen["initial"])  # type: ignore[arg-type]
+    try:
+        assert (live.x0_m, live.theta0_rad) == (cx["x0_m"], cx["theta0_rad"])
+    finally:
+        live.close()
