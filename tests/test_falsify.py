@@ -172,3 +172,56 @@ def test_view_replay_opens_the_counterexample(tmp_path: Path, monkeypatch: pytes
         assert (live.x0_m, live.theta0_rad) == (cx["x0_m"], cx["theta0_rad"])
     finally:
         live.close()
+
+
+def test_a_flick_and_a_setpoint_are_inputs_of_a_run_the_batch_and_the_search(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``Scenario``: a kick of 0 is no flick (the same bits); a flick leaves the ticks before it as they were and
+    changes the ball's speed after; ``run_batch`` with scenarios gives ``run_closed_loop``'s runs bit for bit; a
+    search over a flick finds the kick that loses the ball and ``run --replay`` repeats it; a setpoint reaches
+    the requirements' ``setpoint_m``."""
+    from controllers import registry
+    from twin.engine import Scenario, run_closed_loop
+    from twin.rigs.batch import run_batch
+
+    def run(scenario: Scenario | None) -> object:
+        return run_closed_loop(
+            registry.make("appendix-sf"), x0_m=0.1, theta0_rad=0.0, duration_s=3.0, seed=2, scenario=scenario
+        )
+
+    plain, zero, kicked = run(None), run(Scenario(1.0, 0.0)), run(Scenario(1.0, 0.4))
+    logs = [vars(r.log) for r in (plain, zero, kicked)]  # type: ignore[attr-defined]
+    assert all(np.array_equal(logs[0][k], logs[1][k]) for k in logs[0])
+    k = int(np.searchsorted(logs[0]["true_time_s"], 1.0))  # the first tick after the flick
+    assert np.array_equal(logs[0]["true_x_m"][:k], logs[2]["true_x_m"][:k])
+    assert logs[2]["true_xdot_m_s"][k] - logs[0]["true_xdot_m_s"][k] == pytest.approx(0.4, abs=0.02)
+    batch = run_batch(
+        registry, "appendix-sf", x0_m=np.array([0.1, 0.1]), theta0_rad=np.zeros(2), seeds=np.array([2, 2]),
+        duration_s=3.0, record=True, scenarios=[None, Scenario(1.0, 0.4)],
+    )  # fmt: skip
+    for got, want in zip(batch, (plain, kicked), strict=True):
+        assert all(np.array_equal(vars(got.log)[name], v) for name, v in vars(want.log).items())  # type: ignore[attr-defined]
+    out = tmp_path / "fz"
+    argv = ["falsify", "--controller", "appendix-sf", "--spec", str(SPEC), "--x0", "0", "--theta0", "0"]
+    argv += ["--flick-time", "0.5:2", "--flick-speed", "-1.5:1.5", "--no-noise", "--duration", "3"]
+    assert main([*argv, "--budget", "20", "--out", str(out)]) == 1
+    cx = json.loads((out / "falsify.json").read_text())["counterexample"]
+    assert cx["ball_lost"] and abs(cx["flick_speed_m_s"]) > 0.5 and 0.5 <= cx["flick_time_s"] <= 2
+    capsys.readouterr()
+    assert main(["run", "--replay", str(out / "falsify.json"), "--json"]) == 1
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["replayed"]["same"] and summary["ball_lost"]
+    spec = tmp_path / "sp.toml"
+    spec.write_text('[requirements]\nat = "always (setpoint_m <= 0.05)"\n')
+    base = ["falsify", "--controller", "lqr", "--spec", str(spec), "--x0", "0:0.1", "--theta0", "0"]
+    assert main([*base, "--setpoint", "0.05", "--budget", "3", "--duration", "1", "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert {t["objective"] for t in data["trace"]} == {0.0} and data["least_robust"]["setpoint_m"] == 0.05
+    refused(capsys, [*base, "--setpoint", "0.4"], "--setpoint")
+    refused(capsys, [*base, "--flick-time", "1"], "--flick-speed")
+    refused(
+        capsys,
+        ["falsify", "--controller", "appendix-sf", "--spec", str(spec), "--setpoint", "0:0.1"],
+        "no ball setpoint",
+    )

@@ -29,10 +29,10 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 
 from twin.guard import Fault, Guard, describe, install_interrupt_handler, is_interrupt, safe_name
-from twin.interface import Controller, DaqSample, Rig, RigEnded, Telemetry
+from twin.interface import Controller, DaqSample, Rig, RigEnded, Setpoint, Telemetry
 from twin.log import THESIS_FIELDS, TRUTH_FIELDS, RunLog
 from twin.parameters import Daq, Parameters
-from twin.physics import PhysicsBlock
+from twin.physics import PhysicsBlock, check_on_track
 from twin.realtime import TickTiming, arrival_timing
 from twin.rigs.sim import FirmwareBoard, PlantKind, RigError, make_rig, whole_steps
 from twin.verdict import Criteria, Trace, Verdict, evaluate, evaluate_measured
@@ -47,6 +47,7 @@ __all__ = [
     "ENDED_TICKS",
     "Firmware",
     "RunResult",
+    "Scenario",
     "TrueState",
     "block_peak_abs_theta_rad",
     "StateLaw",
@@ -57,6 +58,33 @@ __all__ = [
     "run_on_rig",
     "update_ticks",
 ]
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """What happens in a run beyond its start: a flick of the ball (a velocity kick of ``flick_speed_m_s`` along
+    the beam, as the live view's Flick, at the first tick boundary ``flick_time_s`` or more after release:
+    after ⌈flick_time_s / period⌉ ticks; a kick of 0 is none) and a setpoint (for a controller that declares one,
+    ``twin.interface.Setpoint``; the verdict is then judged about it)."""
+
+    flick_time_s: float | None = None
+    flick_speed_m_s: float = 0.0
+    setpoint_m: float | None = None
+
+    def __post_init__(self) -> None:
+        for name in ("flick_time_s", "flick_speed_m_s", "setpoint_m"):
+            value = getattr(self, name)
+            if value is not None and not (isinstance(value, (int, float)) and math.isfinite(value)):
+                raise ValueError(f"{name} = {value!r} must be a finite number")
+        if self.flick_time_s is not None and self.flick_time_s < 0:
+            raise ValueError(f"flick_time_s = {self.flick_time_s!r}: a time after release (≥ 0 s)")
+
+    def flick_tick(self, period_s: float) -> int | None:
+        """The ticks run before the flick (None: no flick)."""
+        if self.flick_time_s is None:
+            return None
+        return max(0, math.ceil(self.flick_time_s / period_s - 1e-9))
+
 
 # Two periods agree when they differ by less than this (they are typed as decimal seconds).
 _PERIOD_TOLERANCE_S = 1e-12
@@ -853,22 +881,44 @@ def run_closed_loop(
     criteria: Criteria | None = None,
     pacer: Pacer | None = None,
     controller_timeout_s: float | None = None,
+    scenario: Scenario | None = None,
 ) -> RunResult:
     """Run ``controller`` on a fresh simulated rig from (x0, θ0) at rest for ``duration_s`` after release.
 
     The rig is held while the controller's ``start`` reads it, released at t = 0 and driven from
     t = ``start.free_run_s`` on (twin.rigs.sim). Initial velocities are zero; the controller's observer starts
     from zero velocity, as on the rig. ``stop_when_lost`` ends the run at the tick the ball is lost.
-    ``controller_timeout_s``: the watchdog's budget per update (``ClosedLoop``)."""
+    ``controller_timeout_s``: the watchdog's budget per update (``ClosedLoop``). ``scenario``: a flick and a
+    setpoint (``Scenario``)."""
     if not (isinstance(duration_s, (int, float)) and math.isfinite(duration_s) and duration_s > 0):
         raise ValueError(f"duration_s = {duration_s!r} must be a positive number of seconds")
     p = params or Parameters()
     rig = make_rig(p, plant=plant, ideal_sensors=ideal_sensors, seed=seed, noise=noise)
     rig.reset(x0_m, theta0_rad)
+    s = scenario or Scenario()
+    if s.setpoint_m is not None:
+        if not isinstance(controller, Setpoint):
+            name = getattr(controller, "name", controller)
+            raise ValueError(f"{name!r} has no ball setpoint (twin.interface.Setpoint)")
+        check_on_track(p, "setpoint_m", s.setpoint_m)
+        controller.setpoint_m = s.setpoint_m
     loop = ClosedLoop(rig, controller, controller_timeout_s=controller_timeout_s)
     try:
-        ended = loop.run(update_ticks(duration_s, rig.params), pacer=pacer, stop_when_lost=stop_when_lost)
-        return loop.result(ended, x0_m, criteria)
+        ticks = update_ticks(duration_s, rig.params)
+        first = s.flick_tick(rig.period_s)
+        if first is None:
+            ended = loop.run(ticks, pacer=pacer, stop_when_lost=stop_when_lost)
+        else:
+            first = min(first, ticks)
+            ended = loop.run(first, pacer=pacer, stop_when_lost=stop_when_lost)
+            if ended == ENDED_TICKS:
+                if s.flick_speed_m_s != 0:
+                    rig.kick_ball(s.flick_speed_m_s)  # between two ticks, as the live view's Flick
+                ended = loop.run(ticks - first, pacer=pacer, stop_when_lost=stop_when_lost)
+        result = loop.result(ended, x0_m, criteria)
+        if s.setpoint_m is not None:
+            result.verdict = loop.verdict(x0_m, criteria, x_ref_m=s.setpoint_m)
+        return result
     finally:
         if loop.is_firmware:  # its core is a process of its own
             controller.close()  # type: ignore[union-attr]

@@ -29,6 +29,7 @@ import numpy as np
 from twin.app.fanout import Progress, Runs, run_starts
 from twin.app.montecarlo import Distribution, apply_values
 from twin.app.replay import replay_entry
+from twin.engine import Scenario
 from twin.outputs import JobFiles
 from twin.parameters import ParameterError, Parameters
 from twin.requirements import Spec
@@ -41,14 +42,17 @@ MAX_BUDGET = 100_000
 SIGMA0 = 0.3  # CMA-ES's first step, in the unit cube (a third of every axis)
 GRID = 2.0**12  # CMA-ES's points are run on this grid of the unit cube (``on_grid``)
 
-# What ``Axis.name`` may be: the start, or a parameter by dotted name.
+# What ``Axis.name`` may be: the start, a flick or the setpoint of the run (``twin.engine.Scenario``), or a
+# parameter by dotted name.
 START_AXES = ("x0_m", "theta0_rad")
+SCENARIO_AXES = ("flick_time_s", "flick_speed_m_s", "setpoint_m")
 
 
 @dataclass(frozen=True)
 class Axis:
-    """One searched input: ``x0_m``, ``theta0_rad`` or a parameter (``group.name``) from ``low`` to ``high``;
-    ``step``: values are whole steps (the output latency: whole physics steps)."""
+    """One input: ``x0_m``, ``theta0_rad``, a ``SCENARIO_AXES`` name or a parameter (``group.name``) from ``low`` to
+    ``high`` (searched when ``low < high``, else that value); ``step``: values are whole steps (the output
+    latency: whole physics steps)."""
 
     name: str
     low: float
@@ -102,6 +106,7 @@ class FalsifyResult:
         s = self.settings
         return {
             **replay_entry(s.controller, run, s.noise, s.duration_s, self.spec),
+            **{k: run["values"][k] for k in SCENARIO_AXES if k in run["values"]},
             "searched": run["values"],
             "objective": run["objective"],
         }
@@ -130,11 +135,14 @@ class FalsifyResult:
 
 
 class _Space:
-    """The unit cube's points as runs: a start, a noise seed, the rig's parameters."""
+    """The unit cube's points as runs: a start, a noise seed, the rig's parameters, a scenario."""
 
     def __init__(self, settings: FalsifySettings, base: Parameters, spread: Distribution | None) -> None:
         self.s, self.base, self.spread = settings, base, spread
-        self.dims = len(settings.axes) + (len(spread.names) if spread is not None else 0)
+        self.searched = [a for a in settings.axes if a.high > a.low]
+        self.fixed = {a.name: a.low for a in settings.axes if a.high <= a.low}
+        self.dims = len(self.searched) + (len(spread.names) if spread is not None else 0)
+        self.scenario = any(a.name in SCENARIO_AXES for a in settings.axes)
         if self.dims == 0:
             raise ParameterError("nothing to search: give a range (A:B) to at least one input, or a spread")
         names = [a.name for a in settings.axes]
@@ -145,17 +153,22 @@ class _Space:
             if both:
                 raise ParameterError(f"{both[0]} is both a searched range and in the spread {spread.source}")
 
-    def run_of(self, u: np.ndarray) -> tuple[float, float, dict[str, float], Parameters]:
-        """The start, the searched values by name and the parameters of point ``u``."""
-        s = self.s
-        values = {a.name: a.at(x) for a, x in zip(s.axes, u[: len(s.axes)], strict=True)}
-        overrides = {k: v for k, v in values.items() if k not in START_AXES}
+    def run_of(self, u: np.ndarray) -> tuple[float, float, dict[str, float], Parameters, Scenario | None]:
+        """The start, the inputs' values by name, the parameters and the scenario of point ``u``."""
+        s, k = self.s, len(self.searched)
+        values = {**self.fixed, **{a.name: a.at(x) for a, x in zip(self.searched, u[:k], strict=True)}}
+        overrides = {n: v for n, v in values.items() if n not in START_AXES + SCENARIO_AXES}
         params = self.base.with_overrides(overrides, origin="falsify") if overrides else self.base
         if self.spread is not None:
-            drawn = self.spread.at(u[len(s.axes) :], NORMAL_TAIL)
+            drawn = self.spread.at(u[k:], NORMAL_TAIL)
             params = apply_values(params, self.spread, drawn)
             values.update({n: float(v) for n, v in zip(self.spread.names, drawn, strict=True)})
-        return values.get("x0_m", s.x0_m), values.get("theta0_rad", s.theta0_rad), values, params
+        scenario = (
+            Scenario(values.get("flick_time_s"), values.get("flick_speed_m_s", 0.0), values.get("setpoint_m"))
+            if self.scenario
+            else None
+        )
+        return values.get("x0_m", s.x0_m), values.get("theta0_rad", s.theta0_rad), values, params, scenario
 
 
 def _objective(record: dict[str, Any]) -> tuple[float, str]:
@@ -192,12 +205,12 @@ class _Search:
         """Run the points (one batch) and return their objectives; points the rig cannot take are +inf."""
         batch = len({r["batch"] for r in self.runs})
         rows: list[dict[str, Any]] = []
-        starts, params, seeds = [], [], []
+        starts, params, seeds, scenarios = [], [], [], []
         for u in points[: self.left]:
             u = np.clip(np.asarray(u, dtype=float), 0.0, 1.0)
             seed = int(self.rng.integers(2**31)) if self.space.s.noise else 0
             try:
-                x0, th0, values, p = self.space.run_of(u)
+                x0, th0, values, p, scenario = self.space.run_of(u)
             except ParameterError as exc:  # a point outside a parameter's bounds: no rig, no run
                 rows.append({"infeasible": str(exc)})
                 continue
@@ -205,6 +218,7 @@ class _Search:
             starts.append((x0, th0))
             params.append(p)
             seeds.append(seed)
+            scenarios.append(scenario)
         records, complete = (
             run_starts(
                 self.runs_job,
@@ -213,6 +227,7 @@ class _Search:
                 params=params,
                 workers=self.workers,
                 scheduler=self.scheduler,
+                scenarios=scenarios if self.space.scenario else None,
             )
             if starts
             else ([], True)

@@ -28,7 +28,7 @@ import numpy as np
 from twin.parameters import ParameterError, Parameters
 
 if TYPE_CHECKING:
-    from twin.engine import RunResult
+    from twin.engine import RunResult, Scenario
     from twin.requirements import Requirement
     from twin.verdict import Verdict
     from twin.wire.server import Server
@@ -122,6 +122,7 @@ class _Chunk:
     seeds: tuple[int, ...]
     params: tuple[Parameters, ...] | None  # one per run, or None: ``runs.params`` for all
     nthread: int
+    scenarios: tuple[Scenario | None, ...] | None = None  # one per run (a flick, a setpoint), or None
     controller_timeout_s: float | None = None  # the watchdog's budget per controller call (twin.guard)
     # In this process only (None in worker processes and on Dask): told the chunk's runs done so far (a
     # float) as its batch advances, so that progress moves before the chunk ends.
@@ -181,6 +182,7 @@ def _records(
         record=bool(r.requirements),
         controller_timeout_s=chunk.controller_timeout_s,
         progress=report,
+        scenarios=[chunk.scenarios[i] for i in pick] if chunk.scenarios is not None else None,
     )
     return [
         _record(
@@ -189,19 +191,27 @@ def _records(
             chunk.seeds[i],
             result.verdict,
             result.firmware,
-            _margins(r, result, chunk.params[i] if chunk.params is not None else r.params),
+            _margins(
+                r,
+                result,
+                chunk.params[i] if chunk.params is not None else r.params,
+                chunk.scenarios[i] if chunk.scenarios is not None else None,
+            ),
         )
         for i, result in zip(pick, results, strict=True)
     ]
 
 
-def _margins(runs: Runs, result: RunResult, params: Parameters) -> dict[str, float] | None:
-    """Each of the job's requirements' robustness over a run (None: the job has none)."""
+def _margins(
+    runs: Runs, result: RunResult, params: Parameters, scenario: Scenario | None = None
+) -> dict[str, float] | None:
+    """Each of the job's requirements' robustness over a run (None: the job has none), about its setpoint."""
     if not runs.requirements:
         return None
     from twin.requirements import margins
 
-    return margins(runs.requirements, result.log, params)
+    setpoint = scenario.setpoint_m if scenario is not None and scenario.setpoint_m is not None else 0.0
+    return margins(runs.requirements, result.log, params, setpoint)
 
 
 # What a many-run job keeps of a firmware's figures per run (``twin.avr.firmware.AvrFirmware.figures``).
@@ -424,14 +434,17 @@ def run_starts(
     nthread: int | None = None,
     progress: Progress | None = None,
     serve: Served | None = None,
+    scenarios: Sequence[Scenario | None] | None = None,
 ) -> tuple[list[dict[str, Any] | None], bool]:
-    """Every start ((N, 2): x0, θ0) with its seed (and its parameters, when given): the records in the
+    """Every start ((N, 2): x0, θ0) with its seed (and its parameters and scenario, when given): the records in the
     starts' order (None where not run) and whether all ran. ``workers`` local processes (1: here), or a Dask
     ``scheduler`` address; ``nthread``: rollout threads per batch (default: the cores shared by the
     workers). Each controller call's watchdog budget is the process's (``twin.guard.default_timeout_s``,
     the CLI's ``--controller-timeout``), carried to the workers with the chunks. ``serve``: every run a
     session to a client over the wire instead (``run_served``; ``runs.controller`` is then only a name)."""
     if serve is not None:
+        if scenarios is not None:
+            raise ParameterError("a served job has no flick or setpoint per run (twin.engine.Scenario)")
         if workers > 1 or scheduler is not None:
             raise ParameterError("a served job runs its sessions here, one after the other: no workers")
         return run_served(runs, starts, seeds, serve, params=params, progress=progress)
@@ -464,6 +477,7 @@ def run_starts(
                 seeds=tuple(int(v) for v in seeds[lo : lo + size]),
                 params=tuple(params[lo : lo + size]) if params is not None else None,
                 nthread=threads,
+                scenarios=tuple(scenarios[lo : lo + size]) if scenarios is not None else None,
                 controller_timeout_s=timeout_s,
                 report=within if here else None,
             ),

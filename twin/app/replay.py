@@ -3,8 +3,9 @@ run (``certify.json``): every input needed to repeat it bit for bit (``ballbeam 
 --replay``).
 
 The file keeps the run as ``{"controller", "x0_m", "theta0_rad", "seed", "noise", "duration_s", "parameters"
-(the changes from the defaults by dotted name), "requirements" (name: formula), "robustness"}``; a malformed
-file is refused naming the file and the field.
+(the changes from the defaults by dotted name), "requirements" (name: formula), "robustness"}`` and, when the
+run had them, ``flick_time_s``, ``flick_speed_m_s`` and ``setpoint_m``; a malformed file is refused naming the
+file and the field.
 """
 
 from __future__ import annotations
@@ -35,6 +36,8 @@ class Replay:
     requirements: tuple[Requirement, ...]
     robustness: dict[str, float]  # as the file states it
     source: str
+    flick: tuple[float, float] | None = None  # (time after release, s; speed, m/s)
+    setpoint_m: float | None = None
 
 
 def load_replay(path: str | Path) -> Replay:
@@ -68,6 +71,13 @@ def load_replay(path: str | Path) -> Replay:
     formulas = field("requirements", dict)
     requirements = parse_requirements({"requirements": formulas}, f"{path}: requirements")
     robustness = field("robustness", dict)
+    optional = {}
+    for name in ("flick_time_s", "flick_speed_m_s", "setpoint_m"):
+        if run.get(name) is not None:
+            optional[name] = float(field(name, number))
+    flick = None
+    if "flick_time_s" in optional:
+        flick = (optional["flick_time_s"], optional.get("flick_speed_m_s", 0.0))
     return Replay(
         controller=field("controller", str, lambda v: 0 < len(v) < 4096),
         x0_m=float(field("x0_m", number)),
@@ -79,6 +89,8 @@ def load_replay(path: str | Path) -> Replay:
         requirements=requirements,
         robustness={str(k): float(v) for k, v in robustness.items() if isinstance(v, (int, float))},
         source=str(path),
+        flick=flick,
+        setpoint_m=optional.get("setpoint_m"),
     )
 
 

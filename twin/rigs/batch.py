@@ -34,6 +34,7 @@ from twin.engine import (
     Catalogue,
     ControllerError,
     RunResult,
+    Scenario,
     check_period_s,
     checked_start,
     checked_update,
@@ -187,6 +188,7 @@ def run_batch(
     vectorized: bool = True,
     controller_timeout_s: float | None = None,
     progress: Callable[[float], None] | None = None,
+    scenarios: Sequence[Scenario | None] | None = None,
 ) -> list[RunResult]:
     """Run controller ``name`` from each (x0_m[i], theta0_rad[i]) with noise seed seeds[i]: element i is
     ``run_closed_loop(catalogue.make(name, params_i), x0_m=x0_m[i], …, seed=seeds[i], …)`` bit for bit.
@@ -199,7 +201,9 @@ def run_batch(
     batched one (for tests).
     ``controller_timeout_s``: the watchdog's budget per call of a scalar controller (``twin.guard``). ``progress``
     is called as the runs advance with how many are done, a float: a group's runs advance together, so k of
-    its T ticks count k/T of each (a job's progress moves before its batch ends; it changes no number)."""
+    its T ticks count k/T of each (a job's progress moves before its batch ends; it changes no number).
+    ``scenarios``: per run, a flick or a setpoint (``twin.engine.Scenario``) or None; a run with one takes the
+    single-run path (``run_closed_loop`` with it), the others the batch."""
     x0 = np.asarray(x0_m, dtype=float).reshape(-1)
     th0 = np.asarray(theta0_rad, dtype=float).reshape(-1)
     seed_arr = np.asarray(seeds).reshape(-1)
@@ -218,6 +222,11 @@ def run_batch(
             raise ValueError(f"params has {len(run_params)} entries for {n} runs: give one, or one per run")
     if n == 0:
         return []
+    if scenarios is not None and any(sc is not None for sc in scenarios):
+        return _with_scenarios(
+            catalogue, name, x0, th0, seed_arr, run_params, list(scenarios), duration_s, noise, plant,
+            ideal_sensors, stop_when_lost, criteria, nthread, record, vectorized, controller_timeout_s, progress,
+        )  # fmt: skip
     probe = catalogue.make(name, run_params[0])
     if plant != "twin" or not isinstance(probe, Controller):
         # The reference plant, the 1 kHz laws on the true state and firmware stay on the single-run path.
@@ -275,6 +284,55 @@ def run_batch(
         for j, result in enumerate(group.run(controller, duration_s, stop_when_lost, criteria, on_tick)):
             results[idx[j]] = result
         runs_before += len(idx)
+    return [r for r in results if r is not None]
+
+
+def _with_scenarios(
+    catalogue: Catalogue,
+    name: str,
+    x0: np.ndarray,
+    th0: np.ndarray,
+    seeds: np.ndarray,
+    run_params: list[Parameters],
+    scenarios: list[Scenario | None],
+    duration_s: float,
+    noise: bool,
+    plant: PlantKind,
+    ideal_sensors: bool,
+    stop_when_lost: bool,
+    criteria: Criteria | None,
+    nthread: int | None,
+    record: bool,
+    vectorized: bool,
+    controller_timeout_s: float | None,
+    progress: Callable[[float], None] | None,
+) -> list[RunResult]:
+    """``run_batch`` with scenarios: the runs without one as a batch, each with one alone."""
+    plain = [i for i, sc in enumerate(scenarios) if sc is None]
+    results: list[RunResult | None] = [None] * len(scenarios)
+    if plain:
+        batched = run_batch(
+            catalogue, name, x0_m=x0[plain], theta0_rad=th0[plain], seeds=seeds[plain], duration_s=duration_s,
+            noise=noise, params=[run_params[i] for i in plain], plant=plant, ideal_sensors=ideal_sensors,
+            stop_when_lost=stop_when_lost, criteria=criteria, nthread=nthread, record=record, vectorized=vectorized,
+            controller_timeout_s=controller_timeout_s,
+            progress=progress,
+        )  # fmt: skip
+        for i, result in zip(plain, batched, strict=True):
+            results[i] = result
+    done = len(plain)
+    for i, sc in enumerate(scenarios):
+        if sc is None:
+            continue
+        results[i] = run_closed_loop(
+            catalogue.make(name, run_params[i]), x0_m=float(x0[i]), theta0_rad=float(th0[i]),
+            duration_s=duration_s, seed=int(seeds[i]), noise=noise, params=run_params[i], plant=plant,
+            ideal_sensors=ideal_sensors, stop_when_lost=stop_when_lost, criteria=criteria,
+            controller_timeout_s=controller_timeout_s, scenario=sc,
+        )  # fmt: skip
+        done += 1
+        if progress is not None:
+            progress(float(done))
     return [r for r in results if r is not None]
 
 

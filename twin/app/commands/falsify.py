@@ -6,6 +6,7 @@ import argparse
 import json
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from twin.app.commands.common import (
     JOB_RUN_S,
@@ -20,6 +21,10 @@ from twin.app.commands.common import (
     write_out,
 )
 from twin.app.options import SpanType, count, seed
+
+if TYPE_CHECKING:
+    from twin.app.falsify import Axis
+    from twin.parameters import Parameters
 
 HELP = (
     "search starts, rigs, latency and zeroing for a run that violates a requirement; the counterexample "
@@ -56,6 +61,24 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         type=SpanType("--zeroing"),
         metavar="A:B",
         help="the counter's zeroing error (rad; angle_sensor.zeroing_error_rad)",
+    )
+    parser.add_argument(
+        "--flick-time",
+        type=SpanType("--flick-time"),
+        metavar="A:B",
+        help="flick the ball this long after release (s; with --flick-speed): a range or a value",
+    )
+    parser.add_argument(
+        "--flick-speed",
+        type=SpanType("--flick-speed"),
+        metavar="A:B",
+        help="the flick's kick (m/s along the beam)",
+    )
+    parser.add_argument(
+        "--setpoint",
+        type=SpanType("--setpoint"),
+        metavar="A:B",
+        help="the ball setpoint (m; a controller that has one): a range or a value",
     )
     parser.add_argument(
         "--duration", type=JOB_RUN_S, default=10.0, metavar="S", help="seconds per run (default 10)"
@@ -101,27 +124,22 @@ def run(args: argparse.Namespace) -> int:
     x, th = args.x0, args.theta0
     check_start_box(base, x, th)
     axes = [Axis("x0_m", *x), Axis("theta0_rad", *th)]
-    step = base.physics.timestep_s
-    for option, text, name, grid in (
-        ("--latency", args.latency, "daq.output_latency_s", step),
+    for option, span, name, grid in (
+        ("--latency", args.latency, "daq.output_latency_s", base.physics.timestep_s),
         ("--zeroing", args.zeroing, "angle_sensor.zeroing_error_rad", 0.0),
     ):
-        if text is not None:
-            lo, hi = text
-            for v in (lo, hi):
+        if span is not None:
+            for v in span:
                 try:
                     base.with_overrides({name: v}, origin=option)
                 except ParameterError as exc:
-                    raise ParameterError(f"{option} {lo:g}:{hi:g}: {exc}") from None
-            axes.append(Axis(name, lo, hi, grid))
-    searched = tuple(a for a in axes if a.high > a.low)
-    fixed = {a.name: a.low for a in axes if a.high <= a.low}
-    if "daq.output_latency_s" in fixed or "angle_sensor.zeroing_error_rad" in fixed:
-        base = base.with_overrides({k: v for k, v in fixed.items() if "." in k}, origin="falsify")
+                    raise ParameterError(f"{option} {span[0]:g}:{span[1]:g}: {exc}") from None
+            axes.append(Axis(name, span[0], span[1], grid))
+    axes += _scenario_axes(args, base)
     check_job(args, base, OUTPUT_FILES)
     settings = FalsifySettings(
         controller=args.controller,
-        axes=searched,
+        axes=tuple(axes),
         x0_m=x[0],
         theta0_rad=th[0],
         duration_s=args.duration,
@@ -152,6 +170,36 @@ def run(args: argparse.Namespace) -> int:
         print("ballbeam falsify: interrupted: the runs done so far are reported", file=sys.stderr)
         return 130
     return 1 if out["found"] else 0
+
+
+def _scenario_axes(args: argparse.Namespace, base: Parameters) -> list[Axis]:
+    """--flick-time/--flick-speed and --setpoint as inputs of the search (checked: a flick after release, a
+    setpoint on the track, for a controller that declares one)."""
+    from twin.app.catalogue import build
+    from twin.app.falsify import Axis
+    from twin.interface import Setpoint
+    from twin.parameters import ParameterError
+    from twin.physics import check_on_track
+
+    axes = []
+    if (args.flick_time is None) != (args.flick_speed is None):
+        raise ParameterError("--flick-time and --flick-speed go together (when, and the kick)")
+    if args.flick_time is not None:
+        if args.flick_time[0] < 0:
+            raise ParameterError(f"--flick-time {args.flick_time[0]:g}: a time after release (≥ 0 s)")
+        axes += [Axis("flick_time_s", *args.flick_time), Axis("flick_speed_m_s", *args.flick_speed)]
+    if args.setpoint is not None:
+        for v in args.setpoint:
+            try:
+                check_on_track(base, "--setpoint", v)
+            except ValueError as exc:
+                raise ParameterError(str(exc)) from None
+        if not isinstance(build(args.controller, base), Setpoint):
+            raise ParameterError(
+                f"--setpoint: {args.controller} has no ball setpoint (twin.interface.Setpoint)"
+            )
+        axes.append(Axis("setpoint_m", *args.setpoint))
+    return axes
 
 
 def _print(out: dict, args: argparse.Namespace) -> None:

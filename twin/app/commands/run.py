@@ -95,6 +95,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "verdict is then judged about it",
     )
     parser.add_argument(
+        "--flick-time",
+        type=finite_float(0, unit="s"),
+        metavar="S",
+        help="flick the ball this long after release (at the next tick boundary), as the live view's Flick",
+    )
+    parser.add_argument(
+        "--flick-speed",
+        type=finite_float(unit="m/s"),
+        default=None,
+        metavar="M/S",
+        help="the flick's kick along the beam (m/s; with --flick-time)",
+    )
+    parser.add_argument(
         "--realtime",
         action="store_true",
         help="pace the ticks to the wall clock (one every daq.period_s, as on the rig) and report the tick "
@@ -115,6 +128,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     replay = _replayed(args) if args.replay is not None else None
+    if args.flick_speed is not None and args.flick_time is None:
+        print("ballbeam run: error: --flick-speed needs --flick-time (when to flick)", file=sys.stderr)
+        return 2
     if replay is None:
         if args.controller is None:
             print("ballbeam run: error: --controller is required (unless --replay)", file=sys.stderr)
@@ -230,11 +246,15 @@ def _replayed(args: argparse.Namespace) -> Replay:
             ("--spec", args.spec),
             ("--rig", args.rig),
             ("--setpoint", args.setpoint),
+            ("--flick-time", args.flick_time),
+            ("--flick-speed", args.flick_speed),
         ]
     )
     replay = load_replay(args.replay)
     args.controller, args.x0, args.theta0 = replay.controller, replay.x0_m, replay.theta0_rad
     args.seed, args.no_noise, args.duration = replay.seed, not replay.noise, replay.duration_s
+    args.setpoint = replay.setpoint_m
+    args.flick_time, args.flick_speed = replay.flick if replay.flick is not None else (None, None)
     return replay
 
 
@@ -244,7 +264,7 @@ def _run_in_process(
     """The controller built and run on the twin: (the result, the checked output paths, the pacer), or the
     exit code of a failure (reported)."""
     from twin.app.catalogue import build
-    from twin.engine import ControllerError, run_closed_loop
+    from twin.engine import ControllerError, Scenario, run_closed_loop
     from twin.plant import NumericalError
     from twin.realtime import WallClockPacer
 
@@ -272,6 +292,7 @@ def _run_in_process(
             plant=args.plant,
             ideal_sensors=args.ideal_sensors or args.plant == "reference",
             pacer=pacer,
+            scenario=None if args.flick_time is None else Scenario(args.flick_time, args.flick_speed or 0.0),
         )
     except ControllerError as exc:
         print(f"ballbeam run: the controller failed: {exc}", file=sys.stderr)
