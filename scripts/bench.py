@@ -5,6 +5,7 @@
                             [--skip-vector-env] [--only-vector-env] [--skip-sweep-command] [--only-sweep-command]
                             [--skip-batched-laws] [--only-batched-laws] [--skip-firmware] [--only-firmware]
                             [--skip-fmi] [--only-fmi] [--skip-falsify] [--only-falsify]
+                            [--skip-screen] [--only-screen]
 
 One run measures, on the same work (a 10 s episode from x0 = 0.2 m, θ0 = 0.3 rad, noise on, seed 0):
 
@@ -48,6 +49,8 @@ One run measures, on the same work (a 10 s episode from x0 = 0.2 m, θ0 = 0.3 ra
   answer a brute-force map gives (a start box crossing appendix-sf's region at a corner; a start near its
   edge over docs/examples/spread.toml's rigs, whose tail loses the ball); and a falsification of budget 500 at
   10 s against a 500-run batch;
+- (l) the compiled engine's plant (``twin.screen``, numba) against a plain C RK4 of the same equations and raw
+  ``mujoco.rollout`` of the contact model on one thread: ns per state-step, interleaved;
 - view: the live view's tick rate at speed 1.0 over the given wall time (target 50 Hz ± 1 %) and its CPU
   time per tick, with a client attached (a websocket speaking viser's protocol, draining every frame).
 
@@ -824,6 +827,117 @@ def _falsify_speed(spec: Any) -> dict[str, float]:
     return best
 
 
+# (l) a plain C RK4 of the reference plant alone: the physical limit the compiled engine is measured against
+# (a bench-only copy of eq 3.1.26/3.1.27 and 3.3.1 with the rows of twin.screen.plant.plant_rows).
+_C_RK4 = r"""
+#include <math.h>
+static void f(const double *r, double x, double th, double xd, double thd, double v, double *d) {
+    double s = sin(th), co = cos(th), fr = r[12] * fmax(-1.0, fmin(1.0, thd / 0.01));
+    double tau = r[13] * (v - r[14] * thd);
+    double rb = x * thd * thd - r[3] * s;
+    double rt = tau - r[7] * s - r[8] * x * co - r[9] * x * xd * thd - r[10] * x * thd * thd - r[11] * thd - fr;
+    double m11 = 1.0 + r[0], m12 = -(r[1] + r[2]), m21 = r[4], m22 = r[5] + r[6] * x * x;
+    double det = m11 * m22 - m12 * m21;
+    d[0] = xd; d[1] = thd; d[2] = (rb * m22 - m12 * rt) / det; d[3] = (m11 * rt - m21 * rb) / det;
+}
+void advance(int n, int m, const double *rows, double h, double *st, const double *volts, long *lost) {
+    for (int i = 0; i < n; i++) {
+        const double *r = rows + 18 * i; double *q = st + 4 * i;
+        double x = q[0], th = q[1], xd = q[2], thd = q[3], a[4], b[4], c[4], e[4];
+        for (int k = 0; k < m && lost[i] < 0; k++) {
+            double v = fmin(fmax(volts[(long)i * m + k], -r[15]), r[15]);
+            f(r, x, th, xd, thd, v, a);
+            f(r, x + 0.5*h*a[0], th + 0.5*h*a[1], xd + 0.5*h*a[2], thd + 0.5*h*a[3], v, b);
+            f(r, x + 0.5*h*b[0], th + 0.5*h*b[1], xd + 0.5*h*b[2], thd + 0.5*h*b[3], v, c);
+            f(r, x + h*c[0], th + h*c[1], xd + h*c[2], thd + h*c[3], v, e);
+            x += h/6.0*(a[0]+2*b[0]+2*c[0]+e[0]); th += h/6.0*(a[1]+2*b[1]+2*c[1]+e[1]);
+            xd += h/6.0*(a[2]+2*b[2]+2*c[2]+e[2]); thd += h/6.0*(a[3]+2*b[3]+2*c[3]+e[3]);
+            if (fabs(th) > r[16]) { th = copysign(r[16], th); if (thd * th > 0) thd = 0.0; }
+            if (fabs(x) > r[17]) lost[i] = k + 1;
+        }
+        q[0] = x; q[1] = th; q[2] = xd; q[3] = thd;
+    }
+}
+"""
+
+
+def bench_screen(repeats: int = 3) -> dict[str, float]:
+    """(l) state-steps per second on one core, interleaved, the best of ``repeats``: the compiled engine's plant
+    (twin.screen, numba) against a plain C RK4 of the same equations (gcc -O2) and against raw
+    ``mujoco.rollout`` of the contact model (one thread), over the same random held volts from the same starts
+    (C and the kernel: the same states, checked)."""
+    import ctypes
+    import subprocess
+    import tempfile
+
+    from twin.screen import advance_plant, plant_rows
+
+    n, m = 256, 2000
+    rng = np.random.default_rng(0)
+    start = np.column_stack(
+        [rng.uniform(-0.02, 0.02, n), rng.uniform(-0.03, 0.03, n), np.zeros(n), np.zeros(n)]
+    )
+    volts = np.ascontiguousarray(np.repeat(rng.uniform(-1, 1, (n, m // 20)), 20, axis=1))
+    plant = plant_rows([Parameters()] * n)
+    folder = Path(tempfile.mkdtemp())
+    (folder / "rk4.c").write_text(_C_RK4)
+    subprocess.run(
+        ["gcc", "-O2", "-shared", "-fPIC", "-o", str(folder / "rk4.so"), str(folder / "rk4.c"), "-lm"],
+        check=True,
+    )
+    lib = ctypes.CDLL(str(folder / "rk4.so"))
+    ptr = ctypes.POINTER(ctypes.c_double)
+
+    def c_run() -> tuple[np.ndarray, np.ndarray]:
+        st, lost = start.copy(), np.full(n, -1, dtype=np.int64)
+        lib.advance(
+            ctypes.c_int(n), ctypes.c_int(m), plant.rows.ctypes.data_as(ptr), ctypes.c_double(plant.timestep_s),
+            st.ctypes.data_as(ptr), volts.ctypes.data_as(ptr), lost.ctypes.data_as(ctypes.POINTER(ctypes.c_long)),
+        )  # fmt: skip
+        return st, lost
+
+    def kernel_run() -> tuple[np.ndarray, np.ndarray]:
+        st, lost = start.copy(), np.full(n, -1, dtype=np.int64)
+        advance_plant(plant, st, lost, volts)
+        return st, lost
+
+    model = Plant(Parameters()).model
+    sims = 16
+    data = [mujoco.MjData(model) for _ in range(1)]
+    state0 = np.zeros((sims, mujoco.mj_stateSize(model, mujoco.mjtState.mjSTATE_FULLPHYSICS)))
+    for j in range(sims):
+        plant_j = Plant(Parameters())
+        plant_j.reset(float(start[j, 0]), float(start[j, 1]))
+        mujoco.mj_getState(plant_j.model, plant_j.data, state0[j], mujoco.mjtState.mjSTATE_FULLPHYSICS)
+    controls = np.ascontiguousarray(volts[:sims, :, None])
+
+    def mujoco_run() -> None:
+        rollout.rollout(model, data, state0, controls, nstep=m)
+
+    kernel_run()  # compiled before timing
+    best = {"c": math.inf, "kernel": math.inf, "mujoco": math.inf}
+    for _ in range(repeats):
+        for name, run, steps in (
+            ("c", c_run, n * m),
+            ("kernel", kernel_run, n * m),
+            ("mujoco", mujoco_run, sims * m),
+        ):
+            t = time.perf_counter()
+            run()
+            best[name] = min(best[name], (time.perf_counter() - t) / steps)
+    c_state, c_lost = c_run()
+    k_state, k_lost = kernel_run()
+    return {
+        "kernel_ns_per_state_step": 1e9 * best["kernel"],
+        "c_rk4_ns_per_state_step": 1e9 * best["c"],
+        "mujoco_ns_per_state_step": 1e9 * best["mujoco"],
+        "kernel_over_c_rk4": best["kernel"] / best["c"],
+        "mujoco_over_kernel": best["mujoco"] / best["kernel"],
+        "kernel_vs_c_max_state_diff": float(np.max(np.abs(k_state - c_state))),
+        "kernel_vs_c_lost_differ": float(np.sum(k_lost != c_lost)),
+    }
+
+
 def _and_write(bench: dict[str, float], write: bool) -> dict[str, float]:
     if write:
         write_falsify_table(bench)
@@ -866,6 +980,10 @@ def ratios(results: dict[str, Any]) -> dict[str, float]:
     if target is not None:
         out["i_firmware_real_time_factor"] = target["real_time_factor"]
         out["i_firmware_over_appendix_sf"] = target["firmware_over_appendix_sf"]
+    screen = results.get("screen")
+    if screen is not None:
+        out["l_kernel_over_c_rk4"] = screen["kernel_over_c_rk4"]
+        out["l_mujoco_over_kernel"] = screen["mujoco_over_kernel"]
     search = results.get("falsify")
     if search is not None:
         for name in ("corner", "spread_tail"):
@@ -900,6 +1018,8 @@ def main() -> None:
     parser.add_argument("--only-fmi", action="store_true", help="measure (j) only")
     parser.add_argument("--only-firmware", action="store_true", help="measure (i) only")
     parser.add_argument("--skip-falsify", action="store_true")
+    parser.add_argument("--skip-screen", action="store_true")
+    parser.add_argument("--only-screen", action="store_true", help="measure (l) only")
     parser.add_argument("--only-falsify", action="store_true", help="measure (k) only")
     parser.add_argument(
         "--write-docs",
@@ -918,6 +1038,7 @@ def main() -> None:
         "only_firmware": lambda: bench_firmware(few),
         "only_vector_env": bench_vector_env,
         "only_falsify": lambda: _and_write(bench_falsify(), args.write_docs),
+        "only_screen": bench_screen,
     }
     for option, measure in alone.items():
         if getattr(args, option):
@@ -951,6 +1072,8 @@ def main() -> None:
         results["fmi"] = bench_fmi(max(1, min(args.repeats, 5)))
     if not args.skip_falsify:
         results["falsify"] = bench_falsify()
+    if not args.skip_screen:
+        results["screen"] = bench_screen()
     results["ratios"] = ratios(results)
     if args.json:
         print(json.dumps(results))

@@ -109,29 +109,53 @@ class EquationCoefficients(Generic[C]):
 
     def accelerations(self, x: Any, th: Any, xd: Any, thd: Any, torque_nm: Any) -> tuple[Any, Any]:
         """(ẍ, θ̈) from eq 3.1.26 and 3.1.27 for a motor torque at the beam: floats, or numpy arrays of
-        states (a batch, e.g. identification windows) with the same arithmetic."""
-        b1, b2, b3, b4 = self.beta
+        states (a batch, e.g. identification windows) with the same arithmetic (``ball_beam_accelerations``)."""
         if isinstance(th, float):
             s, co = math.sin(th), math.cos(th)
             friction = self.coulomb_nm * max(-1.0, min(1.0, thd / COULOMB_REGULARIZATION_RAD_S))
         else:
             s, co = np.sin(th), np.cos(th)
             friction = self.coulomb_nm * np.clip(thd / COULOMB_REGULARIZATION_RAD_S, -1.0, 1.0)
-        rhs_ball = x * thd * thd - self.g * s
-        rhs_beam = (
-            torque_nm
-            - b1 * s
-            - b2 * x * co
-            - b3 * x * xd * thd
-            - b4 * x * thd * thd
-            - self.beta_thetadot * thd
-            - friction
-        )
-        # [[1 + k1, −(k2 + c)], [α₁, α₂ + α₃x²]]·(ẍ, θ̈) = (rhs_ball, rhs_beam), solved by Cramer's rule.
-        m11, m12 = 1.0 + self.k1, -(self.k2 + self.c)
-        m21, m22 = self.alpha_xdd, self.alpha_thdd + self.alpha_thdd_x2 * x * x
-        det = m11 * m22 - m12 * m21
-        return (rhs_ball * m22 - m12 * rhs_beam) / det, (m11 * rhs_beam - m21 * rhs_ball) / det
+        b1, b2, b3, b4 = self.beta
+        return ball_beam_accelerations(
+            self.k1, self.k2, self.c, self.g, self.alpha_xdd, self.alpha_thdd, self.alpha_thdd_x2,
+            b1, b2, b3, b4, self.beta_thetadot, x, xd, thd, s, co, friction, torque_nm,
+        )  # fmt: skip
+
+    def as_row(self) -> tuple[float, ...]:
+        """The coefficients in ``ball_beam_accelerations``'s order, then the dry friction (a compiled kernel's
+        row: twin.screen)."""
+        b1, b2, b3, b4 = self.beta
+        return (
+            float(self.k1), float(self.k2), float(self.c), float(self.g), float(self.alpha_xdd),
+            float(self.alpha_thdd), float(self.alpha_thdd_x2), float(b1), float(b2), float(b3), float(b4),
+            float(self.beta_thetadot), float(self.coulomb_nm),
+        )  # fmt: skip
+
+
+def ball_beam_accelerations(
+    k1: Any, k2: Any, c: Any, g: Any, alpha_xdd: Any, alpha_thdd: Any, alpha_thdd_x2: Any,
+    b1: Any, b2: Any, b3: Any, b4: Any, beta_thetadot: Any,
+    x: Any, xd: Any, thd: Any, s: Any, co: Any, friction: Any, torque_nm: Any,
+) -> tuple[Any, Any]:  # fmt: skip
+    """(ẍ, θ̈) of eq 3.1.26 and 3.1.27 (the coefficients: ``EquationCoefficients``) given sin θ, cos θ and the
+    pivot's dry friction: arithmetic only, so that floats, numpy arrays and the compiled screening kernel
+    (twin.screen, numba) compute it from this one home."""
+    rhs_ball = x * thd * thd - g * s
+    rhs_beam = (
+        torque_nm
+        - b1 * s
+        - b2 * x * co
+        - b3 * x * xd * thd
+        - b4 * x * thd * thd
+        - beta_thetadot * thd
+        - friction
+    )
+    # [[1 + k1, −(k2 + c)], [α₁, α₂ + α₃x²]]·(ẍ, θ̈) = (rhs_ball, rhs_beam), solved by Cramer's rule.
+    m11, m12 = 1.0 + k1, -(k2 + c)
+    m21, m22 = alpha_xdd, alpha_thdd + alpha_thdd_x2 * x * x
+    det = m11 * m22 - m12 * m21
+    return (rhs_ball * m22 - m12 * rhs_beam) / det, (m11 * rhs_beam - m21 * rhs_ball) / det
 
 
 def discretize_zoh(a: np.ndarray, b: np.ndarray, period_s: float) -> tuple[np.ndarray, np.ndarray]:
