@@ -124,6 +124,21 @@ def test_bad_falsify_and_replay_inputs_are_refused(
     bad = tmp_path / "bad.json"
     bad.write_text('{"counterexample": {"controller": "appendix-sf", "x0_m": "0.1"}}')
     refused(capsys, ["run", "--replay", str(bad)], str(bad), "parameters")
+    good = {
+        "controller": "appendix-sf",
+        "x0_m": 0.1,
+        "theta0_rad": 0,
+        "seed": 0,
+        "noise": True,
+        "duration_s": 1e9,
+    }
+    good |= {"parameters": {}, "requirements": {"a": "always (x_m <= 1)"}, "robustness": {}}
+    bad.write_text(json.dumps({"counterexample": good}))
+    refused(capsys, ["run", "--replay", str(bad)], str(bad), "duration_s = 1000000000.0")
+    bad.write_text(json.dumps({"counterexample": {**good, "duration_s": 1, "x0_m": 0.5}}))
+    assert (
+        main(["run", "--replay", str(bad)]) == 2 and "x_m = 0.5 is off the track" in capsys.readouterr().err
+    )
     bad.write_text("not json")
     refused(capsys, ["run", "--replay", str(bad)], str(bad), "JSON")
     bad.write_text("{}")

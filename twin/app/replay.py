@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from twin.app.options import MAX_RUN_S
 from twin.parameters import ParameterError, Parameters, load_json, read_input_file
 from twin.requirements import Requirement, Spec, parse_requirements
 
@@ -84,7 +85,7 @@ def load_replay(path: str | Path) -> Replay:
         theta0_rad=float(field("theta0_rad", number)),
         seed=field("seed", int, lambda v: 0 <= v < 2**63),
         noise=field("noise", bool),
-        duration_s=float(field("duration_s", number, lambda v: v > 0)),
+        duration_s=float(field("duration_s", number, lambda v: 0 < v <= MAX_RUN_S)),
         params=params,
         requirements=requirements,
         robustness={str(k): float(v) for k, v in robustness.items() if isinstance(v, (int, float))},
