@@ -222,39 +222,18 @@ def run_batch(
             raise ValueError(f"params has {len(run_params)} entries for {n} runs: give one, or one per run")
     if n == 0:
         return []
-    if scenarios is not None and any(sc is not None for sc in scenarios):
-        return _with_scenarios(
-            catalogue, name, x0, th0, seed_arr, run_params, list(scenarios), duration_s, noise, plant,
-            ideal_sensors, stop_when_lost, criteria, nthread, record, vectorized, controller_timeout_s, progress,
-        )  # fmt: skip
     probe = catalogue.make(name, run_params[0])
-    if plant != "twin" or not isinstance(probe, Controller):
-        # The reference plant, the 1 kHz laws on the true state and firmware stay on the single-run path.
-        singles = []
-        for i in range(n):
-            singles.append(
-                run_closed_loop(
-                    catalogue.make(name, run_params[i]),
-                    x0_m=float(x0[i]),
-                    theta0_rad=float(th0[i]),
-                    duration_s=duration_s,
-                    seed=int(seed_arr[i]),
-                    noise=noise,
-                    params=run_params[i],
-                    plant=plant,
-                    ideal_sensors=ideal_sensors,
-                    stop_when_lost=stop_when_lost,
-                    criteria=criteria,
-                    controller_timeout_s=controller_timeout_s,
-                )
-            )
-            if progress is not None:
-                progress(float(i + 1))
-        return singles
+    # The reference plant, the 1 kHz laws on the true state, firmware and runs with a scenario take the
+    # single-run path; the others are batched.
+    every = plant != "twin" or not isinstance(probe, Controller)
+    run_scenarios = list(scenarios) if scenarios is not None else [None] * n
+    single = [i for i in range(n) if every or run_scenarios[i] is not None]
+    batched = sorted(set(range(n)) - set(single))
     results: list[RunResult | None] = [None] * n
     noisy: dict[int, Parameters] = {}  # the rig's parameters (noise switched as asked), per distinct object
     groups: dict[tuple, list[int]] = {}
-    for i, p in enumerate(run_params):
+    for i in batched:
+        p = run_params[i]
         if id(p) not in noisy:
             noisy[id(p)] = p.with_overrides({"ball_sensor.noise_enabled": bool(noise)})
         groups.setdefault(batch_key(noisy[id(p)]), []).append(i)
@@ -284,55 +263,25 @@ def run_batch(
         for j, result in enumerate(group.run(controller, duration_s, stop_when_lost, criteria, on_tick)):
             results[idx[j]] = result
         runs_before += len(idx)
-    return [r for r in results if r is not None]
-
-
-def _with_scenarios(
-    catalogue: Catalogue,
-    name: str,
-    x0: np.ndarray,
-    th0: np.ndarray,
-    seeds: np.ndarray,
-    run_params: list[Parameters],
-    scenarios: list[Scenario | None],
-    duration_s: float,
-    noise: bool,
-    plant: PlantKind,
-    ideal_sensors: bool,
-    stop_when_lost: bool,
-    criteria: Criteria | None,
-    nthread: int | None,
-    record: bool,
-    vectorized: bool,
-    controller_timeout_s: float | None,
-    progress: Callable[[float], None] | None,
-) -> list[RunResult]:
-    """``run_batch`` with scenarios: the runs without one as a batch, each with one alone."""
-    plain = [i for i, sc in enumerate(scenarios) if sc is None]
-    results: list[RunResult | None] = [None] * len(scenarios)
-    if plain:
-        batched = run_batch(
-            catalogue, name, x0_m=x0[plain], theta0_rad=th0[plain], seeds=seeds[plain], duration_s=duration_s,
-            noise=noise, params=[run_params[i] for i in plain], plant=plant, ideal_sensors=ideal_sensors,
-            stop_when_lost=stop_when_lost, criteria=criteria, nthread=nthread, record=record, vectorized=vectorized,
-            controller_timeout_s=controller_timeout_s,
-            progress=progress,
-        )  # fmt: skip
-        for i, result in zip(plain, batched, strict=True):
-            results[i] = result
-    done = len(plain)
-    for i, sc in enumerate(scenarios):
-        if sc is None:
-            continue
+    for i in single:
         results[i] = run_closed_loop(
-            catalogue.make(name, run_params[i]), x0_m=float(x0[i]), theta0_rad=float(th0[i]),
-            duration_s=duration_s, seed=int(seeds[i]), noise=noise, params=run_params[i], plant=plant,
-            ideal_sensors=ideal_sensors, stop_when_lost=stop_when_lost, criteria=criteria,
-            controller_timeout_s=controller_timeout_s, scenario=sc,
-        )  # fmt: skip
-        done += 1
+            catalogue.make(name, run_params[i]),
+            x0_m=float(x0[i]),
+            theta0_rad=float(th0[i]),
+            duration_s=duration_s,
+            seed=int(seed_arr[i]),
+            noise=noise,
+            params=run_params[i],
+            plant=plant,
+            ideal_sensors=ideal_sensors,
+            stop_when_lost=stop_when_lost,
+            criteria=criteria,
+            controller_timeout_s=controller_timeout_s,
+            scenario=run_scenarios[i],
+        )
+        runs_before += 1
         if progress is not None:
-            progress(float(done))
+            progress(float(runs_before))
     return [r for r in results if r is not None]
 
 
