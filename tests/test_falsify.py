@@ -121,6 +121,12 @@ def test_bad_falsify_and_replay_inputs_are_refused(
     refused(capsys, [*base, "--latency", "0:0.05"], "--latency")
     refused(capsys, [*base, "--x0", "0.1", "--theta0", "0.2"], "nothing to search")
     refused(capsys, [*base, "--budget", "0"], "--budget")
+    one = falsify(
+        _settings((0.0, 0.16), (-0.4, -0.4), budget=12, keep_going=True), Parameters(), load_spec(SPEC)
+    )
+    assert len(one.runs) == 12 and all(
+        len(r["u"]) == 1 for r in one.runs
+    )  # one input: CMA-ES past the corners
     bad = tmp_path / "bad.json"
     bad.write_text('{"counterexample": {"controller": "appendix-sf", "x0_m": "0.1"}}')
     refused(capsys, ["run", "--replay", str(bad)], str(bad), "parameters")

@@ -355,18 +355,18 @@ def _cma_search(search: _Search) -> None:
         x0 = np.array(best["u"]) if best is not None else np.full(d, 0.5)
         if corner is not None:  # the first strategy starts toward the linear model's worst corner
             x0 = 0.15 + 0.7 * corner
-        es = _strategy(cma, x0, population, int(search.rng.integers(2**31)))
+        # cma searches two coordinates or more: a one-input search carries a second that changes nothing
+        es = _strategy(cma, np.r_[x0, 0.5] if d == 1 else x0, population, int(search.rng.integers(2**31)))
         if corner is not None:
             es.inject([corner], force=True)
             corner = None
         while search.left > 0 and not search.found() and search.complete and not es.stop():
             points = on_grid(np.asarray(es.ask(), dtype=float))
-            values = search.evaluate(points)
+            values = search.evaluate(points[:, :d])
             if len(values) < len(points):  # the budget's last, partial generation: nothing to learn
                 break
-            with (
-                warnings.catch_warnings()
-            ):  # the injected corner comes back from the bounds' repair, on the grid
+            # the injected corner comes back from the bounds' repair, on the grid: cma's warning is moot
+            with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 es.tell(list(points), [_finite(v) for v in values])
 
@@ -400,8 +400,6 @@ def _linear_corner(runs: list[dict[str, Any]], dims: int) -> np.ndarray | None:
 
 
 def _strategy(cma: Any, x0: np.ndarray, population: int, seed: int) -> Any:
-    if len(x0) == 1:  # CMA-ES needs two dimensions: a dummy second one that changes nothing
-        raise ParameterError("a one-dimensional search: give a second range (CMA-ES searches ≥ 2 inputs)")
     options = {"bounds": [0.0, 1.0], "popsize": population, "seed": seed + 1, "verbose": -9}
     options.update({"tolx": 1e-4, "tolfun": 1e-9})
     return cma.CMAEvolutionStrategy(list(np.clip(x0, 0.02, 0.98)), SIGMA0, options)
