@@ -38,7 +38,7 @@ from twin.app.sweep import MAX_POINTS, Grid, SweepResult, SweepSettings, point_s
 from twin.outputs import JobFiles
 from twin.parameters import ParameterError, Parameters
 from twin.physics import check_initial_state
-from twin.requirements import Requirement, Spec, violated
+from twin.requirements import Spec, violated
 from twin.sensors import angle_count_step_rad
 
 __all__ = ["ValidationCriteria", "ValidationReport", "load_criteria", "validate"]
@@ -379,6 +379,21 @@ class _Judge:
             return False
         return not violated({r.name: margins[r.name] for r in self.spec.asked(check)})
 
+    def asked(self, check: str) -> str:
+        """What a check asks in words, with a requirements file ("" without one)."""
+        if self.spec is None:
+            return ""
+        return "meets " + ", ".join(r.name for r in self.spec.asked(check))
+
+    def why_not(self, check: str, record: dict[str, Any]) -> str:
+        """Why a run does not meet what the check asks: the verdict's reason, or each requirement it violates
+        with its robustness (a failed run: its reason)."""
+        margins = record.get("requirements")
+        if self.spec is None or margins is None:
+            return str(record["reason"])
+        asked = self.spec.asked(check)
+        return ", ".join(f"{r.name} {margins[r.name]:+.4g}" for r in asked if not margins[r.name] >= 0)
+
     def worst(self, check: str, records: list[dict[str, Any]]) -> str:
         """With a requirements file: each requirement the check asks, its least robustness and where."""
         if self.spec is None:
@@ -429,7 +444,7 @@ def _nominal_stage(b: _Battery, starts: list[tuple[float, float]]) -> bool:
         return False
     done = [r for r in records if r]
     held = sum(b.judge.meets("nominal", r) for r in done)
-    asked = _asked(b, "nominal")
+    asked = b.judge.asked("nominal")
     b.checks.append(
         Check(
             "nominal",
@@ -441,7 +456,7 @@ def _nominal_stage(b: _Battery, starts: list[tuple[float, float]]) -> bool:
     )
     # A run whose controller failed has no figures (it already fails the nominal check).
     saturated = max((r["saturated_fraction"] for r in records if r and not r.get("failed")), default=0.0)
-    asked = _asked(b, "saturation")
+    asked = b.judge.asked("saturation")
     b.checks.append(
         Check(
             "saturation",
@@ -498,7 +513,7 @@ def _region_stage(b: _Battery, settings: SweepSettings) -> SweepResult | None:
     inside = [p for p in region.points if p and xlo <= p["x0_m"] <= xhi and tlo <= p["theta0_rad"] <= thi]
     lost_inside = [(p["x0_m"], p["theta0_rad"]) for p in inside if not b.judge.meets("region", p)]
     kept_all = sum(not p["ball_lost"] for p in region.points if p)
-    asked = _asked(b, "region")
+    asked = b.judge.asked("region")
     b.checks.append(
         Check(
             "region",
@@ -545,8 +560,7 @@ def _sensitivity_stage(b: _Battery, cases: list[tuple[str, str, Parameters]]) ->
             by_param.setdefault(name, []).append((label, record))
     for name, rows in by_param.items():
         bad = [
-            f"{label} from ({r['x0_m']:+.2f}, {r['theta0_rad']:+.2f}): "
-            + (r["reason"] if b.judge.spec is None else _unmet(r, b.judge.spec.asked("sensitivity")))
+            f"{label} from ({r['x0_m']:+.2f}, {r['theta0_rad']:+.2f}): " + b.judge.why_not("sensitivity", r)
             for label, r in rows
             if not b.judge.meets("sensitivity", r)
         ]
@@ -656,20 +670,6 @@ def _montecarlo_stage(b: _Battery) -> bool:
         )
     )
     return True
-
-
-def _asked(b: _Battery, check: str) -> str:
-    """What a check asks in words, with a requirements file ("" without one)."""
-    if b.judge.spec is None:
-        return ""
-    return "meets " + ", ".join(r.name for r in b.judge.spec.asked(check))
-
-
-def _unmet(record: dict[str, Any], asked: tuple[Requirement, ...]) -> str:
-    margins = record.get("requirements")
-    if margins is None:
-        return record["reason"]
-    return ", ".join(f"{r.name} {margins[r.name]:+.4g}" for r in asked if not margins[r.name] >= 0)
 
 
 def _required_grid(c: ValidationCriteria) -> tuple[Grid, Grid]:
