@@ -62,3 +62,76 @@ def test_the_kernels_steps_are_the_reference_plants_for_every_run() -> None:
         kinds.add("lost" if want >= 0 else "kept")
         kinds.add("stops" if abs(abs(ref.state()[1]) - p.beam.stop_angle_rad) < 1e-15 else "free")
     assert kinds >= {"lost", "kept", "stops"}  # the cases the comparison covers
+
+
+def _same_as_single_runs(name: str, x0, theta0, seeds, duration_s: float, params=None, **kw) -> list:
+    from twin.screen.rig import ReferenceBatchRig
+
+    batched = []  # the runs the compiled rig took (not the single-run path)
+    start = ReferenceBatchRig._start_physics
+
+    def spy(self, params, *args):
+        batched.extend(params)
+        return start(self, params, *args)
+
+    ReferenceBatchRig._start_physics = spy  # type: ignore[method-assign]
+    try:
+        runs = _compare_with_single_runs(name, x0, theta0, seeds, duration_s, params, **kw)
+    finally:
+        ReferenceBatchRig._start_physics = start  # type: ignore[method-assign]
+    assert len(batched) == len(x0)
+    return runs
+
+
+def _compare_with_single_runs(name: str, x0, theta0, seeds, duration_s: float, params=None, **kw) -> list:
+    """run_batch(plant="reference") (the compiled kernel under the batch engine's chain) against each run
+    alone on the reference plant (ReferencePlant under SimRig): every log array and the verdict."""
+    from controllers import registry
+    from tests.test_batch import _assert_same_run
+    from twin.engine import run_closed_loop
+    from twin.rigs.batch import run_batch
+
+    runs = run_batch(
+        registry, name, x0_m=x0, theta0_rad=theta0, seeds=seeds, duration_s=duration_s, params=params,
+        plant="reference", record=True, **kw,
+    )  # fmt: skip
+    for i, batched in enumerate(runs):
+        p = params[i] if isinstance(params, list) else params
+        single = run_closed_loop(
+            registry.make(name, p), x0_m=float(x0[i]), theta0_rad=float(theta0[i]), duration_s=duration_s,
+            seed=int(seeds[i]), params=p, plant="reference", **kw,
+        )  # fmt: skip
+        _assert_same_run(single, batched, f"{name} run {i} (x0 = {x0[i]}, θ0 = {theta0[i]}, seed {seeds[i]})")
+    return runs
+
+
+@pytest.mark.quick
+def test_the_fast_engine_is_the_reference_plant_run_alone_bit_for_bit() -> None:
+    """Full sensor chain, noise on: hardware starts, a lost ball and the origin, three seeds each."""
+    x0 = np.tile([0.14, -0.13, 0.25, 0.0], 3)
+    theta0 = np.tile([-0.2, 0.29, -0.7, 0.0], 3)
+    runs = _same_as_single_runs("appendix-sf", x0, theta0, np.repeat([0, 1, 2], 4), 2.0)
+    assert any(r.verdict.ball_lost for r in runs) and not all(r.verdict.ball_lost for r in runs)
+
+
+@pytest.mark.parametrize(
+    ("name", "kw"),
+    [
+        ("appendix-clp", {"stop_when_lost": False}),
+        ("lqr", {"ideal_sensors": True}),
+        ("clp", {"noise": False}),
+    ],
+)
+def test_the_fast_engine_runs_each_controller_and_rig_as_alone(name: str, kw: dict) -> None:
+    x0 = np.array([0.14, -0.13, 0.25, 0.0, 0.3])
+    theta0 = np.array([-0.2, 0.29, -0.7, 0.0, 0.6])
+    _same_as_single_runs(name, x0, theta0, np.arange(5), 3.0, **kw)
+
+
+def test_the_fast_engine_runs_a_spreads_rigs_each_as_alone() -> None:
+    base = Parameters().with_overrides({"start.free_run_s": 0.02})
+    spread = load_spread("docs/examples/spread.toml", base)
+    params, _ = sample_parameters(base, spread, 8, seed=5)
+    rng = np.random.default_rng(2)
+    x0, theta0 = rng.uniform(-0.3, 0.3, 8), rng.uniform(-0.6, 0.6, 8)
+    _same_as_single_runs("appendix-clp", x0, theta0, np.arange(8), 3.0, params=params)

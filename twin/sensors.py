@@ -746,35 +746,49 @@ class BallChainBatch:
         half = self.params.track.half_length_m
         segment = np.searchsorted(chain0._breakpoints_m, x_m)
         equal_steps = equally_spaced(times_s)
-        common = (
+        # ``advance_rig_block``'s common block: equal steps, in contact throughout, on one piece of the curve.
+        smooth = (
             equal_steps
-            & (self._next_start_s[runs] > t_end)
-            & (self._busy_until_s[runs] <= t0)
             & (segment == segment[:, :1]).all(axis=1)
             & (np.abs(x_m).max(axis=1) < half * _CLEAR_OF_ENDS)  # as ``advance_rig_block`` tells it
             & on_track.all(axis=1)
         )
         y = np.empty(len(runs))
-        if common.any():
-            vk = chain0._wiper_v(x_m[common])
-            rows = runs[common]
-            tau = self.tau_s[rows] if self._one_tau_s is None else self._one_tau_s
-            y[common] = rc_filter_uniform_end_v(vk, self.filtered_v[rows], t_end - t0, tau)
         readings = np.empty(len(runs))
-        if common.any():
-            readings[common] = adc_quantize_v(y[common], self.params.daq)
-        for j in np.flatnonzero(~common).tolist():
+        if smooth.any():
+            vk = chain0._wiper_v(x_m[smooth])
+            rows = runs[smooth]
+            tau = self.tau_s[rows] if self._one_tau_s is None else self._one_tau_s
+            y[smooth] = rc_filter_uniform_end_v(vk, self.filtered_v[rows], t_end - t0, tau)
+            # The runs whose noise process draws in the block or whose dropouts reach into it: the chain's own
+            # draws (its seed's numbers in its order) and the dropouts' closed-form effect, run by run.
+            at = np.cumsum(smooth) - 1  # a smooth run's row of vk
+            due = smooth & ((self._next_start_s[runs] <= t_end) | (self._busy_until_s[runs] > t0))
+            for j in np.flatnonzero(due).tolist():
+                chain = self.chains[int(runs[j])]
+                chain._schedule_until(t_end)
+                if chain._first_open < len(chain._dropouts):
+                    chain._forget_finished(t0)
+                if chain._busy_until_s > t0:
+                    y[j] += chain._dropout_effect_v(times_s.tolist(), vk[at[j]].tolist())
+                self._sync_noise(int(runs[j]))
+            readings[smooth] = adc_quantize_v(y[smooth], self.params.daq)
+        for j in np.flatnonzero(~smooth).tolist():
             i = int(runs[j])
             chain = self.chains[i]
             chain.filtered_v, chain.time_s = float(self.filtered_v[i]), self.time_s
             readings[j] = chain.advance_rig_block(times_s, x_m[j], on_track[j], equal_steps)
             y[j] = chain.filtered_v
-            self._next_start_s[i] = chain._next_start_s
-            if chain._dropouts:
-                self._busy_until_s[i] = max(end for _, end in chain._dropouts)
+            self._sync_noise(i)
         self.filtered_v[runs] = y
         self.time_s = t_end
         return readings
+
+    def _sync_noise(self, i: int) -> None:
+        """Run i's next dropout start and latest dropout end, from its chain."""
+        chain = self.chains[i]
+        self._next_start_s[i] = chain._next_start_s
+        self._busy_until_s[i] = chain._busy_until_s
 
 
 def rc_filter_end_v(

@@ -13,8 +13,9 @@ The tick sequence follows the single rig's ``twin.daq.TickSchedule`` (start timi
 output latency: the same object type, so the same plan), its ideal converters are ``IdealSensors.read_v``,
 and lost ball, recording and verdict are ``twin.engine.ClosedLoop``'s step for step; a test checks every log
 array and the verdict against single runs. Runs whose lost ball ends them (``stop_when_lost``) leave the
-batch. Laws on the true state (``StateLaw``) and the reference plant run one by one through
-``run_closed_loop``.
+batch. Laws on the true state (``StateLaw``) run one by one through ``run_closed_loop``. The reference plant's
+runs are batched too, their physics in the compiled kernel (``twin.screen.rig.ReferenceBatchRig``, the fast
+engine).
 """
 
 from __future__ import annotations
@@ -222,10 +223,12 @@ def run_batch(
             raise ValueError(f"params has {len(run_params)} entries for {n} runs: give one, or one per run")
     if n == 0:
         return []
+    if plant not in ("twin", "reference"):
+        raise RigError(f"plant = {plant!r}: expected 'twin' or 'reference'")
     probe = catalogue.make(name, run_params[0])
-    # The reference plant, the 1 kHz laws on the true state, firmware and runs with a scenario take the
-    # single-run path; the others are batched.
-    every = plant != "twin" or not isinstance(probe, Controller)
+    # The 1 kHz laws on the true state, firmware and runs with a scenario take the single-run path; the others
+    # are batched (the reference plant's in the compiled kernel: twin.screen.rig).
+    every = not isinstance(probe, Controller)
     run_scenarios = list(scenarios) if scenarios is not None else [None] * n
     single = [i for i in range(n) if every or run_scenarios[i] is not None]
     batched = sorted(set(range(n)) - set(single))
@@ -250,7 +253,7 @@ def run_batch(
             if len(scalar) != len(made):
                 raise TypeError(f"{name}: the catalogue made something that is not a Controller")
             controller = ScalarControllers(scalar, controller_timeout_s, group_params[0].daq)
-        group = BatchRig(
+        group = _group_rig(plant)(
             [noisy[id(run_params[i])] for i in idx],
             x0[rows],
             th0[rows],
@@ -283,6 +286,15 @@ def run_batch(
         if progress is not None:
             progress(float(runs_before))
     return [r for r in results if r is not None]
+
+
+def _group_rig(plant: PlantKind) -> type[BatchRig]:
+    """The rig of a batch's group: MuJoCo's, or the reference plant's in the compiled kernel."""
+    if plant == "reference":
+        from twin.screen.rig import ReferenceBatchRig  # numba is imported when asked for
+
+        return ReferenceBatchRig
+    return BatchRig
 
 
 def _group_progress(progress: Callable[[float], None], before: int, size: int) -> Callable[[int, int], None]:
@@ -369,6 +381,39 @@ class BatchRig:
         self.dt = dt
         self.schedule = tick_schedule(p)  # the single rig's schedule (held, free run, release, latency)
         self.steps_per_tick = self.schedule.steps_per_tick
+        self._start_physics(params, x0, theta0, nthread, batch, ids, plant_cache)
+        # SimRig.reset
+        self.held = np.stack([x0, theta0, np.zeros(n), np.zeros(n)], axis=1)
+        chain_start = self.schedule.chain_start_step
+        self.ball = None if ideal_sensors else BallChainBatch(params, seeds, x0, chain_start * dt)
+        self.ideal_sensors = IdealSensors(p)
+        # Each run's own (the group shares the rest of its I/O parameters: batch_key).
+        self.gain_v_per_v = np.array([q.amplifier.gain_v_per_v for q in params])
+        self.zeroing_error_rad = np.array([q.angle_sensor.zeroing_error_rad for q in params])
+        self.command_v = np.full(n, p.amplifier.zero_command_v)
+        self.applied_v = self._motor_volts_for(self.command_v, np.arange(n))
+        self.pending_v = self.applied_v.copy()
+        self.lost = np.zeros(n, dtype=bool)
+        self.lost_time_s: list[float | None] = [None] * n
+        self.lost_state = np.full((n, 4), math.nan)
+        self.live = np.arange(n)  # the runs still going
+        self.block_theta = np.zeros((n, 2))
+        self.block_on = np.ones((n, 2), dtype=bool)
+
+    # --- the physics: MuJoCo here; ``twin.screen.rig.ReferenceBatchRig`` overrides these three -------------
+    def _start_physics(
+        self,
+        params: list[Parameters],
+        x0: np.ndarray,
+        theta0: np.ndarray,
+        nthread: int,
+        batch: mjbatch.Batch | None,
+        ids: np.ndarray | None,
+        plant_cache: dict[Parameters, Plant] | None,
+    ) -> None:
+        """Each run's physics reset to its start (the single run's reset and its checks); sets
+        ``physics_time_s``."""
+        n = len(params)
         # One Plant per distinct physics: its model for the batch, its geometry for the numpy stages.
         plants: dict[Parameters, Plant] = {}
         for q in params:
@@ -408,24 +453,7 @@ class BatchRig:
         assert plant0._hinge_qpos is not None
         self.theta_col = 1 + plant0._hinge_qpos
         self.ball_col = 1 + plant0._ball_qpos
-        # SimRig.reset
-        self.held = np.stack([x0, theta0, np.zeros(n), np.zeros(n)], axis=1)
         self.physics_time_s = float(self.last_row[0, 0])
-        chain_start = self.schedule.chain_start_step
-        self.ball = None if ideal_sensors else BallChainBatch(params, seeds, x0, chain_start * dt)
-        self.ideal_sensors = IdealSensors(p)
-        # Each run's own (the group shares the rest of its I/O parameters: batch_key).
-        self.gain_v_per_v = np.array([q.amplifier.gain_v_per_v for q in params])
-        self.zeroing_error_rad = np.array([q.angle_sensor.zeroing_error_rad for q in params])
-        self.command_v = np.full(n, p.amplifier.zero_command_v)
-        self.applied_v = self._motor_volts_for(self.command_v, np.arange(n))
-        self.pending_v = self.applied_v.copy()
-        self.lost = np.zeros(n, dtype=bool)
-        self.lost_time_s: list[float | None] = [None] * n
-        self.lost_state = np.full((n, 4), math.nan)
-        self.live = np.arange(n)  # the runs still going
-        self.block_theta = np.zeros((n, 2))
-        self.block_on = np.ones((n, 2), dtype=bool)
 
     # --- the rig, over the live runs --------------------------------------------------------------------
     def _motor_volts_for(self, command_v: np.ndarray, rows: np.ndarray) -> np.ndarray:

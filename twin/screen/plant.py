@@ -90,43 +90,83 @@ def derivatives(plant: PlantRows, states: np.ndarray, volts: np.ndarray) -> np.n
 
 @numba.njit(cache=True)
 def _advance(
-    rows: np.ndarray, h: float, states: np.ndarray, lost_step: np.ndarray, volts: np.ndarray, step0: int
+    rows: np.ndarray,
+    h: float,
+    states: np.ndarray,
+    lost_step: np.ndarray,
+    volts: np.ndarray,
+    step0: int,
+    xs: np.ndarray,
+    thetas: np.ndarray,
 ) -> None:
     n, m = volts.shape
+    record = xs.shape[1] == m + 1
     for i in range(n):
         r = rows[i]
         x, th, xd, thd = states[i, 0], states[i, 1], states[i, 2], states[i, 3]
+        if record:
+            xs[i, 0], thetas[i, 0] = x, th
         for k in range(m):
-            if lost_step[i] >= 0:
+            if lost_step[i] < 0:
+                v = min(max(volts[i, k], -r[RAIL]), r[RAIL])
+                a1 = _f(r, x, th, xd, thd, v)
+                a2 = _f(
+                    r,
+                    x + 0.5 * h * a1[0],
+                    th + 0.5 * h * a1[1],
+                    xd + 0.5 * h * a1[2],
+                    thd + 0.5 * h * a1[3],
+                    v,
+                )
+                a3 = _f(
+                    r,
+                    x + 0.5 * h * a2[0],
+                    th + 0.5 * h * a2[1],
+                    xd + 0.5 * h * a2[2],
+                    thd + 0.5 * h * a2[3],
+                    v,
+                )
+                a4 = _f(r, x + h * a3[0], th + h * a3[1], xd + h * a3[2], thd + h * a3[3], v)
+                x = x + h / 6.0 * (a1[0] + 2 * a2[0] + 2 * a3[0] + a4[0])
+                th = th + h / 6.0 * (a1[1] + 2 * a2[1] + 2 * a3[1] + a4[1])
+                xd = xd + h / 6.0 * (a1[2] + 2 * a2[2] + 2 * a3[2] + a4[2])
+                thd = thd + h / 6.0 * (a1[3] + 2 * a2[3] + 2 * a3[3] + a4[3])
+                if abs(th) > r[STOP]:
+                    th = math.copysign(r[STOP], th)
+                    if thd * th > 0:
+                        thd = 0.0
+                if abs(x) > r[HALF]:
+                    lost_step[i] = step0 + k + 1
+            elif not record:
                 break
-            v = min(max(volts[i, k], -r[RAIL]), r[RAIL])
-            a1 = _f(r, x, th, xd, thd, v)
-            a2 = _f(
-                r, x + 0.5 * h * a1[0], th + 0.5 * h * a1[1], xd + 0.5 * h * a1[2], thd + 0.5 * h * a1[3], v
-            )
-            a3 = _f(
-                r, x + 0.5 * h * a2[0], th + 0.5 * h * a2[1], xd + 0.5 * h * a2[2], thd + 0.5 * h * a2[3], v
-            )
-            a4 = _f(r, x + h * a3[0], th + h * a3[1], xd + h * a3[2], thd + h * a3[3], v)
-            x = x + h / 6.0 * (a1[0] + 2 * a2[0] + 2 * a3[0] + a4[0])
-            th = th + h / 6.0 * (a1[1] + 2 * a2[1] + 2 * a3[1] + a4[1])
-            xd = xd + h / 6.0 * (a1[2] + 2 * a2[2] + 2 * a3[2] + a4[2])
-            thd = thd + h / 6.0 * (a1[3] + 2 * a2[3] + 2 * a3[3] + a4[3])
-            if abs(th) > r[STOP]:
-                th = math.copysign(r[STOP], th)
-                if thd * th > 0:
-                    thd = 0.0
-            if abs(x) > r[HALF]:
-                lost_step[i] = step0 + k + 1
+            if record:  # a lost run's state stays where it was
+                xs[i, k + 1], thetas[i, k + 1] = x, th
         states[i, 0], states[i, 1], states[i, 2], states[i, 3] = x, th, xd, thd
 
 
+_NO_RECORD = np.empty((0, 0))
+
+
 def advance_plant(
-    plant: PlantRows, states: np.ndarray, lost_step: np.ndarray, volts: np.ndarray, step0: int = 0
-) -> None:
+    plant: PlantRows,
+    states: np.ndarray,
+    lost_step: np.ndarray,
+    volts: np.ndarray,
+    step0: int = 0,
+    *,
+    record: bool = False,
+) -> tuple[np.ndarray, np.ndarray] | None:
     """Advance every run's state (N, 4; in place) over its motor volts (N, M: one per physics step), as
     ``ReferencePlant.advance``; ``lost_step`` (N, int, −1: on the track) gets the step (counted from ``step0``)
-    after which a run's ball passed the track's end, and that run stops there."""
+    after which a run's ball passed the track's end, and that run stops there. ``record``: return each run's
+    x and θ before and after every step, (N, M + 1) each, as ``ReferencePlant.advance``'s block."""
     if states.dtype != np.float64 or not states.flags.c_contiguous:
         raise ValueError("states: a C-contiguous float64 (N, 4) array (advanced in place)")
-    _advance(plant.rows, plant.timestep_s, states, lost_step, np.ascontiguousarray(volts, dtype=float), step0)
+    volts = np.ascontiguousarray(volts, dtype=float)
+    if not record:
+        _advance(plant.rows, plant.timestep_s, states, lost_step, volts, step0, _NO_RECORD, _NO_RECORD)
+        return None
+    xs = np.empty((volts.shape[0], volts.shape[1] + 1))
+    thetas = np.empty_like(xs)
+    _advance(plant.rows, plant.timestep_s, states, lost_step, volts, step0, xs, thetas)
+    return xs, thetas
