@@ -65,6 +65,7 @@ OUTPUT_FILES = JobFiles("sweep", ("sweep.json", "map.png"))
 DEFAULT_X0 = Grid(-0.32, 0.32, 41)
 DEFAULT_THETA0 = Grid(-0.7, 0.7, 41)
 MAX_POINTS = 250_000  # a grid beyond this is a typing error, not a study (about 3 h per 10 s runs here)
+ENGINE_NAMES = ("screen", "fast", "mujoco")  # twin.app.screening
 
 
 def parse_range(option: str, text: str) -> Grid:
@@ -145,22 +146,41 @@ class SweepSettings:
     refine: int = 0  # boundary refinement: the coarse grid's step in grid intervals (0: every start is run)
     audit: int = 0  # with refine: inferred starts run anyway, at random, to check the assumption
     locate: int = 0  # bisections of every grid edge the boundary crosses (0: the boundary to a grid step)
+    # Who decides each start (twin.app.screening): "screen" (the fast engine, MuJoCo near every class change and
+    # on an audit sample), "fast" (the fast engine alone) or "mujoco" (MuJoCo alone). The twin plant only.
+    engine: str = "mujoco"
+    band: int = 1  # screen: grid steps around a class change that MuJoCo decides
+    screen_audit: int = 32  # screen: starts decided by the fast engine alone that MuJoCo runs anyway
 
     def starts(self) -> np.ndarray:
         """The grid's starts (n, 2: x0, θ0), x0 by x0 and θ0 within: start k is (k // nt, k % nt)."""
         xs, ths = self.x0.values(), self.theta0.values()
         return np.array([(x, th) for x in xs for th in ths], dtype=float)
 
-    def runs(self, params: Parameters) -> Runs:
-        """The job every start of this sweep is a run of (``fanout.Runs``), on the rig of ``params``."""
+    def runs(self, params: Parameters, *, fast: bool | None = None) -> Runs:
+        """The job every start of this sweep is a run of (``fanout.Runs``), on the rig of ``params``; ``fast``:
+        on the fast engine (the reference plant compiled, the twin's sensor chain) rather than MuJoCo
+        (default: as ``engine`` says when it names one engine)."""
+        on_fast = self.engine == "fast" if fast is None else fast
         return Runs(
             controller=self.controller,
             params=params,
             duration_s=self.duration_s,
             noise=self.noise,
-            plant=self.plant,
+            plant="reference" if on_fast and self.plant == "twin" else self.plant,
             ideal_sensors=self.ideal_sensors,
         )
+
+    @property
+    def screened(self) -> bool:
+        """Whether the fast engine screens and MuJoCo confirms (``twin.app.screening``)."""
+        return self.engine == "screen" and self.plant == "twin"
+
+    def engine_label(self) -> str:
+        """What decided a start run as asked: "mujoco", "fast" or "reference" (the plant asked for)."""
+        if self.plant != "twin":
+            return self.plant
+        return "fast" if self.engine == "fast" else "mujoco"
 
 
 @dataclass
@@ -174,6 +194,7 @@ class SweepResult:
     served: dict[str, Any] | None = None  # a served job: where, and the clients (fanout.Served.to_json)
     refinement: dict[str, Any] | None = None  # what --refine ran, inferred and audited
     boundary: dict[str, Any] | None = None  # --locate: each boundary crossing to a fraction of a grid step
+    screening: dict[str, Any] | None = None  # --engine screen: what each engine ran, the audit
 
     def to_json(self) -> dict[str, Any]:
         s = self.settings
@@ -182,6 +203,7 @@ class SweepResult:
             **({"served": self.served} if self.served is not None else {}),
             **({"refinement": self.refinement} if self.refinement is not None else {}),
             **({"boundary": self.boundary} if self.boundary is not None else {}),
+            **({"screening": self.screening} if self.screening is not None else {}),
             "complete": self.complete,
             "summary": summarize(self.points),
             "claims": self.claims,
@@ -241,23 +263,41 @@ def run_sweep(
         raise ParameterError("--refine and --locate run here or on workers, not as served sessions")
     if not 0 <= settings.locate <= MAX_LOCATE:
         raise ParameterError(f"--locate {settings.locate}: at most {MAX_LOCATE} bisections of a grid step")
-    runs = replace(settings.runs(p), requirements=requirements)
-
-    def run_batch(
-        batch: np.ndarray, batch_seeds: np.ndarray, progress: Progress | None = None
-    ) -> tuple[list[dict[str, Any] | None], bool]:
-        return run_starts(
-            runs,
-            batch,
-            batch_seeds,
-            workers=workers,
-            scheduler=scheduler,
-            nthread=nthread,
-            progress=progress,
-            serve=serve,  # None with --refine or --locate (refused above)
+    if settings.engine not in ENGINE_NAMES:
+        raise ParameterError(f"--engine {settings.engine!r}: one of {', '.join(ENGINE_NAMES)}")
+    if settings.screened and (serve is not None or settings.refine):
+        raise ParameterError(
+            "--engine screen runs here or on workers, without --refine: give --engine mujoco (or fast) with "
+            "--serve or --refine"
         )
 
-    if settings.refine:
+    def batch_of(fast: bool | None) -> Batch:
+        runs = replace(settings.runs(p, fast=fast), requirements=requirements)
+        label = "fast" if fast else settings.engine_label() if fast is None else "mujoco"
+
+        def run_batch(
+            batch: np.ndarray, batch_seeds: np.ndarray, progress: Progress | None = None
+        ) -> tuple[list[dict[str, Any] | None], bool]:
+            records, complete = run_starts(
+                runs,
+                batch,
+                batch_seeds,
+                workers=workers,
+                scheduler=scheduler,
+                nthread=nthread,
+                progress=progress,
+                serve=serve,  # None with --refine or --locate (refused above)
+            )
+            return [None if r is None else {**r, "engine": label} for r in records], complete
+
+        return run_batch
+
+    run_batch = batch_of(False if settings.screened else None)  # the screen's confirmations are MuJoCo's
+    if settings.screened:
+        result = _screened_sweep(
+            settings, p, grid, starts, seeds, corners, run_batch, batch_of(True), progress
+        )
+    elif settings.refine:
         result = _refined_sweep(settings, p, grid, starts, seeds, corners, run_batch, progress)
     else:
         result = _brute_sweep(settings, p, grid, starts, seeds, corners, run_batch, progress)
@@ -288,6 +328,57 @@ def _brute_sweep(
         for i, (_, _, claim, note) in enumerate(corners)
     ]
     result = SweepResult(settings, points, complete, corner_records, wall_s=time.perf_counter() - start)
+    result.claims = [_judge(claim, result, p) for claim in CLAIMS if settings.controller in claim.applies_to]
+    return result
+
+
+def _screened_sweep(
+    settings: SweepSettings,
+    p: Parameters,
+    grid: np.ndarray,
+    starts: np.ndarray,
+    seeds: np.ndarray,
+    corners: list[tuple[float, float, str, str]],
+    run_mujoco: Batch,
+    run_fast: Batch,
+    progress: Progress | None,
+) -> SweepResult:
+    """Every start on the fast engine; MuJoCo near every class change and on an audit sample
+    (``twin.app.screening.Screening``); the claims' corner states on MuJoCo. Each start has its brute-force
+    seed, so a start MuJoCo ran has its brute-force record."""
+    from twin.app.screening import Screening
+
+    nx, nt = settings.x0.n, settings.theta0.n
+    start = time.perf_counter()
+
+    def job(run: Batch) -> Job:
+        def run_job(
+            requests: list[tuple[int, int]], within: Progress | None
+        ) -> tuple[list[dict[str, Any] | None], bool]:
+            todo = [k for _, k in requests]
+            return run(starts[todo], seeds[todo], within)
+
+        return run_job
+
+    screen = Screening(
+        nx, nt, 1, job(run_fast), job(run_mujoco), band=settings.band, audit=settings.screen_audit,
+        seed=settings.seed, progress=progress,
+    )  # fmt: skip
+    screen.run()
+    points = [screen.record(0, k) or {} for k in range(nx * nt)]
+    complete = screen.complete
+    corner_records: list[dict[str, Any]] = []
+    corner_idx = list(range(nx * nt, len(starts)))
+    if corner_idx and complete:
+        records, complete = run_mujoco(starts[corner_idx], seeds[corner_idx], None)
+        corner_records = [
+            {**(r or {}), "claim": claim, "note": note}
+            for r, (_, _, claim, note) in zip(records, corners, strict=True)
+        ]
+    result = SweepResult(
+        settings, points, complete and all(points), corner_records, wall_s=time.perf_counter() - start
+    )
+    result.screening = screen.summary()
     result.claims = [_judge(claim, result, p) for claim in CLAIMS if settings.controller in claim.applies_to]
     return result
 

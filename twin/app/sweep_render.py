@@ -33,6 +33,16 @@ def write_sweep(result: SweepResult, out_dir: str | Path, *, overwrite: bool = F
     return Path(out_dir)
 
 
+def _engine_words(result: SweepResult) -> str:
+    """Who decided the map's starts, for its title."""
+    s = result.settings
+    if s.plant != "twin":
+        return f"plant {s.plant}"
+    if result.screening is not None:
+        return f"screened (MuJoCo decided {100 * result.screening['mujoco_fraction']:.0f} %)"
+    return "FAST ENGINE ALONE (not confirmed)" if s.engine == "fast" else "MuJoCo twin"
+
+
 def render_map(result: SweepResult, path: Path) -> None:
     """The map: settling time (colour) where held, grey where kept but not held, dark red where lost;
     the claims' rectangles dashed, their corner states marked; --locate's boundary crossings dotted."""
@@ -87,11 +97,18 @@ def render_map(result: SweepResult, path: Path) -> None:
             mew=0.4,
             label=f"boundary, to 1/{2 ** result.boundary['bisections']} of a grid step",
         )
+    decided = np.array(
+        [[xs[k // nt], ths[k % nt]] for k, p in enumerate(result.points) if p.get("engine") == "mujoco"]
+    )
+    if result.screening is not None and len(decided):
+        ax.plot(
+            decided[:, 0], decided[:, 1], ".", ms=1.6, color="white", label="decided by MuJoCo (screened)"
+        )
     summary = summarize(result.points)
     ax.set_title(
         f"{s.controller}: held {summary['held']}, not held {summary['not_held']}, lost {summary['lost']} "
         f"of {summary['points']}\n{s.duration_s:g} s runs, noise {'on' if s.noise else 'off'}, "
-        f"{'ideal sensors' if s.ideal_sensors else 'full I/O chain'}, plant {s.plant}"
+        f"{'ideal sensors' if s.ideal_sensors else 'full I/O chain'}, {_engine_words(result)}"
         + ("" if result.complete else " — INCOMPLETE"),
         fontsize=10,
     )

@@ -95,6 +95,62 @@ def add_plant_options(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def add_engine_options(parser: argparse.ArgumentParser, default: str) -> None:
+    """``--engine screen|fast|mujoco`` and ``--band N`` (twin.app.screening)."""
+    parser.add_argument(
+        "--engine",
+        choices=("screen", "fast", "mujoco"),
+        default=None,
+        help="who decides each start: 'screen' (the fast engine, the reference plant compiled under the twin's "
+        "sensor chain, decides every start; MuJoCo re-runs every start near a class change and an audit "
+        "sample, and any disagreement in the audit fails the command), 'fast' (the fast engine alone, labelled "
+        f"so) or 'mujoco' (MuJoCo alone); default {default} (mujoco with --refine, --serve or --plant reference)",
+    )
+    parser.add_argument(
+        "--band",
+        type=count(1, 64),
+        default=1,
+        metavar="N",
+        help="with --engine screen: the grid steps around each class change that MuJoCo decides (default 1)",
+    )
+
+
+def resolve_engine(args: argparse.Namespace, default: str) -> str:
+    """The engine asked for, or the command's default where the job allows it (refused where it does not)."""
+    engine = args.engine
+    if engine is None:
+        plain = getattr(args, "refine", 0) or getattr(args, "serve", None) is not None or args.plant != "twin"
+        return "mujoco" if plain else default
+    if engine != "mujoco" and args.plant != "twin":
+        from twin.parameters import ParameterError
+
+        raise ParameterError(
+            f"--engine {engine}: the fast engine stands in for the MuJoCo twin; not with --plant reference"
+        )
+    return str(engine)
+
+
+def screen_summary(screen: dict[str, Any]) -> str:
+    """A screened job's line: what each engine decided, the band's disagreements and the audit."""
+    audit = screen["audit"]
+    return (
+        f"screened: the fast engine ran {screen['fast_runs']} starts, MuJoCo decided {screen['mujoco_runs']} "
+        f"({100 * screen['mujoco_fraction']:.1f} %: within {screen['band_steps']} grid step(s) of a class "
+        f"change, {len(screen['band_disagreements'])} of them classed otherwise by the fast engine; audit "
+        f"{audit['checked']} starts, {len(audit['mismatches'])} differ)"
+    )
+
+
+def screen_audit_failure(command: str, wrong: list[dict[str, Any]]) -> str:
+    first = wrong[0]
+    return (
+        f"ballbeam {command}: the screening's audit found {len(wrong)} start(s) decided by the fast engine "
+        f"alone that MuJoCo classes otherwise (the first: map {first['map']}, grid start ({first['i']}, "
+        f"{first['j']}): fast {first['fast']}, MuJoCo {first['mujoco']}); run with a wider --band or "
+        "--engine mujoco"
+    )
+
+
 def add_spread_options(parser: argparse.ArgumentParser, use: str) -> None:
     """``--spread FILE`` or ``--calibration DIR`` (one of them): what rigs are drawn from, for ``use``."""
     what = parser.add_mutually_exclusive_group()

@@ -14,6 +14,7 @@ from twin.app.commands.common import (
     SERVED_CONTROLLER,
     WORKERS,
     add_controller_timeout,
+    add_engine_options,
     add_params_options,
     add_plant_options,
     add_served_options,
@@ -27,6 +28,9 @@ from twin.app.commands.common import (
     load_params,
     params_and_spread,
     progress_bar,
+    resolve_engine,
+    screen_audit_failure,
+    screen_summary,
     served_stopped,
     serving,
     write_out,
@@ -71,6 +75,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--no-noise", action="store_true", help="switch the ball sensor's contact noise off")
     add_plant_options(parser)
+    add_engine_options(parser, "screen")
     add_params_options(parser)
     parser.add_argument(
         "--workers", type=WORKERS, default=1, help="local processes (default 1: this process)"
@@ -96,9 +101,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--audit",
         type=count(0, 100_000),
-        default=0,
+        default=None,
         metavar="N",
-        help="with --refine: also run N inferred starts, at random, and report any that differ",
+        help="with --refine: also run N inferred starts, at random, and report any that differ (default 0); "
+        "with --engine screen: N starts per map decided by the fast engine alone run on MuJoCo too "
+        "(default 32); any that differs fails the command",
     )
     parser.add_argument(
         "--locate",
@@ -165,11 +172,16 @@ def run(args: argparse.Namespace) -> int:
         ideal_sensors=bool(args.ideal_sensors or args.plant == "reference"),
         seed=args.seed,
         refine=args.refine,
-        audit=args.audit,
+        audit=args.audit or 0,
         locate=args.locate,
+        engine=resolve_engine(args, "screen"),
+        band=args.band,
+        screen_audit=32 if args.audit is None else args.audit,
     )
-    if args.audit and not args.refine:
-        raise ParameterError("--audit checks a refined map: give --refine too")
+    if args.audit and not args.refine and settings.engine != "screen":
+        raise ParameterError(
+            "--audit checks a refined or a screened map: give --refine or --engine screen too"
+        )
     if args.locate and robust:
         raise ParameterError("--locate finds one rig's boundary: not with a robust map (--rigs)")
     points = settings.x0.n * settings.theta0.n
@@ -213,6 +225,9 @@ def run(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return 1
+    if result.screening is not None and (wrong := result.screening["audit"]["mismatches"]):
+        print(screen_audit_failure("sweep", wrong), file=sys.stderr)
+        return 1
     return controller_failures(result.points, "sweep")
 
 
@@ -235,6 +250,8 @@ def _print_sweep(args: argparse.Namespace, settings: SweepSettings, result: Swee
                 else ""
             )
         )
+    if (screen := result.screening) is not None:
+        print(screen_summary(screen))
     if (boundary := result.boundary) is not None:
         print(
             f"boundary: {boundary['edges']} grid edges crossed, each located to 1/{2 ** boundary['bisections']} "

@@ -1,0 +1,95 @@
+"""Screen, then confirm (twin.app.screening): the fast engine decides every start, MuJoCo every start near a class
+change and an audit sample. On synthetic maps (no physics) the band follows a boundary MuJoCo moves, an island
+only the audit can see is caught by it, and the result is MuJoCo's on every start MuJoCo ran; on the twin, a
+screened sweep's records are brute force's wherever MuJoCo decided."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import pytest
+
+from twin.app.screening import Screening
+from twin.app.sweep import Grid, SweepSettings, run_sweep, verdict_class
+
+
+def _job(table: np.ndarray, calls: list[list[int]]):
+    def run(requests: list[tuple[int, int]], within: Any) -> tuple[list[dict[str, Any] | None], bool]:
+        calls.append([k for _, k in requests])
+        return [{"c": str(table[m].flat[k])} for m, k in requests], True
+
+    return run
+
+
+def _screen(fast: np.ndarray, mujoco: np.ndarray, **kw: Any) -> tuple[Screening, list[list[int]]]:
+    calls: list[list[int]] = []
+    maps, nx, nt = fast.shape
+    s = Screening(nx, nt, maps, _job(fast, []), _job(mujoco, calls), classify=lambda r: r["c"], **kw)
+    s.run()
+    return s, calls
+
+
+def _half_plane(nx: int, nt: int, cut: float) -> np.ndarray:
+    i, j = np.meshgrid(np.arange(nx), np.arange(nt), indexing="ij")
+    return np.where(i + 0.5 * j < cut, "held", "lost")
+
+
+@pytest.mark.quick
+def test_the_band_follows_a_boundary_that_mujoco_moves() -> None:
+    """MuJoCo's boundary sits 4 grid steps from the fast engine's: the band is taken again after each wave
+    until every start within one step of MuJoCo's boundary was run on MuJoCo, and the map is MuJoCo's."""
+    fast = _half_plane(30, 20, 10.0)[None]
+    mujoco = _half_plane(30, 20, 14.0)[None]
+    s, _ = _screen(fast, mujoco, audit=0)
+    final = np.array([s.classify(s.record(0, k)) for k in range(600)]).reshape(30, 20)
+    assert (final == mujoco[0]).all()
+    decided = np.zeros(600, dtype=bool)
+    decided[list(s.mujoco[0])] = True
+    assert decided[s.near_change(final.astype(object)).ravel()].all()  # every start near a change
+    assert s.stats.waves >= 4 and len(s.stats.changed) > 0
+    assert all(s.record(0, k)["engine"] == ("mujoco" if decided[k] else "fast") for k in range(600))
+    assert decided.sum() < 0.5 * 600  # and not the whole map
+
+
+@pytest.mark.quick
+def test_an_island_far_from_every_boundary_is_what_the_audit_is_for() -> None:
+    fast = _half_plane(20, 20, 6.0)[None]
+    mujoco = fast.copy()
+    mujoco[0, 15, 15] = "kept"  # an island inside the lost region: no class change near it on the fast map
+    s, _ = _screen(fast, mujoco, audit=0)
+    assert not s.stats.audit_mismatches and s.classify(s.record(0, 15 * 20 + 15)) == "lost"  # missed
+    s, _ = _screen(fast, mujoco, audit=400)  # every start the fast engine decided alone
+    assert s.stats.audit_mismatches == [{"map": 0, "i": 15, "j": 15, "fast": "lost", "mujoco": "kept"}]
+
+
+@pytest.mark.quick
+def test_maps_are_screened_together_and_the_audit_is_seeded() -> None:
+    fast = np.stack([_half_plane(12, 12, c) for c in (4.0, 8.0, 30.0)])  # the last: one class, no band
+    s1, calls1 = _screen(fast, fast, audit=5, seed=3)
+    s2, calls2 = _screen(fast, fast, audit=5, seed=3)
+    assert calls1 == calls2 and s1.summary() == s2.summary()
+    assert len(s1.mujoco[2]) == 5  # the map without a class change: its audit only
+    assert s1.summary()["audit"] == {"checked": 15, "mismatches": []}
+    with pytest.raises(ValueError, match="band"):
+        Screening(3, 3, 1, _job(fast, []), _job(fast, []), band=0)
+
+
+@pytest.mark.quick
+def test_a_screened_sweep_is_brute_force_on_every_start_mujoco_ran() -> None:
+    settings = SweepSettings(
+        "appendix-sf", x0=Grid(-0.3, 0.3, 4), theta0=Grid(-0.7, 0.0, 4), duration_s=2.0, engine="screen",
+        screen_audit=2,
+    )  # fmt: skip
+    screened = run_sweep(settings, nthread=2)
+    brute = run_sweep(SweepSettings(**{**settings.__dict__, "engine": "mujoco"}), nthread=2)
+    engines = [p["engine"] for p in screened.points]
+    assert {"fast", "mujoco"} >= set(engines) and "mujoco" in engines
+    for p, q in zip(screened.points, brute.points, strict=True):
+        if p["engine"] == "mujoco":
+            assert p == q
+        else:
+            assert verdict_class(p) == verdict_class(q)  # this small map: the fast engine agrees too
+    assert screened.screening is not None and screened.screening["fast_runs"] == 16
+    fast = run_sweep(SweepSettings(**{**settings.__dict__, "engine": "fast"}), nthread=2)
+    assert {p["engine"] for p in fast.points} == {"fast"} and fast.screening is None
