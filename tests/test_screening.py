@@ -93,3 +93,22 @@ def test_a_screened_sweep_is_brute_force_on_every_start_mujoco_ran() -> None:
     assert screened.screening is not None and screened.screening["fast_runs"] == 16
     fast = run_sweep(SweepSettings(**{**settings.__dict__, "engine": "fast"}), nthread=2)
     assert {p["engine"] for p in fast.points} == {"fast"} and fast.screening is None
+
+
+@pytest.mark.quick
+def test_a_screened_robust_map_is_brute_force_on_every_run_mujoco_made() -> None:
+    from twin.app.montecarlo import load_spread
+    from twin.app.robust import run_robust
+    from twin.parameters import Parameters
+
+    base = Parameters()
+    spread = load_spread("docs/examples/spread.toml", base)
+    settings = SweepSettings(
+        "appendix-sf", x0=Grid(-0.3, 0.3, 3), theta0=Grid(-0.7, 0.0, 4), duration_s=2.0, engine="screen",
+        screen_audit=1,
+    )  # fmt: skip
+    screened = run_robust(settings, base, spread, 2, nthread=2)
+    brute = run_robust(SweepSettings(**{**settings.__dict__, "engine": "mujoco"}), base, spread, 2, nthread=2)
+    assert screened.screening is not None and screened.screening["fast_runs"] == 24
+    assert screened.rig_classes == brute.rig_classes  # this small map: the fast engine agrees everywhere
+    assert screened.points == brute.points

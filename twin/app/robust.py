@@ -25,7 +25,7 @@ import numpy as np
 
 from twin.app.fanout import Progress, Served, run_starts
 from twin.app.options import MAX_RIGS
-from twin.app.sweep import ASSUMPTION, Refinement, SweepSettings, verdict_class
+from twin.app.sweep import ASSUMPTION, Job, Refinement, SweepSettings, verdict_class
 from twin.outputs import JobFiles
 from twin.parameters import ParameterError, Parameters
 
@@ -73,6 +73,7 @@ class RobustResult:
     wall_s: float = 0.0
     runs: int = 0
     refinement: dict[str, Any] | None = None
+    screening: dict[str, Any] | None = None  # --engine screen: what each engine ran, the audit
     nominal_held: int | None = None
     summary: dict[str, Any] = field(default_factory=dict)
 
@@ -88,6 +89,7 @@ class RobustResult:
             "runs": self.runs,
             "wall_s": round(self.wall_s, 1),
             **({"refinement": self.refinement} if self.refinement is not None else {}),
+            **({"screening": self.screening} if self.screening is not None else {}),
             "summary": self.summary,
             "rig_parameters": self.rig_values,
             "rig_classes": self.rig_classes,
@@ -124,30 +126,47 @@ def run_robust(
     grid = settings.starts()
     n = len(grid)
     seeds = [rig_point_seeds(settings.seed, m, n) for m in range(rigs)]
-    runs = settings.runs(base)
     start = time.perf_counter()
 
-    def run_job(
-        requests: list[tuple[int, int]], within: Progress | None
-    ) -> tuple[list[dict[str, Any] | None], bool]:
-        idx = np.array([k for _, k in requests], dtype=np.int64)
-        run_seeds = np.array([seeds[m][k] for m, k in requests], dtype=np.int64)
-        return run_starts(
-            runs,
-            grid[idx],
-            run_seeds,
-            params=[sets[m] for m, _ in requests],
-            workers=workers,
-            scheduler=scheduler,
-            nthread=nthread,
-            progress=within,
-            serve=serve,
-        )
+    def job(fast: bool | None) -> Job:
+        runs = settings.runs(base, fast=fast)
+        label = "fast" if fast else settings.engine_label() if fast is None else "mujoco"
 
-    if serve is not None and settings.refine:
-        raise ParameterError("--refine runs here or on workers, not as served sessions")
-    ref = Refinement(settings.x0.n, settings.theta0.n, settings.refine, rigs, run_job, progress)
-    if settings.refine:
+        def run_job(
+            requests: list[tuple[int, int]], within: Progress | None
+        ) -> tuple[list[dict[str, Any] | None], bool]:
+            idx = np.array([k for _, k in requests], dtype=np.int64)
+            run_seeds = np.array([seeds[m][k] for m, k in requests], dtype=np.int64)
+            records, complete = run_starts(
+                runs,
+                grid[idx],
+                run_seeds,
+                params=[sets[m] for m, _ in requests],
+                workers=workers,
+                scheduler=scheduler,
+                nthread=nthread,
+                progress=within,
+                serve=serve,
+            )
+            return [None if r is None else {**r, "engine": label} for r in records], complete
+
+        return run_job
+
+    if serve is not None and (settings.refine or settings.screened):
+        raise ParameterError("--refine and --engine screen run here or on workers, not as served sessions")
+    ref = Refinement(settings.x0.n, settings.theta0.n, settings.refine, rigs, job(None), progress)
+    screen = None
+    if settings.screened:
+        from twin.app.screening import Screening
+
+        screen = Screening(
+            settings.x0.n, settings.theta0.n, rigs, job(True), job(False), band=settings.band,
+            audit=settings.screen_audit, seed=settings.seed, progress=progress,
+        )  # fmt: skip
+        screen.run()
+        ref.known = [{k: r for k in range(n) if (r := screen.record(m, k)) is not None} for m in range(rigs)]
+        ref.ran, ref.complete = screen.stats.fast + sum(map(len, screen.mujoco)), screen.complete
+    elif settings.refine:
         ref.refine()
     else:
         ref.run([(m, k) for m in range(rigs) for k in range(n)])
@@ -194,6 +213,8 @@ def run_robust(
         wall_s=time.perf_counter() - start,
         runs=ref.ran,
     )
+    if screen is not None:
+        result.screening = screen.summary()
     if settings.refine:
         result.refinement = {
             "coarse_step": settings.refine,

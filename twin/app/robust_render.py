@@ -58,7 +58,14 @@ def render_robust(result: RobustResult, path: Path) -> None:
         f"{s.controller}: {result.rigs} rigs from {Path(result.source).name}\n"
         f"held by every rig {m['held_by_every_rig']} of {m['starts']} (white); lower bound ≥ {result.level:g} "
         f"at {result.confidence:g}: {m['robust']} (red)"
-        + (f"; nominal rig holds {m['nominal_held']}" if "nominal_held" in m else ""),
+        + (f"; nominal rig holds {m['nominal_held']}" if "nominal_held" in m else "")
+        + (
+            f"\nscreened: MuJoCo decided {100 * result.screening['mujoco_fraction']:.0f} % of the runs"
+            if result.screening is not None
+            else "\nFAST ENGINE ALONE (not confirmed)"
+            if s.engine == "fast" and s.plant == "twin"
+            else ""
+        ),
         fontsize=9,
     )
     ax.set_xlabel("initial ball position x0 (m)")

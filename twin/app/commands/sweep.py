@@ -304,9 +304,15 @@ def _robust_sweep(args: argparse.Namespace, settings: Any, params: Parameters, s
             f"{m['robust']} (the best bound {result.rigs} rigs give: {m['best_possible_lower_bound']:.3f}); the "
             f"nominal rig holds {m['nominal_held']}"
         )
+        if result.screening is not None:
+            print(screen_summary(result.screening))
         if args.out is not None:
             print(f"wrote {Path(args.out) / 'robust.json'} and {Path(args.out) / 'robust.png'}")
     if not result.complete:
         print("ballbeam sweep: interrupted: the starts done so far are kept", file=sys.stderr)
         return 130
+    for screened in (nominal.screening, result.screening):
+        if screened is not None and (wrong := screened["audit"]["mismatches"]):
+            print(screen_audit_failure("sweep", wrong), file=sys.stderr)
+            return 1
     return 0
