@@ -112,3 +112,57 @@ def test_a_screened_robust_map_is_brute_force_on_every_run_mujoco_made() -> None
     assert screened.screening is not None and screened.screening["fast_runs"] == 24
     assert screened.rig_classes == brute.rig_classes  # this small map: the fast engine agrees everywhere
     assert screened.points == brute.points
+
+
+@pytest.mark.quick
+def test_a_run_is_confirmed_when_not_held_or_held_near_a_band() -> None:
+    from twin.app.screening import HELD_MARGINS, near_class_change
+    from twin.verdict import Criteria
+
+    held = {"failed": False, "ball_lost": False, "held": True, "steady_x_m": 0.002, "steady_theta_rad": 0.0,
+            "limit_cycle_x_pp_m": 0.001, "limit_cycle_theta_pp_rad": 0.005}  # fmt: skip
+    assert not near_class_change(held)
+    assert near_class_change({**held, "held": False}) and near_class_change({**held, "ball_lost": True})
+    c = Criteria()
+    for metric, (band, margin) in HELD_MARGINS.items():
+        inside = getattr(c, band) - margin
+        assert near_class_change({**held, metric: -(inside + 1e-6)}), metric
+        assert not near_class_change({**held, metric: inside - 1e-6}), metric
+
+
+@pytest.mark.quick
+def test_a_screened_monte_carlo_is_brute_force_on_every_run_mujoco_made() -> None:
+    from twin.app.montecarlo import MonteCarloSettings, load_spread, run_montecarlo
+    from twin.parameters import Parameters
+
+    base = Parameters()
+    spread = load_spread("docs/examples/spread.toml", base)
+    settings = MonteCarloSettings("appendix-sf", 6, duration_s=2.0, engine="screen", audit=2)
+    screened = run_montecarlo(settings, base, spread)
+    brute = run_montecarlo(MonteCarloSettings(**{**settings.__dict__, "engine": "mujoco"}), base, spread)
+    assert screened.screening is not None and screened.screening["fast_runs"] == 6
+    mujoco = [p for p in screened.runs if p["engine"] == "mujoco"]
+    assert len(mujoco) == screened.screening["mujoco_runs"] >= 2
+    for p, q in zip(screened.runs, brute.runs, strict=True):
+        if p["engine"] == "mujoco":
+            assert p == q
+
+
+@pytest.mark.quick
+def test_a_screened_search_counts_only_the_violations_mujoco_confirms() -> None:
+    from twin.app.falsify import Axis, FalsifySettings, falsify
+    from twin.parameters import Parameters
+    from twin.requirements import load_spec
+
+    spec = load_spec("docs/examples/falsify.toml")
+    settings = FalsifySettings(
+        "appendix-sf", (Axis("x0_m", 0.10, 0.32), Axis("theta0_rad", -0.70, -0.30)), duration_s=2.0,
+        noise=False, budget=20, engine="screen",
+    )  # fmt: skip
+    result = falsify(settings, Parameters(), spec)
+    out = result.to_json()
+    assert out["found"] and out["counterexample"] is not None
+    first = result.runs[result.first_violation or 0]
+    assert first["engine"] == "mujoco" and first["fast_objective"] < 0 and first["objective"] < 0
+    assert all(r["engine"] == "mujoco" for r in result.runs if r["objective"] < 0)
+    assert out["decided_by"]["fast"] + out["decided_by"]["mujoco"] == out["runs_spent"]

@@ -80,6 +80,9 @@ class FalsifySettings:
     seed: int = 0  # the search's: its first batch, CMA-ES, the runs' noise seeds
     population: int = 0  # runs per CMA-ES generation (0: ``default_population``)
     keep_going: bool = False  # search the whole budget for the least robust point, past the first violation
+    # "mujoco" (MuJoCo runs the search), "screen" (the fast engine runs it; MuJoCo re-runs every run the fast
+    # engine found violating and each batch's least robust run, and only MuJoCo's violations count) or "fast".
+    engine: str = "mujoco"
 
 
 @dataclass
@@ -99,7 +102,10 @@ class FalsifyResult:
 
     @property
     def least_robust(self) -> dict[str, Any] | None:
-        return min(self.runs, key=lambda r: r["objective"]) if self.runs else None
+        """The least robust run; a screened search's among the runs MuJoCo made (each batch's least robust)."""
+        confirmed = [r for r in self.runs if r.get("engine") == "mujoco"]
+        pool = confirmed if self.settings.engine == "screen" and confirmed else self.runs
+        return min(pool, key=lambda r: r["objective"]) if pool else None
 
     def replay(self, run: dict[str, Any]) -> dict[str, Any]:
         """What ``ballbeam run --replay`` needs to repeat ``run`` bit for bit."""
@@ -123,11 +129,19 @@ class FalsifyResult:
             "complete": self.complete,
             "found": first is not None,
             "runs_spent": len(self.runs),
+            "decided_by": {e: sum(r.get("engine") == e for r in self.runs) for e in ("fast", "mujoco")},
             "runs_to_first_violation": None if first is None else first + 1,
             "counterexample": None if first is None or best is None else self.replay(best),
             "least_robust": None if best is None else self.replay(best),
             "trace": [
-                {k: r[k] for k in ("batch", "x0_m", "theta0_rad", "seed", "values", "objective", "worst")}
+                {
+                    **{
+                        k: r[k]
+                        for k in ("batch", "x0_m", "theta0_rad", "seed", "values", "objective", "worst")
+                    },
+                    "engine": r.get("engine"),
+                    **({"fast_objective": r["fast_objective"]} if "fast_objective" in r else {}),
+                }
                 for r in self.runs
             ],
             "wall_s": round(self.wall_s, 2),
@@ -186,7 +200,8 @@ class _Search:
     """The runs so far, shared by the search strategies."""
 
     space: _Space
-    runs_job: Runs
+    runs_job: Runs  # MuJoCo's (or the fast engine's with --engine fast)
+    fast_job: Runs | None  # with --engine screen: the fast engine's, confirmed by ``runs_job``
     rng: np.random.Generator
     workers: int
     scheduler: str | None
@@ -219,19 +234,9 @@ class _Search:
             params.append(p)
             seeds.append(seed)
             scenarios.append(scenario)
-        records, complete = (
-            run_starts(
-                self.runs_job,
-                np.array(starts, dtype=float).reshape(-1, 2),
-                np.array(seeds, dtype=np.int64),
-                params=params,
-                workers=self.workers,
-                scheduler=self.scheduler,
-                scenarios=scenarios if self.space.scenario else None,
-            )
-            if starts
-            else ([], True)
-        )
+        records, complete = self._run(self.fast_job or self.runs_job, starts, seeds, params, scenarios)
+        if self.fast_job is not None and complete:
+            records, complete = self._confirm(records, starts, seeds, params, scenarios)
         self.complete = self.complete and complete
         done = iter(records)
         objectives = []
@@ -259,6 +264,43 @@ class _Search:
         if self.progress is not None:
             self.progress(len(self.runs), self.space.s.budget)
         return objectives
+
+    def _run(
+        self, job: Runs, starts: list, seeds: list, params: list, scenarios: list
+    ) -> tuple[list[dict[str, Any] | None], bool]:
+        if not starts:
+            return [], True
+        records, complete = run_starts(
+            job,
+            np.array(starts, dtype=float).reshape(-1, 2),
+            np.array(seeds, dtype=np.int64),
+            params=params,
+            workers=self.workers,
+            scheduler=self.scheduler,
+            scenarios=scenarios if self.space.scenario else None,
+        )
+        label = "fast" if job.plant == "reference" else "mujoco"
+        return [None if r is None else {**r, "engine": label} for r in records], complete
+
+    def _confirm(
+        self, records: list[dict[str, Any] | None], starts: list, seeds: list, params: list, scenarios: list
+    ) -> tuple[list[dict[str, Any] | None], bool]:
+        """MuJoCo re-runs the fast engine's violations and the batch's least robust run; its records replace
+        theirs (each keeps the fast engine's objective as ``fast_objective``)."""
+        value = [math.inf if r is None else _objective(r)[0] for r in records]
+        picks = sorted(
+            {i for i, v in enumerate(value) if v < 0} | ({int(np.argmin(value))} if value else set())
+        )
+        picks = [i for i in picks if records[i] is not None]
+        again, complete = self._run(
+            self.runs_job, [starts[i] for i in picks], [seeds[i] for i in picks], [params[i] for i in picks],
+            [scenarios[i] for i in picks],
+        )  # fmt: skip
+        out = list(records)
+        for i, r in zip(picks, again, strict=True):
+            if r is not None:
+                out[i] = {**r, "fast_objective": value[i]}
+        return out, complete
 
 
 def _first_batch(dims: int, rng: np.random.Generator) -> np.ndarray:
@@ -320,11 +362,17 @@ def _new_search(
     scheduler: str | None,
     progress: Progress | None,
 ) -> _Search:
-    runs = Runs(
-        settings.controller, base, settings.duration_s, settings.noise, "twin", False, spec.requirements
-    )
+    def job(plant: str) -> Runs:
+        return Runs(
+            settings.controller, base, settings.duration_s, settings.noise, plant, False, spec.requirements
+        )
+
+    if settings.engine not in ("screen", "fast", "mujoco"):
+        raise ParameterError(f"--engine {settings.engine!r}: one of screen, fast, mujoco")
+    runs = job("reference" if settings.engine == "fast" else "twin")
+    fast = job("reference") if settings.engine == "screen" else None
     rng = np.random.default_rng(np.random.SeedSequence([settings.seed, 0x46414C]))  # "FAL"
-    return _Search(space, runs, rng, workers, scheduler, progress)
+    return _Search(space, runs, fast, rng, workers, scheduler, progress)
 
 
 def _result(

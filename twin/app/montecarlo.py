@@ -34,12 +34,15 @@ import time
 import tomllib
 from dataclasses import asdict, dataclass, field, fields, is_dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from twin.app.fanout import Progress, Runs, Served, run_starts
 from twin.app.sweep import point_seeds
+
+if TYPE_CHECKING:
+    from twin.app.screening import ListJob
 from twin.outputs import JobFiles
 from twin.parameters import (
     READING,
@@ -315,6 +318,11 @@ class MonteCarloSettings:
     plant: str = "twin"
     ideal_sensors: bool = False
     seed: int = 0
+    # "mujoco" (MuJoCo alone), "screen" (the fast engine runs every rig, MuJoCo every rig it did not hold or
+    # held near a band, and an audit sample: twin.app.screening.confirm_list) or "fast" (the fast engine
+    # alone, and the audit).
+    engine: str = "mujoco"
+    audit: int = 32
 
 
 @dataclass
@@ -326,11 +334,13 @@ class MonteCarloResult:
     wall_s: float = 0.0
     summary: dict[str, Any] = field(default_factory=dict)
     served: dict[str, Any] | None = None  # a served job: where, and the clients (fanout.Served.to_json)
+    screening: dict[str, Any] | None = None  # --engine screen or fast: what each engine ran, the audit
 
     def to_json(self) -> dict[str, Any]:
         return {
             "settings": asdict(self.settings),
             **({"served": self.served} if self.served is not None else {}),
+            **({"screening": self.screening} if self.screening is not None else {}),
             "spread": {
                 "source": self.spread.source,
                 "kind": self.spread.kind,
@@ -398,13 +408,39 @@ def run_montecarlo(
     sets, values = sample_parameters(base, spread, settings.n, settings.seed)
     seeds = point_seeds(settings.seed, settings.n)
     starts = np.tile([settings.x0_m, settings.theta0_rad], (settings.n, 1))
-    runs = Runs(
-        settings.controller, base, settings.duration_s, settings.noise, settings.plant, settings.ideal_sensors
-    )
     start = time.perf_counter()
-    records, complete = run_starts(
-        runs, starts, seeds, params=sets, workers=workers, scheduler=scheduler, progress=progress, serve=serve
-    )
+
+    def job(plant: str) -> ListJob:
+        runs = Runs(
+            settings.controller, base, settings.duration_s, settings.noise, plant, settings.ideal_sensors
+        )
+
+        def run(idx: list[int]) -> tuple[list[dict[str, Any] | None], bool]:
+            return run_starts(
+                runs, starts[idx], seeds[idx], params=[sets[i] for i in idx], workers=workers,
+                scheduler=scheduler, progress=progress, serve=serve,
+            )  # fmt: skip
+
+        return run
+
+    every = list(range(settings.n))
+    screening = None
+    if settings.engine == "mujoco" or settings.plant != "twin":
+        records, complete = job(settings.plant)(every)
+        label = settings.plant if settings.plant != "twin" else "mujoco"
+        records = [None if r is None else {**r, "engine": label} for r in records]
+    else:
+        from twin.app.screening import confirm_list, near_class_change
+
+        fast, complete = job("reference")(every)
+        confirm = [i for i, r in enumerate(fast) if r and near_class_change(r)]
+        records, screening, confirmed = confirm_list(
+            fast, job("twin"), confirm=confirm if settings.engine == "screen" else [], audit=settings.audit,
+            seed=settings.seed,
+        )  # fmt: skip
+        complete = complete and confirmed
+        if settings.engine == "fast":
+            screening["confirmed"] = "none (the fast engine alone)"
     out: list[dict[str, Any]] = []
     for record, sample in zip(records, values, strict=True):
         if record is None:
@@ -414,4 +450,5 @@ def run_montecarlo(
     result = MonteCarloResult(settings, spread, out, complete, wall_s=time.perf_counter() - start)
     result.summary = summarize(out)
     result.served = serve.to_json() if serve is not None else None
+    result.screening = screening
     return result

@@ -181,6 +181,7 @@ class Screening:
         decided = sum(len(d) for d in self.mujoco)
         return {
             "band_steps": self.band,
+            "confirmed": f"every start within {self.band} grid step(s) of a class change",
             "fast_runs": s.fast,
             "mujoco_runs": decided,
             "mujoco_band_runs": s.confirmed,
@@ -191,3 +192,82 @@ class Screening:
             "audit": {"checked": s.audited, "mismatches": s.audit_mismatches},
             "assumption": ASSUMPTION,
         }
+
+
+# How far the fast engine's held metrics may sit from MuJoCo's: about twice the largest difference measured over
+# 1000 rigs of docs/examples/spread.toml (appendix-sf from (−0.2 m, 0.3 rad), 10 s, noise on; docs/design.md):
+# steady x 0.75 mm, steady θ 0.68 mrad, limit cycle x 3.2 mm and θ 11 mrad peak to peak.
+HELD_MARGINS = {
+    "steady_x_m": ("offset_band_m", 0.0015),
+    "steady_theta_rad": ("offset_band_rad", 0.0015),
+    "limit_cycle_x_pp_m": ("limit_cycle_band_m", 0.0065),
+    "limit_cycle_theta_pp_rad": ("limit_cycle_band_rad", 0.022),
+}
+
+
+def near_class_change(record: dict[str, Any], criteria: Any = None) -> bool:
+    """Whether MuJoCo must decide a run of a list: the fast engine did not hold it, or one of its held metrics
+    lies within ``HELD_MARGINS`` of its band (``twin.verdict.Criteria``)."""
+    from twin.verdict import Criteria
+
+    c = criteria or Criteria()
+    if verdict_class(record) != "held":
+        return True
+    for metric, (band, margin) in HELD_MARGINS.items():
+        value = record.get(metric)
+        if value is not None and abs(value) > getattr(c, band) - margin:
+            return True
+    return False
+
+
+# A job over a list of runs: run these indices → (records, complete).
+ListJob = Callable[[list[int]], tuple[list[dict[str, Any] | None], bool]]
+
+
+def confirm_list(
+    fast: list[dict[str, Any] | None],
+    mujoco_job: ListJob,
+    *,
+    confirm: list[int],
+    audit: int,
+    seed: int,
+    classify: Callable[[dict[str, Any]], Hashable] = verdict_class,
+) -> tuple[list[dict[str, Any] | None], dict[str, Any], bool]:
+    """Runs without a grid (a Monte Carlo): the fast engine's records, MuJoCo's for the runs ``confirm`` names
+    (``near_class_change``) and for ``audit`` others drawn at random (seeded). Returns the
+    records as decided (each naming its engine), the summary (as ``Screening.summary``'s) and whether every
+    run finished."""
+    rest = [i for i, r in enumerate(fast) if r is not None and i not in set(confirm)]
+    rng = np.random.default_rng(np.random.SeedSequence([seed, 0x53435245]))  # "SCRE"
+    picks = (
+        sorted(rng.choice(rest, size=min(audit, len(rest)), replace=False).tolist()) if rest and audit else []
+    )
+    todo = sorted(set(confirm) | set(picks))
+    records, complete = mujoco_job(todo) if todo else ([], True)
+    by_run = dict(zip(todo, records, strict=True))
+    out: list[dict[str, Any] | None] = [None if r is None else {**r, "engine": "fast"} for r in fast]
+    changed: list[dict[str, Any]] = []
+    mismatches: list[dict[str, Any]] = []
+    for i, r in by_run.items():
+        if r is None:
+            continue
+        f = fast[i]
+        if f is not None and classify(f) != classify(r):
+            (mismatches if i in picks else changed).append(
+                {"run": i, "fast": classify(f), "mujoco": classify(r)}
+            )
+        out[i] = {**r, "engine": "mujoco"}  # a run MuJoCo made is MuJoCo's
+    decided = sum(1 for r in out if r is not None and r["engine"] == "mujoco")
+    summary = {
+        "fast_runs": sum(r is not None for r in fast),
+        "mujoco_runs": decided,
+        "mujoco_fraction": round(decided / len(fast), 4) if fast else 0.0,
+        "decided_by_fast": len(fast) - decided,
+        "confirmed": "every run the fast engine did not hold or held within HELD_MARGINS of a band",
+        "margins": {metric: margin for metric, (_, margin) in HELD_MARGINS.items()},
+        "band_disagreements": changed,
+        "audit": {"checked": len([i for i in picks if by_run.get(i) is not None]), "mismatches": mismatches},
+        "assumption": "a run the fast engine holds with every held metric further than its margin from its band "
+        "is held on MuJoCo too (the audit tests it)",
+    }
+    return out, summary, complete

@@ -95,17 +95,23 @@ def add_plant_options(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def add_engine_options(parser: argparse.ArgumentParser, default: str) -> None:
-    """``--engine screen|fast|mujoco`` and ``--band N`` (twin.app.screening)."""
+def add_engine_options(
+    parser: argparse.ArgumentParser, default: str, *, near: str = "near a class change", grid: bool = True
+) -> None:
+    """``--engine screen|fast|mujoco`` and, for a grid, ``--band N`` (twin.app.screening); ``near``: what MuJoCo
+    re-runs when it confirms."""
     parser.add_argument(
         "--engine",
         choices=("screen", "fast", "mujoco"),
         default=None,
-        help="who decides each start: 'screen' (the fast engine, the reference plant compiled under the twin's "
-        "sensor chain, decides every start; MuJoCo re-runs every start near a class change and an audit "
-        "sample, and any disagreement in the audit fails the command), 'fast' (the fast engine alone, labelled "
-        f"so) or 'mujoco' (MuJoCo alone); default {default} (mujoco with --refine, --serve or --plant reference)",
+        help="who decides each run: 'screen' (the fast engine, the reference plant compiled under the twin's "
+        f"sensor chain, runs everything; MuJoCo re-runs every run {near} and an audit sample, and any "
+        "disagreement in the audit fails the command), 'fast' (the fast engine alone, labelled so) or "
+        f"'mujoco' (MuJoCo alone); default {default}"
+        + (" (mujoco with --refine, --serve or --plant reference)" if default != "mujoco" else ""),
     )
+    if not grid:
+        return
     parser.add_argument(
         "--band",
         type=count(1, 64),
@@ -121,11 +127,15 @@ def resolve_engine(args: argparse.Namespace, default: str) -> str:
     if engine is None:
         plain = getattr(args, "refine", 0) or getattr(args, "serve", None) is not None or args.plant != "twin"
         return "mujoco" if plain else default
-    if engine != "mujoco" and args.plant != "twin":
-        from twin.parameters import ParameterError
+    from twin.parameters import ParameterError
 
+    if engine != "mujoco" and args.plant != "twin":
         raise ParameterError(
             f"--engine {engine}: the fast engine stands in for the MuJoCo twin; not with --plant reference"
+        )
+    if engine != "mujoco" and getattr(args, "serve", None) is not None:
+        raise ParameterError(
+            f"--engine {engine}: a served job's runs are sessions with a client; not with --serve"
         )
     return str(engine)
 
@@ -134,20 +144,24 @@ def screen_summary(screen: dict[str, Any]) -> str:
     """A screened job's line: what each engine decided, the band's disagreements and the audit."""
     audit = screen["audit"]
     return (
-        f"screened: the fast engine ran {screen['fast_runs']} starts, MuJoCo decided {screen['mujoco_runs']} "
-        f"({100 * screen['mujoco_fraction']:.1f} %: within {screen['band_steps']} grid step(s) of a class "
-        f"change, {len(screen['band_disagreements'])} of them classed otherwise by the fast engine; audit "
-        f"{audit['checked']} starts, {len(audit['mismatches'])} differ)"
+        f"the fast engine ran {screen['fast_runs']}, MuJoCo decided {screen['mujoco_runs']} "
+        f"({100 * screen['mujoco_fraction']:.1f} %; confirmed: {screen['confirmed']}, "
+        f"{len(screen['band_disagreements'])} of them classed otherwise by the fast engine; audit "
+        f"{audit['checked']}, {len(audit['mismatches'])} differ)"
     )
 
 
 def screen_audit_failure(command: str, wrong: list[dict[str, Any]]) -> str:
     first = wrong[0]
+    where = (
+        f"map {first['map']}, grid start ({first['i']}, {first['j']})"
+        if "map" in first
+        else f"run {first['run']}"
+    )
     return (
-        f"ballbeam {command}: the screening's audit found {len(wrong)} start(s) decided by the fast engine "
-        f"alone that MuJoCo classes otherwise (the first: map {first['map']}, grid start ({first['i']}, "
-        f"{first['j']}): fast {first['fast']}, MuJoCo {first['mujoco']}); run with a wider --band or "
-        "--engine mujoco"
+        f"ballbeam {command}: the screening's audit found {len(wrong)} run(s) decided by the fast engine "
+        f"alone that MuJoCo classes otherwise (the first: {where}: fast {first['fast']}, MuJoCo "
+        f"{first['mujoco']}); run with a wider --band or --engine mujoco"
     )
 
 

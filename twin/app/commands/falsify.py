@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING
 from twin.app.commands.common import (
     JOB_RUN_S,
     add_controller_timeout,
+    add_engine_options,
     add_job_outputs,
     add_params_options,
     add_requirements_job,
@@ -18,6 +19,7 @@ from twin.app.commands.common import (
     check_start_box,
     params_and_spread,
     progress_bar,
+    resolve_engine,
     write_out,
 )
 from twin.app.options import SpanType, count, seed
@@ -102,6 +104,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--seed", type=seed(), default=0, help="the search's seed (its points and noise seeds)"
     )
+    add_engine_options(
+        parser, "screen", near="the fast engine found violating and each batch's least robust run", grid=False
+    )
     add_params_options(parser)
     add_job_outputs(parser, "DIR/falsify.json and DIR/falsify.png")
     add_controller_timeout(parser)
@@ -119,6 +124,7 @@ def run(args: argparse.Namespace) -> int:
     from twin.requirements import load_spec
 
     args.serve = None  # a search runs here (check_job's served case does not apply)
+    args.plant = "twin"
     base, spread = params_and_spread(args)
     spec = load_spec(args.spec)
     x, th = args.x0, args.theta0
@@ -148,6 +154,7 @@ def run(args: argparse.Namespace) -> int:
         seed=args.seed,
         population=args.population or 0,
         keep_going=args.keep_going,
+        engine=resolve_engine(args, "screen"),
     )
     result = falsify(
         settings,
@@ -219,6 +226,16 @@ def _print(out: dict, args: argparse.Namespace) -> None:
         print(
             f"no violation in {out['runs_spent']} runs (budget {args.budget}); the least robust: {where}; "
             f"robustness {margins}"
+        )
+    decided = out["decided_by"]
+    if decided["fast"]:
+        print(
+            f"engines: the fast engine decided {decided['fast']} runs, MuJoCo {decided['mujoco']}"
+            + (
+                " (every violation and each batch's least robust run)"
+                if out["settings"]["engine"] == "screen"
+                else ""
+            )
         )
     if args.out is not None:
         path = Path(args.out) / "falsify.json"

@@ -13,6 +13,7 @@ from twin.app.commands.common import (
     SERVED_CONTROLLER,
     WORKERS,
     add_controller_timeout,
+    add_engine_options,
     add_params_options,
     add_plant_options,
     add_served_options,
@@ -25,6 +26,9 @@ from twin.app.commands.common import (
     job_name,
     params_and_spread,
     progress_bar,
+    resolve_engine,
+    screen_audit_failure,
+    screen_summary,
     served_stopped,
     serving,
     write_out,
@@ -58,6 +62,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=seed(), default=0, help="seed of the samples and of every run's noise")
     parser.add_argument("--no-noise", action="store_true", help="switch the ball sensor's contact noise off")
     add_plant_options(parser)
+    add_engine_options(
+        parser, "mujoco", near="the fast engine did not hold or held within a margin of a band", grid=False
+    )
+    parser.add_argument(
+        "--audit",
+        type=count(0, 100_000),
+        default=32,
+        metavar="N",
+        help="with --engine screen or fast: N runs the fast engine decided alone run on MuJoCo too (default "
+        "32); any that differs fails the command",
+    )
     add_params_options(parser)
     parser.add_argument(
         "--workers", type=WORKERS, default=1, help="local processes (default 1: this process)"
@@ -99,6 +114,8 @@ def run(args: argparse.Namespace) -> int:
         plant=args.plant,
         ideal_sensors=bool(args.ideal_sensors or args.plant == "reference"),
         seed=args.seed,
+        engine=resolve_engine(args, "mujoco"),
+        audit=args.audit,
     )
     with serving(args, base) as served:
         result = run_montecarlo(
@@ -139,6 +156,8 @@ def run(args: argparse.Namespace) -> int:
                 break
             changed = ", ".join(f"{k} = {v:.6g}" for k, v in run["parameters"].items())
             print(f"  worst: {run['reason']} (seed {run['seed']}): {changed}")
+        if result.screening is not None:
+            print(screen_summary(result.screening))
         if args.out is not None:
             print(f"wrote {Path(args.out) / 'montecarlo.json'} and {Path(args.out) / 'distributions.png'}")
     stopped = served_stopped(served, "montecarlo", sum(map(bool, result.runs)), len(result.runs))
@@ -147,4 +166,7 @@ def run(args: argparse.Namespace) -> int:
     if not result.complete:
         print("ballbeam montecarlo: interrupted: the runs done so far are kept", file=sys.stderr)
         return 130
+    if result.screening is not None and (wrong := result.screening["audit"]["mismatches"]):
+        print(screen_audit_failure("montecarlo", wrong), file=sys.stderr)
+        return 1
     return controller_failures(result.runs, "montecarlo")
