@@ -170,35 +170,7 @@ def run_robust(
         ref.refine()
     else:
         ref.run([(m, k) for m in range(rigs) for k in range(n)])
-    points: list[dict[str, Any]] = []
-    complete = ref.complete
-    letters = [["?"] * n for _ in range(rigs)]
-    for k in range(n):
-        classes = []
-        for m in range(rigs):
-            if k in ref.known[m]:
-                classes.append(verdict_class(ref.known[m][k]))
-            elif k in ref.claims[m]:
-                classes.append(ref.claims[m][k][0])
-            else:
-                continue
-            letters[m][k] = CLASS_LETTERS[classes[-1]]
-        if len(classes) < rigs:
-            complete = False
-        held = classes.count("held")
-        bound = lower_bound(held, len(classes), confidence) if classes else 0.0
-        points.append(
-            {
-                "x0_m": float(grid[k, 0]),
-                "theta0_rad": float(grid[k, 1]),
-                "rigs": len(classes),
-                "held": held,
-                "lost": classes.count("lost"),
-                "rate": round(held / len(classes), 6) if classes else None,
-                "lower_bound": round(bound, 6),
-                "robust": bool(classes) and bound >= level,
-            }
-        )
+    points, letters, complete = _per_start(ref, grid, confidence, level)
     names = spread.names
     result = RobustResult(
         settings=settings,
@@ -235,6 +207,44 @@ def run_robust(
         **({"nominal_held": nominal_held} if nominal_held is not None else {}),
     }
     return result
+
+
+def _per_start(
+    ref: Refinement, grid: np.ndarray, confidence: float, level: float
+) -> tuple[list[dict[str, Any]], list[list[str]], bool]:
+    """Each start's held count over the rigs, its lower bound and robustness; each rig's class letters; and
+    whether every rig's every start is known."""
+    rigs, n = ref.maps, len(grid)
+    points: list[dict[str, Any]] = []
+    complete = ref.complete
+    letters = [["?"] * n for _ in range(rigs)]
+    for k in range(n):
+        classes = []
+        for m in range(rigs):
+            if k in ref.known[m]:
+                classes.append(verdict_class(ref.known[m][k]))
+            elif k in ref.claims[m]:
+                classes.append(ref.claims[m][k][0])
+            else:
+                continue
+            letters[m][k] = CLASS_LETTERS[classes[-1]]
+        if len(classes) < rigs:
+            complete = False
+        held = classes.count("held")
+        bound = lower_bound(held, len(classes), confidence) if classes else 0.0
+        points.append(
+            {
+                "x0_m": float(grid[k, 0]),
+                "theta0_rad": float(grid[k, 1]),
+                "rigs": len(classes),
+                "held": held,
+                "lost": classes.count("lost"),
+                "rate": round(held / len(classes), 6) if classes else None,
+                "lower_bound": round(bound, 6),
+                "robust": bool(classes) and bound >= level,
+            }
+        )
+    return points, letters, complete
 
 
 def refinement_costs(rig_classes: list[str], nx: int, nt: int, step: int) -> dict[str, Any]:
