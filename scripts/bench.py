@@ -914,13 +914,28 @@ def bench_screen(repeats: int = 3) -> dict[str, float]:
     def mujoco_run() -> None:
         rollout.rollout(model, data, state0, controls, nstep=m)
 
+    # The fast engine with everything: appendix-sf closed over the full sensor chain (noise on), DAQ schedule
+    # and amplifier, 10 s runs from starts it holds (none leaves early), on one core.
+    runs, duration_s = 512, 10.0
+    chain_x0, chain_th0 = rng.uniform(-0.1, 0.1, runs), rng.uniform(-0.2, 0.2, runs)
+    chain_steps = runs * round(duration_s / Parameters().physics.timestep_s)
+
+    def chain_run() -> None:
+        results = run_batch(
+            registry, "appendix-sf", x0_m=chain_x0, theta0_rad=chain_th0, seeds=np.arange(runs),
+            duration_s=duration_s, plant="reference", nthread=1,
+        )  # fmt: skip
+        assert not any(r.verdict.ball_lost for r in results)
+
     kernel_run()  # compiled before timing
-    best = {"c": math.inf, "kernel": math.inf, "mujoco": math.inf}
+    best = {"c": math.inf, "kernel": math.inf, "mujoco": math.inf, "chain": math.inf}
+    load = os.getloadavg()[0]
     for _ in range(repeats):
         for name, run, steps in (
             ("c", c_run, n * m),
             ("kernel", kernel_run, n * m),
             ("mujoco", mujoco_run, sims * m),
+            ("chain", chain_run, chain_steps),
         ):
             t = time.perf_counter()
             run()
@@ -933,6 +948,10 @@ def bench_screen(repeats: int = 3) -> dict[str, float]:
         "mujoco_ns_per_state_step": 1e9 * best["mujoco"],
         "kernel_over_c_rk4": best["kernel"] / best["c"],
         "mujoco_over_kernel": best["mujoco"] / best["kernel"],
+        "fast_engine_ns_per_state_step": 1e9 * best["chain"],
+        "fast_engine_over_c_rk4": best["chain"] / best["c"],
+        "mujoco_over_fast_engine": best["mujoco"] / best["chain"],
+        "load_1min": load,
         "kernel_vs_c_max_state_diff": float(np.max(np.abs(k_state - c_state))),
         "kernel_vs_c_lost_differ": float(np.sum(k_lost != c_lost)),
     }
@@ -984,6 +1003,8 @@ def ratios(results: dict[str, Any]) -> dict[str, float]:
     if screen is not None:
         out["l_kernel_over_c_rk4"] = screen["kernel_over_c_rk4"]
         out["l_mujoco_over_kernel"] = screen["mujoco_over_kernel"]
+        out["l_fast_engine_over_c_rk4"] = screen["fast_engine_over_c_rk4"]
+        out["l_mujoco_over_fast_engine"] = screen["mujoco_over_fast_engine"]
     search = results.get("falsify")
     if search is not None:
         for name in ("corner", "spread_tail"):

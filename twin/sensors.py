@@ -33,7 +33,7 @@ import functools
 import math
 import operator
 from collections.abc import Sequence
-from typing import overload
+from typing import Any, overload
 
 import numpy as np
 
@@ -277,37 +277,52 @@ def angle_block_means_v(
 def _block_means_crossing(
     s: list[float], u: np.ndarray, c: np.ndarray, levels: np.ndarray, zero: int, n: int
 ) -> np.ndarray:
-    """``_block_mean``'s count-crossing sum for each row of ``u`` (c = floor(u)), over the batch: the same
-    terms added in the same order (interval by interval, each interval's level and then its crossings one
-    by one), so each row's sum has the bits of ``_block_mean`` on that row alone."""
+    """``_block_mean``'s count-crossing sum for each row of ``u`` (c = floor(u)), compiled (numba, on first
+    use): the same terms added in the same order (interval by interval, each interval's level and then its
+    crossings one by one), so each row's sum has the bits of ``_block_mean`` on that row alone."""
+    return _compiled_crossing()(
+        np.asarray(s, dtype=float), np.ascontiguousarray(u), np.ascontiguousarray(c), levels, zero, n
+    )
+
+
+def _crossing_sums(
+    s: np.ndarray, u: np.ndarray, c: np.ndarray, levels: np.ndarray, zero: int, n: int
+) -> np.ndarray:
     modulus = len(levels)
-    total = np.zeros(len(u))
-    for j in range(len(s) - 1):
-        first = math.floor(s[j]) + 1
-        last = min(math.floor(s[j + 1]), n)
-        if last < first:
-            continue
-        c0, c1 = c[:, j], c[:, j + 1]
-        total = total + (last - first + 1) * levels[(zero + c0.astype(np.int64)) % modulus]
-        rows = np.flatnonzero(c1 != c0)
-        if not rows.size:
-            continue
-        # u is linear on the interval; it reaches boundary m at s* = s_j + (m − u_j)/(u_j+1 − u_j)·(s_j+1 − s_j).
-        uj, c0r, c1r = u[rows, j], c0[rows], c1[rows]
-        ds_du = (s[j + 1] - s[j]) / (u[rows, j + 1] - uj)
-        rising = c1r > c0r
-        for i in range(int(np.abs(c1r - c0r).max())):
-            live = np.abs(c1r - c0r) > i
-            # rising: the count is ≥ m at samples s ≥ s*; falling: the count is < m at samples s > s*
-            m = np.where(rising, c0r + 1 + i, c0r - i)
-            at = s[j] + (m - uj) * ds_du
-            start = np.maximum(first, np.where(rising, np.ceil(at), np.floor(at) + 1))
-            upper = levels[(zero + m.astype(np.int64)) % modulus]
-            lower = levels[(zero + m.astype(np.int64) - 1) % modulus]
-            step = np.where(rising, upper - lower, lower - upper)
-            add = live & (start <= last)
-            total[rows] = np.where(add, total[rows] + (last - start + 1) * step, total[rows])
-    return total / n
+    out = np.empty(u.shape[0])
+    for r in range(u.shape[0]):
+        total = 0.0
+        for j in range(len(s) - 1):
+            first = math.floor(s[j]) + 1
+            last = min(math.floor(s[j + 1]), n)
+            if last < first:
+                continue
+            c0, c1 = c[r, j], c[r, j + 1]
+            total = total + (last - first + 1) * levels[(zero + int(c0)) % modulus]
+            if c1 == c0:
+                continue
+            # u is linear on the interval; it reaches boundary m at s* = s_j + (m − u_j)/(u_j+1 − u_j)·(s_j+1 − s_j).
+            uj = u[r, j]
+            ds_du = (s[j + 1] - s[j]) / (u[r, j + 1] - uj)
+            rising = c1 > c0
+            for i in range(int(abs(c1 - c0))):
+                # rising: the count is ≥ m at samples s ≥ s*; falling: the count is < m at samples s > s*
+                m = c0 + 1 + i if rising else c0 - i
+                at = s[j] + (m - uj) * ds_du
+                start = max(first, math.ceil(at) if rising else math.floor(at) + 1)
+                upper = levels[(zero + int(m)) % modulus]
+                lower = levels[(zero + int(m) - 1) % modulus]
+                if start <= last:
+                    total = total + (last - start + 1) * (upper - lower if rising else lower - upper)
+        out[r] = total / n
+    return out
+
+
+@functools.cache
+def _compiled_crossing() -> Any:
+    import numba
+
+    return numba.njit(cache=True)(_crossing_sums)
 
 
 @functools.lru_cache(maxsize=64)

@@ -271,3 +271,34 @@ def confirm_list(
         "is held on MuJoCo too (the audit tests it)",
     }
     return out, summary, complete
+
+
+def render_agreement(data: dict[str, Any]) -> str:
+    """The README's agreement table from ``scripts/screen_agreement.py``'s JSON (markdown)."""
+    lines = [
+        "| controller | start | noise | max Δx (mm) | RMS Δx (mm) | max Δθ (mrad) | RMS Δθ (mrad) |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for r in data["trajectories"]:
+        lines.append(
+            f"| {r['controller']} | {r['start']} | {'on' if r['noise'] else 'off'} | {r['max_dx_mm']:.2f} | "
+            f"{r['rms_dx_mm']:.2f} | {r['max_dtheta_mrad']:.2f} | {r['rms_dtheta_mrad']:.2f} |"
+        )
+    lines += [
+        "",
+        "| 41 × 41 map | noise | fast engine agrees | its disagreements (grid steps from a class change: "
+        "starts) | screened = brute force | MuJoCo runs | audit differs | brute force | fast | screened |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for m in data["maps"]:
+        where = (
+            ", ".join(f"{d}: {k}" for d, k in m["disagreements_steps_from_a_class_change"].items()) or "none"
+        )
+        lines.append(
+            f"| {m['controller']} | {'on' if m['noise'] else 'off'} | {m['fast_agrees']} of {m['starts']} "
+            f"({100 * m['fast_agrees_share']:.1f} %) | {where} | {m['screened_equals_brute_force']} of "
+            f"{m['starts']} | {m['screened_mujoco_runs']} | {m['screened_audit_mismatches']} | "
+            f"{m['brute_force_s']:.1f} s | {m['fast_s']:.1f} s | {m['screened_s']:.1f} s "
+            f"({m['screened_over_brute_force']:.2f}×) |"
+        )
+    return "\n".join(lines) + "\n"

@@ -11,6 +11,7 @@ from twin.app.commands.common import (
     SERVED_CONTROLLER,
     WORKERS,
     add_controller_timeout,
+    add_engine_options,
     add_params_options,
     add_served_options,
     add_spread_options,
@@ -21,6 +22,9 @@ from twin.app.commands.common import (
     job_name,
     params_and_spread,
     progress_bar,
+    resolve_engine,
+    screen_audit_failure,
+    screen_summary,
     serving,
     write_out,
 )
@@ -47,6 +51,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "saturation, region and sensitivity checks ask them of their runs instead of the verdict's fields",
     )
     parser.add_argument("--seed", type=seed(), default=0, help="base seed of every run's noise")
+    add_engine_options(parser, "screen", near="near a class change of the region check's map")
     add_params_options(parser)
     parser.add_argument(
         "--workers", type=WORKERS, default=1, help="local processes (default 1: this process)"
@@ -84,6 +89,8 @@ def run(args: argparse.Namespace) -> int:
     except ParameterError as exc:
         raise ParameterError(f"{args.criteria or 'the default criteria'}: {exc}") from None
     check_job(args, params, OUTPUT_FILES)
+    args.plant = "twin"
+    settings_engine = resolve_engine(args, "screen")
     with serving(args, params) as served:
         report = validate(
             job_name(args),
@@ -95,6 +102,7 @@ def run(args: argparse.Namespace) -> int:
             progress=progress_bar("validate"),
             serve=served,
             spec=spec,
+            engine=settings_engine,
         )
     if (client := client_name(args, served)) is not None:
         report.controller = client
@@ -116,4 +124,10 @@ def run(args: argparse.Namespace) -> int:
     if not report.complete:
         print("ballbeam validate: interrupted: the checks done so far are reported", file=sys.stderr)
         return 130
+    screened = report.region.screening if report.region is not None else None
+    if screened is not None:
+        print(f"region: {screen_summary(screened)}")
+        if wrong := screened["audit"]["mismatches"]:
+            print(screen_audit_failure("validate", wrong), file=sys.stderr)
+            return 1
     return 0 if report.passed else 1
