@@ -166,3 +166,19 @@ def test_a_screened_search_counts_only_the_violations_mujoco_confirms() -> None:
     assert first["engine"] == "mujoco" and first["fast_objective"] < 0 and first["objective"] < 0
     assert all(r["engine"] == "mujoco" for r in result.runs if r["objective"] < 0)
     assert out["decided_by"]["fast"] + out["decided_by"]["mujoco"] == out["runs_spent"]
+
+
+@pytest.mark.quick
+def test_the_readme_agreement_table_is_the_measured_json_rendered() -> None:
+    import json
+    from pathlib import Path
+
+    from twin.app.screening import render_agreement
+
+    root = Path(__file__).resolve().parent.parent
+    data = json.loads((root / "docs" / "validation" / "screen_agreement.json").read_text())
+    readme = (root / "README.md").read_text()
+    block = readme.split("<!-- screen-table -->\n", 1)[1].split("<!-- /screen-table -->", 1)[0]
+    assert block == render_agreement(data)
+    for m in data["maps"]:  # the measured claims the README makes of them
+        assert m["screened_equals_brute_force"] == m["starts"] and m["screened_audit_mismatches"] == 0
