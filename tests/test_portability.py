@@ -38,6 +38,7 @@ BIT_PINNING = [
     "tests/test_sensors.py::test_rig_block_filter_equals_the_piecewise_filter",
     "tests/test_sensors.py::test_rc_filter_is_exact_against_an_ode_solver",
     "tests/test_portability.py::test_fixed_order_products",
+    "tests/test_screen.py",
 ]
 
 # A batch of runs (vectorized controllers, the scalar loop, a lost ball) hashed, printed by each child.
@@ -53,6 +54,14 @@ for name, vectorized in (("appendix-sf", True), ("appendix-clp", True), ("thesis
                          ("thesis-clp", False)):
     runs = run_batch(registry, name, x0_m=np.array([0.14, -0.13, 0.25]), theta0_rad=np.array([-0.2, 0.29, -0.7]),
                      seeds=np.array([0, 1, 2]), duration_s=3.0, record=True, nthread=1, vectorized=vectorized)
+    for run in runs:
+        for value in vars(run.log).values():
+            digest.update(np.ascontiguousarray(value).tobytes())
+        digest.update(repr(run.verdict.to_json()).encode())
+# the fast engine (the compiled reference plant under the same chain)
+for name in ("appendix-sf", "appendix-clp"):
+    runs = run_batch(registry, name, x0_m=np.array([0.14, -0.13, 0.25]), theta0_rad=np.array([-0.2, 0.29, -0.7]),
+                     seeds=np.array([0, 1, 2]), duration_s=3.0, record=True, plant="reference")
     for run in runs:
         for value in vars(run.log).values():
             digest.update(np.ascontiguousarray(value).tobytes())

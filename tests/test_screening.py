@@ -182,3 +182,43 @@ def test_the_readme_agreement_table_is_the_measured_json_rendered() -> None:
     assert block == render_agreement(data)
     for m in data["maps"]:  # the measured claims the README makes of them
         assert m["screened_equals_brute_force"] == m["starts"] and m["screened_audit_mismatches"] == 0
+
+
+def test_a_screened_sweep_is_the_same_on_one_worker_and_on_two() -> None:
+    settings = SweepSettings(
+        "appendix-clp", x0=Grid(-0.3, 0.3, 5), theta0=Grid(-0.7, 0.7, 5), duration_s=3.0, engine="screen",
+        screen_audit=3,
+    )  # fmt: skip
+    one = run_sweep(settings, workers=1).to_json()
+    two = run_sweep(settings, workers=2).to_json()
+    assert one["points"] == two["points"] and one["screening"] == two["screening"]
+
+
+@pytest.mark.quick
+@pytest.mark.parametrize(
+    ("argv", "needles"),
+    [
+        (
+            ["sweep", "--controller", "appendix-sf", "--engine", "screen", "--plant", "reference"],
+            ["--engine"],
+        ),
+        (["sweep", "--controller", "appendix-sf", "--engine", "screen", "--refine"], ["--refine"]),
+        (["sweep", "--controller", "appendix-sf", "--band", "0"], ["--band"]),
+        (
+            [
+                "montecarlo",
+                "--controller",
+                "appendix-sf",
+                "--spread",
+                "docs/examples/spread.toml",
+                "--engine",
+                "warp",
+            ],
+            ["--engine"],
+        ),  # fmt: skip
+    ],
+)
+def test_engine_options_that_cannot_work_are_refused(capsys, argv: list[str], needles: list[str]) -> None:
+    from tests.cli_checks import refused
+
+    refused(capsys, argv, *needles)

@@ -81,13 +81,16 @@ def test_chunks_and_workers_change_nothing(monkeypatch: pytest.MonkeyPatch) -> N
 
 @pytest.mark.slow
 def test_a_dask_cluster_gives_the_local_result() -> None:
+    """Brute force and screened (the fast engine on the workers, MuJoCo confirming)."""
     distributed = pytest.importorskip("distributed")
-    local = run_sweep(SMALL).to_json()
+    screened = replace(SMALL, engine="screen", screen_audit=2)
+    local = [run_sweep(SMALL).to_json(), run_sweep(screened).to_json()]
     with distributed.LocalCluster(
         n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None
     ) as cluster:
-        remote = run_sweep(SMALL, scheduler=cluster.scheduler_address).to_json()
+        remote = [run_sweep(s, scheduler=cluster.scheduler_address).to_json() for s in (SMALL, screened)]
     assert remote == local
+    assert {p["engine"] for p in local[1]["points"]} <= {"fast", "mujoco"}
 
 
 def test_an_interrupted_sweep_keeps_the_points_done(monkeypatch: pytest.MonkeyPatch) -> None:

@@ -71,7 +71,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=32,
         metavar="N",
         help="with --engine screen or fast: N runs the fast engine decided alone run on MuJoCo too (default "
-        "32); any that differs fails the command",
+        "32); any that differs is reported, and fails a screened job",
     )
     add_params_options(parser)
     parser.add_argument(
@@ -168,5 +168,6 @@ def run(args: argparse.Namespace) -> int:
         return 130
     if result.screening is not None and (wrong := result.screening["audit"]["mismatches"]):
         print(screen_audit_failure("montecarlo", wrong), file=sys.stderr)
-        return 1
+        if settings.engine == "screen":  # the fast engine alone was asked for unconfirmed: reported, not failed
+            return 1
     return controller_failures(result.runs, "montecarlo")
