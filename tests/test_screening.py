@@ -222,3 +222,41 @@ def test_engine_options_that_cannot_work_are_refused(capsys, argv: list[str], ne
     from tests.cli_checks import refused
 
     refused(capsys, argv, *needles)
+
+
+@pytest.mark.quick
+def test_a_held_verdict_near_its_band_is_marginal_on_either_side() -> None:
+    from twin.app.screening import HELD_MARGINS, near_held_band
+    from twin.verdict import Criteria
+
+    kept_on_track = {"failed": False, "ball_lost": False, "steady_x_m": 0.002, "steady_theta_rad": 0.0,
+                     "limit_cycle_x_pp_m": 0.001, "limit_cycle_theta_pp_rad": 0.005}  # fmt: skip
+    band, margin = HELD_MARGINS["steady_x_m"]
+    edge = getattr(Criteria(), band)
+    assert not near_held_band({**kept_on_track, "held": True})
+    assert near_held_band({**kept_on_track, "held": True, "steady_x_m": edge - margin / 2})
+    assert near_held_band({**kept_on_track, "held": False, "steady_x_m": -(edge + margin / 2)})
+    assert not near_held_band({**kept_on_track, "held": False, "steady_x_m": edge + 2 * margin})
+    # two failing metrics: marginal only when both are within their margins
+    both = {**kept_on_track, "held": False, "steady_x_m": edge + margin / 2, "limit_cycle_x_pp_m": 0.05}
+    assert not near_held_band(both)
+    assert not near_held_band({**kept_on_track, "held": False, "ball_lost": True, "steady_x_m": edge})
+
+
+@pytest.mark.quick
+def test_a_marginal_start_far_from_every_boundary_is_mujocos() -> None:
+    fast = _half_plane(20, 20, 6.0)[None]
+    mujoco = fast.copy()
+    mujoco[0, 15, 15] = "kept"  # the island of the audit test, now marginal on the fast engine
+    calls: list[list[int]] = []
+    s = Screening(
+        20, 20, 1, _job(fast, []), _job(mujoco, calls), audit=0, classify=lambda r: r["c"],
+        marginal=lambda r: r is not None and r.get("k") == 15 * 20 + 15,
+    )  # fmt: skip
+
+    def fast_job(requests, within):
+        return [{"c": str(fast[m].flat[k]), "k": k} for m, k in requests], True
+
+    s.fast_job = fast_job
+    s.run()
+    assert s.classify(s.record(0, 15 * 20 + 15)) == "kept" and s.record(0, 15 * 20 + 15)["engine"] == "mujoco"

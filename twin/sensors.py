@@ -623,34 +623,15 @@ class BallPositionChain:
         return self._advance(times_s, x_m, in_contact)
 
     def _dropout_effect_v(self, t: list[float], v: list[float]) -> float:
-        """What the dropouts in (t[0], t[-1]] change in the filter's output at t[-1]: the integral of
-        (v_drop − v(t))·e^(−(t_end − t)/τ)/τ over the dropped time, v the wiper on the curve, linear between
-        the knots ``t`` with values ``v``. On a piece [a, b] of one knot interval, with v_drop − v = α + β·(s − a),
-        u = (b − a)/τ and w = e^(−(t_end − b)/τ), it is exactly w·(α·(1 − e^(−u)) + β·τ·(u − (1 − e^(−u))))."""
-        t0, t_end, tau = t[0], t[-1], self.tau_s
-        dropped: list[list[float]] = []  # the dropouts within the block, overlapping ones merged
-        for a, b in sorted((max(a, t0), min(b, t_end)) for a, b in self._dropouts[self._first_open :]):
-            if b <= a:
-                continue
-            if dropped and a <= dropped[-1][1]:
-                dropped[-1][1] = max(dropped[-1][1], b)
-            else:
-                dropped.append([a, b])
-        effect = 0.0
-        for a, b in dropped:
-            j = max(bisect.bisect_right(t, a) - 1, 0)
-            while j < len(t) - 1 and t[j] < b:
-                lo, hi = max(a, t[j]), min(b, t[j + 1])
-                if hi > lo:
-                    slope = (v[j + 1] - v[j]) / (t[j + 1] - t[j])
-                    alpha = self._dropout_v - (v[j] + slope * (lo - t[j]))
-                    u = (hi - lo) / tau
-                    one_minus = -math.expm1(-u)
-                    # u − (1 − e^(−u)) by its series for tiny u (cancellation)
-                    excess = u * u / 2.0 - u**3 / 6.0 + u**4 / 24.0 if u < 1e-4 else u - one_minus
-                    effect += math.exp((hi - t_end) / tau) * (alpha * one_minus - slope * tau * excess)
-                j += 1
-        return effect
+        """What the dropouts in (t[0], t[-1]] change in the filter's output at t[-1] (``dropout_effects_v``
+        for this chain's dropouts, the wiper linear between the knots ``t`` with values ``v``)."""
+        drops = self._dropouts[self._first_open :]
+        return float(
+            dropout_effects_v(
+                np.asarray(t), np.asarray(v)[None, :], np.array([d[0] for d in drops]),
+                np.array([d[1] for d in drops]), np.array([0, len(drops)]), np.array([self.tau_s]), self._dropout_v,
+            )[0]
+        )  # fmt: skip
 
     def advance(self, times_s: np.ndarray, x_m: np.ndarray, in_contact: bool | np.ndarray = True) -> float:
         """Advance over one block and return the ADC reading of the ball channel at its end.
@@ -722,6 +703,88 @@ class BallPositionChain:
         return self.reading_v
 
 
+def _dropout_sums(
+    t: np.ndarray,
+    v: np.ndarray,
+    starts: np.ndarray,
+    ends: np.ndarray,
+    first: np.ndarray,
+    tau: np.ndarray,
+    open_v: float,
+) -> np.ndarray:
+    t0, t_end, n = t[0], t[-1], len(t)
+    out = np.zeros(v.shape[0])
+    for r in range(v.shape[0]):
+        m = first[r + 1] - first[r]
+        lo_s, hi_s = np.empty(m), np.empty(m)
+        kept = 0
+        for q in range(first[r], first[r + 1]):  # the dropouts within the block
+            a, b = max(starts[q], t0), min(ends[q], t_end)
+            if b > a:
+                lo_s[kept], hi_s[kept] = a, b
+                kept += 1
+        order = np.argsort(lo_s[:kept], kind="mergesort")
+        merged_a, merged_b = np.empty(kept), np.empty(kept)
+        count = 0
+        for q in order:  # overlapping ones merged
+            a, b = lo_s[q], hi_s[q]
+            if count and a <= merged_b[count - 1]:
+                merged_b[count - 1] = max(merged_b[count - 1], b)
+            else:
+                merged_a[count], merged_b[count] = a, b
+                count += 1
+        effect = 0.0
+        for d in range(count):
+            a, b = merged_a[d], merged_b[d]
+            j = max(np.searchsorted(t, a, side="right") - 1, 0)
+            while j < n - 1 and t[j] < b:
+                lo, hi = max(a, t[j]), min(b, t[j + 1])
+                if hi > lo:
+                    slope = (v[r, j + 1] - v[r, j]) / (t[j + 1] - t[j])
+                    alpha = open_v - (v[r, j] + slope * (lo - t[j]))
+                    u = (hi - lo) / tau[r]
+                    one_minus = -math.expm1(-u)
+                    # u − (1 − e^(−u)) by its series for tiny u (cancellation); pow as Python's ** takes it
+                    if u < 1e-4:
+                        excess = u * u / 2.0 - math.pow(u, 3.0) / 6.0 + math.pow(u, 4.0) / 24.0
+                    else:
+                        excess = u - one_minus
+                    effect += math.exp((hi - t_end) / tau[r]) * (alpha * one_minus - slope * tau[r] * excess)
+                j += 1
+        out[r] = effect
+    return out
+
+
+@functools.cache
+def _compiled_dropouts() -> Any:
+    import numba
+
+    return numba.njit(cache=True)(_dropout_sums)
+
+
+def dropout_effects_v(
+    t: np.ndarray,
+    v: np.ndarray,
+    starts: np.ndarray,
+    ends: np.ndarray,
+    first: np.ndarray,
+    tau_s: np.ndarray,
+    open_v: float,
+) -> np.ndarray:
+    """What the dropouts change in each row's filter output at t[-1] over the knots ``t`` (K,), the wiper
+    linear between them with row r's values ``v[r]`` (R, K): row r's dropouts are ``starts``/``ends``
+    [first[r]:first[r + 1]], its time constant ``tau_s[r]``, the open wiper at ``open_v``. The integral of
+    (v_drop − v(t))·e^(−(t_end − t)/τ)/τ over the dropped time (the dropouts clipped to the block, overlapping
+    ones merged): on a piece [a, b] of one knot interval, with v_drop − v = α + β·(s − a), u = (b − a)/τ and
+    w = e^(−(t_end − b)/τ), exactly w·(α·(1 − e^(−u)) + β·τ·(u − (1 − e^(−u)))). Compiled (numba): the one
+    home of the dropouts' effect, for a chain alone and for a batch's rows at once."""
+    return _compiled_dropouts()(
+        np.ascontiguousarray(t, dtype=float), np.ascontiguousarray(v, dtype=float),
+        np.asarray(starts, dtype=float), np.asarray(ends, dtype=float), np.asarray(first, dtype=np.int64),
+        np.asarray(tau_s, dtype=float), float(open_v),
+    )  # fmt: skip
+
+
 class BallChainBatch:
     """The ball chains of a batch of runs in step (one seed each), advanced block by block together.
 
@@ -779,14 +842,28 @@ class BallChainBatch:
             # draws (its seed's numbers in its order) and the dropouts' closed-form effect, run by run.
             at = np.cumsum(smooth) - 1  # a smooth run's row of vk
             due = smooth & ((self._next_start_s[runs] <= t_end) | (self._busy_until_s[runs] > t0))
+            dropped: list[int] = []  # the due runs with a dropout in the block, and their dropouts
+            starts: list[float] = []
+            ends: list[float] = []
+            first = [0]
             for j in np.flatnonzero(due).tolist():
                 chain = self.chains[int(runs[j])]
                 chain._schedule_until(t_end)
                 if chain._first_open < len(chain._dropouts):
                     chain._forget_finished(t0)
                 if chain._busy_until_s > t0:
-                    y[j] += chain._dropout_effect_v(times_s.tolist(), vk[at[j]].tolist())
+                    for a, b in chain._dropouts[chain._first_open :]:
+                        starts.append(a)
+                        ends.append(b)
+                    first.append(len(starts))
+                    dropped.append(j)
                 self._sync_noise(int(runs[j]))
+            if dropped:
+                rows = np.array(dropped)
+                y[rows] += dropout_effects_v(
+                    times_s, vk[at[rows]], np.array(starts), np.array(ends), np.array(first),
+                    self.tau_s[runs[rows]], chain0._dropout_v,
+                )  # fmt: skip
             readings[smooth] = adc_quantize_v(y[smooth], self.params.daq)
         for j in np.flatnonzero(~smooth).tolist():
             i = int(runs[j])

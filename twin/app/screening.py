@@ -5,7 +5,9 @@ full sensor chain, DAQ schedule, amplifier and laws) decides every start of ever
 could disagree, MuJoCo decides:
 
 1. the **band**: every start within ``band`` grid steps (along either axis, diagonals included) of a start
-   of another class is run on MuJoCo;
+   of another class is run on MuJoCo, and every start whose fast run is kept with a held metric within its
+   margin of its band (``near_held_band``: a held/not-held verdict speckled by noise has no spatial boundary
+   to find);
 2. the band follows MuJoCo: with MuJoCo's classes put in, the map's band is taken again, and every start of it
    not yet run on MuJoCo is run, until each start within ``band`` steps of a class change was decided by
    MuJoCo (a boundary MuJoCo moves is followed as far as it goes; the rule of ``--refine``'s trace);
@@ -34,8 +36,9 @@ ENGINES = ENGINE_NAMES
 DEFAULT_BAND = 1  # grid steps around a class change that MuJoCo decides
 DEFAULT_AUDIT = 32  # starts per map decided by the fast engine alone that MuJoCo re-runs anyway
 ASSUMPTION = (
-    "a start further than the band from every class change of the map has the same class on MuJoCo as on the "
-    "fast engine (the two engines' disagreements sit at class changes; measured in the README's agreement table)"
+    "a start further than the band from every class change of the map, whose held metrics are further than their "
+    "margins from their bands, has the same class on MuJoCo as on the fast engine (the two engines' "
+    "disagreements sit at class changes and at marginal runs; measured in the README's agreement table)"
 )
 
 
@@ -55,8 +58,8 @@ class Screening:
     """``maps`` maps of one nx × nt grid (one per rig of a robust sweep), screened and confirmed.
 
     ``fast_job`` and ``mujoco_job`` run (map, start index) pairs (``twin.app.sweep.Job``); ``classify`` is
-    the class that must agree (``verdict_class``). After ``run()``: ``records[m][k]`` each start's record
-    (with ``engine``), ``stats``, ``complete``."""
+    the class that must agree (``verdict_class``); ``marginal``: the fast records MuJoCo decides wherever
+    they are (``near_held_band``). After ``run()``: ``record(m, k)``, ``stats``, ``complete``."""
 
     def __init__(
         self,
@@ -71,18 +74,15 @@ class Screening:
         seed: int = 0,
         progress: Progress | None = None,
         classify: Callable[[dict[str, Any]], Hashable] = verdict_class,
+        marginal: Callable[[dict[str, Any]], bool] | None = None,
     ) -> None:
         if isinstance(band, bool) or not isinstance(band, int) or band < 1:
             raise ValueError(f"band = {band!r}: a whole number of grid steps ≥ 1")
         if isinstance(audit, bool) or not isinstance(audit, int) or audit < 0:
             raise ValueError(f"audit = {audit!r}: a whole number of starts ≥ 0")
         self.nx, self.nt, self.maps, self.band, self.audit, self.seed = nx, nt, maps, band, audit, seed
-        self.fast_job, self.mujoco_job, self.progress, self.classify = (
-            fast_job,
-            mujoco_job,
-            progress,
-            classify,
-        )
+        self.fast_job, self.mujoco_job, self.progress = fast_job, mujoco_job, progress
+        self.classify, self.marginal = classify, marginal
         self.fast: list[dict[int, dict[str, Any]]] = [{} for _ in range(maps)]
         self.mujoco: list[dict[int, dict[str, Any]]] = [{} for _ in range(maps)]
         self.stats = ScreenStats()
@@ -134,12 +134,18 @@ class Screening:
     def run(self) -> None:
         every = [(m, k) for m in range(self.maps) for k in range(self.nx * self.nt)]
         self.stats.fast = self._run(self.fast_job, every, self.fast)
+        marginal = [
+            {k for k, r in self.fast[m].items() if self.marginal is not None and self.marginal(r)}
+            for m in range(self.maps)
+        ]
         while self.complete:  # the band, until MuJoCo decides every start near a class change
             wave = [
-                (m, int(k))
+                (m, k)
                 for m in range(self.maps)
-                for k in np.flatnonzero(self.near_change(self.classes(m)).ravel())
-                if int(k) not in self.mujoco[m]
+                for k in sorted(
+                    set(np.flatnonzero(self.near_change(self.classes(m)).ravel()).tolist()) | marginal[m]
+                )
+                if k not in self.mujoco[m]
             ]
             if not wave:
                 break
@@ -205,19 +211,30 @@ HELD_MARGINS = {
 }
 
 
-def near_class_change(record: dict[str, Any], criteria: Any = None) -> bool:
-    """Whether MuJoCo must decide a run of a list: the fast engine did not hold it, or one of its held metrics
-    lies within ``HELD_MARGINS`` of its band (``twin.verdict.Criteria``)."""
+def near_held_band(record: dict[str, Any], criteria: Any = None) -> bool:
+    """Whether a run kept on the track could be classed the other way on MuJoCo: held with a held metric
+    within ``HELD_MARGINS`` of its band, or not held with every failing metric within its margin beyond its band
+    (``twin.verdict.Criteria``: held is every metric within its band)."""
     from twin.verdict import Criteria
 
+    if record.get("failed") or record.get("ball_lost"):
+        return False
     c = criteria or Criteria()
-    if verdict_class(record) != "held":
-        return True
-    for metric, (band, margin) in HELD_MARGINS.items():
-        value = record.get(metric)
-        if value is not None and abs(value) > getattr(c, band) - margin:
-            return True
-    return False
+    values = [
+        (abs(v), getattr(c, band), margin)
+        for metric, (band, margin) in HELD_MARGINS.items()
+        if (v := record.get(metric)) is not None
+    ]
+    if record["held"]:
+        return any(v > b - d for v, b, d in values)
+    failing = [(v, b, d) for v, b, d in values if v > b]
+    return bool(failing) and all(v <= b + d for v, b, d in failing)
+
+
+def near_class_change(record: dict[str, Any], criteria: Any = None) -> bool:
+    """Whether MuJoCo must decide a run of a list: the fast engine did not hold it, or held it within
+    ``HELD_MARGINS`` of a band."""
+    return verdict_class(record) != "held" or near_held_band(record, criteria)
 
 
 # A job over a list of runs: run these indices → (records, complete).

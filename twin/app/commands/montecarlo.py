@@ -168,6 +168,8 @@ def run(args: argparse.Namespace) -> int:
         return 130
     if result.screening is not None and (wrong := result.screening["audit"]["mismatches"]):
         print(screen_audit_failure("montecarlo", wrong), file=sys.stderr)
-        if settings.engine == "screen":  # the fast engine alone was asked for unconfirmed: reported, not failed
+        if (
+            settings.engine == "screen"
+        ):  # the fast engine alone was asked for unconfirmed: reported, not failed
             return 1
     return controller_failures(result.runs, "montecarlo")
