@@ -241,6 +241,14 @@ def test_a_held_verdict_near_its_band_is_marginal_on_either_side() -> None:
     both = {**kept_on_track, "held": False, "steady_x_m": edge + margin / 2, "limit_cycle_x_pp_m": 0.05}
     assert not near_held_band(both)
     assert not near_held_band({**kept_on_track, "held": False, "ball_lost": True, "steady_x_m": edge})
+    # a map's screening confirms by the offsets alone (the limit cycles' flips sit at its class changes)
+    from twin.app.screening import near_offset_band
+
+    cycle_band, cycle_margin = HELD_MARGINS["limit_cycle_theta_pp_rad"]
+    cycling = getattr(Criteria(), cycle_band) + cycle_margin / 2
+    assert near_held_band({**kept_on_track, "held": False, "limit_cycle_theta_pp_rad": cycling})
+    assert not near_offset_band({**kept_on_track, "held": False, "limit_cycle_theta_pp_rad": cycling})
+    assert near_offset_band({**kept_on_track, "held": True, "steady_x_m": edge - margin / 2})
 
 
 @pytest.mark.quick
