@@ -770,18 +770,12 @@ def bench_falsify(seeds: int = FALSIFY_SEEDS) -> dict[str, float]:
 def write_falsify_table(bench: dict[str, float]) -> None:
     """(k) into docs/validation/falsify_bench.json and the README's table between its falsify-table markers."""
     from twin.app.falsify_render import render_table
-    from twin.outputs import write_atomic
+    from twin.outputs import write_measured_table
 
-    write_atomic(
-        REPO / "docs" / "validation" / "falsify_bench.json",
-        json.dumps(bench, indent=1) + "\n",
-        overwrite=True,
-    )
-    readme = REPO / "README.md"
-    begin, end = "<!-- falsify-table -->\n", "<!-- /falsify-table -->"
-    head, _, rest = readme.read_text().partition(begin)
-    _, _, tail = rest.partition(end)
-    write_atomic(readme, head + begin + render_table(bench) + end + tail, overwrite=True)
+    write_measured_table(
+        REPO / "docs" / "validation" / "falsify_bench.json", bench, REPO / "README.md", "falsify-table",
+        render_table(bench),
+    )  # fmt: skip
 
 
 def _violating_share(name: str, settings: Any, spread: Any, spec: Any) -> float:

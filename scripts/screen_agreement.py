@@ -122,18 +122,12 @@ def main() -> None:
     data = {"load_1min": round(os.getloadavg()[0], 2), "trajectories": trajectories(), "maps": maps()}
     print(render_agreement(data))
     if args.write_docs:
-        from twin.outputs import write_atomic
+        from twin.outputs import write_measured_table
 
-        write_atomic(
-            REPO / "docs" / "validation" / "screen_agreement.json",
-            json.dumps(data, indent=1) + "\n",
-            overwrite=True,
-        )
-        readme = REPO / "README.md"
-        begin, end = "<!-- screen-table -->\n", "<!-- /screen-table -->"
-        head, _, rest = readme.read_text().partition(begin)
-        _, _, tail = rest.partition(end)
-        write_atomic(readme, head + begin + render_agreement(data) + end + tail, overwrite=True)
+        write_measured_table(
+            REPO / "docs" / "validation" / "screen_agreement.json", data, REPO / "README.md", "screen-table",
+            render_agreement(data),
+        )  # fmt: skip
 
 
 if __name__ == "__main__":

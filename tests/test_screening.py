@@ -268,3 +268,19 @@ def test_a_marginal_start_far_from_every_boundary_is_mujocos() -> None:
     s.fast_job = fast_job
     s.run()
     assert s.classify(s.record(0, 15 * 20 + 15)) == "kept" and s.record(0, 15 * 20 + 15)["engine"] == "mujoco"
+
+
+@pytest.mark.quick
+def test_a_measured_table_replaces_only_its_block(tmp_path) -> None:
+    import json
+
+    from twin.outputs import write_measured_table
+
+    readme = tmp_path / "README.md"
+    readme.write_text("intro\n<!-- t -->\nold\n<!-- /t -->\nrest\n")
+    write_measured_table(tmp_path / "m.json", {"a": 1}, readme, "t", "new\n")
+    assert readme.read_text() == "intro\n<!-- t -->\nnew\n<!-- /t -->\nrest\n"
+    assert json.loads((tmp_path / "m.json").read_text()) == {"a": 1}
+    with pytest.raises(ValueError, match="no <!-- other --> marker"):
+        write_measured_table(tmp_path / "m.json", {}, readme, "other", "x\n")
+    assert readme.read_text() == "intro\n<!-- t -->\nnew\n<!-- /t -->\nrest\n"  # untouched

@@ -33,7 +33,7 @@ from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import BinaryIO
+from typing import Any, BinaryIO
 
 __all__ = [
     "MANIFEST",
@@ -47,6 +47,7 @@ __all__ = [
     "check_output_folder",
     "check_outputs",
     "write_atomic",
+    "write_measured_table",
     "writing",
 ]
 
@@ -407,6 +408,20 @@ def write_atomic(path: str | Path, data: bytes | str, *, overwrite: bool = False
     """Write ``data`` (text as UTF-8) to ``path`` through ``atomic_output``: a failure keeps the old file."""
     with atomic_output(path, overwrite=overwrite) as fh:
         fh.write(data.encode("utf-8") if isinstance(data, str) else data)
+
+
+def write_measured_table(
+    json_path: str | Path, data: Any, readme: str | Path, marker: str, table: str
+) -> None:
+    """A measurement's JSON (``data``) and its rendering (``table``) into the README between ``<!-- marker -->``
+    and ``<!-- /marker -->`` (the documentation scripts' ``--write-docs``), each file atomically."""
+    write_atomic(json_path, json.dumps(data, indent=1) + "\n", overwrite=True)
+    begin, end = f"<!-- {marker} -->\n", f"<!-- /{marker} -->"
+    head, found, rest = Path(readme).read_text().partition(begin)
+    if not found:
+        raise ValueError(f"{readme}: no {begin.strip()} marker to write the table after")
+    _, _, tail = rest.partition(end)
+    write_atomic(readme, head + begin + table + end + tail, overwrite=True)
 
 
 def _sha256(path: Path) -> str:

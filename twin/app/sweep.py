@@ -366,21 +366,33 @@ def _screened_sweep(
     )  # fmt: skip
     screen.run()
     points = [screen.record(0, k) or {} for k in range(nx * nt)]
-    complete = screen.complete
-    corner_records: list[dict[str, Any]] = []
-    corner_idx = list(range(nx * nt, len(starts)))
-    if corner_idx and complete:
-        records, complete = run_mujoco(starts[corner_idx], seeds[corner_idx], None)
-        corner_records = [
-            {**(r or {}), "claim": claim, "note": note}
-            for r, (_, _, claim, note) in zip(records, corners, strict=True)
-        ]
+    corner_records, complete = _corner_runs(run_mujoco, starts, seeds, nx * nt, corners, screen.complete)
     result = SweepResult(
         settings, points, complete and all(points), corner_records, wall_s=time.perf_counter() - start
     )
     result.screening = screen.summary()
     result.claims = [_judge(claim, result, p) for claim in CLAIMS if settings.controller in claim.applies_to]
     return result
+
+
+def _corner_runs(
+    run: Batch,
+    starts: np.ndarray,
+    seeds: np.ndarray,
+    first: int,
+    corners: list[tuple[float, float, str, str]],
+    complete: bool,
+) -> tuple[list[dict[str, Any]], bool]:
+    """The claims' corner states (``starts[first:]``) once the grid is complete: their records, and whether
+    every run finished."""
+    idx = list(range(first, len(starts)))
+    if not idx or not complete:
+        return [], complete
+    records, done = run(starts[idx], seeds[idx], None)
+    return [
+        {**(r or {}), "claim": claim, "note": note}
+        for r, (_, _, claim, note) in zip(records, corners, strict=True)
+    ], done
 
 
 def verdict_class(record: dict[str, Any]) -> str:
@@ -673,15 +685,7 @@ def _refined_sweep(
             points.append(_inferred(float(grid[k, 0]), float(grid[k, 1]), int(seeds[k]), cls, cell))
         else:
             points.append({})
-    corner_idx = list(range(nx * nt, len(starts)))
-    corner_records: list[dict[str, Any]] = []
-    if corner_idx and complete:
-        records, done = run_batch(starts[corner_idx], seeds[corner_idx], None)
-        complete = complete and done
-        corner_records = [
-            {**(r or {}), "claim": claim, "note": note}
-            for r, (_, _, claim, note) in zip(records, corners, strict=True)
-        ]
+    corner_records, complete = _corner_runs(run_batch, starts, seeds, nx * nt, corners, complete)
     result = SweepResult(
         settings, points, complete and all(points), corner_records, wall_s=time.perf_counter() - start
     )
