@@ -284,3 +284,19 @@ def test_a_measured_table_replaces_only_its_block(tmp_path) -> None:
     with pytest.raises(ValueError, match="no <!-- other --> marker"):
         write_measured_table(tmp_path / "m.json", {}, readme, "other", "x\n")
     assert readme.read_text() == "intro\n<!-- t -->\nnew\n<!-- /t -->\nrest\n"  # untouched
+
+
+def test_validate_screens_its_region_check_and_says_so() -> None:
+    from tests.test_validate import QUICK
+    from twin.app.validate import validate
+    from twin.parameters import Parameters
+
+    screened = validate("appendix-sf", Parameters(), QUICK, engine="screen")
+    brute = validate("appendix-sf", Parameters(), QUICK)
+    region = {c.name: c for c in screened.checks}["region"]
+    assert "screened: MuJoCo decided" in region.measured
+    assert region.passed == {c.name: c for c in brute.checks}["region"].passed
+    assert screened.region is not None and brute.region is not None
+    assert [verdict_class(p) for p in screened.region.points] == [
+        verdict_class(p) for p in brute.region.points
+    ]

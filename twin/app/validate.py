@@ -532,10 +532,21 @@ def _region_stage(b: _Battery, settings: SweepSettings) -> SweepResult | None:
                 if lost_inside
                 else ""
             )
-            + f"; {kept_all} of {len(region.points)} over the whole grid",
+            + f"; {kept_all} of {len(region.points)} over the whole grid"
+            + _decided_by(region),
         )
     )
     return region
+
+
+def _decided_by(region: SweepResult) -> str:
+    """Who decided the region's starts, when not MuJoCo alone."""
+    if region.screening is not None:
+        s = region.screening
+        return f" (screened: MuJoCo decided {s['mujoco_runs']} of {len(region.points)}, the fast engine the rest)"
+    if region.settings.engine == "fast" and region.settings.plant == "twin":
+        return " (the fast engine alone, not confirmed by MuJoCo)"
+    return ""
 
 
 def _sensitivity_stage(b: _Battery, cases: list[tuple[str, str, Parameters]]) -> bool:
