@@ -288,14 +288,17 @@ def validate(
     serve: Served | None = None,
     spec: Spec | None = None,
     engine: str = "mujoco",
+    band: int = 1,
 ) -> ValidationReport:
     """The battery; ``serve``: every run a session to a client over the wire (``fanout.run_served``), the
     stages one after the other on its one server (``controller`` then only names what the client runs).
     ``spec``: the nominal, saturation, region and sensitivity checks ask its requirements of their runs
     (``SPEC_CHECKS``; its ``[validate]`` table says which each asks) instead of the verdict's fields.
-    ``engine``: who decides the region check's starts (``twin.app.sweep.SweepSettings.engine``); the other
+    ``engine``, ``band``: who decides the region check's starts (``twin.app.sweep.SweepSettings``); the other
     checks are MuJoCo's."""
-    report = _validate(controller, params, criteria, spread, seed, workers, progress, serve, spec, engine)
+    report = _validate(
+        controller, params, criteria, spread, seed, workers, progress, serve, spec, (engine, band)
+    )
     report.spec = spec.source if spec is not None else None
     report.served = serve.to_json() if serve is not None else None
     return report
@@ -311,7 +314,7 @@ def _validate(
     progress: Progress | None,
     serve: Served | None,
     spec: Spec | None,
-    engine: str,
+    engine: tuple[str, int],
 ) -> ValidationReport:
     c = criteria or ValidationCriteria()
     check_criteria_for(c, params)  # before any run
@@ -344,7 +347,8 @@ def _validate(
         duration_s=c.region_duration_s,
         noise=True,
         seed=seed,
-        engine=engine,
+        engine=engine[0],
+        band=engine[1],
     )
     region = _region_stage(b, settings)
     if region is None:

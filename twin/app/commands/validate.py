@@ -103,6 +103,7 @@ def run(args: argparse.Namespace) -> int:
             serve=served,
             spec=spec,
             engine=settings_engine,
+            band=args.band,
         )
     if (client := client_name(args, served)) is not None:
         report.controller = client
