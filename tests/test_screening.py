@@ -300,3 +300,19 @@ def test_validate_screens_its_region_check_and_says_so() -> None:
     assert [verdict_class(p) for p in screened.region.points] == [
         verdict_class(p) for p in brute.region.points
     ]
+
+
+@pytest.mark.quick
+def test_a_start_within_a_ball_radius_of_a_track_end_is_mujocos() -> None:
+    from twin.app.screening import map_marginal, near_track_end
+    from twin.parameters import Parameters
+
+    p = Parameters()
+    edge = p.track.half_length_m - p.ball.radius_m
+    held = {"failed": False, "ball_lost": False, "held": True, "steady_x_m": 0.0, "steady_theta_rad": 0.0,
+            "limit_cycle_x_pp_m": 0.0, "limit_cycle_theta_pp_rad": 0.0}  # fmt: skip
+    assert near_track_end({**held, "x0_m": -(edge + 1e-4)}, p) and near_track_end(
+        {**held, "x0_m": edge + 1e-4}, p
+    )
+    assert not near_track_end({**held, "x0_m": edge - 1e-4}, p)
+    assert map_marginal(p)({**held, "x0_m": -0.32}) and not map_marginal(p)({**held, "x0_m": -0.304})

@@ -430,10 +430,10 @@ def run_montecarlo(
         label = settings.plant if settings.plant != "twin" else "mujoco"
         records = [None if r is None else {**r, "engine": label} for r in records]
     else:
-        from twin.app.screening import confirm_list, near_class_change
+        from twin.app.screening import confirm_list, near_class_change, near_track_end
 
         fast, complete = job("reference")(every)
-        confirm = [i for i, r in enumerate(fast) if r and near_class_change(r)]
+        confirm = [i for i, r in enumerate(fast) if r and (near_class_change(r) or near_track_end(r, base))]
         records, screening, confirmed = confirm_list(
             fast, job("twin"), confirm=confirm if settings.engine == "screen" else [], audit=settings.audit,
             seed=settings.seed,

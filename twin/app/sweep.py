@@ -346,7 +346,7 @@ def _screened_sweep(
     """Every start on the fast engine; MuJoCo near every class change and on an audit sample
     (``twin.app.screening.Screening``); the claims' corner states on MuJoCo. Each start has its brute-force
     seed, so a start MuJoCo ran has its brute-force record."""
-    from twin.app.screening import Screening, near_offset_band
+    from twin.app.screening import Screening, map_marginal
 
     nx, nt = settings.x0.n, settings.theta0.n
     start = time.perf_counter()
@@ -362,7 +362,7 @@ def _screened_sweep(
 
     screen = Screening(
         nx, nt, 1, job(run_fast), job(run_mujoco), band=settings.band, audit=settings.screen_audit,
-        seed=settings.seed, progress=progress, marginal=near_offset_band,
+        seed=settings.seed, progress=progress, marginal=map_marginal(p),
     )  # fmt: skip
     screen.run()
     points = [screen.record(0, k) or {} for k in range(nx * nt)]
