@@ -65,7 +65,7 @@ def test_the_kernels_steps_are_the_reference_plants_for_every_run() -> None:
 
 
 def _same_as_single_runs(name: str, x0, theta0, seeds, duration_s: float, params=None, **kw) -> list:
-    from twin.screen.rig import ReferenceBatchRig
+    from twin.rigs.batch import ReferenceBatchRig
 
     batched = []  # the runs the compiled rig took (not the single-run path)
     start = ReferenceBatchRig._start_physics

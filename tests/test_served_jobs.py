@@ -223,7 +223,18 @@ def test_validate_served_to_run_rig_sessions_gives_the_in_process_report(tmp_pat
     spread.write_text(SPREAD)
     common = ["validate", "--criteria", str(criteria), "--spread", str(spread)]
     ref = subprocess.run(
-        [*CLI, *common, "--controller", "appendix-sf", "--out", str(tmp_path / "ref"), "--json"],
+        # MuJoCo alone, as a served job runs (a session is a client's run on the twin)
+        [
+            *CLI,
+            *common,
+            "--controller",
+            "appendix-sf",
+            "--engine",
+            "mujoco",
+            "--out",
+            str(tmp_path / "ref"),
+            "--json",
+        ],
         capture_output=True,
         text=True,
         env=ENV,

@@ -157,11 +157,12 @@ def run_robust(
     ref = Refinement(settings.x0.n, settings.theta0.n, settings.refine, rigs, job(None), progress)
     screen = None
     if settings.screened:
-        from twin.app.screening import Screening, map_marginal
+        from twin.app.screening import MAP_MARGINAL, Screening, map_marginal
 
         screen = Screening(
             settings.x0.n, settings.theta0.n, rigs, job(True), job(False), band=settings.band,
             audit=settings.screen_audit, seed=settings.seed, progress=progress, marginal=map_marginal(base),
+            marginal_text=MAP_MARGINAL,
         )  # fmt: skip
         screen.run()
         ref.known = [{k: r for k in range(n) if (r := screen.record(m, k)) is not None} for m in range(rigs)]

@@ -29,11 +29,32 @@ from typing import Any
 import numpy as np
 
 from twin.app.fanout import Progress
-from twin.app.sweep import ENGINE_NAMES, Job, verdict_class
 
-__all__ = ["ASSUMPTION", "DEFAULT_AUDIT", "DEFAULT_BAND", "ENGINES", "Screening", "ScreenStats"]
+__all__ = [
+    "ASSUMPTION",
+    "DEFAULT_AUDIT",
+    "DEFAULT_BAND",
+    "ENGINE_NAMES",
+    "Job",
+    "ScreenStats",
+    "Screening",
+    "verdict_class",
+]
 
-ENGINES = ENGINE_NAMES
+ENGINE_NAMES = ("screen", "fast", "mujoco")
+# (map, start) pairs to run, and the wave's progress (runs done of these) → (records, complete).
+Job = Callable[[list[tuple[int, int]], Progress | None], tuple[list[dict[str, Any] | None], bool]]
+
+
+def verdict_class(record: dict[str, Any]) -> str:
+    """What a map shows of a start: 'failed' (the controller), 'lost', 'held' or 'kept' (not held)."""
+    if record.get("failed"):
+        return "failed"
+    if record["ball_lost"]:
+        return "lost"
+    return "held" if record["held"] else "kept"
+
+
 DEFAULT_BAND = 1  # grid steps around a class change that MuJoCo decides
 DEFAULT_AUDIT = 32  # starts per map decided by the fast engine alone that MuJoCo re-runs anyway
 ASSUMPTION = (
@@ -60,7 +81,8 @@ class Screening:
 
     ``fast_job`` and ``mujoco_job`` run (map, start index) pairs (``twin.app.sweep.Job``); ``classify`` is
     the class that must agree (``verdict_class``); ``marginal``: the fast records MuJoCo decides wherever
-    they are (``near_offset_band``). After ``run()``: ``record(m, k)``, ``stats``, ``complete``."""
+    they are (``map_marginal``), described by ``marginal_text`` in the summary. After ``run()``:
+    ``record(m, k)``, ``stats``, ``complete``."""
 
     def __init__(
         self,
@@ -76,6 +98,7 @@ class Screening:
         progress: Progress | None = None,
         classify: Callable[[dict[str, Any]], Hashable] = verdict_class,
         marginal: Callable[[dict[str, Any]], bool] | None = None,
+        marginal_text: str = "",
     ) -> None:
         if isinstance(band, bool) or not isinstance(band, int) or band < 1:
             raise ValueError(f"band = {band!r}: a whole number of grid steps ≥ 1")
@@ -84,6 +107,7 @@ class Screening:
         self.nx, self.nt, self.maps, self.band, self.audit, self.seed = nx, nt, maps, band, audit, seed
         self.fast_job, self.mujoco_job, self.progress = fast_job, mujoco_job, progress
         self.classify, self.marginal = classify, marginal
+        self.marginal_text = marginal_text
         self.fast: list[dict[int, dict[str, Any]]] = [{} for _ in range(maps)]
         self.mujoco: list[dict[int, dict[str, Any]]] = [{} for _ in range(maps)]
         self.stats = ScreenStats()
@@ -163,10 +187,9 @@ class Screening:
                 if alone:
                     chosen = rng.choice(alone, size=min(self.audit, len(alone)), replace=False)
                     picks += [(m, int(k)) for k in sorted(chosen.tolist())]
-            before = [dict(d) for d in self.mujoco]
             self.stats.audited = self._run(self.mujoco_job, picks, self.mujoco)
-            for m, k in picks:
-                if k in self.mujoco[m] and k not in before[m]:
+            for m, k in picks:  # each drawn from the starts MuJoCo had not run
+                if k in self.mujoco[m]:
                     self._compare(m, k, self.stats.audit_mismatches)
 
     def _compare(self, m: int, k: int, into: list[dict[str, Any]]) -> None:
@@ -188,7 +211,8 @@ class Screening:
         decided = sum(len(d) for d in self.mujoco)
         return {
             "band_steps": self.band,
-            "confirmed": f"every start within {self.band} grid step(s) of a class change",
+            "confirmed": f"every start within {self.band} grid step(s) of a class change"
+            + self.marginal_text,
             "fast_runs": s.fast,
             "mujoco_runs": decided,
             "mujoco_band_runs": s.confirmed,
@@ -254,8 +278,15 @@ def near_track_end(record: dict[str, Any], params: Any) -> bool:
     return abs(record["x0_m"]) > params.track.half_length_m - params.ball.radius_m
 
 
+# What ``map_marginal`` confirms, in a screening's summary.
+MAP_MARGINAL = (
+    "; every start kept with an offset within its margin of its band or with its ball within its radius of a "
+    "track end"
+)
+
+
 def map_marginal(params: Any) -> Callable[[dict[str, Any]], bool]:
-    """The runs a map's screening gives MuJoCo wherever they are: an offset near its band, a start at a track end."""
+    """The runs a map's screening gives MuJoCo wherever they are (``MAP_MARGINAL``)."""
     return lambda record: near_offset_band(record) or near_track_end(record, params)
 
 

@@ -27,6 +27,7 @@ import numpy as np
 from controllers import thesis_numbers as T
 from twin.app.fanout import Progress, Runs, Served, run_starts
 from twin.app.options import MAX_LOCATE
+from twin.app.screening import ENGINE_NAMES, MAP_MARGINAL, Job, Screening, map_marginal, verdict_class
 from twin.outputs import JobFiles
 from twin.parameters import ParameterError, Parameters
 from twin.physics import check_initial_state
@@ -65,7 +66,6 @@ OUTPUT_FILES = JobFiles("sweep", ("sweep.json", "map.png"))
 DEFAULT_X0 = Grid(-0.32, 0.32, 41)
 DEFAULT_THETA0 = Grid(-0.7, 0.7, 41)
 MAX_POINTS = 250_000  # a grid beyond this is a typing error, not a study (about 3 h per 10 s runs here)
-ENGINE_NAMES = ("screen", "fast", "mujoco")  # twin.app.screening
 
 
 def parse_range(option: str, text: str) -> Grid:
@@ -346,8 +346,6 @@ def _screened_sweep(
     """Every start on the fast engine; MuJoCo near every class change and on an audit sample
     (``twin.app.screening.Screening``); the claims' corner states on MuJoCo. Each start has its brute-force
     seed, so a start MuJoCo ran has its brute-force record."""
-    from twin.app.screening import Screening, map_marginal
-
     nx, nt = settings.x0.n, settings.theta0.n
     start = time.perf_counter()
 
@@ -362,7 +360,7 @@ def _screened_sweep(
 
     screen = Screening(
         nx, nt, 1, job(run_fast), job(run_mujoco), band=settings.band, audit=settings.screen_audit,
-        seed=settings.seed, progress=progress, marginal=map_marginal(p),
+        seed=settings.seed, progress=progress, marginal=map_marginal(p), marginal_text=MAP_MARGINAL,
     )  # fmt: skip
     screen.run()
     points = [screen.record(0, k) or {} for k in range(nx * nt)]
@@ -393,15 +391,6 @@ def _corner_runs(
         {**(r or {}), "claim": claim, "note": note}
         for r, (_, _, claim, note) in zip(records, corners, strict=True)
     ], done
-
-
-def verdict_class(record: dict[str, Any]) -> str:
-    """What a map shows of a start: 'failed' (the controller), 'lost', 'held' or 'kept' (not held)."""
-    if record.get("failed"):
-        return "failed"
-    if record["ball_lost"]:
-        return "lost"
-    return "held" if record["held"] else "kept"
 
 
 def _inferred(
@@ -436,8 +425,6 @@ ASSUMPTION = (
 )
 Box = tuple[int, int, int, int]  # i0, i1, j0, j1: grid indices, inclusive
 Point = tuple[int, int]  # (i, j): x0 index, θ0 index
-# (map, start) pairs to run, and the wave's progress (runs done of these) → (records, complete).
-Job = Callable[[list[tuple[int, int]], Progress | None], tuple[list[dict[str, Any] | None], bool]]
 # Runs of these starts with these seeds → (records, complete): fanout.run_starts on the sweep's job.
 Batch = Callable[[np.ndarray, np.ndarray, Progress | None], tuple[list[dict[str, Any] | None], bool]]
 

@@ -14,8 +14,7 @@ output latency: the same object type, so the same plan), its ideal converters ar
 and lost ball, recording and verdict are ``twin.engine.ClosedLoop``'s step for step; a test checks every log
 array and the verdict against single runs. Runs whose lost ball ends them (``stop_when_lost``) leave the
 batch. Laws on the true state (``StateLaw``) run one by one through ``run_closed_loop``. The reference plant's
-runs are batched too, their physics in the compiled kernel (``twin.screen.rig.ReferenceBatchRig``, the fast
-engine).
+runs are batched too, their physics in the compiled kernel (``ReferenceBatchRig``, the fast engine).
 """
 
 from __future__ import annotations
@@ -48,6 +47,7 @@ from twin.interface import Controller, DaqSample
 from twin.log import THESIS_FIELDS, TRUTH_FIELDS, RunLog
 from twin.output_stage import ideal_motor_volts, motor_volts
 from twin.parameters import Daq, Parameters
+from twin.physics import check_initial_state
 from twin.plant import (
     FULL_STATE,
     Plant,
@@ -67,6 +67,7 @@ __all__ = [
     "BatchController",
     "BatchSamples",
     "BatchTelemetry",
+    "ReferenceBatchRig",
     "ScalarControllers",
     "batch_key",
     "run_batch",
@@ -227,7 +228,7 @@ def run_batch(
         raise RigError(f"plant = {plant!r}: expected 'twin' or 'reference'")
     probe = catalogue.make(name, run_params[0])
     # The 1 kHz laws on the true state, firmware and runs with a scenario take the single-run path; the others
-    # are batched (the reference plant's in the compiled kernel: twin.screen.rig).
+    # are batched (the reference plant's in the compiled kernel: ReferenceBatchRig).
     every = not isinstance(probe, Controller)
     run_scenarios = list(scenarios) if scenarios is not None else [None] * n
     single = [i for i in range(n) if every or run_scenarios[i] is not None]
@@ -290,11 +291,7 @@ def run_batch(
 
 def _group_rig(plant: PlantKind) -> type[BatchRig]:
     """The rig of a batch's group: MuJoCo's, or the reference plant's in the compiled kernel."""
-    if plant == "reference":
-        from twin.screen.rig import ReferenceBatchRig  # numba is imported when asked for
-
-        return ReferenceBatchRig
-    return BatchRig
+    return ReferenceBatchRig if plant == "reference" else BatchRig
 
 
 def _group_progress(progress: Callable[[float], None], before: int, size: int) -> Callable[[int, int], None]:
@@ -400,7 +397,7 @@ class BatchRig:
         self.block_theta = np.zeros((n, 2))
         self.block_on = np.ones((n, 2), dtype=bool)
 
-    # --- the physics: MuJoCo here; ``twin.screen.rig.ReferenceBatchRig`` overrides these three -------------
+    # --- the physics: MuJoCo here; ``ReferenceBatchRig`` overrides these three ------------------------------
     def _start_physics(
         self,
         params: list[Parameters],
@@ -757,3 +754,71 @@ class BatchRig:
         if self.record:
             log = RunLog(**{f: col[:n, i] for f, col in c.items()}, ball_lost=cols.lost[:n, i])
         return RunResult(controller=name, log=log, verdict=verdict)
+
+
+class ReferenceBatchRig(BatchRig):
+    """The fast engine's rig: ``BatchRig`` (the sensor chains, DAQ schedule, output stage and recorder over the
+    batch, the very functions a single run uses) over the analytic reference plant in the compiled kernel
+    (``twin.screen.plant``) instead of MuJoCo: each run is ``run_closed_loop(..., plant="reference")`` of the
+    same start and seed bit for bit (the kernel steps as ``ReferencePlant.advance``; tests/test_screen.py)."""
+
+    def _start_physics(
+        self,
+        params: list[Parameters],
+        x0: np.ndarray,
+        theta0: np.ndarray,
+        nthread: int,
+        batch: mjbatch.Batch | None,
+        ids: np.ndarray | None,
+        plant_cache: dict[Parameters, Plant] | None,
+    ) -> None:
+        """As ``ReferencePlant.reset``: each start checked, at rest, the clock at 0."""
+        from twin.screen.plant import plant_rows  # numba is imported when the fast engine is asked for
+
+        if batch is not None:
+            raise ValueError("the reference plant's runs are not rows of a MuJoCo batch")
+        for i, q in enumerate(params):
+            check_initial_state(q, float(x0[i]), float(theta0[i]), 0.0, 0.0)
+        self.plant = plant_rows(params)
+        self.states = np.zeros((len(params), 4))
+        self.states[:, 0], self.states[:, 1] = x0, theta0
+        self.lost_step = np.full(len(params), -1, dtype=np.int64)  # ≥ 0 once lost: the kernel skips the run
+        self.physics_time_s = 0.0
+
+    def _advance(self, volts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """``ReferencePlant.advance`` for every live run: (times (m+1,), x, θ, on-track (live, m+1))."""
+        from twin.screen.plant import PlantRows, advance_plant
+
+        live, m, h = self.live, volts.shape[1], self.dt
+        t0 = self.physics_time_s
+        every = len(live) == self.n
+        plant = self.plant if every else PlantRows(self.plant.rows[live], self.plant.timestep_s)
+        states, lost_step = self.states[live], self.lost_step[live]
+        recorded = advance_plant(plant, states, lost_step, volts, record=True)
+        assert recorded is not None
+        along, theta = recorded
+        if not np.isfinite(states).all():
+            j = int(np.flatnonzero(~np.isfinite(states).all(axis=1))[0])
+            raise FloatingPointError(
+                f"run {int(live[j])}: reference model state is not finite by t = {t0 + m * h:.3f} s"
+            )
+        on = np.ones(along.shape, dtype=bool)
+        was_lost = self.lost[live]
+        on[was_lost] = False
+        for j in np.flatnonzero(~was_lost & (lost_step >= 0)).tolist():
+            i, k = int(live[j]), int(lost_step[j])
+            self.lost[i] = True
+            self.lost_time_s[i] = t0 + k * h  # ReferencePlant's: its clock plus the step's offset
+            self.lost_state[i] = states[j]  # the state stays where the ball left the track
+            on[j, k:] = False
+        self.states[live], self.lost_step[live] = states, lost_step
+        times = t0 + np.arange(m + 1) * h
+        self.physics_time_s = float(times[-1])
+        return times, along, theta, on
+
+    def true_state(self) -> np.ndarray:
+        """SimRig.true_state for every live run: the held start, or the kernel's state (frozen once lost)."""
+        live = self.live
+        if self.held_now:
+            return self.held[live].copy()
+        return self.states[live]

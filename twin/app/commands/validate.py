@@ -127,7 +127,8 @@ def run(args: argparse.Namespace) -> int:
         return 130
     screened = report.region.screening if report.region is not None else None
     if screened is not None:
-        print(f"region: {screen_summary(screened)}")
+        if not args.json:  # the JSON holds it (the region's "screening")
+            print(f"region: {screen_summary(screened)}")
         if wrong := screened["audit"]["mismatches"]:
             print(screen_audit_failure("validate", wrong), file=sys.stderr)
             return 1
