@@ -75,7 +75,8 @@ def test_what_is_no_firmware_image_is_refused_naming_it(
     refused(
         capsys,
         ["run", "--controller", f"avr:atmega9999:{image}", *start],
-        "simavr has no MCU named atmega9999",
+        "built for atmega328p",
+        "not for atmega9999",
     )
     refused(capsys, ["sweep", "--controller", "avr:/no/such.elf"], "no such firmware image")
     refused(capsys, ["view", "--controller", "avr:/no/such.elf"], "no such firmware image")

@@ -28,6 +28,7 @@ class Child:
     ) -> None:
         self.name, self.what, self.error, self.timeout_s, self.hint = name, what, error, timeout_s, hint
         self._pending = b""  # answers read from the pipe, not yet taken
+        self.stopped = ""  # why ``line`` ended early: the process ended or did not answer (the message)
         self.proc: subprocess.Popen[bytes] | None = subprocess.Popen(
             argv,
             stdin=subprocess.PIPE,
@@ -72,7 +73,8 @@ class Child:
         while not out.endswith(b"\n") and len(out) < 1024:
             try:
                 out += self.read(1)
-            except Exception:  # noqa: BLE001 - ended: what came is the line
+            except Exception as exc:  # noqa: BLE001 - ended: what came is the line, how it ended is kept
+                self.stopped = str(exc)
                 break
         return out.strip()
 

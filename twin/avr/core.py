@@ -24,6 +24,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from twin.childproc import Child
+from twin.image import read_image
 
 __all__ = [
     "STATE_CRASHED",
@@ -35,6 +36,7 @@ __all__ = [
     "AvrError",
     "AvrUnavailable",
     "Conversion",
+    "MAX_IMAGE_BYTES",
     "Frame",
     "NO_ENTRY",
     "RunReport",
@@ -42,6 +44,7 @@ __all__ = [
     "elf_device",
     "elf_sections",
     "executable",
+    "read_elf",
 ]
 
 SOURCE = Path(__file__).with_name("cosim.c")
@@ -52,6 +55,8 @@ STATE_DONE = 6
 STATE_CRASHED = 7
 STATE_STACK_OVERFLOW = 100
 STATE_ERROR = 101  # simavr logged an error: an invalid opcode, an access outside memory (RunReport.error)
+# The largest image read: an AVR's flash is at most 256 KiB; the rest of an ELF is symbols and debug sections.
+MAX_IMAGE_BYTES = 16 << 20
 # How long one request may take before the child counts as hung (a run to the next physics step is
 # microseconds of work; a whole period of a firmware busy-looping is tens of milliseconds).
 ANSWER_TIMEOUT_S = 30.0
@@ -143,11 +148,18 @@ def executable() -> Path:
 DATA_END_SYMBOLS = (b"__bss_end", b"__noinit_end", b"__heap_start")
 
 
-def data_end(path: Path) -> int:
+def read_elf(path: Path) -> bytes:
+    """The firmware image's bytes: a regular file of at most ``MAX_IMAGE_BYTES`` (``AvrError`` naming it
+    otherwise, before it is read)."""
+    return read_image(path, "firmware image", MAX_IMAGE_BYTES, AvrError)
+
+
+def data_end(path: Path | bytes) -> int:
     """The first data address above the firmware's static data: the highest of ``DATA_END_SYMBOLS`` in the
-    ELF's symbol table; 0 when it has none (the stack is then not checked against the data)."""
+    ELF's symbol table (``path``: the image or its bytes); 0 when it has none (the stack is then not checked
+    against the data)."""
     found = 0
-    raw = path.read_bytes()[: 16 << 20]
+    raw = path if isinstance(path, bytes) else read_elf(path)
     try:
         sections = elf_sections(raw)
         for _, kind, _, _, offset, size, link, _, _, entsize in sections:
@@ -175,10 +187,11 @@ def elf_sections(raw: bytes) -> list[tuple[int, ...]]:
     return [struct.unpack_from("<10I", raw, shoff + i * shentsize) for i in range(shnum)]
 
 
-def elf_device(path: Path) -> str | None:
-    """The MCU an image was built for, as avr-gcc's ``-mmcu`` wrote it in the note ``.note.gnu.avr.deviceinfo``
-    (its last field: the device name); ``None`` when the image has no such note."""
-    raw = path.read_bytes()[: 16 << 20]
+def elf_device(path: Path | bytes) -> str | None:
+    """The MCU an image (``path``: the image or its bytes) was built for, as avr-gcc's ``-mmcu`` wrote it in the
+    note ``.note.gnu.avr.deviceinfo`` (its last field: the device name); ``None`` when the image has no such
+    note."""
+    raw = path if isinstance(path, bytes) else read_elf(path)
     try:
         sections = elf_sections(raw)
         names = sections[struct.unpack_from("<H", raw, 0x32)[0]]
@@ -229,8 +242,7 @@ class AvrCore:
     ) -> None:
         self._child: Child | None = None
         path = Path(elf)
-        if not path.is_file():
-            raise AvrError(f"{path}: no such firmware image")
+        raw = read_elf(path)
         self.path, self.mcu, self.frequency_hz = path, mcu, frequency_hz
         self.adc_reference_v = adc_reference_v
         argv = [
@@ -239,7 +251,7 @@ class AvrCore:
             mcu,
             str(frequency_hz),
             str(1023 * ADC_SCALE),
-            str(data_end(path)),
+            str(data_end(raw)),
         ]
         self._child = Child(
             argv, name=str(path), what="the co-simulation", error=AvrError, timeout_s=ANSWER_TIMEOUT_S

@@ -36,6 +36,7 @@ from twin.avr.core import (
     RunReport,
     elf_device,
     elf_sections,
+    read_elf,
 )
 from twin.engine import ControllerError
 from twin.interface import Telemetry
@@ -133,9 +134,7 @@ class AvrFirmware:
         firmware saw and wrote, to replay through another build of its law."""
         self._core: AvrCore | None = None
         path = Path(elf)
-        if not path.is_file():
-            raise AvrError(f"{path}: no such firmware image")
-        raw = path.read_bytes()
+        raw = read_elf(path)
         # ELF, 32-bit, little-endian, e_machine 83 (EM_AVR)
         if raw[:6] != b"\x7fELF\x01\x01" or raw[18:20] != b"\x53\x00":
             raise AvrError(f"{path}: not an AVR ELF image (build it with avr-gcc)")
@@ -144,7 +143,14 @@ class AvrFirmware:
         except (struct.error, ValueError):
             raise AvrError(f"{path}: a truncated ELF image ({len(raw)} bytes)") from None
         self.path = path
-        self.mcu = mcu or elf_device(path) or DEFAULT_MCU
+        device = elf_device(raw)
+        if mcu and device and mcu.lower() != device.lower():
+            # simavr would run the image on the named core, and its faults would be blamed on the firmware
+            raise AvrError(
+                f"{path}: built for {device} (its device note, avr-gcc -mmcu={device}), not for {mcu} as "
+                f"avr:{mcu}:… names; name {device} or build the image for {mcu}"
+            )
+        self.mcu = mcu or device or DEFAULT_MCU
         self.io = params.mcu_io
         self.clock_hz = int(params.mcu_io.clock_hz)
         self.period_s = params.daq.period_s

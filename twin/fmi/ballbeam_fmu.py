@@ -18,7 +18,7 @@ from pythonfmu3 import (
     Unit,
 )
 
-from twin.fmi.unit import RigUnit
+from twin.fmi.unit import RigUnit, release_state_at_exit
 
 _KINDS = {"float": Float64, "int": Int64, "bool": Boolean}
 _CAUSALITY = {
@@ -38,6 +38,7 @@ class BallBeam(Fmi3Slave):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(**kwargs)
+        release_state_at_exit(self.resources, type(self).__name__)  # pythonfmu's double free at exit
         self.rig = RigUnit(self.resources)
         self.author = "ballbeam-twin"
         self.description = self.rig.description

@@ -9,7 +9,7 @@ from typing import Any
 from pythonfmu import Boolean, Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real
 from pythonfmu.enums import Fmi2Status
 
-from twin.fmi.unit import RigUnit
+from twin.fmi.unit import RigUnit, release_state_at_exit
 
 _KINDS = {"float": Real, "int": Integer, "bool": Boolean}
 _CAUSALITY = {
@@ -29,6 +29,7 @@ class BallBeam(Fmi2Slave):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(**kwargs)
+        release_state_at_exit(self.resources, type(self).__name__)  # pythonfmu's double free at exit
         self.rig = RigUnit(self.resources)
         self.author = "ballbeam-twin"
         self.description = self.rig.description

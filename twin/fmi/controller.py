@@ -14,6 +14,7 @@ import sys
 from pathlib import Path
 
 from twin.childproc import Child
+from twin.fmi.archive import UnitError, unpack
 from twin.fmi.host import REQUEST
 from twin.interface import Controller, DaqSample
 
@@ -21,6 +22,7 @@ __all__ = ["ANSWER_TIMEOUT_S", "FmuController", "FmuError"]
 
 # A step of a controller is microseconds; a unit that has not answered in this long has hung.
 ANSWER_TIMEOUT_S = 30.0
+_LOADED: set[Path] = set()  # the extracted units this process has started once (each is checked so once)
 
 
 class FmuError(RuntimeError):
@@ -28,7 +30,12 @@ class FmuError(RuntimeError):
 
 
 class FmuController(Controller):
-    """The unit at ``path`` stepping once per ``period_s``."""
+    """The unit at ``path`` stepping once per ``period_s``. The unit is checked and extracted when the controller
+    is built (``twin.fmi.archive.unpack``: once per process; its first build here also starts the unit once, so
+    that a unit that cannot load is refused before any run); its process starts with a run (``start``) and ends
+    with ``close``, so that a batch of built controllers holds no process until each one runs."""
+
+    own_process = True  # twin.rigs.batch runs it one run at a time
 
     def __init__(self, path: str | Path, period_s: float = 0.02) -> None:
         super().__init__()
@@ -37,14 +44,19 @@ class FmuController(Controller):
         self.period_s = period_s
         self._child: Child | None = None
         self._t = 0.0
-        if not self.path.is_file():
-            raise FmuError(f"{self.path}: no such FMU")
-        self._spawn()
+        try:
+            self._folder = unpack(self.path)
+        except UnitError as exc:
+            raise FmuError(str(exc)) from None
+        if self._folder not in _LOADED:
+            self._spawn()
+            self.close()
+            _LOADED.add(self._folder)
 
     def _spawn(self) -> None:
         self.close()
         self._child = Child(
-            [sys.executable, "-m", "twin.fmi.host", str(self.path)],
+            [sys.executable, "-m", "twin.fmi.host", str(self._folder)],
             name=self.path.name,
             what="the unit's process",
             error=FmuError,
@@ -53,15 +65,18 @@ class FmuController(Controller):
         )
         line = self._child.line()
         if line != b"OK":
+            if line.startswith(b"NO "):
+                reason = line[3:].decode(errors="replace")
+            else:  # how it ended: "the unit's process ended (signal SIGSEGV): a crash in its library, …"
+                reason = self._child.stopped.partition(": ")[2] or "its process did not start"
             self.close()
-            reason = (
-                line[3:].decode(errors="replace") if line.startswith(b"NO ") else "its process did not start"
-            )
             raise FmuError(f"{self.path}: {reason}")
 
     # --- the Controller contract --------------------------------------------------------------------------
     def start(self, sample: DaqSample) -> None:
-        if self._t:  # a second run of the same controller: a fresh unit
+        if (
+            self._child is None or self._t
+        ):  # a run's own unit; a second run of the same controller: a fresh one
             self._spawn()
         self._t = 0.0
         self._step(sample)
@@ -80,7 +95,7 @@ class FmuController(Controller):
     # --- internals ----------------------------------------------------------------------------------------
     def _step(self, sample: DaqSample) -> float:
         if self._child is None:
-            raise FmuError(f"{self.path}: the unit's process is closed")
+            raise FmuError(f"{self.path}: the unit's process is not running (a step before start, or closed)")
         child = self._child
         child.write(REQUEST.pack(self._t, self.period_s, sample.ball_v, sample.angle_v))
         self._t += self.period_s

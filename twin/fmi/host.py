@@ -1,6 +1,6 @@
-"""The process a controller FMU runs in (``python -m twin.fmi.host FILE.fmu``): a crash in its shared library
-ends this process, never ballbeam's. ``twin.fmi.controller.FmuController`` starts it and speaks to it over its
-stdin and stdout, little-endian:
+"""The process a controller FMU runs in (``python -m twin.fmi.host FOLDER``, the unit as ``twin.fmi.archive``
+checked and extracted it): a crash in its shared library ends this process, never ballbeam's.
+``twin.fmi.controller.FmuController`` starts it and speaks to it over its stdin and stdout, little-endian:
 
     at start   "OK" and a newline, or "NO " and a line saying why (not an FMU, no co-simulation, a variable of
                the convention missing, an instantiation that failed)
@@ -27,7 +27,10 @@ REQUEST = struct.Struct("<4d")
 def _load(path: str) -> tuple[Any, Any, list[int], int, str]:
     import fmpy
 
+    from twin.fmi.archive import check_description
+
     md = fmpy.read_model_description(path)
+    check_description(path, md)  # checked when extracted; again here, since a library is loaded next
     if md.coSimulation is None:
         raise ValueError("not a co-simulation unit (no <CoSimulation>)")
     variables = {v.name: v for v in md.modelVariables}
@@ -37,7 +40,7 @@ def _load(path: str) -> tuple[Any, Any, list[int], int, str]:
             raise ValueError(f"no variable {name!r} (the convention: inputs ball_v, angle_v; output dac_v)")
         if v.causality != causality:
             raise ValueError(f"variable {name!r} is an {v.causality}, not an {causality}")
-    unit = fmpy.instantiate_fmu(fmpy.extract(path), md, fmi_type="CoSimulation")
+    unit = fmpy.instantiate_fmu(path, md, fmi_type="CoSimulation")
     version = md.fmiVersion
     if not version.startswith("3"):
         unit.setupExperiment(startTime=0.0)  # FMI 2.0's step before initialization

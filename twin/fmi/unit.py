@@ -8,15 +8,19 @@ in the README, "The twin in Simulink, OpenModelica and FMPy".
 
 from __future__ import annotations
 
+import atexit
+import ctypes
 import functools
 import json
 import math
+import os
+import threading
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-__all__ = ["OUTPUTS", "RIG_FILE", "STEP_TOLERANCE", "RigUnit", "Variable"]
+__all__ = ["OUTPUTS", "RIG_FILE", "STEP_TOLERANCE", "RigUnit", "Variable", "release_state_at_exit"]
 
 RIG_FILE = "rig.json"
 # How far a step may differ from the period and still be the period (the importer's sums of steps).
@@ -36,6 +40,35 @@ OUTPUTS = (
     ),
 )
 FLAGS = (("ball_lost", "the ball left the track"), ("at_stops", "the beam at its stops"))
+
+
+_RELEASED: set[str] = set()  # the libraries whose state is released at exit (one hook each)
+
+
+def release_state_at_exit(resources: str | Path, identifier: str) -> None:
+    """Make the unit's library release its interpreter state when the importer's Python exits.
+
+    pythonfmu's library (both versions) keeps that state in a static ``std::shared_ptr`` which the C++ runtime
+    destroys at the process's exit, after which the library's unload hook (``finalizePythonInterpreter``) assigns
+    to it again: a use after free, "corrupted double-linked list" and an abort in an importer whose own Python
+    loaded the unit and outlives it (FMPy's ``simulate_fmu``, twice in one process). Called first, from the
+    importer's exit handlers, that function leaves a null pointer, which the later destruction and hook leave
+    alone. Not when the library started Python itself (a host that is no Python program): its own thread ends
+    Python then, and the hook would wait for that very thread."""
+    if threading.main_thread().native_id != os.getpid():
+        return  # Python runs in the library's thread: it is the library's, not the importer's
+    for lib in sorted((Path(resources).parent / "binaries").glob(f"*/{identifier}.*")):
+        key = str(lib.resolve())
+        if key in _RELEASED:
+            continue
+        try:
+            loaded = ctypes.CDLL(
+                key, mode=os.RTLD_NOLOAD
+            )  # the importer's copy, if this is the one it loaded
+        except OSError:
+            continue
+        _RELEASED.add(key)
+        atexit.register(loaded.finalizePythonInterpreter)
 
 
 @dataclass(frozen=True)

@@ -228,8 +228,9 @@ def run_batch(
         raise RigError(f"plant = {plant!r}: expected 'twin' or 'reference'")
     probe = catalogue.make(name, run_params[0])
     # The 1 kHz laws on the true state, firmware and runs with a scenario take the single-run path; the others
-    # are batched (the reference plant's in the compiled kernel: ReferenceBatchRig).
-    every = not isinstance(probe, Controller)
+    # are batched (the reference plant's in the compiled kernel: ReferenceBatchRig). A controller in a process of
+    # its own (a controller FMU) runs one run at a time too: a batch would hold one process per run at once.
+    every = not isinstance(probe, Controller) or bool(getattr(probe, "own_process", False))
     run_scenarios = list(scenarios) if scenarios is not None else [None] * n
     single = [i for i in range(n) if every or run_scenarios[i] is not None]
     batched = sorted(set(range(n)) - set(single))
