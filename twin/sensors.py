@@ -40,6 +40,7 @@ import numpy as np
 from twin import fixedorder as fo
 from twin.converters import angle_volts_v, ball_volts_v, finite_values
 from twin.daq import adc_quantize_v, adc_quantizer
+from twin.jit import njit_cached
 from twin.parameters import AngleSensor, BallSensor, Daq, Parameters
 from twin.physics import PhysicsBlock
 
@@ -320,9 +321,7 @@ def _crossing_sums(
 
 @functools.cache
 def _compiled_crossing() -> Any:
-    import numba
-
-    return numba.njit(cache=True)(_crossing_sums)
+    return njit_cached(_crossing_sums)
 
 
 @functools.lru_cache(maxsize=64)
@@ -630,6 +629,7 @@ class BallPositionChain:
             dropout_effects_v(
                 np.asarray(t), np.asarray(v)[None, :], np.array([d[0] for d in drops]),
                 np.array([d[1] for d in drops]), np.array([0, len(drops)]), np.array([self.tau_s]), self._dropout_v,
+                compiled=False,
             )[0]
         )  # fmt: skip
 
@@ -757,9 +757,7 @@ def _dropout_sums(
 
 @functools.cache
 def _compiled_dropouts() -> Any:
-    import numba
-
-    return numba.njit(cache=True)(_dropout_sums)
+    return njit_cached(_dropout_sums)
 
 
 def dropout_effects_v(
@@ -770,15 +768,20 @@ def dropout_effects_v(
     first: np.ndarray,
     tau_s: np.ndarray,
     open_v: float,
+    *,
+    compiled: bool = True,
 ) -> np.ndarray:
     """What the dropouts change in each row's filter output at t[-1] over the knots ``t`` (K,), the wiper
     linear between them with row r's values ``v[r]`` (R, K): row r's dropouts are ``starts``/``ends``
     [first[r]:first[r + 1]], its time constant ``tau_s[r]``, the open wiper at ``open_v``. The integral of
     (v_drop − v(t))·e^(−(t_end − t)/τ)/τ over the dropped time (the dropouts clipped to the block, overlapping
     ones merged): on a piece [a, b] of one knot interval, with v_drop − v = α + β·(s − a), u = (b − a)/τ and
-    w = e^(−(t_end − b)/τ), exactly w·(α·(1 − e^(−u)) + β·τ·(u − (1 − e^(−u)))). Compiled (numba): the one
-    home of the dropouts' effect, for a chain alone and for a batch's rows at once."""
-    return _compiled_dropouts()(
+    w = e^(−(t_end − b)/τ), exactly w·(α·(1 − e^(−u)) + β·τ·(u − (1 − e^(−u)))). The one home of the
+    dropouts' effect, for a chain alone and for a batch's rows at once: compiled (numba) for a batch;
+    ``compiled=False`` runs the same function as Python, with the same bits (``tests/test_no_tick_imports.py``),
+    for a chain alone: a single run never imports numba nor compiles on a tick (a served session's clock)."""
+    sums = _compiled_dropouts() if compiled else _dropout_sums
+    return sums(
         np.ascontiguousarray(t, dtype=float), np.ascontiguousarray(v, dtype=float),
         np.asarray(starts, dtype=float), np.asarray(ends, dtype=float), np.asarray(first, dtype=np.int64),
         np.asarray(tau_s, dtype=float), float(open_v),

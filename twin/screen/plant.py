@@ -22,6 +22,7 @@ import numba
 import numpy as np
 
 from twin.dcmotor import torque_nm
+from twin.jit import njit_cached
 from twin.parameters import Parameters
 from twin.reference import COULOMB_REGULARIZATION_RAD_S, EquationCoefficients, ball_beam_accelerations
 
@@ -74,7 +75,7 @@ def _f(
     return xd, thd, xdd, thdd
 
 
-@numba.njit(cache=True)
+@njit_cached
 def _derivatives(rows: np.ndarray, states: np.ndarray, volts: np.ndarray) -> np.ndarray:
     out = np.empty_like(states)
     for i in range(states.shape[0]):
@@ -88,7 +89,7 @@ def derivatives(plant: PlantRows, states: np.ndarray, volts: np.ndarray) -> np.n
     return _derivatives(plant.rows, np.ascontiguousarray(states, dtype=float), np.asarray(volts, dtype=float))
 
 
-@numba.njit(cache=True)
+@njit_cached
 def _advance(
     rows: np.ndarray,
     h: float,
