@@ -315,6 +315,9 @@ class Calibration:
     information_condition: float = math.nan
     diagnosis: str = ""
     interval_method: str = INTERVAL_METHOD
+    # The parameters asked for that the logs do not identify (name: why): left out of ``values`` and kept at
+    # their start value in ``params``; each is also a problem (calibrate exits 1).
+    not_identifiable: dict[str, str] = field(default_factory=dict)
 
     @property
     def trustworthy(self) -> bool:
@@ -353,7 +356,8 @@ class Calibration:
             "wall_s": round(self.wall_s, 2),
             "windows": self.n_windows,
             "ticks": self.n_ticks,
-            "ci_inflation": round(self.ci_inflation, 3),
+            # JSON has no NaN: with no value identified there is no inflation to state
+            "ci_inflation": round(self.ci_inflation, 3) if math.isfinite(self.ci_inflation) else None,
             "ci_level": CONFIDENCE,
             "interval_method": self.interval_method,
             "problems": list(self.problems),
@@ -365,6 +369,10 @@ class Calibration:
             if math.isfinite(self.information_condition)
             else None,
             "diagnosis": self.diagnosis,
+            "not_identifiable": {
+                name: {"kept": _get(self.params, name), "unit": FITTABLE[name].unit, "reason": why}
+                for name, why in self.not_identifiable.items()
+            },
         }
 
 
@@ -834,6 +842,8 @@ class _Covariance:
     naive_var: np.ndarray  # (g,) their variances if the residuals were white
     information: np.ndarray  # (g, g) the globals' Fisher information, the window states marginalized
     n_clusters: int
+    # (g,) each global's sensitivity: the norm of its Jacobian column (0: the residuals do not depend on it)
+    sensitivity: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
 
 def _row_windows(problem: WindowProblem) -> np.ndarray:
@@ -859,19 +869,23 @@ def _sandwich(problem: WindowProblem, jac: scipy.sparse.spmatrix, rw: np.ndarray
     lu = scipy.sparse.linalg.splu(Hn)
     rhs = np.zeros((H.shape[0], n_g))
     rhs[np.arange(n_g), np.arange(n_g)] = 1.0 / d[:n_g]
-    X = lu.solve(rhs) / d[:, None]  # H⁻¹[:, :g]
+    with np.errstate(over="ignore", invalid="ignore"):  # a flat direction: inf, refused as not identifiable
+        X = lu.solve(rhs) / d[:, None]  # H⁻¹[:, :g]
     per_cluster = max(1, int(round(CLUSTER_S / (problem.W * problem.windows.period_s))))
     cluster = _row_windows(problem) // per_cluster
     n_c = int(cluster.max()) + 1 if cluster.size else 1
-    B = np.asarray(J @ X)  # (rows, g)
+    with np.errstate(over="ignore", invalid="ignore"):
+        B = np.asarray(J @ X)  # (rows, g)
     G = np.zeros((n_c, n_g))  # no globals (the dropout rate alone is fitted apart): an empty covariance
-    for k in range(n_g):
-        G[:, k] = np.bincount(cluster, weights=B[:, k] * rw, minlength=n_c)
-    cov = G.T @ G * n_c / max(n_c - 1, 1)
+    with np.errstate(over="ignore", invalid="ignore"):
+        for k in range(n_g):
+            G[:, k] = np.bincount(cluster, weights=B[:, k] * rw, minlength=n_c)
+        cov = G.T @ G * n_c / max(n_c - 1, 1)
     inv_block = X[:n_g]
     with np.errstate(all="ignore"):
         information = np.linalg.pinv(0.5 * (inv_block + inv_block.T))
-    return _Covariance(cov, np.diag(inv_block).copy(), information, n_c)
+    sensitivity = np.sqrt(np.maximum(H.diagonal()[:n_g], 0.0))
+    return _Covariance(cov, np.diag(inv_block).copy(), information, n_c, sensitivity)
 
 
 def _adequacy(problem: WindowProblem, z: np.ndarray) -> dict[str, ChannelAdequacy]:
@@ -981,7 +995,9 @@ def calibrate(
     problems: list[str] = []
     # A mismatched model's standard deviations mean nothing: only an adequate fit is judged on excitation.
     if not mismatched:
-        problems += _excitation_problems(problem.fit, z, intervals.std, intervals.corr)
+        # A value the logs do not identify is its own problem (below), not a loosely determined one.
+        known_std = np.where([n in intervals.unidentified for n in problem.fit], 0.0, intervals.std)
+        problems += _excitation_problems(problem.fit, z, known_std, intervals.corr)
     warnings += _correlation_warnings(problem, intervals.corr)
     diagnosis = ""
     if mismatched:
@@ -996,15 +1012,23 @@ def calibrate(
     losses, params_with_losses = _fit_dropout(
         problem, z, params_fitted, base, warnings if DROPOUT in fit else []
     )
+    unidentified = dict(intervals.unidentified)
     if DROPOUT in fit:
         values[DROPOUT], params_fitted = losses, params_with_losses
+        reason = _unidentified(losses.ci_low, losses.ci_high, losses.sd, 1.0)
+        if reason:
+            unidentified[DROPOUT] = reason
     warnings += _beyond_scope(losses)
+    correlation = intervals.corr
+    if unidentified:
+        values, correlation, params_fitted = _leave_out(problem, z, base, values, correlation, unidentified)
+        problems.insert(0, _unidentified_problem(base, unidentified))
     pred_b0, pred_a0 = problem.predict(fitted.z_before)
     pred_b1, pred_a1 = problem.predict(z)
     return Calibration(
         params=params_fitted,
         values=values,
-        correlation=intervals.corr,
+        correlation=correlation,
         rms_before=_rms(problem, pred_b0, pred_a0),
         rms_after=_rms(problem, pred_b1, pred_a1),
         converged=bool(fitted.result.success),
@@ -1019,6 +1043,7 @@ def calibrate(
         dropped=list(problem.dropped),
         information_condition=condition,
         diagnosis=diagnosis,
+        not_identifiable=unidentified,
         traces={
             "t_s": np.arange(problem.n_windows * problem.W) * problem.windows.period_s,
             "y_ball_m": problem.windows.y_ball_m.ravel(),
@@ -1055,8 +1080,10 @@ class _Intervals:
     values: dict[str, FittedValue]
     corr: np.ndarray  # the globals' correlation matrix
     inflation: float  # median of the cluster-robust over the white-residual standard deviations
-    warnings: list[str]  # per value, in the fit's order: undetermined, unidentifiable, on a bound
+    warnings: list[str]  # per value, in the fit's order: unidentifiable, on a bound
     std: np.ndarray  # the globals' statistical (cluster-robust) standard deviations
+    # The globals the logs do not identify (``_unidentified``): the reason for each, in the fit's order.
+    unidentified: dict[str, str] = field(default_factory=dict)
 
 
 def _intervals(problem: WindowProblem, fitted: _Fit) -> _Intervals:
@@ -1076,6 +1103,7 @@ def _intervals(problem: WindowProblem, fitted: _Fit) -> _Intervals:
     z_crit = float(scipy.stats.t.ppf(0.5 + CONFIDENCE / 2, max(sandwich.n_clusters - 1, 1)))
     values: dict[str, FittedValue] = {}
     warnings: list[str] = []
+    unidentified: dict[str, str] = {}
     for i, name in enumerate(problem.fit):
         spec = FITTABLE[name]
         rel, absolute = MODEL_RESOLUTION.get(name, (0.0, 0.0))
@@ -1090,9 +1118,11 @@ def _intervals(problem: WindowProblem, fitted: _Fit) -> _Intervals:
             sd=half / z_crit,
             statistical_half=z_crit * std[i],
         )
-        if not np.isfinite(std[i]) or std[i] == 0.0:
-            warnings.append(f"{name}: the data do not determine it (flat direction)")
-        elif hi - lo > spec.upper - spec.lower:
+        reason = _unidentified(lo, hi, float(std[i]), float(sandwich.sensitivity[i]))
+        if reason:
+            unidentified[name] = reason
+            continue
+        if hi - lo > spec.upper - spec.lower:
             warnings.append(
                 f"{name}: its {CONFIDENCE:.0%} interval is wider than its bounds: not identifiable here"
             )
@@ -1100,7 +1130,53 @@ def _intervals(problem: WindowProblem, fitted: _Fit) -> _Intervals:
             warnings.append(
                 f"{name} = {z[i]:.6g} {spec.unit} sits on its bound [{spec.lower:g}, {spec.upper:g}]"
             )
-    return _Intervals(values, corr, inflation, warnings, std)
+    return _Intervals(values, corr, inflation, warnings, std, unidentified)
+
+
+def _leave_out(
+    problem: WindowProblem,
+    z: np.ndarray,
+    base: Parameters,
+    values: dict[str, FittedValue],
+    corr: np.ndarray,
+    unidentified: dict[str, str],
+) -> tuple[dict[str, FittedValue], np.ndarray, Parameters]:
+    """The values, correlation and parameters without the ``unidentified`` ones: those stay at their start
+    value (``base``), so params.toml and calibration.json hold what the logs identify, as their readers
+    (``--params``, ``--calibration``) take it."""
+    kept = [i for i, name in enumerate(problem.fit) if name not in unidentified]
+    at_start = z.copy()
+    for i, name in enumerate(problem.fit):
+        if name in unidentified:
+            at_start[i] = _get(base, name)
+    params = problem.parameters(at_start)
+    if DROPOUT in values and DROPOUT not in unidentified:
+        params = params.with_overrides({DROPOUT: values[DROPOUT].value}, origin="calibration")
+    values = {name: v for name, v in values.items() if name not in unidentified}
+    return values, corr[np.ix_(kept, kept)], params
+
+
+def _unidentified_problem(base: Parameters, unidentified: dict[str, str]) -> str:
+    """The problem of the parameters the logs do not identify, each with why and the value it keeps."""
+    told = []
+    for name, why in unidentified.items():
+        hint = ": the logs' command never reaches the rails" if name == RAIL else ""
+        told.append(f"{name}: {why}{hint}; kept at its start {_get(base, name):g} {FITTABLE[name].unit}")
+    return (
+        "not identifiable by these logs: "
+        + "; ".join(told)
+        + " — left out of params.toml's fit (record a log that exercises it, or drop it from --fit)"
+    )
+
+
+def _unidentified(lo: float, hi: float, std: float, sensitivity: float) -> str:
+    """Why a fitted value is not identified by the logs ("" when it is): the residuals do not depend on it
+    (zero sensitivity, e.g. a rail the command never reaches) or its interval is not finite."""
+    if sensitivity == 0.0:
+        return "the residuals do not depend on it (zero sensitivity)"
+    if not (math.isfinite(lo) and math.isfinite(hi) and math.isfinite(std)) or std == 0.0:
+        return f"its {CONFIDENCE:.0%} interval is [{lo:.6g}, {hi:.6g}] (a flat direction of the fit)"
+    return ""
 
 
 def _loosely_determined(name: str, value: float, std: float) -> str:

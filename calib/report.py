@@ -2,7 +2,9 @@
 
     DIR/params.toml        every parameter, the fitted ones replaced (loads with --params)
     DIR/calibration.json   {"params": {name: {value, ci_low, ci_high, initial, unit}}, "rms_residual": …,
-                            "converged", "warnings", "correlation", …}
+                            "converged", "warnings", "correlation", "not_identifiable": {name: {kept,
+                            unit, reason}}, …} (a parameter the logs do not identify is out of "params"
+                            and the correlations, and keeps its start value in params.toml)
     DIR/report.md          measured against simulated before and after, residuals over time and their
                            histogram, the intervals and the correlation matrix (PNGs beside it;
                            ``calib.report_render``)

@@ -18,6 +18,11 @@ Five signals are statistics over the trailing window (``WINDOWED`` and ``rail_sh
 are the verdict's final-window mean, peak-to-peak and saturated share. On a finite run ``eventually always P``
 is P at the last tick (its robustness too), so the verdict's checks are formulas
 (docs/examples/requirements.toml); a run shorter than the window has windows of what there is.
+
+Every formula is checked when its file is loaded, before any run (``parse_requirements``: bounds below 0 or
+reversed, numbers not finite, division by other than a non-zero number, sqrt/exp/pow, nesting; then
+``check_timing`` against the run's period and duration), and each robustness is stated finite (``stated``):
+whatever a command writes is valid JSON that ``run --replay`` reads back.
 """
 
 from __future__ import annotations
@@ -30,6 +35,7 @@ import tomllib
 import warnings
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from fractions import Fraction
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -42,9 +48,11 @@ if TYPE_CHECKING:
     from twin.parameters import Parameters
 
 __all__ = [
+    "ROBUSTNESS_LIMIT",
     "SIGNALS",
     "Requirement",
     "Spec",
+    "check_timing",
     "load_requirements",
     "load_spec",
     "margins",
@@ -52,6 +60,7 @@ __all__ = [
     "parse_requirements",
     "robustness",
     "run_signals",
+    "stated",
     "violated",
 ]
 
@@ -85,6 +94,15 @@ WINDOWED: dict[str, tuple[str, Callable[[np.ndarray], Any]]] = {
 }
 MAX_REQUIREMENTS = 100
 MAX_FORMULA_CHARS = 2000
+# Operators and parentheses nested deeper than this are refused: rtamt's parser and monitor recurse per level.
+MAX_NESTING = 40
+# A robustness beyond ±this (±inf: e.g. `eventually` over a window where the run has no tick, or a bound no
+# number reaches) or undefined (NaN: inf − inf, a run with no tick) is stated as ±this, NaN as −this (it
+# counts as violated): JSON has no infinities, and every file a command writes is one its reader accepts.
+ROBUSTNESS_LIMIT = 1e100
+# Arithmetic whose result can fail on a run's values (a negative under sqrt, an overflowing exp): refused
+# when the file is loaded, rather than after the run. Division is allowed by a non-zero number only.
+REFUSED_FUNCTIONS = {"Sqrt": "sqrt", "Exp": "exp", "Pow": "pow"}
 
 
 @dataclass(frozen=True)
@@ -104,18 +122,139 @@ def parse_requirements(data: Any, where: str) -> tuple[Requirement, ...]:
     out = []
     for name, formula in table.items():
         if not isinstance(formula, str) or not formula.strip():
-            raise ParameterError(f"{where}: requirement {name!r} = {formula!r}: a formula in quotes")
+            shown = (
+                repr(formula) if isinstance(formula, (int, float, bool)) else f"a {type(formula).__name__}"
+            )
+            raise ParameterError(f"{where}: requirement {name!r} = {shown[:80]}: a formula in quotes")
         if len(formula) > MAX_FORMULA_CHARS:
             raise ParameterError(
                 f"{where}: requirement {name!r}: a formula of at most {MAX_FORMULA_CHARS} characters"
             )
         requirement = Requirement(str(name), formula.strip())
+        depth = _paren_depth(requirement.formula)
+        if depth > MAX_NESTING:
+            raise ParameterError(
+                f"{where}: requirement {name!r}: parentheses nested {depth} deep; at most {MAX_NESTING}"
+            )
         try:
-            _monitor(requirement, 0.02)
+            spec = _monitor(requirement, 0.02)
+        except RecursionError:
+            raise ParameterError(
+                f"{where}: requirement {name!r}: operators nested too deep; at most {MAX_NESTING}"
+            ) from None
         except Exception as exc:  # noqa: BLE001 - rtamt's parser raises its own types
             raise ParameterError(f"{where}: requirement {name!r}: {_say(exc)}") from None
+        problem = _shape_problem(spec.ast.specs[0], 1)
+        if problem:
+            raise ParameterError(f"{where}: requirement {name!r}: {problem}")
         out.append(requirement)
     return tuple(out)
+
+
+def _paren_depth(formula: str) -> int:
+    depth = deepest = 0
+    for char in formula:
+        depth += (char == "(") - (char == ")")
+        deepest = max(deepest, depth)
+    return deepest
+
+
+def _shape_problem(node: Any, depth: int) -> str | None:
+    """What makes a parsed formula unfit to judge whatever the run (None: nothing): nesting deeper than
+    ``MAX_NESTING``, a number that is not finite, a division by other than a non-zero number, a function
+    whose value can fail on a run (``REFUSED_FUNCTIONS``), a time bound below 0 or above its other end."""
+    kind = type(node).__name__
+    if depth > MAX_NESTING:
+        return f"operators nested deeper than {MAX_NESTING}"
+    if kind == "Constant" and not math.isfinite(float(node.val)):
+        return f"the number {node.val} is not finite"
+    if kind in REFUSED_FUNCTIONS:
+        return (
+            f"{REFUSED_FUNCTIONS[kind]}(…) can fail on a run's values (a negative under sqrt or pow, an "
+            "exp that overflows): write the comparison without it (sqrt(a) <= c as a <= c*c)"
+        )
+    if kind == "Division":
+        divisor = node.children[1]
+        if type(divisor).__name__ != "Constant":
+            return (
+                f"divides by {divisor.name}, which a run can make 0: divide by a number only "
+                "(a / y <= c as a <= c * y for y > 0)"
+            )
+        if float(divisor.val) == 0.0:
+            return f"divides by {divisor.name}: division by zero"
+    if hasattr(node, "begin_unit"):  # a timed operator: its interval [begin, end]
+        begin, end = _bound_s(node.begin, node.begin_unit), _bound_s(node.end, node.end_unit)
+        if begin < 0 or end < 0:
+            return f"{_interval(node)}: a time bound below 0 s (time runs from the tick judged on)"
+        if begin > end:
+            return (
+                f"{_interval(node)}: the lower bound {float(begin):g} s is above the upper {float(end):g} s"
+            )
+    for child in node.children:
+        problem = _shape_problem(child, depth + 1)
+        if problem:
+            return problem
+    return None
+
+
+# rtamt's time units in its own integer base (nanoseconds); a bound without a unit is in seconds.
+_UNIT_NS = {"s": 10**9, "ms": 10**6, "us": 10**3, "ns": 1}
+
+
+def _bound_s(value: Any, unit: str) -> Fraction:
+    return Fraction(value) * _UNIT_NS[unit or "s"] / _UNIT_NS["s"]
+
+
+def _interval(node: Any) -> str:
+    """A timed operator as written, its bounds in seconds: ``eventually[0:5]``."""
+    operator = type(node).__name__.removeprefix("Timed").lower()
+    begin, end = _bound_s(node.begin, node.begin_unit), _bound_s(node.end, node.end_unit)
+    return f"{operator}[{float(begin):g}:{float(end):g}]"
+
+
+# The past-time operators: they look back from the tick judged, not ahead.
+_LOOKING_BACK = {"TimedOnce", "TimedHistorically", "TimedSince"}
+
+
+def _horizon_problem(node: Any, period_ns: Fraction, duration_s: float, ahead: Fraction) -> str | None:
+    """The first timed operator whose bounds are not whole DAQ periods or that looks (with the operators it
+    is nested in) past the run's end; ``ahead``: how far its parents already look, in seconds."""
+    if hasattr(node, "begin_unit"):
+        for value, unit in ((node.begin, node.begin_unit), (node.end, node.end_unit)):
+            ticks = Fraction(value) * _UNIT_NS[unit or "s"] / period_ns
+            if ticks.denominator != 1:
+                period_s = float(period_ns / _UNIT_NS["s"])
+                low, high = math.floor(ticks) * period_s, math.ceil(ticks) * period_s
+                return (
+                    f"{_interval(node)}: {float(_bound_s(value, unit)):g} s is not a whole number of DAQ periods "
+                    f"({period_s:g} s): the nearest are {low:.10g} and {high:.10g} s"
+                )
+        if type(node).__name__ not in _LOOKING_BACK:
+            ahead += _bound_s(node.end, node.end_unit)
+        if ahead > Fraction(duration_s):
+            return (
+                f"{_interval(node)}: looks {float(ahead):g} s ahead (with the operators around it), past "
+                f"the run's {duration_s:g} s"
+            )
+    for child in node.children:
+        problem = _horizon_problem(child, period_ns, duration_s, ahead)
+        if problem:
+            return problem
+    return None
+
+
+def check_timing(
+    requirements: tuple[Requirement, ...], where: str, period_s: float, duration_s: float
+) -> None:
+    """Refuse (``ParameterError`` naming ``where``, the requirement and the bound) a formula whose time bounds
+    are not whole DAQ periods of ``period_s`` or look past a run of ``duration_s``: checked before a run, as
+    rtamt's monitor refuses the one and pads the other beyond the run with ±inf (and memory)."""
+    # rtamt's own arithmetic: the period in its nanoseconds, exactly as it converts a float period
+    period_ns = Fraction(float(period_s) * _UNIT_NS["s"])
+    for r in requirements:
+        problem = _horizon_problem(_monitor(r, 0.02).ast.specs[0], period_ns, duration_s, Fraction(0))
+        if problem:
+            raise ParameterError(f"{where}: requirement {r.name!r}: {problem}")
 
 
 @dataclass(frozen=True)
@@ -139,6 +278,11 @@ def load_spec(path: str | Path, checks: tuple[str, ...] = ()) -> Spec:
         data = tomllib.loads(raw.decode("utf-8-sig"))
     except (UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
         raise ParameterError(f"{path}: not a TOML requirements file: {exc}") from None
+    except RecursionError:
+        raise ParameterError(
+            f"{path}: tables or arrays nested too deep for a requirements file (one [requirements] table "
+            'of name = "formula")'
+        ) from None
     requirements = parse_requirements(data, str(path))
     extra = sorted(set(data) - {"requirements", "validate"})
     if extra:
@@ -257,18 +401,29 @@ def run_signals(
 def robustness(
     requirements: tuple[Requirement, ...], signals: Mapping[str, np.ndarray], period_s: float
 ) -> dict[str, float]:
-    """Each requirement's robustness at time 0 over ``signals`` (``run_signals``); NaN for a run with no tick."""
+    """Each requirement's robustness at time 0 over ``signals`` (``run_signals``) as ``stated`` (a run with no
+    tick: −``ROBUSTNESS_LIMIT``, nothing to judge)."""
     times = np.asarray(signals["time"], dtype=float)
     if not times.size:
-        return {r.name: math.nan for r in requirements}
+        return {r.name: stated(math.nan) for r in requirements}
     # rtamt keys its samples by time: whole periods from 0 (the ticks' times carry the physics' rounding)
     data = {"time": (np.round(times / period_s) * period_s).tolist()}
     data.update({name: np.asarray(signals[name], dtype=float).tolist() for name in SIGNALS})
     out = {}
     for r in requirements:
-        values = _monitor(r, period_s).evaluate(data)
-        out[r.name] = float(values[0][1])
+        try:
+            values = _monitor(r, period_s).evaluate(data)
+        except (ArithmeticError, ValueError) as exc:  # what parse_requirements cannot rule out
+            raise ParameterError(f"requirement {r.name!r} = {r.formula!r}: on this run: {exc}") from None
+        out[r.name] = stated(float(values[0][1]))
     return out
+
+
+def stated(value: float) -> float:
+    """A robustness as it is stated (``ROBUSTNESS_LIMIT``): finite, NaN as −limit."""
+    if math.isnan(value):
+        return -ROBUSTNESS_LIMIT
+    return min(max(value, -ROBUSTNESS_LIMIT), ROBUSTNESS_LIMIT)
 
 
 def margins(
@@ -280,5 +435,5 @@ def margins(
 
 
 def violated(values: Mapping[str, float]) -> list[str]:
-    """The requirements whose robustness is negative (or NaN: a run with nothing to judge)."""
+    """The requirements whose robustness is negative (or NaN)."""
     return [name for name, value in values.items() if not value >= 0]

@@ -7,13 +7,20 @@ import json
 import sys
 from pathlib import Path
 
-from twin.app.commands.common import add_params_options, inputs, load_params, progress_bar, write_out
+from twin.app.commands.common import (
+    add_params_options,
+    check_overwrite,
+    inputs,
+    load_params,
+    progress_bar,
+    write_out,
+)
 from twin.app.options import finite_float
 from twin.outputs import check_output_folder
 
 HELP = (
     "fit the twin's parameters to logs recorded on a rig (exit 0 converged and adequate; 1 not "
-    "converged, model mismatch or weak excitation; 2 a log refused)"
+    "converged, model mismatch, weak excitation or a parameter the logs do not identify; 2 a log refused)"
 )
 
 
@@ -44,6 +51,7 @@ def run(args: argparse.Namespace) -> int:
     from calib.report import OUTPUT_FILES, write_report
     from twin.parameters import ParameterError
 
+    check_overwrite(args, "--out")
     start = load_params(args)
     fit = [name.strip() for name in args.fit.split(",") if name.strip()]
     unknown = [n for n in fit if n not in FITTABLE]
@@ -73,13 +81,16 @@ def run(args: argparse.Namespace) -> int:
             print(
                 f"{name:<36} {v.value:12.6g}  [{v.ci_low:.6g}, {v.ci_high:.6g}]  (start {v.initial:.6g}) {v.unit}"
             )
+        for name in cal.not_identifiable:  # the problem on stderr says why and the value it keeps
+            print(f"{name:<36} not identifiable by these logs: kept at its start value")
         print(f"converged: {cal.converged} ({cal.message}); {cal.wall_s:.1f} s")
         for warning in cal.warnings:
             print(f"warning: {warning}")
         if args.out is not None:
             print(f"wrote {Path(args.out) / 'params.toml'}, calibration.json, report.md")
     # A fit that did not converge, or whose residuals or information say it cannot be trusted (model
-    # mismatch, weak excitation), exits 1: its files are written for inspection, its message is on stderr.
+    # mismatch, weak excitation, a parameter the logs do not identify: kept at its start value in
+    # params.toml), exits 1: its files are written for inspection, its message is on stderr.
     for problem in cal.problems:
         print(f"calibrate: {problem}", file=sys.stderr)
     return 0 if cal.trustworthy else 1
