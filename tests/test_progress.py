@@ -1,5 +1,6 @@
-"""Progress moves as runs advance (not only when a 64-run batch ends) and changes no number; a job of stages
-(validate) reports one count over all its stages with the stage named, so that its ETA is the whole job's."""
+"""Progress counts whole runs done, as their batches come back (what an interrupt keeps: a batch running is
+lost), never fractions of a batch's ticks, and changes no number; a job of stages (validate) reports one
+count over all its stages with the stage named, so that its ETA is the whole job's."""
 
 import dataclasses
 from pathlib import Path
@@ -16,7 +17,7 @@ from twin.app.validate import validate
 from twin.parameters import Parameters
 
 SPREAD = Path(__file__).resolve().parent.parent / "docs" / "examples" / "spread.toml"
-# Two seconds of each run: the number of ticks (100) is what progress is counted in within a batch.
+# Two seconds of each run.
 RUNS = Runs("appendix-sf", Parameters(), 2.0, True, "twin", False)
 
 
@@ -29,34 +30,31 @@ def _recorder() -> tuple[list[tuple[int, int, str]], object]:
     return calls, progress
 
 
-def test_one_batch_reports_every_run_as_it_advances() -> None:
-    """Six runs in one batch (one chunk): the count passes 1, 2, … 6 before the batch ends, never goes back,
-    and the records equal those of the same job without progress."""
-    starts = np.column_stack([np.linspace(-0.2, 0.2, 6), np.zeros(6)])
-    seeds = point_seeds(3, 6)
+def test_progress_counts_the_runs_of_each_batch_as_it_comes_back() -> None:
+    """64 runs in two batches of 32: the count is 0, 32, 64 (nothing in between: no run of a batch is done
+    before the batch is), and the records equal those of the same job without progress."""
+    n = 64
+    starts = np.column_stack([np.linspace(-0.2, 0.2, n), np.zeros(n)])
+    seeds = point_seeds(3, n)
     calls, progress = _recorder()
     records, complete = run_starts(RUNS, starts, seeds, progress=progress)  # type: ignore[arg-type]
     plain, _ = run_starts(RUNS, starts, seeds)
     assert complete and records == plain
-    done = [d for d, _, _ in calls]
-    assert done == sorted(done) and done[0] == 0 and done[-1] == 6
-    assert set(done) == set(range(7))  # every whole run reported once the batch has advanced that far
-    assert all(total == 6 for _, total, _ in calls)
+    assert calls == [(0, n, ""), (32, n, ""), (n, n, "")]
 
 
-def test_a_monte_carlo_of_twenty_moves_before_it_ends() -> None:
-    """The issue's case: ``montecarlo --n 20`` (one 64-run chunk) sat at 0 % until done."""
+def test_a_monte_carlo_counts_whole_runs() -> None:
+    """``montecarlo --n 64``: two batches of 32; the bar showed fractions of ticks over one batch of all."""
     calls, progress = _recorder()
-    settings = MonteCarloSettings("appendix-sf", 20, -0.2, 0.3, duration_s=1.0, seed=0)
+    settings = MonteCarloSettings("appendix-sf", 64, -0.2, 0.3, duration_s=1.0, seed=0)
     result = run_montecarlo(settings, Parameters(), load_spread(SPREAD, Parameters()), progress=progress)  # type: ignore[arg-type]
     assert result.complete
-    done = [d for d, _, _ in calls]
-    assert len([d for d in done if 0 < d < 20]) >= 10 and done[-1] == 20
+    assert [d for d, _, _ in calls] == [0, 32, 64]
 
 
-def test_a_robust_map_moves_within_its_one_wave() -> None:
-    """A brute-force robust map is one job of every start on every rig: its count moves before the job
-    ends (it sat at 0 until the end), never goes back, and changes no number."""
+def test_a_robust_map_counts_whole_runs() -> None:
+    """A brute-force robust map is one job of every start on every rig (12 runs, one batch): its count is
+    whole runs, never goes back, and changes no number."""
     from twin.app.robust import run_robust
     from twin.app.sweep import Grid, SweepSettings
 
@@ -69,7 +67,7 @@ def test_a_robust_map_moves_within_its_one_wave() -> None:
     }
     done = [d for d, _, _ in calls]
     assert done == sorted(done) and done[-1] == 12 and all(total == 12 for _, total, _ in calls)
-    assert len({d for d in done if 0 < d < 12}) >= 6
+    assert set(done) == {0, 12}
 
 
 @pytest.mark.quick

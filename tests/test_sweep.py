@@ -73,8 +73,8 @@ def test_every_point_is_its_single_run() -> None:
 @pytest.mark.slow
 def test_chunks_and_workers_change_nothing(monkeypatch: pytest.MonkeyPatch) -> None:
     whole = run_sweep(SMALL).to_json()
-    monkeypatch.setattr(fanout, "CHUNK_RUNS", 2)
-    monkeypatch.setattr(fanout, "IN_PROCESS_CHUNK_RUNS", 2)
+    monkeypatch.setattr(fanout, "MIN_BATCH_RUNS", 2)
+    monkeypatch.setattr(fanout, "MAX_BATCH_RUNS", 2)
     assert run_sweep(SMALL).to_json() == whole
     assert run_sweep(SMALL, workers=2).to_json() == whole
 
@@ -94,7 +94,8 @@ def test_a_dask_cluster_gives_the_local_result() -> None:
 
 
 def test_an_interrupted_sweep_keeps_the_points_done(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(fanout, "IN_PROCESS_CHUNK_RUNS", 4)
+    monkeypatch.setattr(fanout, "MIN_BATCH_RUNS", 4)
+    monkeypatch.setattr(fanout, "MAX_BATCH_RUNS", 4)
     real = fanout.run_chunk
     calls = []
 

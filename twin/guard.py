@@ -23,7 +23,10 @@ How a blocked call is stopped (a Python thread cannot be killed):
 
 The real Ctrl-C is told apart from a controller's ``raise KeyboardInterrupt`` by the SIGINT handler
 installed here (``install_interrupt_handler``): it raises ``Interrupted``, a ``KeyboardInterrupt``
-subclass. A process that ignores SIGINT (the fan-out's workers) cannot receive a Ctrl-C at all.
+subclass. A process that ignores SIGINT (the fan-out's workers) cannot receive a Ctrl-C at all. The CLI
+installs it for SIGTERM and SIGHUP too (``terminate=True``): ``kill``, ``timeout`` or a closed terminal then
+end a long job as Ctrl-C does, keeping the runs done; the exit code says which signal it was
+(``interrupt_exit_code``: 128 + the signal's number, 130 for Ctrl-C, 143 for SIGTERM, 129 for SIGHUP).
 """
 
 from __future__ import annotations
@@ -35,7 +38,8 @@ import signal
 import threading
 import time
 import weakref
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from typing import Any, TypeVar
 
 __all__ = [
@@ -45,13 +49,19 @@ __all__ = [
     "Fault",
     "Guard",
     "Interrupted",
+    "STOP_SIGNALS",
     "Stalled",
     "check_timeout_s",
+    "command_ended",
     "default_timeout_s",
     "describe",
     "fault_text",
     "first_call_budget_s",
     "install_interrupt_handler",
+    "interrupt_exit_code",
+    "job_runs",
+    "pending_interrupt",
+    "interrupt_name",
     "is_interrupt",
     "safe_name",
     "set_default_timeout_s",
@@ -72,7 +82,8 @@ class Stalled(BaseException):
 
 
 class Interrupted(KeyboardInterrupt):
-    """The process's own Ctrl-C (SIGINT), as raised by the handler installed here."""
+    """The process's own Ctrl-C (SIGINT), or SIGTERM/SIGHUP where the CLI asked (``terminate=True``), as
+    raised by the handler installed here."""
 
 
 class Fault(Exception):
@@ -170,17 +181,95 @@ def first_call_budget_s(timeout_s: float | None = None) -> float:
     return FIRST_CALL_BUDGET_S if timeout_s is None else max(timeout_s, FIRST_CALL_BUDGET_S)
 
 
-# --- Ctrl-C ---------------------------------------------------------------------------------------------
+# --- Ctrl-C, SIGTERM, SIGHUP -----------------------------------------------------------------------------
+# The signal that interrupted this process last (None: none yet): its exit code and name.
+_interrupted_by: int | None = None
+# Ended as Ctrl-C is: ``kill``'s and ``timeout``'s default signal, and a terminal closing under the job.
+STOP_SIGNALS = (signal.SIGTERM, signal.SIGHUP)
+# A command of the CLI (``install_interrupt_handler(terminate=True)``) that has started a job's runs
+# (``job_runs``): a first signal between its runs does not raise where the job's code happens to be (its
+# results would be lost) but stops its next runs; a signal within its runs raises there (``run_starts``
+# keeps what came back). A second signal always raises at once.
+_between_runs_deferred = False
+_in_job = False
+_in_runs = 0
+_deferred = False  # a signal came between a job's runs and has stopped no runs yet
+
+
 def _on_sigint(signum: int, frame: object) -> None:
+    global _interrupted_by, _deferred
+    first = _interrupted_by is None
+    _interrupted_by = signum
+    if first and _between_runs_deferred and _in_job and not _in_runs:
+        _deferred = True
+        return
     raise Interrupted
 
 
-def install_interrupt_handler() -> None:
+def install_interrupt_handler(*, terminate: bool = False) -> None:
     """In the main thread, replace Python's default SIGINT handler by one raising ``Interrupted`` (the same
-    behaviour, told apart from a controller's own ``KeyboardInterrupt``); any other handler is kept."""
+    behaviour, told apart from a controller's own ``KeyboardInterrupt``); any other handler is kept.
+    ``terminate`` (the CLI, as a command starts): SIGTERM and SIGHUP at their default (which ends the process
+    on the spot, writing nothing) are handled alike, so that a job stopped by ``kill`` or ``timeout`` keeps
+    what it did as on Ctrl-C; and once a job's runs have started, a first signal between them waits for its
+    next runs (``job_runs``) instead of raising in the job's own code."""
+    global _interrupted_by, _between_runs_deferred, _in_job, _in_runs, _deferred
     if threading.current_thread() is threading.main_thread():
         if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
             signal.signal(signal.SIGINT, _on_sigint)
+        if terminate:  # a command starts: nothing has interrupted it yet
+            _interrupted_by, _deferred = None, False
+            _between_runs_deferred, _in_job, _in_runs = True, False, 0
+            for signum in STOP_SIGNALS:
+                if signal.getsignal(signum) is signal.SIG_DFL:
+                    signal.signal(signum, _on_sigint)
+
+
+def command_ended() -> None:
+    """Undo what ``install_interrupt_handler(terminate=True)`` added and forget the command's signal: SIGTERM
+    and SIGHUP at their defaults, no deferral between runs (``main`` called in a process that goes on)."""
+    global _interrupted_by, _deferred, _between_runs_deferred, _in_job
+    _interrupted_by, _deferred = None, False
+    _between_runs_deferred = _in_job = False
+    if threading.current_thread() is threading.main_thread():
+        for signum in STOP_SIGNALS:
+            if signal.getsignal(signum) is _on_sigint:
+                signal.signal(signum, signal.SIG_DFL)
+
+
+@contextmanager
+def job_runs() -> Iterator[bool]:
+    """Around a job's runs (``twin.app.fanout.run_starts``): yields whether they must not start (the process
+    was interrupted before them: the job winds down with what it has); within the block a signal raises
+    ``Interrupted``, which the caller turns into the runs done so far."""
+    global _in_job, _in_runs, _deferred
+    _in_job = True
+    stop = _interrupted_by is not None and (_deferred or _between_runs_deferred)
+    _deferred = False
+    _in_runs += 1
+    try:
+        yield stop
+    finally:
+        _in_runs -= 1
+
+
+def pending_interrupt() -> bool:
+    """Whether a signal came after a job's last runs (while it judged or wrote them) and stopped nothing:
+    its outputs are complete, and the process still ends as interrupted (``interrupt_exit_code``)."""
+    return _deferred
+
+
+def interrupt_exit_code() -> int:
+    """128 + the number of the signal that interrupted the process (the shell's convention): 130 for Ctrl-C
+    (and a ``KeyboardInterrupt`` no signal of ours raised), 143 for SIGTERM, 129 for SIGHUP."""
+    return 128 + (_interrupted_by if _interrupted_by is not None else signal.SIGINT)
+
+
+def interrupt_name() -> str:
+    """What interrupted the process, for its message: ``Ctrl-C``, ``SIGTERM`` or ``SIGHUP``."""
+    if _interrupted_by is None or _interrupted_by == signal.SIGINT:
+        return "Ctrl-C"
+    return signal.Signals(_interrupted_by).name
 
 
 def is_interrupt(exc: BaseException, *, in_helper: bool = False) -> bool:
@@ -270,17 +359,22 @@ class _Helper:
         self.thread.start()
 
     def _serve(self) -> None:
-        while True:
-            self.go.wait()
-            self.go.clear()
-            job = self.job
-            if job is None:
-                return
-            try:
-                self.result = (True, job[0](job[1]))
-            except BaseException as exc:  # noqa: BLE001 - handed back to the caller
-                self.result = (False, exc)
-            self.done.set()
+        # An abandoned call's Stalled may land after the call returned (between two calls, in a wait): the
+        # guard has moved on, so it ends the thread quietly instead of printing a thread's traceback.
+        try:
+            while True:
+                self.go.wait()
+                self.go.clear()
+                job = self.job
+                if job is None:
+                    return
+                try:
+                    self.result = (True, job[0](job[1]))
+                except BaseException as exc:  # noqa: BLE001 - handed back to the caller
+                    self.result = (False, exc)
+                self.done.set()
+        except Stalled:
+            return
 
     def stop(self) -> None:
         """End the idle thread (its guard is gone)."""
@@ -294,6 +388,7 @@ class _Helper:
         ident = self.thread.ident
         if ident is not None:
             ctypes.pythonapi.PyThreadState_SetAsyncExc(ctypes.c_ulong(ident), ctypes.py_object(Stalled))
+        self.go.set()  # a call that returned meanwhile finds no job and the thread ends
 
 
 class Guard:

@@ -2,7 +2,8 @@
 
 Exit codes: 0 success (for ``run``: the ball was held), 1 a run whose ball was lost or not held, or whose
 controller failed, 2 bad input (arguments, parameter files, output paths), each with a one-line message
-and no traceback.
+and no traceback; 130 interrupted by Ctrl-C, 143 by SIGTERM (``kill``, ``timeout``), 129 by SIGHUP: a long
+job then writes and reports the runs it finished, its outputs marked incomplete.
 
 Outputs (``--log``, ``--plot``, ``--out``) are checked before any work (twin.outputs): a known extension of
 the file written (a link's target), not an existing file unless ``--overwrite``, never an input of the
@@ -139,26 +140,40 @@ def main(argv: Sequence[str] | None = None) -> int:
         return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 2)
     from twin.guard import (
         check_timeout_s,
+        command_ended,
         default_timeout_s,
         install_interrupt_handler,
+        interrupt_exit_code,
+        interrupt_name,
+        pending_interrupt,
         set_default_timeout_s,
     )
 
-    install_interrupt_handler()  # the user's Ctrl-C told apart from a controller's KeyboardInterrupt
+    # The user's Ctrl-C told apart from a controller's KeyboardInterrupt; SIGTERM and SIGHUP end a job as it
+    # does (exit 128 + the signal: 130, 143, 129), keeping what was done.
+    install_interrupt_handler(terminate=True)
     previous_timeout_s = default_timeout_s()
     try:
         set_default_timeout_s(
             check_timeout_s(getattr(args, "controller_timeout", None), "--controller-timeout")
         )
-        return int(args.func(args))
+        code = int(args.func(args))
+        if pending_interrupt():  # it came as the job ended: its outputs are complete, the exit code says so
+            print(
+                f"ballbeam: interrupted ({interrupt_name()}) after its runs: the outputs are complete",
+                file=sys.stderr,
+            )
+            return interrupt_exit_code()
+        return code
     except BrokenPipeError:  # output piped into e.g. head
         return 0
     except SystemExit as exc:  # not ours (the controllers' calls are guarded): never a silent success
         print(f"ballbeam: error: unexpected SystemExit({exc.code!r})", file=sys.stderr)
         return 1
-    except KeyboardInterrupt:  # Ctrl-C outside the long jobs (which keep what they did and return 130)
-        print("ballbeam: interrupted", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt:  # Ctrl-C/SIGTERM outside the long jobs (which keep what they did)
+        name = interrupt_name()
+        print("ballbeam: interrupted" + ("" if name == "Ctrl-C" else f" ({name})"), file=sys.stderr)
+        return interrupt_exit_code()
     except (ValueError, OSError) as exc:  # bad input, or an output that cannot be written: no traceback
         print(f"ballbeam: error: {one_line(exc)}", file=sys.stderr)
         return 2
@@ -167,6 +182,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 1
     finally:
         set_default_timeout_s(previous_timeout_s)  # the caller's own default (main called in-process)
+        command_ended()  # SIGTERM and SIGHUP back to their defaults (main called in-process)
 
 
 if __name__ == "__main__":

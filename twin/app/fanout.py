@@ -1,10 +1,12 @@
 """Many closed-loop runs fanned out: in this process, in local worker processes, or on a Dask cluster.
 
 A job is a list of starts, each with its own seed (and, for Monte Carlo, its own parameters). It is cut
-into chunks (``chunk_runs``: one batch here when it fits, a few per worker elsewhere); each chunk runs
-through the batch engine (``twin.rigs.batch.run_batch``) where it lands. Because every run's numbers depend only
-on its own start, seed and parameters, the result is the same however the job is chunked and wherever the
-chunks run. Ctrl-C stops handing out chunks and returns what came back (``complete`` false).
+into chunks (``chunk_runs``: at least ``BATCHES`` of them, of ``MIN_BATCH_RUNS`` … ``MAX_BATCH_RUNS`` runs);
+each chunk runs through the batch engine (``twin.rigs.batch.run_batch``) where it lands. Because every run's
+numbers depend only on its own start, seed and parameters, the result is the same however the job is chunked
+and wherever the chunks run. A run is done when its chunk has come back: progress counts those runs, and an
+interrupt (Ctrl-C, or SIGTERM/SIGHUP in the CLI: ``twin.guard``) stops handing out chunks, stops the chunks
+running (their runs are lost: at most one chunk per worker) and returns the runs done (``complete`` false).
 
 A served job (``Served``, ``run_served``) runs the same starts, seeds and parameters as sessions of the
 twin served on protocol 1, one after the other, to a controller in any language: each record is made from
@@ -18,13 +20,14 @@ from __future__ import annotations
 
 import os
 import signal
-from collections.abc import Callable, Generator, Sequence
+from collections.abc import Generator, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field, fields
 from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
+from twin.guard import STOP_SIGNALS
 from twin.parameters import ParameterError, Parameters
 
 if TYPE_CHECKING:
@@ -34,8 +37,9 @@ if TYPE_CHECKING:
     from twin.wire.server import Server
 
 __all__ = [
-    "CHUNK_RUNS",
-    "IN_PROCESS_CHUNK_RUNS",
+    "BATCHES",
+    "MAX_BATCH_RUNS",
+    "MIN_BATCH_RUNS",
     "chunk_runs",
     "Progress",
     "Runs",
@@ -46,21 +50,30 @@ __all__ = [
     "run_starts",
 ]
 
-CHUNK_RUNS = 64  # the fewest runs per batch sent to a worker process or a cluster (load balancing)
-# Runs per batch in this process: a batch pays its per-tick Python once for all its runs, so one batch is
-# fastest (41 × 41 of appendix-sf, 10 s: 49.5 s in chunks of 64, 40.4 s of 512, 37.5 s in one); the cap bounds
-# its memory (~16 KB a run) and what Ctrl-C loses (the batch running).
-IN_PROCESS_CHUNK_RUNS = 4096
+# Runs per chunk. A batch pays its per-tick Python once for all its runs, so larger batches cost less CPU per
+# run; an interrupt loses the chunks running, and progress moves as chunks come back, so a job is cut into
+# at least BATCHES chunks. Measured (CPU seconds per run, ``time.process_time``, 5 s runs of appendix-sf in
+# this process): a sweep (512 starts, one rig) 39.5 ms in one batch of 512, 39.7 ms in 256s, 44.1 ms in 128s,
+# 47.4 ms in 64s, 47.8 ms in 32s; a Monte Carlo (256 rigs of docs/examples/spread.toml, each its own model)
+# 54 ms from 64 to 256 a batch, 58 ms in 32s, 72 ms in 16s. So a job of 2048 runs or more costs what one
+# batch does, a smaller one up to ~20 % more; MIN_BATCH_RUNS keeps that bound; MAX_BATCH_RUNS bounds what an
+# interrupt loses (256 runs of 15 s: about 40 s of CPU) and a batch's memory (~16 KB a run, ~100 kB with
+# each run's log kept for requirements).
+BATCHES = 8
+MIN_BATCH_RUNS = 32
+MAX_BATCH_RUNS = 256
 CHUNKS_PER_WORKER = 4  # with local workers: enough chunks that none waits long for the last
 
 
 def chunk_runs(n: int, workers: int, scheduler: str | None) -> int:
-    """Runs per chunk of a job of ``n`` runs: in this process as few batches as ``IN_PROCESS_CHUNK_RUNS``
-    allows; on workers or a cluster a few chunks per worker, never below ``CHUNK_RUNS``."""
-    if scheduler is None and workers <= 1:
-        return max(1, min(n, IN_PROCESS_CHUNK_RUNS))
-    per = -(-n // (CHUNKS_PER_WORKER * (workers if scheduler is None else 8)))
-    return max(1, min(IN_PROCESS_CHUNK_RUNS, max(CHUNK_RUNS, per)))
+    """Runs per chunk of a job of ``n`` runs: ``n`` / ``BATCHES`` here (more chunks, ``CHUNKS_PER_WORKER``,
+    with workers or a cluster), within ``MIN_BATCH_RUNS`` … ``MAX_BATCH_RUNS``, evened out so that the last
+    chunk is not a sliver."""
+    here = scheduler is None and workers <= 1
+    chunks = BATCHES if here else max(BATCHES, CHUNKS_PER_WORKER * (workers if scheduler is None else 8))
+    size = min(MAX_BATCH_RUNS, max(MIN_BATCH_RUNS, -(-n // chunks)))
+    count = max(1, -(-n // size))
+    return max(1, -(-n // count))
 
 
 class Progress(Protocol):
@@ -72,24 +85,37 @@ class Progress(Protocol):
 class Stages:
     """One progress over every run of every stage of a job (validate), so that its ETA is the whole job's.
 
-    ``planned``: each stage's runs, in order. ``stage(name)`` is that stage's ``Progress``: its (done, n)
-    calls are counted after the runs of the stages before it; a stage whose first call reports another size
-    than planned (a grid's corner states, known once it is built) corrects the job's total."""
+    ``planned``: each stage's runs, in order, counted before the job starts (a screened stage: every start on
+    the fast engine and, at most, every start again on MuJoCo). ``stage(name)`` is that stage's
+    ``Progress``: its (done, n) calls are counted after the runs of the stages before it. A stage that runs
+    in waves, each counted from 0 (a screening: the fast engine's wave, then MuJoCo's), counts each wave
+    after the ones before it, so the job's count never goes back. A stage's size is its plan until it has
+    reported more (a grid's corner states, known once it is built); once the next stage starts, it is the
+    runs the stage ran."""
 
     def __init__(self, progress: Progress | None, planned: dict[str, int]) -> None:
         self.progress = progress
+        self.planned = dict(planned)
         self.sizes = dict(planned)
+        self.ran: dict[str, int] = {}  # per stage started: the runs counted so far
 
     def stage(self, name: str) -> Progress | None:
         if self.progress is None:
             return None
         progress, names = self.progress, list(self.sizes)
+        for earlier in names[: names.index(name)]:  # the stages before it are over: what they ran
+            self.sizes[earlier] = self.ran.get(earlier, self.sizes[earlier])
         before = sum(self.sizes[n] for n in names[: names.index(name)])
         label = f"{name} (stage {names.index(name) + 1} of {len(names)})"
+        waves = [0, 0]  # the runs of the stage's finished waves; the runs done in the current wave
 
         def update(done: int, total: int, stage: str = "") -> None:
-            self.sizes[name] = total
-            progress(before + done, sum(self.sizes.values()), label)
+            if done < waves[1]:  # a new wave, counted from 0
+                waves[0] += waves[1]
+            waves[1] = done
+            self.ran[name] = waves[0] + done
+            self.sizes[name] = max(self.planned[name], waves[0] + total)
+            progress(before + waves[0] + done, sum(self.sizes.values()), label)
 
         return update
 
@@ -108,10 +134,6 @@ class Runs:
     requirements: tuple[Requirement, ...] = ()
 
 
-# Runs per batch when each run's log is kept for its requirements (17 columns a tick: ~100 kB a 15 s run).
-RECORDED_CHUNK_RUNS = 512
-
-
 @dataclass(frozen=True)
 class _Chunk:
     """One piece of work as plain data (picklable, for processes and Dask)."""
@@ -124,9 +146,6 @@ class _Chunk:
     nthread: int
     scenarios: tuple[Scenario | None, ...] | None = None  # one per run (a flick, a setpoint), or None
     controller_timeout_s: float | None = None  # the watchdog's budget per controller call (twin.guard)
-    # In this process only (None in worker processes and on Dask): told the chunk's runs done so far (a
-    # float) as its batch advances, so that progress moves before the chunk ends.
-    report: Callable[[float], None] | None = None
 
 
 def run_chunk(chunk: _Chunk) -> list[dict[str, Any]]:
@@ -140,13 +159,13 @@ def run_chunk(chunk: _Chunk) -> list[dict[str, Any]]:
 
     runs = range(len(chunk.seeds))
     try:
-        return _records(chunk, runs, chunk.report)
+        return _records(chunk, runs)
     except (ControllerError, NumericalError):
         pass
     out = []
     for i in runs:
         try:
-            out += _records(chunk, [i], _after(chunk.report, i))
+            out += _records(chunk, [i])
         except ControllerError as exc:
             out.append(_failed(chunk, i, str(exc)))
         except NumericalError as exc:  # the simulation failed, not the controller: no physical verdict
@@ -154,14 +173,7 @@ def run_chunk(chunk: _Chunk) -> list[dict[str, Any]]:
     return out
 
 
-def _after(report: Callable[[float], None] | None, before: int) -> Callable[[float], None] | None:
-    """``report`` for a batch that starts after ``before`` runs of its chunk."""
-    return None if report is None else lambda done: report(before + done)
-
-
-def _records(
-    chunk: _Chunk, runs: Sequence[int], report: Callable[[float], None] | None = None
-) -> list[dict[str, Any]]:
+def _records(chunk: _Chunk, runs: Sequence[int]) -> list[dict[str, Any]]:
     from twin.app.catalogue import catalogue_for
     from twin.rigs.batch import run_batch
 
@@ -181,7 +193,6 @@ def _records(
         nthread=chunk.nthread,
         record=bool(r.requirements),
         controller_timeout_s=chunk.controller_timeout_s,
-        progress=report,
         scenarios=[chunk.scenarios[i] for i in pick] if chunk.scenarios is not None else None,
     )
     return [
@@ -271,6 +282,14 @@ def _numerical_record(x0_m: float, theta0_rad: float, seed: int, reason: str) ->
     return {**_failed_record(x0_m, theta0_rad, seed, ""), "numerical": True, "reason": reason}
 
 
+def _worker_signals() -> None:
+    """A worker process ignores Ctrl-C (the terminal sends it to the whole group: the parent decides) and
+    dies at SIGTERM (the parent's way to stop a chunk it no longer wants; ``timeout`` signals the group)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    for signum in STOP_SIGNALS:
+        signal.signal(signum, signal.SIG_DFL)
+
+
 def _local(
     chunks: list[tuple[int, _Chunk]], workers: int
 ) -> Generator[tuple[int, list[dict[str, Any]]], None, None]:
@@ -278,19 +297,22 @@ def _local(
         for lo, chunk in chunks:
             yield lo, run_chunk(chunk)
         return
-    # Workers ignore Ctrl-C: the parent stops handing out work and keeps what came back.
-    with ProcessPoolExecutor(
-        workers, initializer=signal.signal, initargs=(signal.SIGINT, signal.SIG_IGN)
-    ) as pool:
-        pending: dict[Future, int] = {pool.submit(run_chunk, chunk): lo for lo, chunk in chunks}
-        try:
-            while pending:
-                done, _ = wait(pending, return_when=FIRST_COMPLETED)
-                for future in done:
-                    yield pending.pop(future), future.result()
-        finally:
-            for future in pending:
-                future.cancel()
+    pool = ProcessPoolExecutor(workers, initializer=_worker_signals)
+    pending: dict[Future, int] = {pool.submit(run_chunk, chunk): lo for lo, chunk in chunks}
+    finished = False
+    try:
+        while pending:
+            done, _ = wait(pending, return_when=FIRST_COMPLETED)
+            for future in done:
+                yield pending.pop(future), future.result()
+        finished = True
+    finally:
+        if not finished:  # interrupted (or failed): the chunks still running are not waited for
+            # The pool has no public way to stop a running task (Python 3.14's terminate_workers); its
+            # futures are left to fail as the pool breaks (cancelling them first trips Python 3.11's pool).
+            for process in list(getattr(pool, "_processes", {}).values()):
+                process.terminate()
+        pool.shutdown(wait=finished)
 
 
 def _dask(
@@ -442,31 +464,47 @@ def run_starts(
     workers). Each controller call's watchdog budget is the process's (``twin.guard.default_timeout_s``,
     the CLI's ``--controller-timeout``), carried to the workers with the chunks. ``serve``: every run a
     session to a client over the wire instead (``run_served``; ``runs.controller`` is then only a name)."""
+    from twin.guard import job_runs
+
     if serve is not None:
         if scenarios is not None:
             raise ParameterError("a served job has no flick or setpoint per run (twin.engine.Scenario)")
         if workers > 1 or scheduler is not None:
             raise ParameterError("a served job runs its sessions here, one after the other: no workers")
-        return run_served(runs, starts, seeds, serve, params=params, progress=progress)
+    results: list[dict[str, Any] | None] = [None] * len(starts)
+    # A signal within raises here: the runs done so far are returned; one that came before: no run starts.
+    with job_runs() as stop:
+        if stop:
+            return results, False
+        try:
+            if serve is not None:
+                return run_served(runs, starts, seeds, serve, params=params, progress=progress)
+            return _fan_out(
+                runs, starts, seeds, results, params, workers, scheduler, nthread, progress, scenarios
+            )
+        except KeyboardInterrupt:
+            return results, False
+
+
+def _fan_out(
+    runs: Runs,
+    starts: np.ndarray,
+    seeds: np.ndarray,
+    results: list[dict[str, Any] | None],
+    params: Sequence[Parameters] | None,
+    workers: int,
+    scheduler: str | None,
+    nthread: int | None,
+    progress: Progress | None,
+    scenarios: Sequence[Scenario | None] | None,
+) -> tuple[list[dict[str, Any] | None], bool]:
+    """``run_starts`` here, on workers or on a cluster, each record into ``results`` as its chunk comes back."""
     from twin.guard import default_timeout_s
 
     timeout_s = default_timeout_s()
     n = len(starts)
     threads = nthread or max(1, (os.cpu_count() or 1) // max(workers, 1))
-    done = 0
-    shown = [0]  # the runs the progress was last told
-
-    def within(runs_in_chunk: float) -> None:
-        # Runs of the chunk being run here, in this process: the whole runs done so far.
-        now = done + int(runs_in_chunk)
-        if progress is not None and now > shown[0]:
-            shown[0] = now
-            progress(now, n)
-
-    here = progress is not None and scheduler is None and workers <= 1
     size = chunk_runs(n, workers, scheduler)
-    if runs.requirements:
-        size = min(size, RECORDED_CHUNK_RUNS)
     chunks = [
         (
             lo,
@@ -479,23 +517,21 @@ def run_starts(
                 nthread=threads,
                 scenarios=tuple(scenarios[lo : lo + size]) if scenarios is not None else None,
                 controller_timeout_s=timeout_s,
-                report=within if here else None,
             ),
         )
         for lo in range(0, n, size)
     ]
-    results: list[dict[str, Any] | None] = [None] * n
     source = _dask(chunks, scheduler) if scheduler else _local(chunks, workers)
     if progress is not None:
         progress(0, n)  # the bar (and its clock for the ETA) starts with the job
+    done = 0
     try:
         for lo, records in source:
             results[lo : lo + len(records)] = records
             done += len(records)
-            if progress is not None:
-                shown[0] = done
+            if progress is not None:  # whole runs, done and kept: what an interrupt now would keep
                 progress(done, n)
     except KeyboardInterrupt:
-        source.close()  # stop the workers' queue (a running chunk finishes)
+        source.close()  # stop handing out chunks; the running ones are stopped, not waited for
         return results, False
     return results, all(r is not None for r in results)

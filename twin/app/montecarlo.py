@@ -329,7 +329,9 @@ class MonteCarloSettings:
 class MonteCarloResult:
     settings: MonteCarloSettings
     spread: Distribution
-    runs: list[dict[str, Any]]  # per run: seed, verdict and the sampled values ({} where not run)
+    # Per run done: seed, verdict and the sampled values, in the job's order; an interrupted job (complete
+    # false) lists only the runs it finished (settings.n says how many were asked).
+    runs: list[dict[str, Any]]
     complete: bool
     wall_s: float = 0.0
     summary: dict[str, Any] = field(default_factory=dict)
@@ -443,8 +445,7 @@ def run_montecarlo(
             screening["confirmed"] = "none (the fast engine alone)"
     out: list[dict[str, Any]] = []
     for record, sample in zip(records, values, strict=True):
-        if record is None:
-            out.append({})
+        if record is None:  # not run (interrupted): not listed
             continue
         out.append({**record, "parameters": {n: float(v) for n, v in zip(spread.names, sample, strict=True)}})
     result = MonteCarloResult(settings, spread, out, complete, wall_s=time.perf_counter() - start)

@@ -23,6 +23,7 @@ from __future__ import annotations
 import math
 import time
 import tomllib
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
@@ -325,14 +326,19 @@ def _validate(
     starts = [*T.CHAPTER4_STARTS, *T.HARDWARE_STARTS.values()]
     cases = _sensitivity_cases(c, params, controller.startswith("avr:"))
     x_required, theta_required = _required_grid(c)
-    # One progress over the four stages' runs (the region's corner states join its count when it starts).
+    # One progress over the five stages' runs, counted up front (the region's corner states join its count
+    # when it starts). A screened map runs every start on the fast engine and, at most, every start again on
+    # MuJoCo: planned so, its count shrinks to what it ran when the next stage starts.
+    per_start = 1 if engine[0] == "mujoco" else 2
     stages = Stages(
         progress,
         {
             "nominal": len(starts) * c.nominal_seeds,
-            "region": c.region_x0[2] * c.region_theta0[2],
+            "region": c.region_x0[2] * c.region_theta0[2] * per_start,
             "sensitivity": len(cases) * len(T.CHAPTER4_STARTS),
-            "robust region": x_required.n * theta_required.n * c.robust_rigs if spread is not None else 0,
+            "robust region": x_required.n * theta_required.n * c.robust_rigs * per_start
+            if spread is not None
+            else 0,
             "monte carlo": c.montecarlo_runs if spread is not None else 0,
         },
     )
@@ -440,6 +446,23 @@ class _Battery:
         wall_s = time.perf_counter() - self.started
         return ValidationReport(self.controller, self.checks, region, wall_s, self.c, complete=complete)
 
+    def interrupted(
+        self, stage: str, records: Sequence[dict[str, Any] | None], of: int, what: str = "runs"
+    ) -> bool:
+        """The stage interrupted (Ctrl-C, SIGTERM): a check not judged (``passed`` None) whose rows are what
+        it finished (``of`` asked), so that the report keeps them. False: the battery ends."""
+        done = [r for r in records if r]
+        self.checks.append(
+            Check(
+                stage,
+                None,
+                "not judged: the validation was interrupted in this stage",
+                f"interrupted after {len(done)} of {of} {what} (kept in the rows)",
+                done,
+            )
+        )
+        return False
+
 
 def _nominal_stage(b: _Battery, starts: list[tuple[float, float]]) -> bool:
     """The thesis's starts, several seeds: the nominal and the saturation checks. False: interrupted."""
@@ -450,7 +473,7 @@ def _nominal_stage(b: _Battery, starts: list[tuple[float, float]]) -> bool:
         b.runs, grid, seeds, workers=b.workers, progress=b.stages.stage("nominal"), serve=b.serve
     )
     if not complete:
-        return False
+        return b.interrupted("nominal", records, len(records))
     done = [r for r in records if r]
     held = sum(b.judge.meets("nominal", r) for r in done)
     asked = b.judge.asked("nominal")
@@ -517,6 +540,7 @@ def _region_stage(b: _Battery, settings: SweepSettings) -> SweepResult | None:
         requirements=b.runs.requirements,
     )
     if not region.complete:
+        b.interrupted("region", region.points, len(region.points), "starts")
         return None
     (xlo, xhi), (tlo, thi) = b.c.required_x0_m, b.c.required_theta0_rad
     inside = [p for p in region.points if p and xlo <= p["x0_m"] <= xhi and tlo <= p["theta0_rad"] <= thi]
@@ -573,7 +597,7 @@ def _sensitivity_stage(b: _Battery, cases: list[tuple[str, str, Parameters]]) ->
         serve=b.serve,
     )
     if not complete:
-        return False
+        return b.interrupted("sensitivity", records, len(records))
     by_param: dict[str, list[tuple[str, dict[str, Any]]]] = {}
     for (name, label, _), record in zip(labels, records, strict=True):
         if record:
@@ -626,7 +650,12 @@ def _robust_region_stage(
         serve=b.serve,
     )
     if not robust.complete:
-        return False
+        return b.interrupted(
+            "robust region",
+            [p for p in robust.points if p["rigs"]],
+            len(robust.points),
+            "starts run on any rig",
+        )
     kept_rows = [
         {
             **point,
@@ -677,7 +706,7 @@ def _montecarlo_stage(b: _Battery) -> bool:
         serve=b.serve,
     )
     if not mc.complete:
-        return False
+        return b.interrupted("monte carlo", mc.runs, c.montecarlo_runs)
     s = mc.summary
     b.checks.append(
         Check(
