@@ -459,7 +459,7 @@ def test_a_silent_server_ends_the_session_within_the_timeout(bb_sf: Path) -> Non
         [bb_sf, "udp", "127.0.0.1", "9", "--timeout", "0.5"], capture_output=True, timeout=10
     )
     assert proc.returncode == 1
-    assert proc.stderr.decode() == "bb_sf: no CONFIG from the server within 0.5 s\n"
+    assert proc.stderr.decode() == "bb_sf: no CONFIG from the server within 0.5 s (--timeout)\n"
 
 
 @pytest.mark.parametrize(

@@ -155,7 +155,7 @@ def test_a_client_that_dies_mid_job_fails_its_run_and_the_job_goes_on() -> None:
     assert same(got.points[0], ref[0]) and same(got.points[2], ref[2])
     dead = got.points[1]
     assert dead["failed"] and not dead["held"] and dead["settling_time_s"] is None
-    assert dead["reason"] == "the controller failed: 'py appendix-sf': no COMMAND 21 within 0.5 s"
+    assert dead["reason"] == "the controller failed: 'py appendix-sf': no COMMAND 21 within 0.5 s (--timeout)"
     assert (dead["x0_m"], dead["theta0_rad"], dead["seed"]) == (ref[1]["x0_m"], 0.1, ref[1]["seed"])
 
 
@@ -172,7 +172,7 @@ def test_no_client_within_the_wait_ends_the_job_with_the_runs_done() -> None:
         waited = time.perf_counter() - t0
     ref, _ = run_starts(runs, starts[:1], point_seeds(0, 1))
     assert not complete and same(records[:1], ref) and records[1:] == [None, None] and waited < 5.0
-    assert job.stopped == f"no controlling client said HELLO to {job.server.url} within 0.3 s"
+    assert job.stopped == f"no controlling client said HELLO to {job.server.url} within 0.3 s (--wait-client)"
     # a later stage of the same job (validate) serves nothing more
     assert run_starts(runs, starts, point_seeds(0, 3), serve=job) == ([None, None, None], False)
 
@@ -366,7 +366,9 @@ def test_run_rig_sessions_n_runs_n_and_a_job_without_a_client_stops(tmp_path: Pa
         [*job, "--out", str(out_dir)],
         [*CLI, "run", "--rig", "{url}", "--controller", "appendix-sf", "--sessions", "2"],
     )
-    assert code == 1 and "within 1 s: the job stopped after 2 of 3 runs (they are kept)" in err, err
+    assert (
+        code == 1 and "within 1 s (--wait-client): the job stopped after 2 of 3 runs (they are kept)" in err
+    ), err
     lines = [line for line in client.splitlines() if line.startswith("session ")]
     assert [line.split(":")[0] for line in lines] == ["session 1", "session 2"], client
     assert all("ended last sample" in line for line in lines)

@@ -4,7 +4,10 @@
  *   bb_sf pipe [options]            the same frames over stdin/stdout, back to back (no network)
  *   bb_sf selftest                  decode the frames on stdin, print their fields and re-encoded bytes
  *   bb_sf crc                       print the CRC-32 of stdin
- * options: --timeout S (default 10: the longest wait for a frame), --trace PATH (one line per sample:
+ * options: --timeout S (default 10: the longest wait for CONFIG, for any frame of the session, and for the
+ *          server to move on from a sample it repeats after our answer), --wait-start S (default 0: no
+ *          limit; how long the server may hold the session once we acknowledged its held sample, repeating
+ *          it: the live view holds it until a browser connects), --trace PATH (one line per sample:
  *          seq, x1..x4, u, u_temp, command as C99 hex floats; "-" is stderr; with several sessions their
  *          lines follow each other, each session's from seq 0), --name NAME (HELLO's client),
  *          --sessions N (default 1: N sessions one after the other, a fresh controller each, as a served
@@ -193,6 +196,7 @@ static int open_udp(transport *t, const char *host, const char *port)
 
 typedef struct {
     double timeout_s;
+    double wait_start_s; /* 0: as long as the server holds the session (repeating the held sample) */
     const char *trace_path;
     const char *name;
     long sessions; /* 0: until the server stops answering HELLO */
@@ -352,8 +356,10 @@ static int run_session(transport *t, const options *o, FILE *tr, int has_prev, u
                           cfg.command_high_v};
 
     sf_state sf;
-    int started = 0, last_seen = 0;
+    int started = 0, last_seen = 0, told_held = 0;
     uint32_t last_seq = 0;
+    double answered_at = 0.0; /* when the latest new sample was answered */
+    unsigned long repeats = 0; /* of that sample since */
     double last_command_v = cfg.zero_command_v;
     bb_frame cmd;
     memset(&cmd, 0, sizeof cmd);
@@ -374,7 +380,7 @@ static int run_session(transport *t, const options *o, FILE *tr, int has_prev, u
                         (unsigned long)last_seq, n.answered, n.ignored);
                 return 0;
             }
-            fprintf(stderr, "bb_sf: %s from the server for %g s after sample %lu: giving up\n",
+            fprintf(stderr, "bb_sf: %s from the server for %g s (--timeout) after sample %lu: giving up\n",
                     r == RX_EOF ? "end of stream and no STOP" : "no frame", o->timeout_s,
                     (unsigned long)last_seq);
             return 1;
@@ -396,6 +402,28 @@ static int run_session(transport *t, const options *o, FILE *tr, int has_prev, u
         }
         const bb_sample *s = &f.u.sample;
         if (started && f.seq == last_seq) { /* the same sample again: the same answer, no new tick */
+            double waited = now_s() - answered_at;
+            int held = f.seq == 0 && (s->flags & BB_FLAG_HELD);
+            double limit = held ? o->wait_start_s : o->timeout_s;
+            repeats++;
+            if (limit > 0.0 && waited >= limit) {
+                if (held)
+                    fprintf(stderr, "bb_sf: the session did not start within %g s (--wait-start): the server "
+                            "held the rig, repeating sample 0 %lu times after our acknowledgement; sent "
+                            "STOP 1\n", limit, repeats);
+                else
+                    fprintf(stderr, "bb_sf: no sample after %lu for %g s (--timeout): the server repeated it "
+                            "%lu times, our commands do not reach it; sent STOP 1\n", (unsigned long)f.seq,
+                            limit, repeats);
+                send_stop(t, session, BB_STOP_CLIENT_QUIT);
+                return 1;
+            }
+            if (held && !told_held && waited >= 1.0) { /* not a lost answer: the server holds the run */
+                fprintf(stderr, "bb_sf: session %lu: connected, the held sample acknowledged; waiting for the "
+                        "server to start the run (the live view starts it when a browser connects)\n",
+                        (unsigned long)session);
+                told_held = 1;
+            }
             cmd.seq = f.seq;
             cmd.u.command.dac_v = last_command_v;
             (void)send_typed(t, &cmd);
@@ -428,6 +456,8 @@ static int run_session(transport *t, const options *o, FILE *tr, int has_prev, u
         }
         last_seq = f.seq;
         last_command_v = command_v;
+        answered_at = now_s();
+        repeats = 0;
         trace_line(tr, f.seq, &sf, command_v);
         if (tr != NULL) fflush(tr); /* before the answer: a reader of the trace has the line with it */
         /* the last sample is answered too: a server that does not wait ignores it, one that logs
@@ -524,8 +554,10 @@ static int crc_of_stdin(void)
 static int usage(const char *problem)
 {
     if (problem != NULL) fprintf(stderr, "bb_sf: %s\n", problem);
-    fprintf(stderr, "usage: bb_sf udp HOST PORT [--timeout S] [--trace PATH] [--name NAME] [--sessions N]\n"
-                    "       bb_sf pipe [--timeout S] [--trace PATH] [--name NAME] [--sessions N]\n"
+    fprintf(stderr, "usage: bb_sf udp HOST PORT [--timeout S] [--wait-start S] [--trace PATH] [--name NAME] "
+                    "[--sessions N]\n"
+                    "       bb_sf pipe [--timeout S] [--wait-start S] [--trace PATH] [--name NAME] "
+                    "[--sessions N]\n"
                     "       bb_sf selftest | bb_sf crc\n");
     return 2;
 }
@@ -551,7 +583,7 @@ int main(int argc, char **argv)
         snprintf(msg, sizeof msg, "unknown mode '%.60s'", mode);
         return usage(msg);
     }
-    options o = {10.0, NULL, "bb_sf appendix-sf (C99)", 1};
+    options o = {10.0, 0.0, NULL, "bb_sf appendix-sf (C99)", 1};
     for (int i = first_option; i < argc; i++) {
         if (i + 1 >= argc) return usage("an option needs a value");
         if (strcmp(argv[i], "--timeout") == 0) {
@@ -559,6 +591,14 @@ int main(int argc, char **argv)
             o.timeout_s = strtod(argv[i + 1], &end);
             if (end == argv[i + 1] || *end != '\0' || !(o.timeout_s > 0.0 && o.timeout_s <= 3600.0)) {
                 fprintf(stderr, "bb_sf: --timeout %s: a number of seconds in (0, 3600]\n", argv[i + 1]);
+                return 2;
+            }
+        } else if (strcmp(argv[i], "--wait-start") == 0) {
+            char *end = NULL;
+            o.wait_start_s = strtod(argv[i + 1], &end);
+            if (end == argv[i + 1] || *end != '\0' || !(o.wait_start_s >= 0.0 && o.wait_start_s <= 86400.0)) {
+                fprintf(stderr, "bb_sf: --wait-start %s: a number of seconds in [0, 86400] (0: no limit)\n",
+                        argv[i + 1]);
                 return 2;
             }
         } else if (strcmp(argv[i], "--trace") == 0) {
@@ -613,7 +653,7 @@ int main(int argc, char **argv)
         if (rc >= 128) return rc;
         if (rc == SESSION_NO_CONFIG) {
             if (o.sessions == 0 && done > 0) break; /* the served job is over */
-            fprintf(stderr, "bb_sf: no CONFIG from the server within %g s", o.timeout_s);
+            fprintf(stderr, "bb_sf: no CONFIG from the server within %g s (--timeout)", o.timeout_s);
             if (o.sessions != 1) fprintf(stderr, " (after %ld sessions)", done);
             fprintf(stderr, "\n");
             return 1;

@@ -2,10 +2,14 @@
 the served twin or any rig whose firmware speaks it. A controller runs on it in the one closed loop
 (``twin.engine.run_on_rig``), with the log the rig software keeps.
 
-The handshake repeats HELLO until CONFIG comes (bounded: ``connect_timeout_s``); ``read`` waits at most
-``timeout_s`` for the next SAMPLE; a server that disappears is a ``RemoteError`` within that time, never a
-hang. A sample that has not been answered when the next is read (the held block that ``start`` reads) is
-acknowledged with the command the DAC holds, as the protocol's session requires.
+The handshake repeats HELLO until CONFIG comes (bounded: ``connect_timeout_s``); ``read`` waits for the
+next SAMPLE at most ``timeout_s`` of silence (no frame of the session at all), and at most ``timeout_s`` for
+a sample that the server repeats without moving on (our answers do not reach it). A held sample repeated
+after we answered it is a session that has not started yet (a live view waiting for its browser): that is
+waited for ``start_wait_s`` (``None``: as long as the server keeps repeating it). Each ``RemoteError`` names
+what was waited for, from whom, for how long, and the option that sets the wait; never a hang. A sample
+that has not been answered when the next is read (the held block that ``start`` reads) is acknowledged
+with the command the DAC holds, as the protocol's session requires.
 
 The server is a boundary, as a file is: what it sends is checked on arrival, and what is wrong with it is a
 ``RemoteError`` naming the rig, the message, the field and its value (the rig's fault, not the controller's):
@@ -108,11 +112,16 @@ class RemoteRig(OverLink, Rig):
         client: str = "ballbeam-twin RemoteRig",
         connect_timeout_s: float = 5.0,
         timeout_s: float = 5.0,
+        start_wait_s: float | None = None,
         adc_range_v: tuple[float, float] | None = None,
+        wait_names: tuple[str, str] = ("timeout_s", "start_wait_s"),
     ) -> None:
         """``adc_range_v``: the card's analog input range, which SAMPLE volts must lie in (default the
-        thesis's card, ``twin.parameters.Daq``'s; ``run --rig`` gives its parameters')."""
+        thesis's card, ``twin.parameters.Daq``'s; ``run --rig`` gives its parameters'). ``wait_names``: what
+        the messages call ``timeout_s`` and ``start_wait_s`` (``run --rig``: its options)."""
         self.timeout_s = timeout_s
+        self.start_wait_s = start_wait_s
+        self.wait_names = wait_names
         daq = Daq()
         self.adc_range_v = adc_range_v if adc_range_v is not None else (daq.adc_min_v, daq.adc_max_v)
         if link is None:
@@ -213,10 +222,17 @@ class RemoteRig(OverLink, Rig):
         """The next SAMPLE (an unanswered previous one acknowledged first with the DAC's value)."""
         if not self._answered and self.last is not None:
             self.write(self.command_v)
-        deadline = time.monotonic() + self.timeout_s
+        start = time.monotonic()
+        # Moved on only by a repeat of the sample we answered (the server is there, and says where it is,
+        # bounded by ``_check_repeats``); any other frame, valid or not, does not prolong the wait.
+        silence_until = start + self.timeout_s
         after = -1 if self.last is None else self.last.seq
-        while (left := deadline - time.monotonic()) > 0:
-            frame = self._recv(left)
+        repeats = 0
+        while True:
+            now = time.monotonic()
+            if now >= silence_until:
+                raise RemoteError(self._silence(after, now - start))
+            frame = self._recv(silence_until - now)
             if frame is None or frame.session != self.session:
                 continue
             msg = frame.msg
@@ -226,6 +242,9 @@ class RemoteRig(OverLink, Rig):
                 if msg.flags & p.FLAG_REFUSED and self.config.role == p.ROLE_CONTROL:
                     self.stop()  # the session ends here: the rig does not wait out its timeout for us
                     raise RemoteError(f"{self.url} refused COMMAND {after} (dac_v = {self.command_v!r} V)")
+                repeats += 1
+                self._check_repeats(msg, repeats, time.monotonic() - start)
+                silence_until = time.monotonic() + self.timeout_s
                 if self.config.role == p.ROLE_CONTROL:  # a repeated sample: our answer was lost, repeat it
                     self._send(p.Command(seq=after, dac_v=self.command_v), self.session)
                 continue
@@ -237,7 +256,36 @@ class RemoteRig(OverLink, Rig):
                 self.last = msg
                 self._answered = self.config.role != p.ROLE_CONTROL
                 return DaqSample(time_s=msg.time_s, ball_v=msg.ball_v, angle_v=msg.angle_v)
-        raise RemoteError(f"no SAMPLE from {self.url} within {self.timeout_s:g} s: the server is gone")
+
+    def _silence(self, after: int, waited_s: float) -> str:
+        """The message of a server from which nothing came for ``timeout_s``."""
+        what = "SAMPLE 0" if after < 0 else f"SAMPLE {after + 1}"
+        return (
+            f"no {what} from {self.url} for {waited_s:.1f} s ({self.wait_names[0]} {self.timeout_s:g} s): "
+            "the server is gone, the link is down, or what it sent was not the session's next sample"
+        )
+
+    def _check_repeats(self, msg: p.Sample, repeats: int, waited_s: float) -> None:
+        """A sample we answered, repeated ``repeats`` times over ``waited_s``: the held one is a session that
+        has not started (waited ``start_wait_s``); another, answers that do not reach the server
+        (``timeout_s``). A ``RemoteError`` (STOP 1 sent) once the wait is over."""
+        held = bool(msg.flags & p.FLAG_HELD) and msg.seq == 0
+        limit, name = (
+            (self.start_wait_s, self.wait_names[1]) if held else (self.timeout_s, self.wait_names[0])
+        )
+        if limit is None or waited_s < limit:
+            return
+        self.stop()
+        if held:
+            raise RemoteError(
+                f"the session at {self.url} did not start within {waited_s:.1f} s ({name} {limit:g} s): the "
+                f"server held the rig, repeating SAMPLE 0 {repeats} times after our acknowledgement (a live "
+                "view waits for its browser, or for Run); sent STOP 1"
+            )
+        raise RemoteError(
+            f"no SAMPLE {msg.seq + 1} from {self.url} for {waited_s:.1f} s ({name} {limit:g} s): the server "
+            f"repeated SAMPLE {msg.seq} {repeats} times — our COMMANDs do not reach it; sent STOP 1"
+        )
 
     # --- the checks on arrival ------------------------------------------------------------------------
     def _check_sample(self, msg: p.Sample) -> None:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import sys
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
@@ -24,6 +25,16 @@ MakeController = Callable[["Parameters"], object]
 OnRun = Callable[[int, "RunResult", dict[str, Any]], None]
 
 
+@dataclass(frozen=True)
+class Waits:
+    """A client's waits once connected (``RemoteRig``): the longest silence, or repeat of an answered
+    sample, before the server counts as gone (``--wait-sample``); how long a held session may wait to start
+    (``--wait-start``; ``None``: as long as the server holds it, repeating the held sample)."""
+
+    sample_s: float = 5.0
+    start_s: float | None = None
+
+
 def connect(
     url: str,
     client: str,
@@ -31,10 +42,13 @@ def connect(
     *,
     retry_refused: bool,
     adc_range_v: tuple[float, float] | None = None,
+    waits: Waits | None = None,
 ) -> RemoteRig:
     """``open_remote`` within ``wait_s``; ``retry_refused``: a refusal (the rig is still another session's,
     e.g. a dead client's waiting out its timeout) is asked again until then. ``adc_range_v``: the card's
-    analog input range that the samples' volts are checked against (``RemoteRig``)."""
+    analog input range that the samples' volts are checked against (``RemoteRig``); ``waits``: its waits
+    for a sample and for the session's start."""
+    waits = waits or Waits()
     import time
 
     from twin.rigs.remote import Refused, open_remote
@@ -47,6 +61,9 @@ def connect(
                 client=client,
                 connect_timeout_s=max(deadline - time.monotonic(), 0.2),
                 adc_range_v=adc_range_v,
+                timeout_s=waits.sample_s,
+                start_wait_s=waits.start_s,
+                wait_names=("--wait-sample", "--wait-start"),
             )
         except Refused:
             if not retry_refused or time.monotonic() >= deadline:
@@ -63,6 +80,7 @@ def run_on_remote_rig(
     sessions: int,
     wait_s: float,
     on_run: OnRun,
+    waits: Waits | None = None,
 ) -> int:
     """The controller named ``name`` (built by ``make_controller``) on the rig at ``url``: ``sessions``
     sessions one after the other (0: until the server stops answering HELLO within ``wait_s``), a fresh
@@ -80,7 +98,9 @@ def run_on_remote_rig(
                 params.daq.adc_min_v,
                 params.daq.adc_max_v,
             )  # not in CONFIG: the card's as the client knows it
-            rig = connect(url, f"ballbeam run {name}"[:32], wait_s, retry_refused=many, adc_range_v=adc)
+            rig = connect(
+                url, f"ballbeam run {name}"[:32], wait_s, retry_refused=many, adc_range_v=adc, waits=waits
+            )
         except RemoteError as exc:
             if sessions == 0 and done:  # the server has no further session: the job is over
                 break

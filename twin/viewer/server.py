@@ -38,8 +38,9 @@ from twin.viewer.security import (
 )
 from twin.viewer.session import LiveTwin, owe
 from twin.viewer.wire import WIRE_MARGIN_S, WireCatalogue
+from twin.warm import warm
 from twin.wire import protocol as p
-from twin.wire.server import ServeError, Server, SessionSettings
+from twin.wire.server import DEFAULT_TIMEOUT_S, ServeError, Server, SessionSettings
 
 PLOT_EVERY_FRAMES = 10  # plots and status at 5 Hz: enough for the eye, a tenth of the traffic
 MAX_CATCH_UP_S = 0.25  # after a stall longer than this the pacing restarts instead of racing to catch up
@@ -206,6 +207,7 @@ def serve(
     rig_name: str = "ballbeam-twin",
     monitor: MonitorFactory | None = None,
     initial: tuple[float, float] | None = None,
+    wire_timeout_s: float = DEFAULT_TIMEOUT_S,
 ) -> dict[str, float]:
     """Start the live view and block until interrupted, ``stop`` is set or ``duration_s`` of wall time passed.
 
@@ -217,7 +219,10 @@ def serve(
 
     ``wire=(host, port)`` serves the twin on protocol 1 over UDP there (port 0: a free one) to a controller in
     any language (``ballbeam view --serve``): the menu's first entry, "wire client (udp://host:port)", the
-    one started unless ``controller`` names another (twin.viewer.wire); ``rig_name`` is CONFIG's rig.
+    one started unless ``controller`` names another (twin.viewer.wire); ``rig_name`` is CONFIG's rig;
+    ``wire_timeout_s`` how long the client's answer is awaited (its acknowledgement of the held sample, its
+    answers to its repeats while the view waits to run, a command while it runs) before its session ends
+    with STOP 3 and a new one waits, so that a vanished client does not keep the one session.
     ``monitor`` builds the shadow (twin.viewer.monitor) when the panel's "Shadow the rig" is ticked.
     ``initial``: the first run's (x0, θ0) (a replayed run's; default the panel's)."""
     if not (isinstance(speed, (int, float)) and math.isfinite(speed) and SPEED_MIN <= speed <= SPEED_MAX):
@@ -228,7 +233,12 @@ def serve(
     wire_server: Server | None = None
     if wire is not None:
         settings = SessionSettings(
-            params=params, plant=plant, ideal_sensors=ideal_sensors, mode=p.MODE_REALTIME, rig_name=rig_name
+            params=params,
+            plant=plant,
+            ideal_sensors=ideal_sensors,
+            mode=p.MODE_REALTIME,
+            rig_name=rig_name,
+            timeout_s=wire_timeout_s,
         )
         try:
             wire_server = Server(settings, wire[0], wire[1], log=_log)
@@ -288,6 +298,7 @@ def _serve(
         controller = catalogue.NAMES[0] if wire_server is not None else DEFAULT_CONTROLLER
     if controller not in catalogue.NAMES:
         raise ViewerError(f"unknown controller {controller!r}; known: {', '.join(catalogue.NAMES)}")
+    warm(params, plant=plant, ideal_sensors=ideal_sensors)  # before the view's clock: no tick stalls
     live = LiveTwin(
         params,
         catalogue,
@@ -300,6 +311,8 @@ def _serve(
         monitor=monitor,
         initial=initial,
     )
+    if isinstance(catalogue, WireCatalogue):  # a wire client that went: a new run (Reset) for the next one
+        catalogue.on_vacant = functools.partial(live.enqueue, "reset")
     try:
         viewer = Viewer(live, host, port, allowed_origins, params_source)
     except BaseException:

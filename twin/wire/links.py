@@ -15,6 +15,7 @@ from __future__ import annotations
 import os
 import select
 import socket
+import sys
 import termios
 import time
 import tty
@@ -50,6 +51,10 @@ _RECV_BYTES = 4096  # UDP: larger than any frame, so that an oversized datagram 
 _RCVBUF_BYTES = 1 << 20  # room for a burst of datagrams, so that a flood drops less of the client's traffic
 _READ_BYTES = 4096
 _WRITE_WAIT_S = 0.1  # a serial write that cannot drain this long is dropped, as UDP drops a datagram
+# Linux: a listening socket queues the ICMP errors of its datagrams (IP_RECVERR, IPV6_RECVERR), each with the
+# address it was sent to, so that a peer whose socket closed is known by name (``UdpLink.unreachable``).
+_RECVERR = {socket.AF_INET: (socket.IPPROTO_IP, 11), socket.AF_INET6: (socket.IPPROTO_IPV6, 25)}
+_MAX_ERRORS = 64  # errors read from the queue at once (bounded: a flood of them waits for the next call)
 _BAUDS = {
     int(name[1:]): getattr(termios, name)
     for name in dir(termios)
@@ -108,6 +113,9 @@ class UdpLink:
         self.sock = sock
         self.url = url
         self.connected = connected
+        self.reports_errors = False  # the socket queues ICMP errors (listen, on Linux): ``unreachable``
+        self._errors = select.poll()
+        self._errors.register(sock.fileno(), 0)  # no events asked: POLLERR alone is reported
 
     @classmethod
     def listen(cls, host: str = "127.0.0.1", port: int = 0) -> UdpLink:
@@ -121,7 +129,15 @@ class UdpLink:
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, _RCVBUF_BYTES)
         except OSError:
             pass  # the system's default buffer: still correct, only less tolerant of bursts
-        return cls(sock, f"udp://{host}:{sock.getsockname()[1]}", connected=False)
+        link = cls(sock, f"udp://{host}:{sock.getsockname()[1]}", connected=False)
+        if sys.platform.startswith("linux"):
+            level, option = _RECVERR[sock.family]
+            try:
+                sock.setsockopt(level, option, 1)
+                link.reports_errors = True
+            except OSError:
+                pass  # vanished peers are then known by their silence alone
+        return link
 
     @classmethod
     def connect(cls, host: str, port: int) -> UdpLink:
@@ -139,13 +155,19 @@ class UdpLink:
         return int(self.sock.getsockname()[1])
 
     def send(self, frame: bytes, peer: Peer | None = None) -> None:
-        try:
-            if self.connected or peer is None:
-                self.sock.send(frame)
-            else:
-                self.sock.sendto(frame, cast(tuple[Any, ...], peer))  # a listening link's peers are addresses
-        except OSError:
-            pass  # a peer that went away (ICMP unreachable on loopback): its silence is handled by timeouts
+        # A socket that queues ICMP errors reports another peer's pending one on this call, which then sends
+        # nothing: once reported it is cleared, and the frame goes on the second try.
+        for _ in range(2 if self.reports_errors else 1):
+            try:
+                if self.connected or peer is None:
+                    self.sock.send(frame)
+                else:
+                    self.sock.sendto(
+                        frame, cast(tuple[Any, ...], peer)
+                    )  # a listening link's peers: addresses
+                return
+            except OSError:
+                pass  # a peer that went away (ICMP unreachable): its silence is handled by timeouts
 
     def recv(self, wait_s: float) -> tuple[bytes, Peer] | None:
         try:
@@ -153,10 +175,28 @@ class UdpLink:
             data, addr = self.sock.recvfrom(_RECV_BYTES)
         except TimeoutError:
             return None
+        except ConnectionRefusedError:  # a vanished peer's ICMP error, reported here once: no datagram lost
+            return None
         except OSError:  # ICMP port unreachable from a vanished peer, or our socket closed under us
             time.sleep(min(max(wait_s, 0.0), 0.01))
             return None
         return data, addr
+
+    def unreachable(self) -> list[Peer]:
+        """The peers whose datagrams came back unreachable since the last call (their socket closed or their
+        process died: the kernel's ICMP error, queued on a listening socket on Linux); [] elsewhere."""
+        if not self.reports_errors or not self._errors.poll(0):  # POLLERR: an error is queued (a cheap check)
+            return []
+        peers: list[Peer] = []
+        self.sock.settimeout(0.0)  # non-blocking: with a timeout the call would wait for data it never reads
+        for _ in range(_MAX_ERRORS):
+            try:
+                _, _, _, addr = self.sock.recvmsg(1, 512, socket.MSG_ERRQUEUE | socket.MSG_DONTWAIT)
+            except OSError:  # BlockingIOError: the queue is empty
+                break
+            if addr:
+                peers.append(addr)
+        return peers
 
     def close(self) -> None:
         self.sock.close()

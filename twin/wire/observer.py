@@ -69,12 +69,13 @@ class Observer(OverLink):
 
     A daemon thread drains the socket into an unbounded queue as fast as datagrams come, so that a consumer
     slower than a lock-step session loses none of them (the socket's buffer only absorbs the thread's
-    pauses). The frames of other sessions are dropped, malformed ones counted (``counts``). Each session
-    begins with a ``Joined`` event. With ``follow`` (the default) the reader says HELLO again as soon as a
-    STOP comes, every 0.2 s until the server's next session admits it: a served job's sessions are seen
-    one after another. That HELLO, sent on the STOP, waits at the server for its next session and so is
-    taken before the next controller's unless that one is quicker; then the observer joins during the
-    session and misses its first blocks. Without ``follow``, ``rejoin`` asks for the next session.
+    pauses). The frames of other sessions are dropped, malformed ones counted (``counts``). Each session begins
+    with a ``Joined`` event; while it lasts the reader repeats HELLO every 0.2 s (the keep-alive by which the
+    server knows the observer is still there). With ``follow`` (the default) the reader says HELLO again as soon
+    as a STOP comes, every 0.2 s until the server's next session admits it: a served job's sessions are seen one
+    after another. That HELLO, sent on the STOP, waits at the server for its next session and so is taken before
+    the next controller's unless that one is quicker; then the observer joins during the session and misses its
+    first blocks. Without ``follow``, ``rejoin`` asks for the next session.
 
     ``config`` and ``session`` are the reader's latest session's (a slow consumer's events may be of an
     earlier one: each ``Joined`` carries its own)."""
@@ -117,6 +118,7 @@ class Observer(OverLink):
         self._answered = threading.Event()  # the first CONFIG came (granted or refused)
         self._closing = threading.Event()
         self._last_seq = -1
+        self._watching = False  # admitted to a session that has not ended: the keep-alive HELLOs go
         self._reader = threading.Thread(target=self._read, name=f"observer {self.url}", daemon=True)
         self._reader.start()
         if not self._answered.wait(connect_timeout_s) or self.config is None:
@@ -139,7 +141,9 @@ class Observer(OverLink):
         next_hello = 0.0
         while not self._closing.is_set():
             wait_s = _READER_WAIT_S
-            if self._joining.is_set():
+            # HELLO until a session admits us, then as the keep-alive while we watch it: the server frees the
+            # place of an observer that falls silent (docs/protocol.md, "Observers and sessions").
+            if self._joining.is_set() or self._watching:
                 now = time.monotonic()
                 if now >= next_hello:
                     self.link.send(p.encode(p.Hello(role=p.ROLE_OBSERVE, client=self.client), 0))
@@ -177,9 +181,11 @@ class Observer(OverLink):
                 return False
             self._last_seq = msg.seq
         self._events.put(msg)
-        if isinstance(msg, p.Stop) and self.follow:
-            self._joining.set()
-            return True
+        if isinstance(msg, p.Stop):
+            self._watching = False
+            if self.follow:
+                self._joining.set()
+                return True
         return False
 
     def _join(self, config: p.Config, session: int) -> None:
@@ -191,6 +197,7 @@ class Observer(OverLink):
         else:
             self.config, self.session, self._last_seq = config, session, -1
             self.counts.sessions += 1
+            self._watching = True
             self._joining.clear()
             self._events.put(Joined(session, config))
         self._answered.set()

@@ -17,7 +17,10 @@ reproduces the in-process run of the same controller bit for bit.
   holds its last value. After ``watchdog_periods`` missing periods in a row the output goes to the zero
   command and the samples carry the watchdog flag until a command arrives.
 * **Observers** (at most ``MAX_OBSERVERS``) get every SAMPLE, every COMMAND the server accepts (the echo:
-  what the DAC holds, from SAMPLE k's ``applied_seq``) and the STOP; a new session forgets them.
+  what the DAC holds, from SAMPLE k's ``applied_seq``) and the STOP; a new session forgets them. An observer
+  repeats HELLO while it watches (its keep-alive); one that vanishes — its socket closed (the transport
+  reports the port unreachable) or silent for ``observer_silence_s`` — loses its place, which a new
+  observer may then take.
 
 Anything that is not a valid frame of this session from the right peer — malformed, oversized, another
 session's, a replayed or out-of-order command, an observer's command, a non-finite or out-of-range DAC
@@ -38,6 +41,7 @@ from twin.interface import Controller, DaqSample
 from twin.parameters import Parameters
 from twin.realtime import TickTiming, WallClockPacer
 from twin.rigs.sim import PlantKind, SimRig, make_rig
+from twin.warm import warm
 from twin.wire import protocol as p
 from twin.wire.links import Link, LinkError, OverLink, SerialCounts, SerialLink, UdpLink
 
@@ -55,6 +59,9 @@ __all__ = [
 DEFAULT_WATCHDOG_PERIODS = 5  # 0.1 s at 50 Hz: a dead controller's last command drives the beam no longer
 DEFAULT_TIMEOUT_S = 5.0  # lock-step: the longest wait for one command before the session ends (STOP 3)
 MAX_OBSERVERS = 4  # further clients are refused: the samples sent per tick stay bounded
+# An observer says HELLO every 0.2 s while it watches (twin.wire.observer): one silent this long (at least,
+# or the session's timeout_s if longer) has vanished and its place is freed.
+MIN_OBSERVER_SILENCE_S = 1.0
 _RESEND_S = (
     0.2  # lock-step: SAMPLE k is repeated this often while its COMMAND is awaited (UDP may lose either)
 )
@@ -79,7 +86,7 @@ class SessionSettings:
     plant: PlantKind = "twin"
     ideal_sensors: bool = False
     mode: int = p.MODE_LOCKSTEP
-    timeout_s: float = DEFAULT_TIMEOUT_S
+    timeout_s: float = DEFAULT_TIMEOUT_S  # the wait for a command (lock-step; the view: for an answer)
     watchdog_periods: int = DEFAULT_WATCHDOG_PERIODS
     wait_client_s: float | None = None  # how long to wait for a controlling client (None: until one comes)
     stop_when_lost: bool = True
@@ -99,6 +106,7 @@ class SessionCounts:
     unexpected: int = 0  # a valid frame the server does not take (a SAMPLE or CONFIG sent to it)
     refused_clients: int = 0  # HELLOs answered with role 0
     observers: int = 0
+    observers_gone: int = 0  # observers whose place was freed: their port unreachable, or silent
     late_commands: int = 0  # real time: a command that arrived after its tick's boundary
     missing_commands: int = 0  # real time: periods that ended without their command
     watchdog_trips: int = 0  # times the watchdog put the output at the zero command
@@ -227,6 +235,7 @@ class Server(OverLink):
         self.controller_addr: Hashable | None = None
         self.client_name = ""
         self.observers: list[Hashable] = []
+        self._heard: dict[Hashable, float] = {}  # an observer → when it was last heard (time.monotonic)
         self._reply: dict[Hashable, Hashable] = {}  # an admitted client's address → where it is sent to
         self._seq = 0
         self._n_ticks = 0
@@ -265,6 +274,7 @@ class Server(OverLink):
         if settings is not None:
             self.settings = settings
         s = self.settings
+        warm(s.params, plant=s.plant, ideal_sensors=s.ideal_sensors)  # before the clock: no tick stalls
         self._new_session()
         self._await_controller()
         rig = make_rig(s.params, plant=s.plant, ideal_sensors=s.ideal_sensors, seed=s.seed, noise=s.noise)
@@ -312,6 +322,26 @@ class Server(OverLink):
         self._rig = rig
 
     @property
+    def observer_silence_s(self) -> float:
+        """How long an observer may be silent (no keep-alive HELLO) before its place is freed."""
+        return max(self.settings.timeout_s, MIN_OBSERVER_SILENCE_S)
+
+    def forget_vanished_observers(self) -> None:
+        """Free the places of observers that went: the transport reported their port unreachable (a closed
+        socket, a dead process), or they have been silent for ``observer_silence_s``."""
+        # Drained on every call: the queued errors are charged to the socket's receive buffer.
+        gone = set(self.link.unreachable()) if isinstance(self.link, UdpLink) else set()
+        if not self.observers:
+            return
+        oldest = time.monotonic() - self.observer_silence_s
+        for addr in list(self.observers):
+            if self._reply.get(addr, addr) in gone or self._heard.get(addr, math.inf) < oldest:
+                self.observers.remove(addr)
+                self._heard.pop(addr, None)
+                self._reply.pop(addr, None)
+                self.counts.observers_gone += 1
+
+    @property
     def watchdog(self) -> bool:
         """Whether the watchdog holds the output at the zero command now (commands stopped)."""
         return self._watchdog
@@ -333,7 +363,9 @@ class Server(OverLink):
         while self.controller_addr is None:
             left = deadline - time.monotonic()
             if left <= 0:
-                raise ServeError(f"no controlling client said HELLO to {self.url} within {wait_s:g} s")
+                raise ServeError(
+                    f"no controlling client said HELLO to {self.url} within {wait_s:g} s (--wait-client)"
+                )
             self.receive(min(left, 0.5))
 
     # --- receiving ----------------------------------------------------------------------------------
@@ -346,6 +378,8 @@ class Server(OverLink):
         data, addr = got
         c = self.counts
         c.frames += 1
+        if addr in self._heard:
+            self._heard[addr] = time.monotonic()  # any datagram: the observer is there
         try:
             frame = p.decode_frame(data)
         except p.ProtocolError:
@@ -384,6 +418,8 @@ class Server(OverLink):
 
     def _hello(self, msg: p.Hello, addr: Hashable) -> None:
         c = self.counts
+        if msg.role == p.ROLE_OBSERVE and addr not in self.observers:
+            self.forget_vanished_observers()  # a place a vanished observer held is free for this one
         if addr == self.controller_addr:  # a repeated HELLO: our CONFIG was lost (the first reply port stays)
             self._send(self._config(p.ROLE_CONTROL), self._reply[addr])
         elif addr in self.observers:
@@ -394,6 +430,7 @@ class Server(OverLink):
             self._send(self._config(p.ROLE_CONTROL), self._reply[addr])
         elif msg.role == p.ROLE_OBSERVE and len(self.observers) < MAX_OBSERVERS:
             self.observers.append(addr)
+            self._heard[addr] = time.monotonic()
             self._reply[addr] = _reply_to(addr, msg.reply_port)
             c.observers += 1
             self._send(self._config(p.ROLE_OBSERVE), self._reply[addr])
@@ -427,7 +464,7 @@ class Server(OverLink):
         if isinstance(got, p.Command):
             return self.accept(got)
         if not realtime:
-            self._end = (p.STOP_ERROR, f"no COMMAND {seq} within {s.timeout_s:g} s")
+            self._end = (p.STOP_ERROR, f"no COMMAND {seq} within {s.timeout_s:g} s (--timeout)")
             raise _SessionOver(self._end[1])
         return self.missed(rig.command_v)
 
@@ -446,6 +483,7 @@ class Server(OverLink):
         if self._watchdog:
             self.counts.watchdog_ticks += 1
         out = p.Sample(seq, sample.time_s, sample.ball_v, sample.angle_v, flags, self._applied_seq)
+        self.forget_vanished_observers()
         for addr in self._peers():
             self._send(out, addr)
         self._resend_at = None
