@@ -24,6 +24,9 @@ from __future__ import annotations
 
 import ast
 import os
+import shutil
+import subprocess
+import sys
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -415,13 +418,8 @@ def test_a_realtime_failure_on_an_overloaded_machine_is_a_skip_naming_the_load(t
     tasks waited for a CPU more than OVERLOAD_STALL of the test's time is a skip saying so; the same failure
     on a machine that did not wait stays a failure. The kernel's pressure file is a stand-in here, advanced
     by the test itself (0.2 s of stall over ~0.3 s)."""
-    import shutil
-    import subprocess
-    import sys
-
     psi = tmp_path / "cpu"
     psi.write_text("some avg10=0.00 avg60=0.00 avg300=0.00 total=0\n")
-    shutil.copy(Path(__file__).with_name("conftest.py"), tmp_path / "conftest.py")
     (tmp_path / "test_pace.py").write_text(
         "import pathlib, time, pytest\n\n"
         "@pytest.mark.realtime\n"
@@ -434,12 +432,69 @@ def test_a_realtime_failure_on_an_overloaded_machine_is_a_skip_naming_the_load(t
         "    time.sleep(0.3)\n"
         "    assert False, 'pace missed'\n"
     )
-    env = {**os.environ, "BALLBEAM_TEST_PSI": str(psi), "PYTHONPATH": str(Path(__file__).parents[1])}
-    env.pop("PYTEST_XDIST_TESTRUNUID", None)
-    out = subprocess.run(
-        [sys.executable, "-m", "pytest", "-q", "-rsf", "-p", "no:cacheprovider", "-p", "no:randomly", str(tmp_path)],
-        capture_output=True, text=True, env=env, cwd=tmp_path, timeout=120,
-    )  # fmt: skip
+    stat = tmp_path / "stat"  # a machine whose CPUs are never busy: the others' share is nil
+    stat.write_text(_STAT.format(busy=0))
+    out = _run_beside(tmp_path, psi, stat)
     assert "1 failed, 1 skipped" in out.stdout, out.stdout + out.stderr
     assert "test_idle" in out.stdout and "FAILED" in out.stdout
     assert "the machine was overloaded (a task waited for a CPU" in out.stdout
+
+
+# /proc/stat's first lines: user nice system idle iowait irq softirq steal guest guest_nice, in clock ticks.
+_STAT = "cpu  {busy} 0 0 1000 0 0 0 0 0 0\ncpu0 0 0 0 0 0 0 0 0 0 0\ncpu1 0 0 0 0 0 0 0 0 0 0\n"
+
+
+def _run_beside(tmp_path: Path, psi: Path, stat: Path) -> subprocess.CompletedProcess[str]:
+    """tmp_path's tests under tests/conftest.py, with stand-ins for the kernel's pressure and CPU files."""
+    shutil.copy(Path(__file__).with_name("conftest.py"), tmp_path / "conftest.py")
+    env = {
+        **os.environ,
+        "BALLBEAM_TEST_PSI": str(psi),
+        "BALLBEAM_TEST_STAT": str(stat),
+        "PYTHONPATH": str(Path(__file__).parents[1]),
+    }
+    env.pop("PYTEST_XDIST_TESTRUNUID", None)
+    return subprocess.run(
+        [sys.executable, "-m", "pytest", "-q", "-rsf", "-p", "no:cacheprovider", "-p", "no:randomly", str(tmp_path)],
+        capture_output=True, text=True, env=env, cwd=tmp_path, timeout=120,
+    )  # fmt: skip
+
+
+def test_a_busy_loop_on_each_core_is_seen_though_nothing_waits(tmp_path: Path) -> None:
+    """Two busy-loops on two cores make nothing wait (the stall stays 0) until the test's own task wakes and
+    queues behind one: the CPU time other programs took says the machine was not the test's. A realtime
+    failure in its call, in a fixture's setup (before the test's own clock starts: a module fixture) or in its
+    teardown is then a skip naming the load; with the CPUs idle the same failures stay failures."""
+    psi = tmp_path / "cpu"
+    psi.write_text("some avg10=0.00 avg60=0.00 avg300=0.00 total=0\n")
+    stat = tmp_path / "stat"
+    stat.write_text(_STAT.format(busy=0))
+    # Each test sleeps 0.3 s, then the stand-in says the CPUs were busy for 6 s more (600 clock ticks) since.
+    busy = (
+        f"p = pathlib.Path({str(stat)!r}); "
+        f"p.write_text({_STAT!r}.format(busy=int(p.read_text().split()[1]) + 600))"
+    )
+    (tmp_path / "test_hogs.py").write_text(
+        "import pathlib, time, pytest\n\n"
+        f"def _hogs():\n    time.sleep(0.3)\n    {busy}\n\n"
+        "@pytest.fixture(scope='module')\n"
+        "def served():\n    _hogs()\n    raise AssertionError('the view did not start in time')\n\n"
+        "@pytest.fixture\n"
+        "def teardown_waits():\n    yield\n    _hogs()\n    raise AssertionError('the view did not stop in time')\n\n"
+        "@pytest.mark.realtime\n"
+        "def test_call():\n    _hogs()\n    assert False, 'pace missed'\n\n"
+        "@pytest.mark.realtime\n"
+        "def test_setup(served):\n    pass\n\n"
+        "@pytest.mark.realtime\n"
+        "def test_teardown(teardown_waits):\n    pass\n"
+    )
+    out = _run_beside(tmp_path, psi, stat)
+    assert "3 skipped" in out.stdout and "failed" not in out.stdout and "error" not in out.stdout, out.stdout
+    assert out.stdout.count("other programs kept its 2 CPUs") == 3, out.stdout
+    for phase in ("call", "setup", "teardown"):
+        assert f"in the {phase} of this test" in out.stdout, out.stdout
+    # The same failures on a machine whose CPUs stay idle: failures (the test's own CPU is not counted).
+    (tmp_path / "test_hogs.py").write_text((tmp_path / "test_hogs.py").read_text().replace(busy, "pass"))
+    stat.write_text(_STAT.format(busy=0))
+    out = _run_beside(tmp_path, psi, stat)
+    assert "1 failed" in out.stdout and "2 error" in out.stdout and "skipped" not in out.stdout, out.stdout

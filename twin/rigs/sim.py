@@ -23,13 +23,20 @@ takes effect) is ``twin.daq.TickSchedule``, which the batch (``twin.rigs.batch``
 from __future__ import annotations
 
 import math
+import warnings
 from typing import Literal, Protocol
 
 import numpy as np
 
 from twin.daq import TickSchedule, block_span_s
 from twin.interface import DaqSample, Rig
-from twin.output_stage import amplifier_volts, ideal_motor_volts, motor_volts_of
+from twin.output_stage import (
+    CommandClampedWarning,
+    amplifier_volts,
+    clamped_command_text,
+    ideal_motor_volts,
+    motor_volts_of,
+)
 from twin.parameters import Parameters
 from twin.physics import PhysicsBackend, PhysicsBlock
 from twin.plant import Plant
@@ -123,6 +130,12 @@ class SimRig(Rig):
         if not isinstance(command_v, (int, float, np.floating, np.integer)) or not math.isfinite(command_v):
             raise ValueError(f"command_v = {command_v!r}: the DAC command must be a finite number of volts")
         self.command_v = float(command_v)
+        daq = self.params.daq
+        if not daq.dac_min_v <= self.command_v <= daq.dac_max_v:  # the card clamps it: said once a run
+            self.clamped_commands += 1
+            if self.clamped_commands == 1:
+                text = clamped_command_text(self.command_v, daq, self._ticks, self.time_s)
+                warnings.warn(text, CommandClampedWarning, stacklevel=2)
         self._set_motor_volts(self._motor_volts_for(self.command_v))
 
     # --- simulation only ------------------------------------------------------------------------------
@@ -181,6 +194,7 @@ class SimRig(Rig):
         self._schedule.reset()
         self._ball.reset(x_m, self._step_time(self._schedule.chain_start_step), seed=self.seed)
         self._ticks = 0
+        self.clamped_commands = 0  # commands written outside the DAC's range this run (the card clamped them)
         self.command_v = self.params.amplifier.zero_command_v
         self._pending_motor_v = self._applied_motor_v = self._motor_volts_for(self.command_v)
         self.last_block = None

@@ -107,6 +107,7 @@ class Panels:
         self.downloads_refused = 0  # clicks answered while the previous download was still on its way
         self._pending: list[Refusal] = []  # refusals not yet notified
         self._last_notify = -math.inf
+        self._last_download_notice = -math.inf
         self._notified_error: str | None = None
         self._lost_run: int | None = None  # the run whose lost ball is notified
         self._lost_notices: list[Any] = []
@@ -303,9 +304,14 @@ class Panels:
 
     def _send_download(self, client: Any, name: str, data: bytes) -> None:
         """On the loop's thread: send the file, unless the last one is still waiting for that browser to
-        take it (then a notification only): clicks never pile copies of the record up in memory."""
+        take it (then a notification, at most two a second: a browser that reads nothing would hold one per
+        click): clicks never pile copies of the record up in memory."""
         if download_bytes_queued(client):
             self.downloads_refused += 1
+            now = time.monotonic()
+            if now - self._last_download_notice < NOTIFY_EVERY_S:
+                return
+            self._last_download_notice = now
             client.add_notification(
                 "Download",
                 "the previous download is still being sent",

@@ -96,10 +96,18 @@ _STOP = ("stop",)
 _SESSION = ("session",)
 
 
+class _Stopped(Exception):
+    """Raised from the build's progress report: the worker was stopped while its band was being built."""
+
+
 class ShadowWorker:
     """The monitor built from ``factory(params)`` in a daemon thread, fed by ``feed`` (any thread, never
     blocks), working its windows off whenever samples are not waiting. ``run`` is the number of the view's
-    run it starts on (``new_session`` gives each next one's)."""
+    run it starts on (``new_session`` gives each next one's).
+
+    ``stop`` ends the thread at its next step (a band being built is abandoned at its next progress report);
+    until it has ended, ``resume`` takes the stop back, so that a checkbox toggled on and off never has more
+    than one worker building (each build holds a band's memory and a core for tens of seconds)."""
 
     def __init__(self, factory: MonitorFactory, params: Parameters, run: int = 0) -> None:
         self._queue: queue.SimpleQueue[tuple[Any, ...]] = queue.SimpleQueue()
@@ -114,6 +122,8 @@ class ShadowWorker:
         self._from_s = math.nan  # t of the first sample it took of that run
         self.scored = 0
         self.skipped = 0
+        self._stopping = False  # stop asked for (under the lock); resume takes it back until it is honoured
+        self._ended = False  # the thread has ended or honoured a stop (under the lock): it cannot resume
         self._thread = threading.Thread(
             target=self._run_thread, args=(factory, params), name="shadow", daemon=True
         )
@@ -129,7 +139,18 @@ class ShadowWorker:
         self._queue.put((*_SESSION, run))
 
     def stop(self) -> None:
+        with self._lock:
+            self._stopping = True
         self._queue.put(_STOP)
+
+    def resume(self) -> bool:
+        """Take back a ``stop`` the thread has not honoured yet: True if it goes on (the caller starts a new
+        session for it: samples were not fed meanwhile), False if it has ended."""
+        with self._lock:
+            if self._ended:
+                return False
+            self._stopping = False
+            return True
 
     @property
     def alive(self) -> bool:
@@ -155,6 +176,9 @@ class ShadowWorker:
 
         def progress(fraction: float) -> None:
             with self._lock:
+                if self._stopping:
+                    self._ended = True
+                    raise _Stopped
                 self._status = f"{_BUILDING} {100.0 * min(max(fraction, 0.0), 1.0):.0f} %"
 
         try:
@@ -166,7 +190,16 @@ class ShadowWorker:
 
     def _run_thread(self, factory: MonitorFactory, params: Parameters) -> None:
         try:
+            self._work(factory, params)
+        finally:
+            with self._lock:
+                self._ended = True
+
+    def _work(self, factory: MonitorFactory, params: Parameters) -> None:
+        try:
             monitor = self._build(factory, params)
+        except _Stopped:
+            return
         except Exception as exc:  # noqa: BLE001 - a monitor that cannot be built is reported, the view goes on
             with self._lock:
                 self._status = f"shadow failed: {type(exc).__name__}: {exc}"
@@ -188,7 +221,11 @@ class ShadowWorker:
             except queue.Empty:
                 item = None
             if item is _STOP:
-                return
+                with self._lock:
+                    if self._stopping:
+                        self._ended = True
+                        return
+                continue  # resumed since: this stop was taken back
             if item is not None and item[0] == _SESSION[0]:
                 while monitor.pending():  # the run's last complete windows, before its stream is forgotten
                     self._publish(monitor.process())

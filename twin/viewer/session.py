@@ -165,6 +165,9 @@ class LiveTwin:
         # drift (% of motor resistance, from the next run) changes only the rig.
         self.monitor_factory = monitor
         self.shadow: ShadowWorker | None = None
+        # The last shadow switched off, until its thread ends: switched on again meanwhile, it goes on
+        # (a flood of toggles never has more than one band being built).
+        self._shadow_stopping: ShadowWorker | None = None
         self.drift_pct = 0.0
         self._shadow_seq = 0
         self.catalogue = catalogue
@@ -534,11 +537,16 @@ class LiveTwin:
         if on and factory is None:
             raise _Refused("this view was started without a shadow (the application gives none)")
         if on and factory is not None and self.shadow is None:
-            self.shadow = ShadowWorker(factory, self.params, run=self.runs)
+            stopping, self._shadow_stopping = self._shadow_stopping, None
+            if stopping is not None and stopping.resume():
+                self.shadow = stopping
+                stopping.new_session(self.runs)  # the samples it missed while off: a new session
+            else:
+                self.shadow = ShadowWorker(factory, self.params, run=self.runs)
             self._feed_shadow(self.loop.command_v, held=True)  # its first session starts at this block
         elif not on and self.shadow is not None:
             self.shadow.stop()
-            self.shadow = None
+            self._shadow_stopping, self.shadow = self.shadow, None
 
     def _do_drift(self, value: Any) -> None:
         self.drift_pct = _on_slider("drift", value, DRIFT)
@@ -619,7 +627,7 @@ class LiveTwin:
         if wire is None:
             return
         try:
-            wire.service(deadline)
+            wire.service(deadline, release=False)  # no run without the view running: the client waits, held
         except Exception as exc:  # noqa: BLE001 - the link's failure fails the run, not the server
             self._fail(exc)
 
