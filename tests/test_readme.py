@@ -19,8 +19,8 @@ def _blocks(language: str) -> list[str]:
 def test_the_controller_example_holds_the_ball() -> None:
     (code,) = [b for b in _blocks("python") if "class MyController" in b]
     out = io.StringIO()
-    with contextlib.redirect_stdout(out):
-        exec(compile(code, "README.md", "exec"), {"__name__": "readme"})
+    with contextlib.redirect_stdout(out):  # run as a script (imported, it defines the class alone)
+        exec(compile(code, "README.md", "exec"), {"__name__": "__main__"})
     assert out.getvalue().startswith("True held")
 
 

@@ -8,6 +8,7 @@ documents are commands the parser takes.
 
 import re
 import shlex
+from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
@@ -19,17 +20,46 @@ README = ROOT / "README.md"
 SHELL_BLOCKS = ("", "bash", "sh", "shell", "console")
 
 
-def _shell_lines(text: str) -> list[tuple[int, str]]:
-    """(line number, logical line) of every shell code block, continuations joined as a shell does."""
-    out: list[tuple[int, str]] = []
-    in_block, shell, pending, start = False, False, "", 0
+@dataclass(frozen=True)
+class Block:
+    """A fenced code block: its language (``""`` when none), the line number of its first line inside the
+    fence, and its lines."""
+
+    language: str
+    first_line: int
+    lines: tuple[str, ...]
+
+    @property
+    def text(self) -> str:
+        return "".join(line + "\n" for line in self.lines)
+
+    @property
+    def shell(self) -> bool:
+        return self.language in SHELL_BLOCKS
+
+
+def code_blocks(text: str) -> list[Block]:
+    """Every fenced code block of a Markdown text, in order (indented fences too: a block in a list item)."""
+    blocks: list[Block] = []
+    lines: list[str] = []
+    language, first, inside = "", 0, False
     for number, line in enumerate(text.splitlines(), start=1):
         fence = re.match(r"^\s*```(\w*)", line)
-        if fence:
-            in_block, shell = not in_block, fence.group(1) in SHELL_BLOCKS
-            continue
-        if not (in_block and shell):
-            continue
+        if fence and not inside:
+            language, first, lines, inside = fence.group(1), number + 1, [], True
+        elif fence:
+            blocks.append(Block(language, first, tuple(lines)))
+            inside = False
+        elif inside:
+            lines.append(line)
+    return blocks
+
+
+def logical_lines(block: Block) -> list[tuple[int, str]]:
+    """(line number, logical line) of a shell block, continuations joined as a shell does."""
+    out: list[tuple[int, str]] = []
+    pending, start = "", 0
+    for number, line in enumerate(block.lines, start=block.first_line):
         if not pending:
             start = number
         if line.endswith("\\"):
@@ -40,18 +70,32 @@ def _shell_lines(text: str) -> list[tuple[int, str]]:
     return out
 
 
+def _shell_lines(text: str) -> list[tuple[int, str]]:
+    """(line number, logical line) of every shell code block."""
+    return [line for block in code_blocks(text) if block.shell for line in logical_lines(block)]
+
+
+SEPARATORS = ("&&", ";", "||", "(", ")")
+
+
+def shell_words(line: str) -> list[str]:
+    """A logical line's words as a shell splits them, comments dropped; ``&&``, ``;`` and a subshell's
+    parentheses are words of their own."""
+    lexer = shlex.shlex(line, posix=True, punctuation_chars="&;()")
+    lexer.whitespace_split = True
+    lexer.commenters = "#"
+    return list(lexer)
+
+
 def _commands(text: str) -> list[tuple[int, list[str]]]:
     """The ``ballbeam`` invocations: the words after ``ballbeam`` up to the end or a ``&&``, ``;``, ``|``."""
     found = []
     for number, line in _shell_lines(text):
-        lexer = shlex.shlex(line, posix=True, punctuation_chars="&;")
-        lexer.whitespace_split = True
-        lexer.commenters = "#"
-        words = list(lexer)
+        words = shell_words(line)
         for i, word in enumerate(words):
-            if word == "ballbeam" and (i == 0 or words[i - 1] in ("&&", ";", "||")):
+            if word == "ballbeam" and (i == 0 or words[i - 1] in SEPARATORS):
                 rest = words[i + 1 :]
-                end = next((k for k, w in enumerate(rest) if w in ("&&", ";", "||")), len(rest))
+                end = next((k for k, w in enumerate(rest) if w in SEPARATORS), len(rest))
                 found.append((number, rest[:end]))
     return found
 

@@ -17,7 +17,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["TickTiming", "WallClockPacer", "arrival_timing", "tick_timing"]
+__all__ = [
+    "OVERRUN_WARNING_SHARE",
+    "TickTiming",
+    "WallClockPacer",
+    "arrival_timing",
+    "overrun_warning",
+    "tick_timing",
+]
 
 _SPIN_S = 0.0005  # sleep() overshoots by up to a scheduler quantum: spin for the last half millisecond
 
@@ -37,6 +44,25 @@ class TickTiming:
 
     def to_json(self) -> dict[str, float | int]:
         return {k: (round(v, 4) if isinstance(v, float) else v) for k, v in self.__dict__.items()}
+
+
+# Above this share of overrun ticks a run did not keep real time: on the rig those ticks' blocks would have
+# been missed. A controller within its period on an idle machine overruns none.
+OVERRUN_WARNING_SHARE = 0.01
+
+
+def overrun_warning(timing: TickTiming) -> str | None:
+    """One line saying that a paced run did not keep real time (more than ``OVERRUN_WARNING_SHARE`` of its ticks
+    overran), or None. The simulation does not depend on the pace: the verdict stands, the timing does not."""
+    if timing.ticks == 0 or timing.overruns <= OVERRUN_WARNING_SHARE * timing.ticks:
+        return None
+    return (
+        f"real time not kept: {timing.overruns} of {timing.ticks} ticks overran "
+        f"({100 * timing.overruns / timing.ticks:.0f} %, above {100 * OVERRUN_WARNING_SHARE:g} %): a tick began a "
+        f"period late or computed longer than the period ({timing.period_ms:g} ms; longest compute "
+        f"{timing.compute_max_ms:.1f} ms, latest start {timing.jitter_max_ms:.1f} ms); the verdict is the "
+        "simulation's and stands, the timing figures are this machine's: run on an idle machine"
+    )
 
 
 @dataclass

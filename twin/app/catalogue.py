@@ -76,6 +76,21 @@ def _import_keeping_the_process(name: str) -> Any:
         os._exit = real_exit
 
 
+def _looks_like_a_path(name: str) -> bool:
+    """A file path or a relative module name where a dotted module name belongs (importlib would raise a
+    ``TypeError`` for a leading dot, or look for a module named with slashes)."""
+    return name.startswith(".") or "/" in name or os.sep in name or name.endswith(".py")
+
+
+def _dotted(path: str) -> str:
+    """The dotted module name a relative file path would have from the current folder (``mypkg/mod.py`` →
+    ``mypkg.mod``), for the message; a path outside it keeps only its file's name."""
+    parts = [p for p in path.replace(os.sep, "/").removesuffix(".py").split("/") if p not in ("", ".")]
+    if path.startswith("/") or ".." in parts:
+        parts = parts[-1:]
+    return ".".join(parts).lstrip(".") or "mod"
+
+
 def user_controller(spec: str, timeout_s: float | None = None) -> Callable[..., Controller] | None:
     """The class named by ``MODULE:CLASS`` (a ``Controller`` subclass) or the function named by
     ``MODULE:FUNCTION`` (one that builds a ``Controller``: a trained policy's ``PolicyController``, say), or
@@ -87,6 +102,12 @@ def user_controller(spec: str, timeout_s: float | None = None) -> Callable[..., 
     if ":" not in spec:
         from controllers import registry
 
+        if spec not in registry.NAMES and _looks_like_a_path(spec):
+            raise ParameterError(
+                f"--controller {spec}: a file path, not a controller: give MODULE:CLASS, the module's dotted "
+                f"name as Python imports it from the current folder ({os.getcwd()}) and the class, "
+                f"e.g. {_dotted(spec)}:MyController"
+            )
         if spec not in registry.NAMES:
             raise ParameterError(
                 f"--controller {spec!r}: unknown controller; known: {', '.join(registry.NAMES)}, "
@@ -99,6 +120,12 @@ def user_controller(spec: str, timeout_s: float | None = None) -> Callable[..., 
     module_name, _, qualname = spec.partition(":")
     if not module_name or not qualname:
         raise ParameterError(f"--controller {spec!r}: expected MODULE:CLASS, e.g. mypkg.mod:MyController")
+    if _looks_like_a_path(module_name):
+        raise ParameterError(
+            f"--controller {spec}: {module_name!r} is a file path or a relative name; MODULE is the module's "
+            f"dotted name as Python imports it from the current folder ({os.getcwd()}), "
+            f"e.g. {_dotted(module_name)}:{qualname}"
+        )
     cwd = os.getcwd()
     if "" not in sys.path and cwd not in sys.path:  # as `python -m`: the user's modules where they are
         sys.path.insert(0, cwd)

@@ -22,7 +22,7 @@ import numpy as np
 
 from twin.app.fanout import Progress, Runs, run_starts
 from twin.app.montecarlo import Distribution, sample_parameters
-from twin.app.replay import replay_entry
+from twin.app.replay import controller_identity, replay_entry
 from twin.app.sweep import point_seeds
 from twin.outputs import JobFiles
 from twin.parameters import ParameterError, Parameters
@@ -74,6 +74,7 @@ class CertifyResult:
     counterexample: dict[str, Any] | None
     requirements: dict[str, dict[str, Any]] = field(default_factory=dict)
     wall_s: float = 0.0
+    controller_sha256: str | None = None  # ``controller_identity`` of the controller when the job started
 
     def statement(self) -> str:
         s = self.settings
@@ -129,6 +130,7 @@ class CertifyResult:
             "runs_spent": len(self.runs),
             "runs_to_first_violation": None if self.first_violation is None else self.first_violation + 1,
             "requirements": self.requirements,
+            # the run to repeat comes before the runs: load_replay reads a large file's head only
             "counterexample": self.counterexample,
             "runs": [
                 {
@@ -171,6 +173,7 @@ def certify(
     if settings.batch < 1:
         raise ParameterError(f"--batch {settings.batch}: at least 1 run")
     started = time.perf_counter()
+    identity = controller_identity(settings.controller, missing_ok=True)
     starts, seeds, rigs, values = draws(settings, base, spread, needed)
     job = Runs(
         settings.controller, base, settings.duration_s, settings.noise, "twin", False, spec.requirements
@@ -196,9 +199,25 @@ def certify(
             progress(len(runs), needed)
         bad = next((r for r in runs[lo:] if _fails(r)), None)
         if bad is not None:
-            cx = replay_entry(settings.controller, bad, settings.noise, settings.duration_s, spec)
+            cx = replay_entry(
+                settings.controller,
+                bad,
+                settings.noise,
+                settings.duration_s,
+                spec,
+                controller_sha256=identity,
+                plant="twin",
+            )
             return CertifyResult(
-                settings, spec, spread, needed, runs, "fail", cx, wall_s=time.perf_counter() - started
+                settings,
+                spec,
+                spread,
+                needed,
+                runs,
+                "fail",
+                cx,
+                wall_s=time.perf_counter() - started,
+                controller_sha256=identity,
             )
         if not complete:
             return CertifyResult(
@@ -210,8 +229,9 @@ def certify(
                 "interrupted",
                 None,
                 wall_s=time.perf_counter() - started,
+                controller_sha256=identity,
             )
-    result = CertifyResult(settings, spec, spread, needed, runs, "pass", None)
+    result = CertifyResult(settings, spec, spread, needed, runs, "pass", None, controller_sha256=identity)
     _noise_reruns(result, rigs, job, workers, scheduler)
     result.wall_s = time.perf_counter() - started
     return result
@@ -262,6 +282,8 @@ def _noise_reruns(
                     s.noise,
                     s.duration_s,
                     result.spec,
+                    controller_sha256=result.controller_sha256,
+                    plant="twin",
                 )
         else:
             entry["noise_sd"] = 0.0

@@ -28,7 +28,7 @@ import numpy as np
 
 from twin.app.fanout import Progress, Runs, run_starts
 from twin.app.montecarlo import Distribution, apply_values
-from twin.app.replay import replay_entry
+from twin.app.replay import controller_identity, replay_entry
 from twin.engine import Scenario
 from twin.outputs import JobFiles
 from twin.parameters import ParameterError, Parameters
@@ -94,6 +94,7 @@ class FalsifyResult:
     complete: bool
     wall_s: float = 0.0
     base: dict[str, Any] = field(default_factory=dict)  # the base parameters' changes from the defaults
+    controller_sha256: str | None = None  # ``controller_identity`` of the controller when the search started
 
     @property
     def first_violation(self) -> int | None:
@@ -111,7 +112,17 @@ class FalsifyResult:
         """What ``ballbeam run --replay`` needs to repeat ``run`` bit for bit."""
         s = self.settings
         return {
-            **replay_entry(s.controller, run, s.noise, s.duration_s, self.spec),
+            **replay_entry(
+                s.controller,
+                run,
+                s.noise,
+                s.duration_s,
+                self.spec,
+                controller_sha256=self.controller_sha256,
+                # the engine that made this run: the fast engine's (the reference plant under the twin's
+                # sensor chain) replays on it
+                plant="reference" if run.get("engine") == "fast" else "twin",
+            ),
             **{k: run["values"][k] for k in SCENARIO_AXES if k in run["values"]},
             "searched": run["values"],
             "objective": run["objective"],
@@ -131,6 +142,7 @@ class FalsifyResult:
             "runs_spent": len(self.runs),
             "decided_by": {e: sum(r.get("engine") == e for r in self.runs) for e in ("fast", "mujoco")},
             "runs_to_first_violation": None if first is None else first + 1,
+            # the runs to repeat come before the trace: load_replay reads a large file's head only
             "counterexample": None if first is None or best is None else self.replay(best),
             "least_robust": None if best is None else self.replay(best),
             "trace": [
@@ -328,10 +340,11 @@ def falsify(
     if not 1 <= settings.budget <= MAX_BUDGET:
         raise ParameterError(f"--budget {settings.budget}: 1 … {MAX_BUDGET} runs")
     space = _Space(settings, base, spread)
+    identity = controller_identity(settings.controller, missing_ok=True)
     search = _new_search(settings, base, spec, space, workers, scheduler, progress)
     started = time.perf_counter()
     _cma_search(search)
-    return _result(search, spec, spread, base, started)
+    return _result(search, spec, spread, base, started, identity)
 
 
 def uniform_search(
@@ -346,11 +359,12 @@ def uniform_search(
     """The baseline: the same cube sampled uniformly at random (seeded), in batches of ``batch``, to the
     first violation or the budget."""
     space = _Space(settings, base, spread)
+    identity = controller_identity(settings.controller, missing_ok=True)
     search = _new_search(settings, base, spec, space, workers, None, None)
     started = time.perf_counter()
     while search.left > 0 and not search.found() and search.complete:
         search.evaluate(search.rng.random((min(batch, search.left), space.dims)))
-    return _result(search, spec, spread, base, started)
+    return _result(search, spec, spread, base, started, identity)
 
 
 def _new_search(
@@ -376,7 +390,12 @@ def _new_search(
 
 
 def _result(
-    search: _Search, spec: Spec, spread: Distribution | None, base: Parameters, started: float
+    search: _Search,
+    spec: Spec,
+    spread: Distribution | None,
+    base: Parameters,
+    started: float,
+    identity: str | None,
 ) -> FalsifyResult:
     return FalsifyResult(
         search.space.s,
@@ -386,6 +405,7 @@ def _result(
         search.complete,
         time.perf_counter() - started,
         base.changed(),
+        identity,
     )
 
 

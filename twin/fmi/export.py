@@ -18,11 +18,24 @@ from typing import Any
 
 from twin.parameters import _GROUPS, Parameters
 
-__all__ = ["MODEL", "SCRIPT", "SCRIPTS", "export_fmu", "rig_description"]
+__all__ = ["MODEL", "SCRIPT", "SCRIPTS", "check_rig", "export_fmu", "rig_description"]
 
 SCRIPT = Path(__file__).with_name("ballbeam_fmu.py")
 SCRIPTS = {3: SCRIPT, 2: Path(__file__).with_name("ballbeam_fmu2.py")}
 MODEL = "BallBeam"  # the unit's model identifier: the slave's class
+
+
+def check_rig(params: Parameters, source: str) -> None:
+    """Refuse, before a unit is written, parameters its rig cannot be built from: the unit builds the very
+    ``TwinRig`` a run does (``RigUnit.start``), so this is the check ``ballbeam run`` makes (a period, latency or
+    free-run time that is no whole number of physics steps, …), not a copy of it."""
+    from twin.parameters import ParameterError
+    from twin.rigs.sim import TwinRig
+
+    try:
+        TwinRig(params)
+    except ValueError as exc:
+        raise ParameterError(f"the parameters of {source} make no rig a run accepts: {exc}") from None
 
 
 def rig_description(

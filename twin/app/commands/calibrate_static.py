@@ -6,7 +6,7 @@ import argparse
 import json
 from pathlib import Path
 
-from twin.app.commands.common import add_params_options, inputs, load_params
+from twin.app.commands.common import add_params_options, check_overwrite, inputs, load_params
 from twin.outputs import check_outputs, writing
 
 PARAMS_OUT_SUFFIXES = (".toml",)
@@ -34,6 +34,7 @@ def run(args: argparse.Namespace) -> int:
     from calib.static_render import render_lines, render_toml
     from twin.outputs import atomic_output
 
+    check_overwrite(args, "--out")
     params = load_params(args)
     paths = check_outputs(
         [("--out", args.out, PARAMS_OUT_SUFFIXES, 0)], overwrite=args.overwrite, inputs=inputs(args)

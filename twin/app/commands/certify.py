@@ -79,7 +79,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from twin.app.certify import OUTPUT_FILES, CertifySettings, certify, runs_needed
     from twin.parameters import ParameterError
-    from twin.requirements import load_spec
+    from twin.requirements import check_timing, load_spec
 
     args.serve = None
     if (args.spread is None) == (args.calibration is None):
@@ -89,6 +89,7 @@ def run(args: argparse.Namespace) -> int:
     base, spread = params_and_spread(args)
     assert spread is not None
     spec = load_spec(args.spec)
+    check_timing(spec.requirements, args.spec, base.daq.period_s, args.duration)
     x, th = args.x0, args.theta0
     check_start_box(base, x, th)
     runs_needed(args.guarantee, args.confidence)  # refused here if it cannot be stated
@@ -123,10 +124,14 @@ def run(args: argparse.Namespace) -> int:
             sd = f", noise sd {r['noise_sd']:.3g}" if "noise_reruns" in r else ""
             print(f"  {name}: {r['status']}, least robustness {r['least_robustness']:+.4g}{sd}")
         if result.counterexample is not None and args.out is not None:
-            print(f"repeat it: ballbeam run --replay {Path(args.out) / 'certify.json'}")
+            from twin.app.replay import replay_command
+
+            print(f"repeat it: {replay_command(Path(args.out) / 'certify.json', args.controller)}")
     if result.outcome == "interrupted":
-        print("ballbeam certify: interrupted: no statement", file=sys.stderr)
-        return 130
+        from twin.guard import interrupt_exit_code, interrupt_name
+
+        print(f"ballbeam certify: interrupted ({interrupt_name()}): no statement", file=sys.stderr)
+        return interrupt_exit_code()
     return 0 if result.outcome == "pass" else 1
 
 

@@ -115,14 +115,26 @@ def add_engine_options(
     parser.add_argument(
         "--band",
         type=count(1, 64),
-        default=1,
+        default=None,  # 1, set by resolve_engine: given, it is refused where the engine is not screen
         metavar="N",
         help="with --engine screen: the grid steps around each class change that MuJoCo decides (default 1)",
     )
 
 
 def resolve_engine(args: argparse.Namespace, default: str) -> str:
-    """The engine asked for, or the command's default where the job allows it (refused where it does not)."""
+    """The engine asked for, or the command's default where the job allows it (refused where it does not).
+    A grid's ``--band`` goes with the screen engine only (refused with another); not given, it is set to 1."""
+    engine = _engine(args, default)
+    if hasattr(args, "band"):
+        if args.band is not None and engine != "screen":
+            refuse_unused(
+                [("--band", args.band)], f"the band is the screen engine's; this job's engine is {engine}"
+            )
+        args.band = 1 if args.band is None else args.band
+    return engine
+
+
+def _engine(args: argparse.Namespace, default: str) -> str:
     engine = args.engine
     if engine is None:
         plain = getattr(args, "refine", 0) or getattr(args, "serve", None) is not None or args.plant != "twin"
@@ -333,8 +345,83 @@ def check_job(args: argparse.Namespace, params: Parameters, outputs: JobFiles) -
 
     if args.serve is None:  # served: the client's controller is none of ours
         catalogue_for(args.controller, params)
+    check_overwrite(args, "--out")
+    if getattr(args, "scheduler", None) is not None:  # the scheduler's workers run the job, not local ones
+        refuse_unused(
+            [("--workers", args.workers if args.workers > 1 else None)],
+            f"--scheduler {args.scheduler} fans the runs out to its own workers: drop one",
+        )
     if args.out is not None:
         check_output_folder("--out", args.out, outputs, overwrite=args.overwrite, inputs=inputs(args))
+
+
+def given(value: object) -> bool:
+    """An option given on the command line: its value neither None (not given) nor False (a flag not set)."""
+    return value is not None and value is not False
+
+
+def refuse_unused(options: Sequence[tuple[str, object]], why: str) -> None:
+    """Refuse (a ParameterError: exit 2) the first of ``options`` (option, value) given: the job would not use
+    it, ``why`` says when it would. An option is applied or refused, never ignored."""
+    from twin.parameters import ParameterError
+
+    for option, value in options:
+        if given(value):
+            raise ParameterError(f"{option}{_shown(value)}: {why}")
+
+
+def _shown(value: object) -> str:
+    """An option's value as typed, after its name: nothing for a flag, ``A:B`` for a range (``A`` for one)."""
+    if value is True:
+        return ""
+    if isinstance(value, tuple):
+        text = ":".join(dict.fromkeys(f"{v:g}" for v in value))
+    elif isinstance(value, float):
+        text = f"{value:g}"
+    else:
+        text = str(value)
+    return f" {text[:60]}"
+
+
+def check_overwrite(args: argparse.Namespace, *outputs: str) -> None:
+    """``--overwrite`` with none of the command's ``outputs`` (option names) given replaces nothing: refused."""
+    named = [getattr(args, option[2:].replace("-", "_"), None) for option in outputs]
+    if getattr(args, "overwrite", False) and not any(given(value) for value in named):
+        refuse_unused(
+            [("--overwrite", True)], f"it replaces an existing {' or '.join(outputs)}: none is given"
+        )
+
+
+def check_flick(
+    times: tuple[float, float] | None, speeds: tuple[float, float] | None, duration_s: float
+) -> None:
+    """``--flick-time`` and ``--flick-speed`` (a value each, or a range ``(A, B)`` searched): both or neither,
+    the time before the run ends, a kick within the live view's Flick range in size (its sign is the
+    direction); a range searched (it may cross 0) within its top in size and not below its bottom whole."""
+    from twin.parameters import ParameterError
+
+    if times is None and speeds is None:
+        return
+    if times is None or speeds is None:
+        option, value = ("--flick-time", times) if speeds is None else ("--flick-speed", speeds)
+        other = "--flick-speed (the kick)" if speeds is None else "--flick-time (when)"
+        refuse_unused([(option, value)], f"a flick needs {other} too")
+        return
+    # The Flick control's range has one home, the view's (a heavy import: only for a flick).
+    from twin.viewer.common import FLICK
+
+    if times[1] >= duration_s:
+        raise ParameterError(
+            f"--flick-time{_shown(times)}: at or after the run's end ({duration_s:g} s after release); flick "
+            "within it"
+        )
+    sizes = (abs(speeds[0]), abs(speeds[1]))
+    smallest = min(sizes) if speeds[0] == speeds[1] else max(sizes)
+    if max(sizes) > FLICK.high or smallest < FLICK.low:
+        raise ParameterError(
+            f"--flick-speed{_shown(speeds)}: a kick of {FLICK.low:g}…{FLICK.high:g} {FLICK.unit} either way "
+            "(the live view's Flick; the sign is the direction)"
+        )
 
 
 def params_and_spread(args: argparse.Namespace) -> tuple[Parameters, Distribution | None]:

@@ -37,7 +37,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from twin.app.commands.common import compare_params
-    from twin.fmi.export import export_fmu, rig_description
+    from twin.fmi.export import check_rig, export_fmu, rig_description
     from twin.outputs import check_outputs
 
     paths = check_outputs(
@@ -50,6 +50,7 @@ def run(args: argparse.Namespace) -> int:
     else:
         params = load_params(args)
         source = params_source(args) or "the defaults (thesis values)"
+    check_rig(params, source)
     description = rig_description(params, version=package_version(), source=source, uncertainty=uncertainty)
     out = export_fmu(paths["--out"], description, overwrite=args.overwrite, fmi_version=args.fmi)
     summary = {

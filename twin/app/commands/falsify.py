@@ -15,6 +15,7 @@ from twin.app.commands.common import (
     add_job_outputs,
     add_params_options,
     add_requirements_job,
+    check_flick,
     check_job,
     check_start_box,
     params_and_spread,
@@ -121,12 +122,17 @@ def _max_budget() -> float:
 def run(args: argparse.Namespace) -> int:
     from twin.app.falsify import OUTPUT_FILES, Axis, FalsifySettings, falsify
     from twin.parameters import ParameterError
-    from twin.requirements import load_spec
+    from twin.requirements import check_timing, load_spec
 
     args.serve = None  # a search runs here (check_job's served case does not apply)
     args.plant = "twin"
+    if args.population is not None and args.population > args.budget:
+        raise ParameterError(
+            f"--population {args.population}: above --budget {args.budget}: not one generation would run whole"
+        )
     base, spread = params_and_spread(args)
     spec = load_spec(args.spec)
+    check_timing(spec.requirements, args.spec, base.daq.period_s, args.duration)
     x, th = args.x0, args.theta0
     check_start_box(base, x, th)
     axes = [Axis("x0_m", *x), Axis("theta0_rad", *th)]
@@ -174,8 +180,12 @@ def run(args: argparse.Namespace) -> int:
     else:
         _print(out, args)
     if not result.complete:
-        print("ballbeam falsify: interrupted: the runs done so far are reported", file=sys.stderr)
-        return 130
+        from twin.guard import interrupt_exit_code, interrupt_name
+
+        print(
+            f"ballbeam falsify: interrupted ({interrupt_name()}): the runs done are reported", file=sys.stderr
+        )
+        return interrupt_exit_code()
     return 1 if out["found"] else 0
 
 
@@ -189,8 +199,9 @@ def _scenario_axes(args: argparse.Namespace, base: Parameters) -> list[Axis]:
     from twin.physics import check_on_track
 
     axes = []
-    if (args.flick_time is None) != (args.flick_speed is None):
-        raise ParameterError("--flick-time and --flick-speed go together (when, and the kick)")
+    check_flick(
+        args.flick_time, args.flick_speed, args.duration
+    )  # both, within the run and the Flick's range
     if args.flick_time is not None:
         if args.flick_time[0] < 0:
             raise ParameterError(f"--flick-time {args.flick_time[0]:g}: a time after release (≥ 0 s)")
@@ -239,4 +250,6 @@ def _print(out: dict, args: argparse.Namespace) -> None:
         )
     if args.out is not None:
         path = Path(args.out) / "falsify.json"
-        print(f"wrote {path}; repeat it: ballbeam run --replay {path}")
+        from twin.app.replay import replay_command
+
+        print(f"wrote {path}; repeat it: {replay_command(path, args.controller)}")

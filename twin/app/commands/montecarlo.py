@@ -26,6 +26,7 @@ from twin.app.commands.common import (
     job_name,
     params_and_spread,
     progress_bar,
+    refuse_unused,
     resolve_engine,
     screen_audit_failure,
     screen_summary,
@@ -68,7 +69,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--audit",
         type=count(0, 100_000),
-        default=32,
+        default=None,  # 32 with the fast engine; given with MuJoCo alone, refused
         metavar="N",
         help="with --engine screen or fast: N runs the fast engine decided alone run on MuJoCo too (default "
         "32); any that differs is reported, and fails a screened job",
@@ -104,6 +105,12 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as exc:
         raise ParameterError(f"--x0/--theta0: {exc}") from None
     check_job(args, base, OUTPUT_FILES)
+    engine = resolve_engine(args, "mujoco")
+    if engine == "mujoco":
+        refuse_unused(
+            [("--audit", args.audit)],
+            "it re-runs the fast engine's runs on MuJoCo: with --engine screen or fast",
+        )
     settings = MonteCarloSettings(
         controller=job_name(args),
         n=args.n,
@@ -114,8 +121,8 @@ def run(args: argparse.Namespace) -> int:
         plant=args.plant,
         ideal_sensors=bool(args.ideal_sensors or args.plant == "reference"),
         seed=args.seed,
-        engine=resolve_engine(args, "mujoco"),
-        audit=args.audit,
+        engine=engine,
+        audit=32 if args.audit is None else args.audit,
     )
     with serving(args, base) as served:
         result = run_montecarlo(
@@ -160,12 +167,19 @@ def run(args: argparse.Namespace) -> int:
             print(screen_summary(result.screening))
         if args.out is not None:
             print(f"wrote {Path(args.out) / 'montecarlo.json'} and {Path(args.out) / 'distributions.png'}")
-    stopped = served_stopped(served, "montecarlo", sum(map(bool, result.runs)), len(result.runs))
+    stopped = served_stopped(served, "montecarlo", len(result.runs), settings.n)
     if stopped is not None:
         return stopped
     if not result.complete:
-        print("ballbeam montecarlo: interrupted: the runs done so far are kept", file=sys.stderr)
-        return 130
+        from twin.guard import interrupt_exit_code, interrupt_name
+
+        kept = f" in {Path(args.out) / 'montecarlo.json'}" if args.out is not None else ""
+        print(
+            f"ballbeam montecarlo: interrupted ({interrupt_name()}) after {len(result.runs)} of {settings.n} "
+            f"runs: the runs done are kept{kept}",
+            file=sys.stderr,
+        )
+        return interrupt_exit_code()
     if result.screening is not None and (wrong := result.screening["audit"]["mismatches"]):
         print(screen_audit_failure("montecarlo", wrong), file=sys.stderr)
         if (

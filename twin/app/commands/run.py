@@ -16,10 +16,13 @@ from twin.app.commands.common import (
     add_episode_options,
     add_params_options,
     add_plant_options,
+    check_flick,
+    check_overwrite,
     controller_help,
     inputs,
     load_params,
     log_bytes,
+    refuse_unused,
     save_log,
 )
 from twin.app.options import count, finite_float
@@ -30,6 +33,7 @@ if TYPE_CHECKING:
     from twin.engine import RunResult
     from twin.parameters import Parameters
     from twin.realtime import WallClockPacer
+    from twin.requirements import Requirement
     from twin.verdict import Verdict
 
 PLOT_SUFFIXES = (".png",)
@@ -48,8 +52,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--replay",
         metavar="FILE",
         help="repeat a run bit for bit: falsify --out's falsify.json (its counterexample, else its least robust "
-        "run) or certify's certify.json (its failing run): controller, start, seed, noise, duration, parameters "
-        "and requirements from the file; the summary says whether each robustness is the one the file states",
+        "run) or certify's certify.json (its failing run): controller, engine, start, seed, noise, duration, "
+        "parameters and requirements from the file; the summary says whether each robustness is the one the "
+        "file states. A file naming your own code (MODULE:CLASS, avr:, fmu:) runs it only when you name it "
+        "with --controller or pass --trust-replay-controller, and only if its SHA-256 is the file's",
+    )
+    parser.add_argument(
+        "--trust-replay-controller",
+        action="store_true",
+        help="with --replay: run the MODULE:CLASS, firmware image or FMU the file names without naming it with "
+        "--controller (that code runs here: use it for files you made; stderr says what runs)",
     )
     parser.add_argument(
         "--x0", type=finite_float(), metavar="M", help="initial ball position (m; required unless --rig)"
@@ -80,6 +92,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         type=finite_float(0, 3600, lo_open=True, unit="s"),
         metavar="S",
         help="with --rig: how long HELLO is repeated before the server counts as gone (default 5)",
+    )
+    parser.add_argument(
+        "--wait-sample",
+        type=finite_float(0, 3600, lo_open=True, unit="s"),
+        metavar="S",
+        help="with --rig: the longest wait for the next SAMPLE (silence, or a sample repeated because our "
+        "commands do not reach the server) before the server counts as gone (default 5)",
+    )
+    parser.add_argument(
+        "--wait-start",
+        type=finite_float(0, 86400, lo_open=True, unit="s"),
+        metavar="S",
+        help="with --rig: how long a held session may wait to start once we acknowledged its held sample (a "
+        "live view waits for its browser) (default: as long as the server holds it)",
     )
     parser.add_argument(
         "--spec",
@@ -127,10 +153,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    replay = _replayed(args) if args.replay is not None else None
-    if args.flick_speed is not None and args.flick_time is None:
-        print("ballbeam run: error: --flick-speed needs --flick-time (when to flick)", file=sys.stderr)
-        return 2
+    replay = _replayed(args)
+    _check_options(args, replay)
     if replay is None:
         if args.controller is None:
             print("ballbeam run: error: --controller is required (unless --replay)", file=sys.stderr)
@@ -145,11 +169,15 @@ def run(args: argparse.Namespace) -> int:
         if args.rig is not None:
             raise ValueError("--spec judges the twin's true state: not with --rig (a rig's measured signals)")
         requirements = load_requirements(args.spec)
+    _check_timing(args, requirements, params)
     if args.rig is not None:
         return _run_on_remote_rig(args, params)
-    if args.sessions != 1 or args.wait_server is not None:
+    rig_only = (args.wait_server, args.wait_sample, args.wait_start)
+    if args.sessions != 1 or any(wait is not None for wait in rig_only):
         print(
-            "ballbeam run: error: --sessions and --wait-server are a rig's: they need --rig", file=sys.stderr
+            "ballbeam run: error: --sessions, --wait-server, --wait-sample and --wait-start are a rig's: they "
+            "need --rig",
+            file=sys.stderr,
         )
         return 2
     if args.x0 is None or args.theta0 is None:
@@ -182,7 +210,7 @@ def run(args: argparse.Namespace) -> int:
         "seed": args.seed,
         "noise": not args.no_noise,
         "plant": args.plant,
-        "ideal_sensors": bool(args.ideal_sensors or args.plant == "reference"),
+        "ideal_sensors": _ideal_sensors(args),
         "free_run_s": params.start.free_run_s,
         **({} if args.setpoint is None else {"setpoint_m": args.setpoint}),
         **result.verdict.to_json(),
@@ -196,7 +224,7 @@ def run(args: argparse.Namespace) -> int:
             summary["firmware_warning"] = stuck
             print(f"ballbeam run: {stuck}", file=sys.stderr)
     if pacer is not None:
-        summary["realtime"] = pacer.timing().to_json()
+        summary.update(_realtime_summary(pacer))
     from twin.plant import through_stops  # the physics' own module: loaded once a run has run
 
     warning = through_stops(result.verdict.peak_theta_rad, params)
@@ -229,13 +257,74 @@ def run(args: argparse.Namespace) -> int:
     return 0 if held else 1
 
 
-def _replayed(args: argparse.Namespace) -> Replay:
-    """``--replay FILE``: the run it names, put into ``args`` (options the file sets are refused)."""
-    from twin.app.replay import load_replay, refuse_given
+def _realtime_summary(pacer: WallClockPacer) -> dict[str, object]:
+    """The paced run's timing, and a warning (also on stderr) when it did not keep real time."""
+    from twin.realtime import overrun_warning
+
+    timing = pacer.timing()
+    late = overrun_warning(timing)
+    if late is None:
+        return {"realtime": timing.to_json()}
+    print(f"ballbeam run: warning: {late}", file=sys.stderr)
+    return {"realtime": timing.to_json(), "realtime_warning": late}
+
+
+def _check_options(args: argparse.Namespace, replay: Replay | None) -> None:
+    """Options this run would not use are refused, not ignored: those a run on ``--rig`` leaves to the server,
+    ``--overwrite`` with nothing to write, a flick without its time or kick, after the run or beyond the live
+    view's Flick range."""
+    if args.rig is not None:
+        refuse_unused(_set_by_the_rig(args), "with --rig the server sets the run and its rig: drop it")
+    check_overwrite(args, "--log", "--plot")
+    if replay is None and args.rig is None:
+        duration = 15.0 if args.duration is None else args.duration
+        flick = [None if v is None else (v, v) for v in (args.flick_time, args.flick_speed)]
+        check_flick(flick[0], flick[1], duration)
+
+
+def _check_timing(
+    args: argparse.Namespace, requirements: tuple[Requirement, ...] | None, params: Parameters
+) -> None:
+    """The requirements' time bounds against this run's duration and period (``check_timing``)."""
+    if requirements is not None:
+        from twin.requirements import check_timing
+
+        where = args.spec if args.spec is not None else f"{args.replay}: requirements"
+        check_timing(requirements, where, params.daq.period_s, args.duration)
+
+
+def _set_by_the_rig(args: argparse.Namespace) -> list[tuple[str, object]]:
+    """The options of a run here that a run on ``--rig`` does not use (the server's start, duration, noise,
+    plant and pacing; a flick, setpoint or plot of the run here)."""
+    return [
+        ("--x0", args.x0),
+        ("--theta0", args.theta0),
+        ("--duration", args.duration),
+        ("--seed", args.seed),
+        ("--no-noise", args.no_noise),
+        ("--plant", None if args.plant == "twin" else args.plant),
+        ("--ideal-sensors", args.ideal_sensors),
+        ("--realtime", args.realtime),
+        ("--setpoint", args.setpoint),
+        ("--flick-time", args.flick_time),
+        ("--flick-speed", args.flick_speed),
+        ("--plot", args.plot),
+    ]
+
+
+def _replayed(args: argparse.Namespace) -> Replay | None:
+    """``--replay FILE``: the run it names, put into ``args`` (options the file sets are refused; its
+    controller only as ``replay_controller`` allows); None without ``--replay``."""
+    from twin.app.replay import load_replay, refuse_given, replay_controller
+    from twin.parameters import ParameterError
+
+    if args.replay is None:
+        if args.trust_replay_controller:
+            raise ParameterError("--trust-replay-controller goes with --replay FILE")
+        return None
 
     refuse_given(
         [
-            ("--controller", args.controller),
             ("--x0", args.x0),
             ("--theta0", args.theta0),
             ("--duration", args.duration),
@@ -248,14 +337,26 @@ def _replayed(args: argparse.Namespace) -> Replay:
             ("--setpoint", args.setpoint),
             ("--flick-time", args.flick_time),
             ("--flick-speed", args.flick_speed),
+            ("--plant", None if args.plant == "twin" else args.plant),
+            ("--ideal-sensors", args.ideal_sensors),
         ]
     )
     replay = load_replay(args.replay)
+    replay_controller(replay, args.controller, args.trust_replay_controller, "ballbeam run")
+    args.plant, args.ideal_sensors = replay.plant, replay.ideal_sensors
     args.controller, args.x0, args.theta0 = replay.controller, replay.x0_m, replay.theta0_rad
     args.seed, args.no_noise, args.duration = replay.seed, not replay.noise, replay.duration_s
     args.setpoint = replay.setpoint_m
     args.flick_time, args.flick_speed = replay.flick if replay.flick is not None else (None, None)
     return replay
+
+
+def _ideal_sensors(args: argparse.Namespace) -> bool:
+    """``--ideal-sensors``, always with ``--plant reference``; a replay's as its file states (the fast engine's
+    runs: the reference plant under the twin's sensor chain)."""
+    if args.replay is not None:
+        return bool(args.ideal_sensors)
+    return bool(args.ideal_sensors or args.plant == "reference")
 
 
 def _run_in_process(
@@ -290,7 +391,7 @@ def _run_in_process(
             noise=not args.no_noise,
             params=params,
             plant=args.plant,
-            ideal_sensors=args.ideal_sensors or args.plant == "reference",
+            ideal_sensors=_ideal_sensors(args),
             pacer=pacer,
             scenario=None if args.flick_time is None else Scenario(args.flick_time, args.flick_speed or 0.0),
         )
@@ -353,7 +454,7 @@ def _run_on_remote_rig(args: argparse.Namespace, params: Parameters) -> int:
     ``--wait-server``), a fresh controller each, built from that session's CONFIG (a served job's runs,
     ``sweep --serve``)."""
     from controllers import registry
-    from twin.rigs.session import run_on_remote_rig
+    from twin.rigs.session import Waits, run_on_remote_rig
     from twin.wire.links import parse_url
 
     try:
@@ -412,4 +513,5 @@ def _run_on_remote_rig(args: argparse.Namespace, params: Parameters) -> int:
         sessions=args.sessions,
         wait_s=args.wait_server or 5.0,
         on_run=on_run,
+        waits=Waits(args.wait_sample or 5.0, args.wait_start),
     )

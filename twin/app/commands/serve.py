@@ -12,9 +12,11 @@ from twin.app.commands.common import (
     add_episode_options,
     add_params_options,
     add_plant_options,
+    check_overwrite,
     inputs,
     load_params,
     log_bytes,
+    refuse_unused,
     save_log,
 )
 from twin.app.options import count, finite_float
@@ -58,20 +60,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         type=finite_float(0, 3600, lo_open=True, unit="s"),
         default=5.0,
         metavar="S",
-        help="lock-step: the longest wait for one command before the session ends with STOP 3 (default 5)",
+        help="lock-step: the longest wait for one command before the session ends with STOP 3; also how long "
+        "an observer may be silent, at least 1 s, before its place is freed (default 5)",
     )
     parser.add_argument(
         "--watchdog",
         type=count(1, 10_000),
-        default=5,
+        default=None,  # the server's default (5); given in lock-step, refused: that mode waits instead
         metavar="N",
         help="real time: periods without a command before the output goes to the zero command (default 5)",
     )
     parser.add_argument(
         "--wait-client",
-        type=finite_float(0, lo_open=True, unit="s"),
+        type=finite_float(0, 86400, lo_open=True, unit="s"),
         metavar="S",
-        help="give up when no controlling client says HELLO within S seconds (default: wait)",
+        help="give up when no controlling client says HELLO within S seconds, at most a day (default: wait "
+        "until one comes)",
     )
     parser.add_argument("--log", metavar="FILE", help="save the session: .mat or .csv, with the true state")
     parser.add_argument("--overwrite", action="store_true", help="replace an existing --log file")
@@ -96,6 +100,9 @@ def run(args: argparse.Namespace) -> int:
     if args.baud is not None and args.serial is None:
         print("ballbeam serve: error: --baud is the serial line's speed: it needs --serial", file=sys.stderr)
         return 2
+    if args.mode == "lockstep":  # a lock-step session waits for each command (--timeout): no watchdog
+        refuse_unused([("--watchdog", args.watchdog)], "the real-time watchdog: it needs --mode realtime")
+    check_overwrite(args, "--log")
     params = load_params(args)
     paths = check_outputs(
         [("--log", args.log, LOG_SUFFIXES, log_bytes(args.log, args.duration, params))],
@@ -114,7 +121,7 @@ def run(args: argparse.Namespace) -> int:
         ideal_sensors=ideal,
         mode=protocol.MODE_REALTIME if args.mode == "realtime" else protocol.MODE_LOCKSTEP,
         timeout_s=args.timeout,
-        watchdog_periods=args.watchdog,
+        **({} if args.watchdog is None else {"watchdog_periods": args.watchdog}),
         wait_client_s=args.wait_client,
         rig_name=f"ballbeam-twin {package_version()} {args.plant}",
     )

@@ -10,10 +10,12 @@ from typing import TYPE_CHECKING, Any
 
 from twin.app.commands.common import (
     add_params_options,
+    check_overwrite,
     compare_params,
     hardware_controller,
     inputs,
     progress_bar,
+    refuse_unused,
 )
 from twin.app.options import count, finite_float
 from twin.outputs import check_outputs
@@ -111,6 +113,9 @@ def run(args: argparse.Namespace) -> int:
 
     if args.reference and args.reference_controller:
         raise ParameterError("--reference-controller runs the twin's reference: not with --reference logs")
+    check_overwrite(args, "--log")
+    if args.json:  # JSON prints the summary alone: there is nothing for --quiet to leave out
+        refuse_unused([("--quiet", args.quiet)], "--json prints the summary alone: drop one")
     base, source = compare_params(args)
     reference = args.reference_controller or REFERENCE_CONTROLLER
     factory = None if args.reference else hardware_controller(reference, base)

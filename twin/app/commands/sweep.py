@@ -214,8 +214,7 @@ def run(args: argparse.Namespace) -> int:
     if stopped is not None:
         return stopped
     if not result.complete:
-        print("ballbeam sweep: interrupted: the starts done so far are kept", file=sys.stderr)
-        return 130
+        return _interrupted(args, "sweep.json", sum(map(bool, result.points)), len(result.points))
     if result.refinement is not None and (wrong := result.refinement["audit"]["mismatches"]):
         first = wrong[0]
         print(
@@ -309,10 +308,23 @@ def _robust_sweep(args: argparse.Namespace, settings: Any, params: Parameters, s
         if args.out is not None:
             print(f"wrote {Path(args.out) / 'robust.json'} and {Path(args.out) / 'robust.png'}")
     if not result.complete:
-        print("ballbeam sweep: interrupted: the starts done so far are kept", file=sys.stderr)
-        return 130
+        run_on_every_rig = sum(p["rigs"] == result.rigs for p in result.points)
+        return _interrupted(args, "robust.json", run_on_every_rig, len(result.points), " on every rig")
     for screened in (nominal.screening, result.screening):
         if screened is not None and (wrong := screened["audit"]["mismatches"]):
             print(screen_audit_failure("sweep", wrong), file=sys.stderr)
             return 1
     return 0
+
+
+def _interrupted(args: argparse.Namespace, name: str, done: int, total: int, where: str = "") -> int:
+    """An interrupted map (Ctrl-C, SIGTERM): what it kept, where, and 128 + the signal."""
+    from twin.guard import interrupt_exit_code, interrupt_name
+
+    kept = f" in {Path(args.out) / name}" if args.out is not None else ""
+    print(
+        f"ballbeam sweep: interrupted ({interrupt_name()}) with {done} of {total} starts run{where}: the runs "
+        f"done are kept{kept}",
+        file=sys.stderr,
+    )
+    return interrupt_exit_code()

@@ -81,9 +81,12 @@ def run(args: argparse.Namespace) -> int:
     spec = None
     if args.spec is not None:
         from twin.app.validate import SPEC_CHECKS
-        from twin.requirements import load_spec
+        from twin.requirements import check_timing, load_spec
 
         spec = load_spec(args.spec, SPEC_CHECKS)
+        for asking in SPEC_CHECKS:  # each check's runs are as long as the criteria say
+            duration = criteria.region_duration_s if asking == "region" else criteria.duration_s
+            check_timing(spec.asked(asking), args.spec, params.daq.period_s, duration)
     try:
         check_criteria_for(criteria, params)
     except ParameterError as exc:
@@ -115,7 +118,8 @@ def run(args: argparse.Namespace) -> int:
     else:
         mark = {True: "pass", False: "FAIL", None: "not run"}
         for check in report.checks:
-            print(f"{mark[check.passed]:<8} {check.name}: {check.measured}  [{check.criterion}]")
+            shown = "stopped" if check.measured.startswith("interrupted") else mark[check.passed]
+            print(f"{shown:<8} {check.name}: {check.measured}  [{check.criterion}]")
         print(f"{report.controller}: {'PASS' if report.passed else 'FAIL'} ({report.wall_s:.0f} s)")
         if args.out is not None:
             print(f"wrote {Path(args.out) / 'report.md'}")
@@ -123,8 +127,15 @@ def run(args: argparse.Namespace) -> int:
         print(f"ballbeam validate: {served.stopped}: the checks done so far are reported", file=sys.stderr)
         return 1
     if not report.complete:
-        print("ballbeam validate: interrupted: the checks done so far are reported", file=sys.stderr)
-        return 130
+        from twin.guard import interrupt_exit_code, interrupt_name
+
+        kept = f" in {Path(args.out) / 'validation.json'}" if args.out is not None else ""
+        print(
+            f"ballbeam validate: interrupted ({interrupt_name()}): the checks done and the runs of the stage "
+            f"interrupted are reported{kept}",
+            file=sys.stderr,
+        )
+        return interrupt_exit_code()
     screened = report.region.screening if report.region is not None else None
     if screened is not None:
         if not args.json:  # the JSON holds it (the region's "screening")

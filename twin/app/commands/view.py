@@ -55,6 +55,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "in real time (docs/protocol.md)",
     )
     parser.add_argument(
+        "--wire-timeout",
+        type=finite_float(0, 3600, lo_open=True, unit="s"),
+        metavar="S",
+        help="with --serve: how long the wire client's answer is awaited (its acknowledgement, a command) before "
+        "its session ends with STOP 3 and a new one waits for a client (default 5)",
+    )
+    parser.add_argument(
         "--speed",
         type=finite_float(
             SPEED_MIN,
@@ -70,7 +77,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--replay",
         metavar="FILE",
         help="open a run to repeat (falsify.json's counterexample, certify.json's failing run): its controller, "
-        "start, seed, noise and parameters; Reset repeats it",
+        "engine, start, seed, noise and parameters; Reset repeats it. A file naming your own code (MODULE:CLASS, "
+        "avr:, fmu:) runs it only when you name it with --controller or pass --trust-replay-controller, and "
+        "only if its SHA-256 is the file's",
+    )
+    parser.add_argument(
+        "--trust-replay-controller",
+        action="store_true",
+        help="with --replay: run the MODULE:CLASS, firmware image or FMU the file names without naming it with "
+        "--controller (that code runs here: use it for files you made; stderr says what runs)",
     )
     parser.add_argument(
         "--no-noise", action="store_true", help="start with the ball sensor's contact noise off (the switch)"
@@ -96,21 +111,31 @@ def run(args: argparse.Namespace) -> int:
     from twin.viewer import ViewerError, serve
 
     initial = None
+    ideal_sensors = args.ideal_sensors or args.plant == "reference"
+    if args.wire_timeout is not None and args.serve is None:
+        print("ballbeam view: error: --wire-timeout is the wire client's: it needs --serve", file=sys.stderr)
+        return 2
+    if args.trust_replay_controller and args.replay is None:
+        print("ballbeam view: error: --trust-replay-controller goes with --replay FILE", file=sys.stderr)
+        return 2
     if args.replay is not None:
-        from twin.app.replay import load_replay, refuse_given
+        from twin.app.replay import load_replay, refuse_given, replay_controller
 
         refuse_given(
             [
-                ("--controller", args.controller),
                 ("--seed", args.seed),
                 ("--params", args.params),
                 ("--set", args.set),
                 ("--no-noise", args.no_noise),
+                ("--plant", None if args.plant == "twin" else args.plant),
+                ("--ideal-sensors", args.ideal_sensors),
             ]
         )
         replay = load_replay(args.replay)
+        replay_controller(replay, args.controller, args.trust_replay_controller, "ballbeam view")
         params = replay.params
         args.controller, args.seed, args.no_noise = replay.controller, replay.seed, not replay.noise
+        args.plant, ideal_sensors = replay.plant, replay.ideal_sensors  # the engine the run was made on
         initial = (replay.x0_m, replay.theta0_rad)
     else:
         params = load_params(args)
@@ -133,10 +158,11 @@ def run(args: argparse.Namespace) -> int:
             duration_s=args.duration,
             params=params,
             plant=args.plant,
-            ideal_sensors=args.ideal_sensors or args.plant == "reference",
+            ideal_sensors=ideal_sensors,
             allowed_origins=tuple(args.allow_origin or ()),
             params_source=params_source(args),
             wire=args.serve,
+            wire_timeout_s=5.0 if args.wire_timeout is None else args.wire_timeout,
             rig_name=f"ballbeam-twin {package_version()} {args.plant}",
             initial=initial,
         )
