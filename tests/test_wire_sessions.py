@@ -454,7 +454,7 @@ def _first_read_then(rig: RemoteRig) -> None:
     rig.read()
 
 
-@pytest.mark.quick
+@pytest.mark.realtime
 def test_the_python_client_waits_for_a_held_session_as_long_as_told_and_says_so() -> None:
     names = ("--wait-sample", "--wait-start")
     with _holding(repeat=True) as server:  # a live view waiting for its browser
@@ -531,6 +531,7 @@ def bb_sf(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return build_bb_sf(tmp_path_factory.mktemp("c"))
 
 
+@pytest.mark.realtime
 def test_the_c_client_waits_for_a_held_session_as_told(bb_sf: Path) -> None:
     """bb_sf answers the repeated held sample past its --timeout (the server is there), and gives up at its
     --wait-start with a line that names it, having sent STOP 1; a bad --wait-start is a usage error."""
