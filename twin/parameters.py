@@ -14,13 +14,14 @@ import json
 import math
 import os
 import re
-import stat
 import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from types import MappingProxyType
 from typing import Any
+
+from twin.image import open_regular
 
 __all__ = [
     "ParameterError",
@@ -1070,16 +1071,7 @@ def read_input_file(path: str | Path, what: str, typical: str = "") -> bytes:
     writer), or a larger file (only ``MAX_FILE_BYTES`` + 1 bytes are read). ``typical``: the size such a file
     has, for the message."""
     path = Path(path)
-    try:
-        # O_NONBLOCK: opening a FIFO does not wait for a writer; the fstat below refuses it
-        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
-    except OSError as exc:
-        raise ParameterError(f"{path}: cannot read {what} ({exc.strerror or exc})") from None
-    mode = os.fstat(fd).st_mode
-    if not stat.S_ISREG(mode):
-        os.close(fd)
-        kind = "a directory" if stat.S_ISDIR(mode) else "a device, pipe or socket"
-        raise ParameterError(f"{path}: not a regular file ({kind}): a {what} is a TOML or JSON text file")
+    fd = open_regular(path, ParameterError, what, f"a {what} is a TOML or JSON text file")
     with os.fdopen(fd, "rb") as fh:
         try:
             text = fh.read(MAX_FILE_BYTES + 1)

@@ -22,13 +22,13 @@ import math
 import os
 import re
 import shlex
-import stat
 import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from twin.app.options import MAX_RUN_S
+from twin.image import open_regular
 from twin.parameters import MAX_FILE_BYTES, ParameterError, Parameters, load_json
 from twin.requirements import Requirement, Spec, parse_requirements
 
@@ -79,18 +79,7 @@ def _read_head(path: str | Path) -> str:
     """The replay file's text: whole up to ``REPLAY_HEAD_BYTES``, else its head up to the job's bulk (the runs to
     repeat come before it), closed as a JSON object. A file that is not a regular file is refused before it is
     read."""
-    try:
-        # O_NONBLOCK: opening a FIFO does not wait for a writer; the fstat below refuses it
-        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
-    except OSError as exc:
-        raise ParameterError(f"{path}: cannot read replay file ({exc.strerror or exc})") from None
-    mode = os.fstat(fd).st_mode
-    if not stat.S_ISREG(mode):
-        os.close(fd)
-        kind = "a directory" if stat.S_ISDIR(mode) else "a device, pipe or socket"
-        raise ParameterError(
-            f"{path}: not a regular file ({kind}): a replay file is falsify.json or certify.json"
-        )
+    fd = open_regular(path, ParameterError, "replay file", "a replay file is falsify.json or certify.json")
     with os.fdopen(fd, "rb") as fh:
         try:
             raw = fh.read(REPLAY_HEAD_BYTES + 1)
@@ -288,13 +277,10 @@ def controller_identity(spec: str, *, missing_ok: bool = False) -> str | None:
         if is_code(spec) and not spec.startswith(("avr:", "fmu:")) and not missing_ok:
             raise ParameterError(f"--controller {spec}: module {spec.partition(':')[0]} not found")
         return None
-    try:
-        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
-    except OSError as exc:
-        raise ParameterError(f"--controller {spec}: {path}: {exc.strerror or exc}") from None
+    fd = open_regular(
+        path, ParameterError, f"--controller {spec}", "a controller is a module file or an image"
+    )
     with os.fdopen(fd, "rb") as fh:
-        if not stat.S_ISREG(os.fstat(fh.fileno()).st_mode):
-            raise ParameterError(f"--controller {spec}: {path} is not a regular file")
         digest = hashlib.sha256()
         try:
             while chunk := fh.read(_HASH_CHUNK):

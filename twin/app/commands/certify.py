@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from pathlib import Path
 from typing import Any
 
@@ -17,6 +16,7 @@ from twin.app.commands.common import (
     add_requirements_job,
     check_job,
     check_start_box,
+    interrupted,
     params_and_spread,
     progress_bar,
     write_out,
@@ -128,10 +128,7 @@ def run(args: argparse.Namespace) -> int:
 
             print(f"repeat it: {replay_command(Path(args.out) / 'certify.json', args.controller)}")
     if result.outcome == "interrupted":
-        from twin.guard import interrupt_exit_code, interrupt_name
-
-        print(f"ballbeam certify: interrupted ({interrupt_name()}): no statement", file=sys.stderr)
-        return interrupt_exit_code()
+        return interrupted("certify", ": no statement")
     return 0 if result.outcome == "pass" else 1
 
 

@@ -690,3 +690,13 @@ def check_start_box(params: Parameters, x0_m: tuple[float, float], theta0_rad: t
                 check_initial_state(params, x, theta, 0.0, 0.0)
             except ValueError as exc:
                 raise ParameterError(f"--x0/--theta0: {exc}") from None
+
+
+def interrupted(command: str, what: str, out: str | None = None, name: str = "") -> int:
+    """Say that ``command`` was interrupted (Ctrl-C, SIGTERM, SIGHUP) and what it kept (``what``; ``out``/``name``:
+    the file it is kept in), on stderr; the exit code, 128 + the signal."""
+    from twin.guard import interrupt_exit_code, interrupt_name
+
+    kept = f" in {Path(out) / name}" if out is not None and name else ""
+    print(f"ballbeam {command}: interrupted ({interrupt_name()}){what}{kept}", file=sys.stderr)
+    return interrupt_exit_code()

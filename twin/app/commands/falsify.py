@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -18,6 +17,7 @@ from twin.app.commands.common import (
     check_flick,
     check_job,
     check_start_box,
+    interrupted,
     params_and_spread,
     progress_bar,
     resolve_engine,
@@ -180,12 +180,7 @@ def run(args: argparse.Namespace) -> int:
     else:
         _print(out, args)
     if not result.complete:
-        from twin.guard import interrupt_exit_code, interrupt_name
-
-        print(
-            f"ballbeam falsify: interrupted ({interrupt_name()}): the runs done are reported", file=sys.stderr
-        )
-        return interrupt_exit_code()
+        return interrupted("falsify", ": the runs done are reported")
     return 1 if out["found"] else 0
 
 

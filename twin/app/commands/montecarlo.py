@@ -23,6 +23,7 @@ from twin.app.commands.common import (
     client_name,
     controller_failures,
     controller_help,
+    interrupted,
     job_name,
     params_and_spread,
     progress_bar,
@@ -171,15 +172,8 @@ def run(args: argparse.Namespace) -> int:
     if stopped is not None:
         return stopped
     if not result.complete:
-        from twin.guard import interrupt_exit_code, interrupt_name
-
-        kept = f" in {Path(args.out) / 'montecarlo.json'}" if args.out is not None else ""
-        print(
-            f"ballbeam montecarlo: interrupted ({interrupt_name()}) after {len(result.runs)} of {settings.n} "
-            f"runs: the runs done are kept{kept}",
-            file=sys.stderr,
-        )
-        return interrupt_exit_code()
+        done = f" after {len(result.runs)} of {settings.n} runs: the runs done are kept"
+        return interrupted("montecarlo", done, args.out, "montecarlo.json")
     if result.screening is not None and (wrong := result.screening["audit"]["mismatches"]):
         print(screen_audit_failure("montecarlo", wrong), file=sys.stderr)
         if (

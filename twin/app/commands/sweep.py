@@ -24,6 +24,7 @@ from twin.app.commands.common import (
     client_name,
     controller_failures,
     controller_help,
+    interrupted,
     job_name,
     load_params,
     params_and_spread,
@@ -319,12 +320,5 @@ def _robust_sweep(args: argparse.Namespace, settings: Any, params: Parameters, s
 
 def _interrupted(args: argparse.Namespace, name: str, done: int, total: int, where: str = "") -> int:
     """An interrupted map (Ctrl-C, SIGTERM): what it kept, where, and 128 + the signal."""
-    from twin.guard import interrupt_exit_code, interrupt_name
-
-    kept = f" in {Path(args.out) / name}" if args.out is not None else ""
-    print(
-        f"ballbeam sweep: interrupted ({interrupt_name()}) with {done} of {total} starts run{where}: the runs "
-        f"done are kept{kept}",
-        file=sys.stderr,
-    )
-    return interrupt_exit_code()
+    kept = f" with {done} of {total} starts run{where}: the runs done are kept"
+    return interrupted("sweep", kept, args.out, name)

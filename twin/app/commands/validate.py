@@ -19,6 +19,7 @@ from twin.app.commands.common import (
     check_served,
     client_name,
     controller_help,
+    interrupted,
     job_name,
     params_and_spread,
     progress_bar,
@@ -127,15 +128,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"ballbeam validate: {served.stopped}: the checks done so far are reported", file=sys.stderr)
         return 1
     if not report.complete:
-        from twin.guard import interrupt_exit_code, interrupt_name
-
-        kept = f" in {Path(args.out) / 'validation.json'}" if args.out is not None else ""
-        print(
-            f"ballbeam validate: interrupted ({interrupt_name()}): the checks done and the runs of the stage "
-            f"interrupted are reported{kept}",
-            file=sys.stderr,
-        )
-        return interrupt_exit_code()
+        done = ": the checks done and the runs of the stage interrupted are reported"
+        return interrupted("validate", done, args.out, "validation.json")
     screened = report.region.screening if report.region is not None else None
     if screened is not None:
         if not args.json:  # the JSON holds it (the region's "screening")
