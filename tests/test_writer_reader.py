@@ -17,9 +17,9 @@ from twin.app.cli import main
 from twin.app.falsify import Axis, FalsifySettings, falsify
 from twin.app.falsify_render import write_falsify
 from twin.app.montecarlo import load_spread
-from twin.app.replay import REPLAY_HEAD_BYTES
+from twin.app.replay import REPLAY_HEAD_BYTES, load_replay
 from twin.parameters import MAX_FILE_BYTES, Parameters
-from twin.requirements import Spec, parse_requirements
+from twin.requirements import ROBUSTNESS_LIMIT, Spec, parse_requirements
 
 ROOT = Path(__file__).parents[1]
 SPEC = ROOT / "docs" / "examples" / "falsify.toml"
@@ -173,3 +173,45 @@ def test_a_runs_log_is_read_by_judge_calibrate_and_compare_and_the_calibration_b
     ) in (0, 1)
     assert (tmp_path / "cmp" / "comparison.json").exists()
     assert main(["export-fmu", "--out", "cal.fmu", "--calibration", "cal"]) == 0
+
+
+FAILING_CONTROLLER = """
+from twin.interface import Controller
+
+
+class Fails(Controller):
+    name = "fails"
+
+    def start(self, sample):
+        pass
+
+    def update(self, sample):
+        raise ValueError("no card")
+"""
+
+
+def _strict(text: str) -> object:
+    def refuse(name: str) -> object:
+        raise AssertionError(f"{name} is not JSON")
+
+    return json.loads(text, parse_constant=refuse)
+
+
+def test_a_failed_controllers_search_writes_strict_json(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A controller that fails scores −inf inside the search; falsify.json and --json state it finitely, and the
+    file still replays (its reader accepts what its writer wrote)."""
+    (tmp_path / "fails_ctrl.py").write_text(FAILING_CONTROLLER)
+    monkeypatch.chdir(tmp_path)
+    spec = Path(__file__).parents[1] / "docs" / "examples" / "falsify.toml"
+    argv = ["falsify", "--controller", "fails_ctrl:Fails", "--spec", str(spec), "--x0", "0.0:0.1"]
+    argv += ["--theta0", "0", "--no-noise", "--budget", "4", "--duration", "1", "--engine", "mujoco"]
+    assert main([*argv, "--out", "fz", "--json"]) == 1
+    out = _strict(capsys.readouterr().out)
+    data = _strict((tmp_path / "fz" / "falsify.json").read_text())
+    assert isinstance(out, dict) and isinstance(data, dict)
+    assert data["counterexample"]["objective"] == -ROBUSTNESS_LIMIT
+    assert all(t["objective"] == -ROBUSTNESS_LIMIT for t in data["trace"])
+    replay = load_replay(tmp_path / "fz" / "falsify.json")
+    assert replay.controller == "fails_ctrl:Fails"

@@ -32,7 +32,7 @@ from twin.app.replay import controller_identity, replay_entry
 from twin.engine import Scenario
 from twin.outputs import JobFiles
 from twin.parameters import ParameterError, Parameters
-from twin.requirements import Spec
+from twin.requirements import Spec, stated
 
 __all__ = ["Axis", "FalsifyResult", "FalsifySettings", "OUTPUT_FILES", "falsify", "uniform_search"]
 
@@ -125,7 +125,7 @@ class FalsifyResult:
             ),
             **{k: run["values"][k] for k in SCENARIO_AXES if k in run["values"]},
             "searched": run["values"],
-            "objective": run["objective"],
+            "objective": stated(run["objective"]),  # a failed controller's −inf: JSON has no infinities
         }
 
     def to_json(self) -> dict[str, Any]:
@@ -147,12 +147,10 @@ class FalsifyResult:
             "least_robust": None if best is None else self.replay(best),
             "trace": [
                 {
-                    **{
-                        k: r[k]
-                        for k in ("batch", "x0_m", "theta0_rad", "seed", "values", "objective", "worst")
-                    },
+                    **{k: r[k] for k in ("batch", "x0_m", "theta0_rad", "seed", "values", "worst")},
+                    "objective": stated(r["objective"]),
                     "engine": r.get("engine"),
-                    **({"fast_objective": r["fast_objective"]} if "fast_objective" in r else {}),
+                    **({"fast_objective": stated(r["fast_objective"])} if "fast_objective" in r else {}),
                 }
                 for r in self.runs
             ],

@@ -27,7 +27,7 @@ PROBLEMS = {
 def write_falsify(result: FalsifyResult, out_dir: str | Path, *, overwrite: bool = False) -> Path:
     """``falsify.json`` and ``falsify.png`` into ``out_dir``, atomically (its other files are kept)."""
     with atomic_directory(out_dir, OUTPUT_FILES, overwrite=overwrite) as tmp:
-        (tmp / "falsify.json").write_text(json.dumps(result.to_json(), indent=1) + "\n")
+        (tmp / "falsify.json").write_text(json.dumps(result.to_json(), indent=1, allow_nan=False) + "\n")
         render_falsify(result, tmp / "falsify.png")
     return Path(out_dir)
 

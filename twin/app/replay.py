@@ -30,7 +30,7 @@ from typing import Any
 from twin.app.options import MAX_RUN_S
 from twin.image import open_regular
 from twin.parameters import MAX_FILE_BYTES, ParameterError, Parameters, load_json
-from twin.requirements import Requirement, Spec, parse_requirements
+from twin.requirements import ROBUSTNESS_LIMIT, Requirement, Spec, parse_requirements
 
 __all__ = [
     "TRUST_OPTION",
@@ -347,6 +347,7 @@ def replay_entry(
         "duration_s": duration_s,
         "parameters": run["parameters"],
         "requirements": {r.name: r.formula for r in spec.requirements},
-        "robustness": run["requirements"],
+        # a run whose controller failed has no signals: it violates every requirement, stated at the limit
+        "robustness": run.get("requirements") or {r.name: -ROBUSTNESS_LIMIT for r in spec.requirements},
         "ball_lost": run["ball_lost"],
     }

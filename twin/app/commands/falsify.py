@@ -176,7 +176,7 @@ def run(args: argparse.Namespace) -> int:
     write_out(args, write_falsify, result)
     out = result.to_json()
     if args.json:
-        print(json.dumps(out))
+        print(json.dumps(out, allow_nan=False))
     else:
         _print(out, args)
     if not result.complete:
