@@ -31,6 +31,7 @@ import viser
 import websockets.exceptions
 import websockets.sync.client
 import zstandard
+from test_viewer_hostile import CAMERA
 
 import twin.viewer.gui as gui
 from controllers import registry
@@ -179,20 +180,7 @@ class _Browser:
         )
         self.uuids: dict[str, str] = {}
         threading.Thread(target=self._drain, daemon=True).start()
-        self.send(
-            {
-                "type": "ViewerCameraMessage",
-                "wxyz": [1.0, 0.0, 0.0, 0.0],
-                "position": [0.2, -0.72, 0.52],
-                "fov": 1.0,
-                "near": 0.01,
-                "far": 100.0,
-                "image_height": 900,
-                "image_width": 1400,
-                "look_at": [0.0, 0.0, 0.24],
-                "up_direction": [0.0, 0.0, 1.0],
-            }
-        )
+        self.send(CAMERA)  # what a browser tab sends first
 
     def _drain(self) -> None:
         try:
