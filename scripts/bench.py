@@ -649,7 +649,7 @@ def bench_fmi(repeats: int) -> dict[str, float]:
     import fmpy
     from fmpy.fmi3 import FMU3Slave
 
-    from twin.app.catalogue import build
+    from twin.app.hosts import build
 
     root = Path(__file__).resolve().parents[1]
     subprocess.run(
@@ -768,13 +768,14 @@ def bench_falsify(seeds: int = FALSIFY_SEEDS) -> dict[str, float]:
 
 
 def write_falsify_table(bench: dict[str, float]) -> None:
-    """(k) into docs/validation/falsify_bench.json and the README's table between its falsify-table markers."""
+    """(k) into docs/validation/falsify_bench.json and its table on docs/validation/engines.md between the
+    falsify-table markers."""
     from twin.app.falsify_render import render_table
     from twin.outputs import write_measured_table
 
+    page = REPO / "docs" / "validation" / "engines.md"  # the manual's page of the table
     write_measured_table(
-        REPO / "docs" / "validation" / "falsify_bench.json", bench, REPO / "README.md", "falsify-table",
-        render_table(bench),
+        REPO / "docs" / "validation" / "falsify_bench.json", bench, page, "falsify-table", render_table(bench),
     )  # fmt: skip
 
 
@@ -1043,7 +1044,7 @@ def main() -> None:
     parser.add_argument(
         "--write-docs",
         action="store_true",
-        help="with (k): write its table into the README and docs/validation/",
+        help="with (k): write its table and JSON into docs/validation/",
     )
     parser.add_argument("--batch-side", type=int, default=41, help="the batch grid's points per side")
     args = parser.parse_args()

@@ -62,8 +62,14 @@ def truth(seed: int) -> dict[str, float]:
 
 def make_log(source: str, seed: int, rig_seed: int, duration_s: float = 60.0) -> RigLog:
     rig = START.with_overrides(truth(rig_seed))
-    if source == "twin":
-        return rig_log(run_experiment("square", rig, duration_s=duration_s, seed=seed).log, f"twin-{seed}")
+    return LOG_SOURCES[source](rig, seed, duration_s)
+
+
+def _twin_log(rig: Parameters, seed: int, duration_s: float) -> RigLog:
+    return rig_log(run_experiment("square", rig, duration_s=duration_s, seed=seed).log, f"twin-{seed}")
+
+
+def _independent_log(rig: Parameters, seed: int, duration_s: float) -> RigLog:
     from independent_rig import rig_log_of, simulate  # type: ignore[import-not-found]  # tests/, put on the path
 
     losses = rig.ball_sensor
@@ -75,6 +81,10 @@ def make_log(source: str, seed: int, rig_seed: int, duration_s: float = 60.0) ->
         dropout_max_s=2 * losses.dropout_mean_duration_s,  # uniform 0…2μ: the twin's mean duration μ
     )
     return rig_log_of(log, f"independent-{seed}")
+
+
+# Each --sources name's log maker: the twin, or the independent simulator of tests/ (the table is the choice).
+LOG_SOURCES = {"twin": _twin_log, "independent": _independent_log}
 
 
 def one(source: str, seed: int, rig_seed: int | None = None) -> dict[str, dict[str, float]]:

@@ -2,7 +2,7 @@
 firmware on a simulated ATmega328P (float) — with each difference's cause measured (twin.app.firmware_forms).
 
 Builds examples/c and examples/avr with their Makefiles (gcc, avr-gcc), then writes docs/firmware/forms.json and
-docs/firmware/forms.md, and puts forms.md in the README between its firmware-forms markers
+docs/firmware/forms.md, and puts forms.md in docs/validation/firmware.md between its firmware-forms markers
 (tests/test_avr_forms.py checks they agree).
 
 python scripts/firmware_forms.py [--duration S] [--workers N] [--validation]
@@ -42,7 +42,7 @@ def main() -> int:
     OUT.mkdir(parents=True, exist_ok=True)
     write_atomic(OUT / "forms.json", json.dumps(result, indent=1) + "\n", overwrite=True)
     write_atomic(OUT / "forms.md", render(result), overwrite=True)
-    readme = OUT.parents[1] / "README.md"
+    readme = OUT.parent / "validation" / "firmware.md"  # the manual's page of the table
     text = readme.read_text()
     begin, end = "<!-- firmware-forms -->\n", "<!-- /firmware-forms -->"
     head, _, rest = text.partition(begin)

@@ -11,8 +11,8 @@
 3. What it buys: the same maps screened (``ballbeam sweep``'s default, ``twin.app.screening``) against brute
    force: classes compared at every start, wall times in one run (ratios; the machine is shared).
 
-``--write-docs`` writes the JSON and the README's table between its screen-table markers
-(``twin.app.screening.render_agreement``; tests/test_screening.py checks the README is the JSON rendered).
+``--write-docs`` writes the JSON and its table on docs/validation/engines.md between the screen-table markers
+(``twin.app.screening.render_agreement``; tests/test_screening.py checks the page is the JSON rendered).
 """
 
 from __future__ import annotations
@@ -124,8 +124,9 @@ def main() -> None:
     if args.write_docs:
         from twin.outputs import write_measured_table
 
+        page = REPO / "docs" / "validation" / "engines.md"  # the manual's page of the table
         write_measured_table(
-            REPO / "docs" / "validation" / "screen_agreement.json", data, REPO / "README.md", "screen-table",
+            REPO / "docs" / "validation" / "screen_agreement.json", data, page, "screen-table",
             render_agreement(data),
         )  # fmt: skip
 

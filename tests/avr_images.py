@@ -9,6 +9,8 @@ from pathlib import Path
 
 import pytest
 
+from twin.firmware import Board
+
 F_CPU = 16_000_000
 ROOT = Path(__file__).resolve().parents[1]
 AVR_DIR = ROOT / "examples" / "avr"
@@ -27,15 +29,15 @@ BOARD = (
 )
 
 
-def build_image(name: str, text: str, tmp: Path) -> Path:
-    """A one-file firmware ``text`` built with avr-gcc for the ATmega328P at 16 MHz."""
+def build_image(name: str, text: str, tmp: Path, mcu: str = "atmega328p") -> Path:
+    """A one-file firmware ``text`` built with avr-gcc for ``mcu`` (the ATmega328P) at 16 MHz."""
     avr_gcc = shutil.which("avr-gcc")
     if avr_gcc is None:
         pytest.skip("avr-gcc is not installed (Debian: apt-get install gcc-avr avr-libc)")
     source = tmp / f"{name}.c"
     source.write_text(text)
     out = tmp / f"{name}.elf"
-    subprocess.run([avr_gcc, "-std=c99", "-Os", "-mmcu=atmega328p", f"-DF_CPU={F_CPU}UL", "-o", str(out), str(source)],
+    subprocess.run([avr_gcc, "-std=c99", "-Os", f"-mmcu={mcu}", f"-DF_CPU={F_CPU}UL", "-o", str(out), str(source)],
                    check=True)  # fmt: skip
     return out
 
@@ -77,6 +79,32 @@ def example_image(tmp: Path) -> Path:
     subprocess.run(
         [avr_gcc, *_makefile_cflags(), "-Werror", "-o", str(out), str(AVR_DIR / "main.c"),
          str(C_DIR / "appendix_sf.c"), "-lm"],
+        check=True,
+    )  # fmt: skip
+    return out
+
+
+def example_image_for(board: Board, mcu: str, tmp: Path) -> Path:
+    """examples/avr's image built for ``mcu`` on ``board`` (twin.avr.boards): main.c's Uno pins (chip select PB2,
+    MOSI PB3, SCK PB5) replaced by the board's, with the Makefile's flags otherwise."""
+    avr_gcc = shutil.which("avr-gcc")
+    if avr_gcc is None:
+        pytest.skip("avr-gcc is not installed (Debian: apt-get install gcc-avr avr-libc)")
+    text = (AVR_DIR / "main.c").read_text()
+    spi = "(1 << PB2) | (1 << PB3) | (1 << PB5)"
+    assert spi in text and text.count("PB2") == 5, "examples/avr/main.c's pins changed: update this builder"
+    text = text.replace(spi, "(1 << DAC_SELECT) | (1 << SPI_MOSI) | (1 << SPI_SCK)").replace(
+        "PB2", "DAC_SELECT"
+    )
+    source = tmp / "main_board.c"
+    source.write_text(text)
+    out = tmp / f"bb_sf_{mcu}.elf"
+    pins = {"DAC_SELECT": board.dac_select, "SPI_MOSI": board.spi_mosi, "SPI_SCK": board.spi_sck}
+    flags = [f for f in _makefile_cflags() if not f.startswith("-mmcu=")]
+    subprocess.run(
+        [avr_gcc, *flags, f"-mmcu={mcu}", "-Werror", f"-I{AVR_DIR}",
+         *(f"-D{name}=P{pin.port}{pin.bit}" for name, pin in pins.items()),
+         "-o", str(out), str(source), str(C_DIR / "appendix_sf.c"), "-lm"],
         check=True,
     )  # fmt: skip
     return out

@@ -202,7 +202,7 @@ def test_run_result_carries_no_firmware_figures_for_a_python_controller() -> Non
 def test_the_live_view_runs_the_firmware_shows_its_load_and_closes_it(image: Path) -> None:
     """The view (a tick per frame) runs what ``ballbeam run`` runs, bit for bit; its status line gives the
     firmware's load, longest update and stack; Reset replaces the co-simulation (the old process ends)."""
-    from twin.app.catalogue import catalogue_for
+    from twin.app.hosts import catalogue_for
     from twin.engine import update_ticks
     from twin.viewer import LiveTwin
 

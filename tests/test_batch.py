@@ -188,7 +188,7 @@ def test_rigs_of_a_spread_share_one_group(monkeypatch, ideal_sensors: bool) -> N
 
     def counting(self, params, *args, **kwargs):  # noqa: ANN001, ANN002, ANN003
         init(self, params, *args, **kwargs)
-        built.append((len(params), len(self.distinct), len(self.shapes)))
+        built.append((len(params), len(self.physics.distinct), len(self.physics.shapes)))
 
     monkeypatch.setattr(batch.BatchRig, "__init__", counting)
     step = 2 * np.pi / (256 * 7)  # one encoder count at the beam (eq 6.2.1)

@@ -161,7 +161,9 @@ def test_the_readmes_falsifier_table_is_the_benchs_json_rendered() -> None:
 
     bench = json.loads((ROOT / "docs" / "validation" / "falsify_bench.json").read_text())
     block = re.search(
-        r"<!-- falsify-table -->\n(.*?)<!-- /falsify-table -->", (ROOT / "README.md").read_text(), re.S
+        r"<!-- falsify-table -->\n(.*?)<!-- /falsify-table -->",
+        (ROOT / "docs" / "validation" / "engines.md").read_text(),
+        re.S,
     )
     assert block is not None and block[1] == render_table(bench)
     # the table's ratio is the medians' (a search without a violation counts budget + 1)

@@ -231,7 +231,7 @@ def test_the_example_controller_unit_gives_the_c_clients_commands_bit_for_bit(co
     bit for bit (tests/test_c_controller.py)."""
     from fmpy.validation import validate_fmu
 
-    from twin.app.catalogue import build
+    from twin.app.hosts import build
 
     assert validate_fmu(str(controller_unit)) == []
     log = _reference(duration_s=6.0)
@@ -291,7 +291,7 @@ HOSTILE_UNITS = {
 def test_a_failing_controller_unit_fails_its_run_naming_the_tick(name: str, tmp_path: Path) -> None:
     from fmu_units import hostile_unit
 
-    from twin.app.catalogue import build
+    from twin.app.hosts import build
     from twin.engine import ControllerError
 
     body, message = HOSTILE_UNITS[name]
@@ -386,7 +386,7 @@ def test_a_controller_unit_drives_a_served_rig_and_the_live_view(
     import subprocess
     import sys
 
-    from twin.app.catalogue import catalogue_for
+    from twin.app.hosts import catalogue_for
     from twin.engine import update_ticks
     from twin.viewer import LiveTwin
 

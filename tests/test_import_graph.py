@@ -44,8 +44,13 @@ def _modules(root: Path) -> dict[str, Path]:
 def _imported(module: str, path: Path, known: set[str]) -> set[str]:
     """The modules of ``known`` that ``module`` (its source at ``path``) imports, anywhere in its text."""
     is_package = path.name == "__init__.py"
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    if is_package and "lazy_exports(" in ast.unparse(tree):
+        # A lazy re-export also names its names under ``if TYPE_CHECKING:`` for a type checker; nothing
+        # runs them, so they are no edge (the lazy table itself is none either, see above).
+        tree.body = [node for node in tree.body if not _is_type_checking_block(node)]
     found: set[str] = set()
-    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+    for node in ast.walk(tree):
         if isinstance(node, ast.Import):
             found.update(alias.name for alias in node.names)
         elif isinstance(node, ast.ImportFrom):
@@ -59,6 +64,10 @@ def _imported(module: str, path: Path, known: set[str]) -> set[str]:
                 sub = f"{base}.{alias.name}"
                 found.add(sub if sub in known else base)
     return {name for name in found if name in known and name != module}
+
+
+def _is_type_checking_block(node: ast.stmt) -> bool:
+    return isinstance(node, ast.If) and isinstance(node.test, ast.Name) and node.test.id == "TYPE_CHECKING"
 
 
 def import_graph(root: Path = ROOT) -> dict[str, set[str]]:

@@ -138,18 +138,16 @@ def test_firmware_and_fmu_images_are_checked_against_the_files_hash_before_loadi
 ) -> None:
     from avr_images import board_image
 
-    import twin.app.catalogue as catalogue
+    import twin.app.hosts as hosts
 
     image = board_image("hold", "dac(0x3800);", tmp_path)
     sha = hashlib.sha256(image.read_bytes()).hexdigest()
     spec = f"avr:{image}"
     replay_file = _write(tmp_path / "avr.json", spec, sha)
     loaded: list[str] = []
-    real_firmware, real_fmu = catalogue.firmware, catalogue.fmu_controller
-    monkeypatch.setattr(
-        catalogue, "firmware", lambda s, *a, **k: loaded.append(s) or real_firmware(s, *a, **k)
-    )
-    monkeypatch.setattr(catalogue, "fmu_controller", lambda s, *a: loaded.append(s) or real_fmu(s, *a))
+    real_firmware, real_fmu = hosts.firmware, hosts.fmu_controller
+    monkeypatch.setattr(hosts, "firmware", lambda s, *a, **k: loaded.append(s) or real_firmware(s, *a, **k))
+    monkeypatch.setattr(hosts, "fmu_controller", lambda s, *a: loaded.append(s) or real_fmu(s, *a))
     refused(
         capsys, ["run", "--replay", str(replay_file)], str(replay_file), spec, "--trust-replay-controller"
     )

@@ -65,20 +65,20 @@ def test_the_kernels_steps_are_the_reference_plants_for_every_run() -> None:
 
 
 def _same_as_single_runs(name: str, x0, theta0, seeds, duration_s: float, params=None, **kw) -> list:
-    from twin.rigs.batch import ReferenceBatchRig
+    from twin.screen.plant import ReferenceBatchPhysics
 
-    batched = []  # the runs the compiled rig took (not the single-run path)
-    start = ReferenceBatchRig._start_physics
+    batched = []  # the runs the compiled kernel took (not the single-run path)
+    start = ReferenceBatchPhysics.__init__
 
     def spy(self, params, *args):
         batched.extend(params)
         return start(self, params, *args)
 
-    ReferenceBatchRig._start_physics = spy  # type: ignore[method-assign]
+    ReferenceBatchPhysics.__init__ = spy  # type: ignore[method-assign]
     try:
         runs = _compare_with_single_runs(name, x0, theta0, seeds, duration_s, params, **kw)
     finally:
-        ReferenceBatchRig._start_physics = start  # type: ignore[method-assign]
+        ReferenceBatchPhysics.__init__ = start  # type: ignore[method-assign]
     assert len(batched) == len(x0)
     return runs
 

@@ -598,7 +598,7 @@ def test_the_docs_pin_the_reply_ports_bytes_as_the_codec_writes_them() -> None:
     assert "**Offsets count bytes from 0**" in protocol
     assert "byte 18 = 0xA9, byte 19 = 0x61" in protocol
     assert "Bytes 18 (low) and 19 (high), counted from 0: the frame's 19th and 20th bytes" in protocol
-    readme = " ".join((root / "README.md").read_text().split())
+    readme = " ".join((root / "docs" / "connect.md").read_text().split())  # the manual's Simulink recipe
     assert "bytes 19–20, `uint16`" not in readme  # the old, 1-based numbering without saying so
     assert (
         "at offset 18: bytes 18–19 counting from 0 as docs/protocol.md does, the frame's 19th and 20th"

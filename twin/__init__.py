@@ -21,7 +21,31 @@ The names load on first use, so that importing a light module of the package (th
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from twin.exports import lazy_exports
+
+if TYPE_CHECKING:  # the names' real types for a type checker; at run time they load on first use (below)
+    from twin.engine import (
+        ClosedLoop,
+        ControllerError,
+        RunResult,
+        StateLaw,
+        TrueState,
+        run_closed_loop,
+        run_on_rig,
+    )
+    from twin.interface import Controller, DaqSample, Rig, RigEnded, Setpoint, Telemetry
+    from twin.log import RunLog, load_csv, load_mat
+    from twin.parameters import ParameterError, Parameters
+    from twin.plant import Plant
+    from twin.reference import ReferenceModel
+    from twin.rigs.batch import BatchRig, run_batch
+    from twin.rigs.remote import RemoteRig, open_remote
+    from twin.rigs.sim import SimRig, make_rig
+    from twin.verdict import Criteria, Trace, Verdict, evaluate_measured
+    from twin.wire.server import Server, SessionSettings
+
 
 __all__ = [
     "BatchRig",

@@ -28,13 +28,14 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
+from twin.firmware import Firmware
 from twin.guard import Fault, Guard, describe, install_interrupt_handler, is_interrupt, safe_name
 from twin.interface import Controller, DaqSample, Rig, RigEnded, Setpoint, Telemetry
 from twin.log import THESIS_FIELDS, TRUTH_FIELDS, RunLog
 from twin.parameters import Daq, Parameters
 from twin.physics import PhysicsBlock, check_on_track
 from twin.realtime import TickTiming, arrival_timing
-from twin.rigs.sim import FirmwareBoard, PlantKind, RigError, make_rig, whole_steps
+from twin.rigs.sim import RigError, make_rig, whole_steps
 from twin.verdict import Criteria, Trace, Verdict, evaluate, evaluate_measured
 
 __all__ = [
@@ -45,7 +46,6 @@ __all__ = [
     "ENDED_BALL_LOST",
     "ENDED_LAST_SAMPLE",
     "ENDED_TICKS",
-    "Firmware",
     "RunResult",
     "Scenario",
     "TrueState",
@@ -104,24 +104,6 @@ class StateLaw(Protocol):
     def reset(self) -> None: ...
 
     def motor_volts(self, state: np.ndarray) -> float: ...
-
-
-@runtime_checkable
-class Firmware(FirmwareBoard, Protocol):
-    """A controller that is firmware on a microcontroller's board (``twin.avr.firmware.AvrFirmware``): its pins
-    get the rig's sensor signals every physics step, its output drives the amplifier, on its own clock.
-    Simulation only: the rig must offer ``read_with_firmware`` (``twin.rigs.sim.SimRig``). ``figures`` is
-    what the target adds to a run's verdict (cycles per update, deadline margin, stack, missed periods)."""
-
-    name: str
-    period_s: float
-
-    @property
-    def telemetry(self) -> Telemetry: ...
-
-    def figures(self) -> dict[str, Any]: ...
-
-    def close(self) -> None: ...
 
 
 @dataclass(frozen=True)
@@ -875,7 +857,7 @@ def run_closed_loop(
     seed: int = 0,
     noise: bool = True,
     params: Parameters | None = None,
-    plant: PlantKind = "twin",
+    plant: str = "twin",
     ideal_sensors: bool = False,
     stop_when_lost: bool = True,
     criteria: Criteria | None = None,

@@ -1,7 +1,8 @@
 """Build the MuJoCo model of the rig from ``models/ballbeam.xml`` and a ``Parameters`` set.
 
 The XML gives the structure (bodies, joints, geoms, actuator, sensors, scene); every physical number is
-reapplied here from ``Parameters`` through ``mujoco.MjSpec``.
+reapplied here from ``Parameters`` through ``mujoco.MjSpec``, one function per rig part's fragment (``apply_ball``,
+``apply_track``, ``apply_beam_drive``, ``apply_actuator``: ``twin.parts`` names the elements each owns).
 """
 
 from __future__ import annotations
@@ -9,6 +10,7 @@ from __future__ import annotations
 import copy
 import functools
 import math
+from collections.abc import Callable, Sequence
 from importlib import resources
 from pathlib import Path
 
@@ -17,7 +19,19 @@ import numpy as np
 
 from twin.parameters import Parameters
 
-__all__ = ["ModelError", "model_path", "build_spec", "build_model", "measure_rest_gap_m"]
+__all__ = [
+    "THESIS_FRAGMENTS",
+    "ModelError",
+    "apply_actuator",
+    "apply_ball",
+    "apply_beam_drive",
+    "apply_physics",
+    "apply_track",
+    "build_model",
+    "build_spec",
+    "measure_rest_gap_m",
+    "model_path",
+]
 
 MODEL_FILE = "ballbeam.xml"
 
@@ -28,7 +42,12 @@ HINGE = "beam_hinge"
 BALL_JOINT = "ball_free"
 MOTOR = "motor"
 WIRES = ("wire_rod", "wire_spring")
+TRACK_SITES = ("track_centre", "track_end_pos", "track_end_neg")
 BALL_GEOM = "ball"
+BALL_SITE = "ball_centre"
+BALL_IN_BEAM = "ball_in_beam"  # the ball's position in the beam's frame (a framepos sensor)
+HINGE_SENSORS = ("beam_angle", "beam_rate")
+MOTOR_SENSOR = "motor_torque"
 HINGE_AXIS_BEAM = np.array([0.0, -1.0, 0.0])  # theta > 0 lifts the +x end (eq 3.1.26 sign convention)
 
 # Cosmetic lateral/long-axis inertia of the beam bar (40 mm x 10 mm section); only the hinge-axis inertia
@@ -59,17 +78,50 @@ def _find(spec: mujoco.MjSpec, kind: str, name: str):
     return element
 
 
-def build_spec(params: Parameters | None = None, *, hold_beam_rad: float | None = None) -> mujoco.MjSpec:
-    """The rig's MjSpec with every physical value taken from ``params``.
+def build_spec(
+    params: Parameters | None = None,
+    *,
+    hold_beam_rad: float | None = None,
+    fragments: Sequence[Callable[[mujoco.MjSpec, Parameters], None]] | None = None,
+) -> mujoco.MjSpec:
+    """The rig's MjSpec with every physical value taken from ``params``: the numerical options, then each
+    part's fragment patched from its parameters (``fragments``, default ``THESIS_FRAGMENTS``: the parts' MJCF
+    fragments, ``twin.parts``; each writes its own elements, so their order does not matter).
 
     ``hold_beam_rad`` replaces the hinge by a rigid mount at that angle (the beam "held" by hand, for
     rolling checks and static sensor calibration); the motor is then removed with the hinge."""
     p = params or Parameters()
     spec = mujoco.MjSpec.from_file(str(model_path()))
+    apply_physics(spec, p)
+    for apply in THESIS_FRAGMENTS if fragments is None else fragments:
+        apply(spec, p)
+    if hold_beam_rad is not None:
+        if not math.isfinite(hold_beam_rad):
+            raise ValueError(f"hold_beam_rad = {hold_beam_rad!r} is not finite")
+        beam, motor = _find(spec, "body", BEAM_BODY), _find(spec, "actuator", MOTOR)
+        # Rotation by theta about the hinge axis (0, -1, 0).
+        beam.quat = [math.cos(hold_beam_rad / 2), 0.0, -math.sin(hold_beam_rad / 2), 0.0]
+        spec.delete(motor)
+        for sensor in list(spec.sensors):
+            if sensor.name in (*HINGE_SENSORS, MOTOR_SENSOR):
+                spec.delete(sensor)
+        spec.delete(_find(spec, "joint", HINGE))
+    return spec
 
+
+def apply_physics(spec: mujoco.MjSpec, p: Parameters) -> None:
+    """The numerical options (``physics``): time step and gravity."""
     spec.option.timestep = p.physics.timestep_s
     spec.option.gravity = [0.0, 0.0, -p.physics.gravity_m_s2]
 
+
+def _contact_solimp(p: Parameters) -> list[float]:
+    impedance = p.physics.contact_impedance
+    return [impedance, impedance, 0.001, 0.5, 2.0]
+
+
+def apply_beam_drive(spec: mujoco.MjSpec, p: Parameters) -> None:
+    """The beam turned at its pivot (``beam``): its body's inertia and the hinge's stops and bearing."""
     # Beam: mass M_B at h above P; J_BP about P means J_BP - M_B h^2 about the centre of gravity.
     beam = _find(spec, "body", BEAM_BODY)
     i_hinge = p.beam.inertia_pivot_kgm2 - p.beam.mass_kg * p.beam.cog_height_m**2
@@ -90,6 +142,10 @@ def build_spec(params: Parameters | None = None, *, hold_beam_rad: float | None 
     hinge.damping = [p.beam.pivot_damping_nm_s_per_rad, 0.0, 0.0]
     hinge.frictionloss = p.beam.pivot_friction_nm
 
+
+def apply_track(spec: mujoco.MjSpec, p: Parameters) -> None:
+    """The two wires (``track``, with the ball's radius): their axes, radius, friction and contact, and the
+    track's sites."""
     # Wires: each contact point lies h* above P and d/2 to the side; the wire axis lies one wire radius
     # further along the line from the ball centre through the contact point.
     r, rho, rs = p.ball.radius_m, p.track.wire_radius_m, p.rolling_radius_m
@@ -97,8 +153,7 @@ def build_spec(params: Parameters | None = None, *, hold_beam_rad: float | None 
     y_axis = half_d * (1.0 + rho / r)
     z_axis = h_star - rho * rs / r
     timeconst = p.physics.contact_timeconst_s
-    impedance = p.physics.contact_impedance
-    solimp = [impedance, impedance, 0.001, 0.5, 2.0]
+    solimp = _contact_solimp(p)
     for name, side in zip(WIRES, (1.0, -1.0), strict=True):
         wire = _find(spec, "geom", name)
         wire.type = mujoco.mjtGeom.mjGEOM_CAPSULE
@@ -108,10 +163,14 @@ def build_spec(params: Parameters | None = None, *, hold_beam_rad: float | None 
         wire.solref = [timeconst, 1.0]
         wire.solimp = solimp
         wire.margin = p.physics.contact_margin_m
-    for name, x in (("track_centre", 0.0), ("track_end_pos", half_len), ("track_end_neg", -half_len)):
+    for name, x in zip(TRACK_SITES, (0.0, half_len, -half_len), strict=True):
         _find(spec, "site", name).pos = [x, 0.0, h_star]
 
+
+def apply_ball(spec: mujoco.MjSpec, p: Parameters) -> None:
+    """The ball (``ball``): a solid sphere resting on the track above the pivot."""
     # Ball: solid sphere, J = 2/5 m r^2 (eq 3.1.21), resting with its centre h* + r* above P.
+    beam = _find(spec, "body", BEAM_BODY)
     ball = _find(spec, "body", BALL_BODY)
     ball.mass = p.ball.mass_kg
     ball.inertia = [p.ball.inertia_kgm2] * 3
@@ -119,11 +178,14 @@ def build_spec(params: Parameters | None = None, *, hold_beam_rad: float | None 
     ball.explicitinertial = True
     ball.pos = [beam.pos[0], beam.pos[1], beam.pos[2] + p.ball_centre_height_m]
     ball_geom = _find(spec, "geom", BALL_GEOM)
-    ball_geom.size = [r, 0.0, 0.0]
+    ball_geom.size = [p.ball.radius_m, 0.0, 0.0]
     ball_geom.friction = [p.track.friction, 0.0, 0.0]
-    ball_geom.solref = [timeconst, 1.0]
-    ball_geom.solimp = solimp
+    ball_geom.solref = [p.physics.contact_timeconst_s, 1.0]
+    ball_geom.solimp = _contact_solimp(p)
 
+
+def apply_actuator(spec: mujoco.MjSpec, p: Parameters) -> None:
+    """The geared DC motor and its amplifier's rails (``motor``, ``amplifier``) on the hinge."""
     # Motor (eq 3.3.1): joint torque = N Kt/R (V - Kb N thetadot); rotor inertia and viscous damping are
     # reflected by N^2 by MuJoCo; the amplifier's rails bound the terminal volts (§6.4).
     motor = _find(spec, "actuator", MOTOR)
@@ -137,17 +199,15 @@ def build_spec(params: Parameters | None = None, *, hold_beam_rad: float | None 
     motor.ctrllimited = mujoco.mjtLimited.mjLIMITED_TRUE
     motor.ctrlrange = [-p.amplifier.rail_v, p.amplifier.rail_v]
 
-    if hold_beam_rad is not None:
-        if not math.isfinite(hold_beam_rad):
-            raise ValueError(f"hold_beam_rad = {hold_beam_rad!r} is not finite")
-        # Rotation by theta about the hinge axis (0, -1, 0).
-        beam.quat = [math.cos(hold_beam_rad / 2), 0.0, -math.sin(hold_beam_rad / 2), 0.0]
-        spec.delete(motor)
-        for sensor in list(spec.sensors):
-            if sensor.name in ("beam_angle", "beam_rate", "motor_torque"):
-                spec.delete(sensor)
-        spec.delete(hinge)
-    return spec
+
+# Today's rig's fragments (``build_spec``'s default): the beam turned at its pivot, the two wires, the ball, the
+# geared DC motor.
+THESIS_FRAGMENTS: tuple[Callable[[mujoco.MjSpec, Parameters], None], ...] = (
+    apply_beam_drive,
+    apply_track,
+    apply_ball,
+    apply_actuator,
+)
 
 
 def build_model(params: Parameters | None = None, *, hold_beam_rad: float | None = None) -> mujoco.MjModel:

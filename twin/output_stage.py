@@ -21,6 +21,7 @@ from twin.parameters import Amplifier, Daq, Parameters
 
 __all__ = [
     "CommandClampedWarning",
+    "amplifier_of",
     "amplifier_volts",
     "clamped_command_text",
     "motor_volts",
@@ -90,8 +91,15 @@ def ideal_motor_volts(
     return np.asarray(amplifier_volts(clipped, params.amplifier, gain_v_per_v))
 
 
+def amplifier_of(params: Parameters) -> Callable[[float], float]:
+    """``amplifier_volts`` of one finite Python float with the amplifier bound once: the motor volts for the
+    DAC's output (the actuator's half of the rig's per-tick write, ``twin.parts``)."""
+    amplifier = params.amplifier
+    return lambda dac_output_v: float(amplifier_volts(dac_output_v, amplifier))
+
+
 def motor_volts_of(params: Parameters) -> Callable[[float], float]:
     """``motor_volts`` of one finite Python float with the DAC's constants bound once (the rig's per-tick
     write): the same two steps (``tests/test_output_stage.py`` checks it against ``motor_volts``)."""
-    dac, amplifier = dac_quantizer(params.daq), params.amplifier
-    return lambda command_v: float(amplifier_volts(dac(command_v), amplifier))
+    dac, amplifier = dac_quantizer(params.daq), amplifier_of(params)
+    return lambda command_v: amplifier(dac(command_v))

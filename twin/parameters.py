@@ -38,7 +38,9 @@ __all__ = [
     "SoftwareCalibration",
     "Start",
     "Parameters",
+    "GROUPS",
     "READING",
+    "check_group",
     "declaration",
     "read_input_file",
     "within_bounds",
@@ -1062,6 +1064,14 @@ _GROUPS: dict[str, type] = {
     "start": Start,
     "mcu_io": McuIo,
 }
+# The parameter table's groups by name, read-only: each rig part points at its own (``twin.parts``).
+GROUPS: Mapping[str, type] = MappingProxyType(_GROUPS)
+
+
+def check_group(obj: Any, group: str) -> None:
+    """Check a parameter group's values as declared by its fields (``param``, ``curve``, ``flag``), naming
+    ``group.field`` in the refusal: what each group's ``__post_init__`` calls, for a part's own group too."""
+    _check_fields(obj, group)
 
 
 def read_input_file(path: str | Path, what: str, typical: str = "") -> bytes:

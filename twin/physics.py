@@ -5,18 +5,33 @@ model (``twin.reference.ReferencePlant``). The simulated rig (``twin.rigs.sim.Si
 volts of each physics step of one control period and reads back a ``PhysicsBlock``: the ball position, the
 beam angle and the ball's contact with the track at every step, which the sensor chains turn into the
 block the I/O card delivers.
+
+``BatchPhysics`` is the same for N runs stepped together (the batch engine, ``twin.rigs.batch.BatchRig``):
+start the runs from their parameters and initial states, advance the live ones by a block of volts per step,
+and report the true state, the track contact, when each ball was lost and the clock. Its signatures carry
+numpy arrays only. ``twin.backends`` names each backend's single-run and batch implementations.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Sequence
 from typing import NamedTuple, Protocol
 
 import numpy as np
 
 from twin.parameters import Parameters
 
-__all__ = ["PhysicsBackend", "PhysicsBlock", "check_initial_state", "check_on_track"]
+__all__ = [
+    "BatchBlock",
+    "BatchFactory",
+    "BatchPhysics",
+    "PhysicsBackend",
+    "PhysicsBlock",
+    "SingleFactory",
+    "check_initial_state",
+    "check_on_track",
+]
 
 
 class PhysicsBlock(NamedTuple):
@@ -73,6 +88,52 @@ class PhysicsBackend(Protocol):
     def kick_ball(self, dv_m_s: float) -> None:
         """Add ``dv_m_s`` to the ball's speed along the beam, keeping it rolling without slipping."""
         ...
+
+
+class BatchBlock(NamedTuple):
+    """One stretch of simulated time of the live runs of a batch, at the physics steps (index 0: the state
+    before the first step). The runs are in step: one clock for all."""
+
+    time_s: np.ndarray  # (m + 1,)
+    x_m: np.ndarray  # (live, m + 1) ball centre along the beam (m)
+    theta_rad: np.ndarray  # (live, m + 1) beam angle (rad)
+    on_track: np.ndarray  # (live, m + 1) bool: false from the first step off the track on (a lost run: all)
+
+
+class BatchPhysics(Protocol):
+    """N runs of one physics backend stepped together, each run its single-run backend bit for bit (an
+    exact backend) or its screening stand-in. Built by a ``BatchFactory`` from each run's parameters and
+    initial state (x, θ at rest, checked as ``check_initial_state``), with the clock at 0. ``runs`` are
+    indices of the runs still going, ascending; the others are not advanced."""
+
+    @property
+    def time_s(self) -> float:
+        """The runs' clock after the last block."""
+        ...
+
+    @property
+    def lost(self) -> np.ndarray:
+        """(N,) bool: the run's ball has left the track (latched)."""
+        ...
+
+    @property
+    def lost_time_s(self) -> list[float | None]:
+        """Per run: the time of the last state on the track before its ball was lost, None while on it."""
+        ...
+
+    def advance(self, runs: np.ndarray, volts: np.ndarray) -> BatchBlock:
+        """Advance runs ``runs`` by one physics step per column of ``volts`` (len(runs), m): terminal volts,
+        each held over its step."""
+        ...
+
+    def true_state(self, runs: np.ndarray) -> np.ndarray:
+        """(len(runs), 4): (x_m, θ_rad, ẋ_m_s, θ̇_rad_s) now; a lost run's where its ball left the track."""
+        ...
+
+
+# A backend's makers: one run from its parameters; N runs from theirs, their starts and the threads to use.
+SingleFactory = Callable[[Parameters], PhysicsBackend]
+BatchFactory = Callable[[Sequence[Parameters], np.ndarray, np.ndarray, int], BatchPhysics]
 
 
 def check_initial_state(

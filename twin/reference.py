@@ -35,7 +35,9 @@ __all__ = [
     "ReferenceModel",
     "ReferencePlant",
     "discretize_zoh",
+    "pivot_friction_nm",
     "rk4_step",
+    "step_boundary",
 ]
 
 STATE_NAMES = ("x", "theta", "xdot", "thetadot")
@@ -112,10 +114,9 @@ class EquationCoefficients(Generic[C]):
         states (a batch, e.g. identification windows) with the same arithmetic (``ball_beam_accelerations``)."""
         if isinstance(th, float):
             s, co = math.sin(th), math.cos(th)
-            friction = self.coulomb_nm * max(-1.0, min(1.0, thd / COULOMB_REGULARIZATION_RAD_S))
         else:
             s, co = np.sin(th), np.cos(th)
-            friction = self.coulomb_nm * np.clip(thd / COULOMB_REGULARIZATION_RAD_S, -1.0, 1.0)
+        friction = pivot_friction_nm(self.coulomb_nm, thd)
         b1, b2, b3, b4 = self.beta
         return ball_beam_accelerations(
             self.k1, self.k2, self.c, self.g, self.alpha_xdd, self.alpha_thdd, self.alpha_thdd_x2,
@@ -131,6 +132,28 @@ class EquationCoefficients(Generic[C]):
             float(self.alpha_thdd), float(self.alpha_thdd_x2), float(b1), float(b2), float(b3), float(b4),
             float(self.beta_thetadot), float(self.coulomb_nm),
         )  # fmt: skip
+
+
+def pivot_friction_nm(coulomb_nm: Any, thetadot_rad_s: Any) -> Any:
+    """τ_f = F·sat(θ̇/ω_f), the pivot's dry friction (ω_f = ``COULOMB_REGULARIZATION_RAD_S``): floats, numpy
+    arrays, and the compiled kernel (twin.screen, numba) from this one home."""
+    z = thetadot_rad_s / COULOMB_REGULARIZATION_RAD_S
+    if isinstance(z, float):  # a float, or a float in the compiled kernel
+        return coulomb_nm * max(-1.0, min(1.0, z))
+    return coulomb_nm * np.clip(z, -1.0, 1.0)
+
+
+def step_boundary(
+    x: float, th: float, thd: float, stop_rad: float, half_m: float
+) -> tuple[float, float, bool]:
+    """What the equations leave out, at a step's end: the beam meets its stops inelastically (θ clamped to
+    ±``stop_rad``, an outward θ̇ set to zero), and the ball is lost once |x| passes the track's end
+    (``half_m``). (θ, θ̇, lost) after the step; the reference plant and the compiled kernel alike."""
+    if abs(th) > stop_rad:
+        th = math.copysign(stop_rad, th)
+        if thd * th > 0:
+            thd = 0.0
+    return th, thd, abs(x) > half_m
 
 
 def ball_beam_accelerations(
@@ -261,7 +284,8 @@ class ReferenceModel:
 
 def rk4_step(f: Any, x: Any, th: Any, xd: Any, thd: Any, u: Any, h: float) -> tuple[Any, Any, Any, Any]:
     """One classical Runge-Kutta step of (x, θ, ẋ, θ̇) with the input ``u`` held; ``f(x, θ, ẋ, θ̇, u)`` returns
-    the four derivatives. Floats or numpy arrays alike (the reference plant; the identification's batch)."""
+    the four derivatives. Floats or numpy arrays alike (the reference plant; the identification's batch), and
+    the compiled kernel (twin.screen, numba: ``u`` may be any value ``f`` takes, passed through)."""
     a1 = f(x, th, xd, thd, u)
     a2 = f(x + 0.5 * h * a1[0], th + 0.5 * h * a1[1], xd + 0.5 * h * a1[2], thd + 0.5 * h * a1[3], u)
     a3 = f(x + 0.5 * h * a2[0], th + 0.5 * h * a2[1], xd + 0.5 * h * a2[2], thd + 0.5 * h * a2[3], u)
@@ -349,15 +373,12 @@ class ReferencePlant:
             if self._lost_time_s is None:
                 v = min(max(float(volts[i]), -rail), rail)
                 x, th, xd, thd = rk4_step(f, x, th, xd, thd, v, h)
-                if abs(th) > stop:
-                    th = math.copysign(stop, th)
-                    if thd * th > 0:
-                        thd = 0.0
+                th, thd, lost = step_boundary(x, th, thd, stop, half)
                 if not all(math.isfinite(v_) for v_ in (x, th, xd, thd)):
                     raise FloatingPointError(
                         f"reference model state is not finite at t = {t0 + (i + 1) * h:.3f} s"
                     )
-                if abs(x) > half:
+                if lost:
                     self._lost_time_s = t0 + (i + 1) * h
             times[i + 1] = t0 + (i + 1) * h
             xs[i + 1], thetas[i + 1], on[i + 1] = x, th, self._lost_time_s is None

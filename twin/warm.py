@@ -16,8 +16,9 @@ from __future__ import annotations
 
 import bisect
 
+from twin.backends import DEFAULT_PLANT
 from twin.parameters import Parameters
-from twin.rigs.sim import PlantKind, SimRig, make_rig
+from twin.rigs.sim import SimRig, make_rig
 
 __all__ = ["warm"]
 
@@ -25,10 +26,12 @@ WARM_TICKS = 40  # 0.8 s at the thesis's 20 ms: the ball still for 10 ticks, the
 _FLICK_M_S = 0.5  # the live view's fastest flick
 _DROPOUTS = {"ball_sensor.noise_enabled": True, "ball_sensor.dropout_rate_hz": 200.0}
 
-_warmed: set[tuple[PlantKind, bool]] = set()
+_warmed: set[tuple[str, bool]] = set()
 
 
-def warm(params: Parameters | None = None, *, plant: PlantKind = "twin", ideal_sensors: bool = False) -> None:
+def warm(
+    params: Parameters | None = None, *, plant: str = DEFAULT_PLANT, ideal_sensors: bool = False
+) -> None:
     """Take every path a tick of ``make_rig(params, plant=plant, ideal_sensors=ideal_sensors)`` may take, once
     per process and rig kind (a few tens of ms of CPU the first time, nothing after): call it before a session,
     the view or a served rig starts its clock."""

@@ -18,7 +18,18 @@ The names load on first use."""
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from twin.exports import lazy_exports
+
+if TYPE_CHECKING:  # the names' real types for a type checker; at run time they load on first use (below)
+    from twin.app.envs import BallBeamEnv, BallBeamVectorEnv
+    from twin.app.montecarlo import MonteCarloSettings, load_spread, run_montecarlo
+    from twin.app.robust import run_robust
+    from twin.app.sweep import Grid, SweepSettings, run_sweep
+    from twin.app.sweep_render import write_sweep
+    from twin.app.validate import ValidationCriteria, load_criteria
+
 
 __all__ = [
     "BallBeamEnv",

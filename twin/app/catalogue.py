@@ -1,9 +1,9 @@
-"""The controller a command runs: a name from the registry, the user's own ``MODULE:CLASS``, a firmware image
-``avr:[MCU:]FILE.elf`` (twin.avr: the image on a simulated microcontroller) or a controller FMU ``fmu:FILE.fmu``
-(twin.fmi.controller: in a process of its own).
+"""The controller a command runs: a name from the registry, the user's own ``MODULE:CLASS``, or another host's
+value (a firmware image, a controller FMU): ``twin.app.hosts`` is the table of hosts and its parser; here are the
+Python rows' import and construction and the catalogue that carries one controller more.
 
-``catalogue_for(spec, params)`` is the catalogue (``twin.engine.Catalogue``) in which ``spec`` names a
-controller; worker processes rebuild it from the same text, so a user's controller runs there too. Failures
+``twin.app.hosts.catalogue_for(spec, params)`` is the catalogue (``twin.engine.Catalogue``) in which ``spec``
+names a controller; worker processes rebuild it from the same text, so a user's controller runs there too. Failures
 are ``ParameterError``s naming the ``--controller`` value (one line, no traceback). Imports stay lazy:
 ``ballbeam --help`` must not load python-control.
 """
@@ -20,19 +20,15 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:
     from collections.abc import Mapping
 
-    from twin.avr.firmware import AvrFirmware
-    from twin.engine import Catalogue, CatalogueEntry, Firmware, StateLaw
+    from twin.engine import Catalogue, CatalogueEntry, StateLaw
+    from twin.firmware import Firmware
     from twin.guard import Fault, Guard
     from twin.interface import Controller
     from twin.parameters import Parameters
 
 __all__ = [
     "WithController",
-    "build",
-    "catalogue_for",
     "construct",
-    "firmware",
-    "fmu_controller",
     "one_line",
     "user_controller",
     "with_user_controller",
@@ -253,109 +249,3 @@ def with_user_controller(
         )
 
     return WithController(base, spec, lambda params: construct(cls, spec, params, timeout_s), entry)
-
-
-def firmware(spec: str, params: Parameters, *, check: bool = False) -> AvrFirmware:
-    """The firmware image ``avr:[MCU:]FILE.elf`` names, for a rig of ``params``; a ``ParameterError`` naming the
-    ``--controller`` value when the image cannot be read, is no AVR ELF or, with ``check``, simavr cannot load it
-    (a core is started once) or the co-simulation cannot be built here."""
-    from twin.avr.core import AvrError, AvrUnavailable
-    from twin.avr.firmware import AvrFirmware, firmware_spec
-    from twin.parameters import ParameterError
-
-    parsed = firmware_spec(spec)
-    assert parsed is not None
-    mcu, path = parsed
-    if not path.name:
-        raise ParameterError(f"--controller {spec!r}: expected avr:FILE.elf or avr:MCU:FILE.elf")
-    try:
-        made = AvrFirmware(path, params, mcu=mcu, name=spec)
-        if check:
-            made.core().close()
-    except (AvrError, AvrUnavailable, OSError) as exc:
-        raise ParameterError(f"--controller {spec}: {one_line(exc)}") from None
-    return made
-
-
-def fmu_controller(spec: str, params: Parameters) -> Controller:
-    """The controller FMU ``fmu:FILE.fmu`` names, in a process of its own, stepping at the rig's period; a
-    ``ParameterError`` naming the ``--controller`` value when it cannot be loaded (not an FMU, not co-simulation,
-    a variable of the convention missing, an instantiation that failed)."""
-    from twin.fmi.controller import FmuController, FmuError
-    from twin.parameters import ParameterError
-
-    path = spec.removeprefix("fmu:")
-    if not path:
-        raise ParameterError(f"--controller {spec!r}: expected fmu:FILE.fmu")
-    try:
-        return FmuController(path, params.daq.period_s)
-    except (FmuError, OSError) as exc:
-        raise ParameterError(f"--controller {spec}: {one_line(exc)}") from None
-
-
-def _with_one(
-    base: Catalogue,
-    spec: str,
-    make: Callable[[Parameters], Controller | StateLaw | Firmware],
-    description: str,
-    simulation_only: bool,
-) -> WithController:
-    """The registry plus one controller that ``make`` builds (no batched form, no setpoint)."""
-
-    def entry() -> CatalogueEntry:
-        from twin.engine import CatalogueEntry
-
-        return CatalogueEntry(
-            name=spec,
-            build=make,
-            description=description,
-            simulation_only=simulation_only,
-            batched=False,
-            setpoint=False,
-        )
-
-    return WithController(base, spec, make, entry)
-
-
-def _fmu_catalogue(base: Catalogue, spec: str, params: Parameters) -> WithController:
-    """The registry plus a controller FMU, loaded once here (a bad unit is refused before any run)."""
-    fmu_controller(spec, params).close()  # type: ignore[attr-defined]
-    return _with_one(
-        base, spec, lambda p: fmu_controller(spec, p), f"your controller FMU {spec} (its own process)", False
-    )
-
-
-def _firmware_catalogue(base: Catalogue, spec: str, params: Parameters) -> WithController:
-    """The registry plus a firmware image, which is loaded once here (a bad image is refused before any run)."""
-    made = firmware(spec, params, check=True)
-    text = f"your firmware {spec} on a simulated {made.mcu} at {made.clock_hz / 1e6:g} MHz"
-    return _with_one(base, spec, lambda p: firmware(spec, p), text, True)
-
-
-def build(spec: str, params: Parameters, timeout_s: float | None = None) -> Controller | StateLaw | Firmware:
-    """One controller named by ``spec`` (a registry name, ``MODULE:CLASS`` or ``avr:FILE.elf``) for a rig of
-    ``params``."""
-    from controllers import registry
-
-    if spec.startswith("avr:"):
-        return firmware(spec, params, check=True)
-    if spec.startswith("fmu:"):
-        return fmu_controller(spec, params)
-    user = user_controller(spec, timeout_s)
-    return registry.make(spec, params) if user is None else construct(user, spec, params, timeout_s)
-
-
-def catalogue_for(spec: str, params: Parameters, timeout_s: float | None = None) -> Catalogue:
-    """The registry, or the registry plus the user's ``MODULE:CLASS`` (its constructor tried once here, so
-    that a failing one is refused before any work); ``timeout_s``: the watchdog's budget (``twin.guard``)."""
-    from controllers import registry
-
-    if spec.startswith("avr:"):
-        return _firmware_catalogue(registry, spec, params)
-    if spec.startswith("fmu:"):
-        return _fmu_catalogue(registry, spec, params)
-    user = user_controller(spec, timeout_s)
-    if user is None:
-        return registry
-    construct(user, spec, params, timeout_s)
-    return with_user_controller(registry, spec, user, timeout_s)

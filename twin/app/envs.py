@@ -39,6 +39,7 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 
 from twin.app.options import MAX_RUN_S
+from twin.backends import DEFAULT_PLANT, backend
 from twin.engine import ClosedLoop, block_peak_abs_theta_rad, judge
 from twin.interface import Controller, DaqSample
 from twin.learning import (
@@ -54,7 +55,7 @@ from twin.learning import (
 )
 from twin.parameters import Parameters
 from twin.physics import check_initial_state, check_on_track
-from twin.rigs.sim import PlantKind, make_rig
+from twin.rigs.sim import make_rig
 from twin.rigs.vector import VectorBlocks, VectorRig
 from twin.verdict import Criteria, Trace
 
@@ -83,7 +84,7 @@ class EnvConfig:
     setpoint_range_m: tuple[float, float]
     noise: bool
     ideal_sensors: bool
-    plant: PlantKind
+    plant: str  # a registered backend's name (twin.backends)
     terminate_at_stops: bool
     criteria: Criteria
 
@@ -108,7 +109,7 @@ def make_config(
     setpoint_range_m: Sequence[float] = (0.0, 0.0),
     noise: bool = True,
     ideal_sensors: bool = False,
-    plant: str = "twin",
+    plant: str = DEFAULT_PLANT,
     terminate_at_stops: bool = True,
     criteria: Criteria | None = None,
 ) -> EnvConfig:
@@ -126,8 +127,7 @@ def make_config(
         base, dist = load_calibration_spread(calibration)
     elif spread is not None:
         dist = load_spread(spread, base)
-    if plant not in ("twin", "reference"):
-        raise ValueError(f"plant = {plant!r}: expected 'twin' or 'reference'")
+    backend(plant)  # a registered backend (ValueError naming the value and the choices otherwise)
     for name, flag in (
         ("setpoint_in_observation", setpoint_in_observation),
         ("noise", noise),
@@ -177,7 +177,7 @@ def make_config(
         setpoint_range_m=spr,
         noise=bool(noise),
         ideal_sensors=bool(ideal_sensors),
-        plant=plant,  # type: ignore[arg-type]
+        plant=plant,
         terminate_at_stops=bool(terminate_at_stops),
         criteria=criteria or Criteria(),
     )
@@ -472,7 +472,7 @@ class BallBeamVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
             raise ValueError(f"num_envs = {num_envs!r}: at least one")
         self.cfg = cfg = make_config(**options)
-        if cfg.plant != "twin":
+        if cfg.plant != DEFAULT_PLANT:  # VectorRig steps rows of MuJoCo's batch
             raise ValueError("the vector env runs the MuJoCo twin: for the reference plant use SyncVectorEnv")
         n = self.num_envs = int(num_envs)
         self.single_observation_space, self.single_action_space = _spaces(cfg)

@@ -29,6 +29,7 @@ import numpy as np
 from twin.app.fanout import Progress, Runs, run_starts
 from twin.app.montecarlo import Distribution, apply_values
 from twin.app.replay import controller_identity, replay_entry
+from twin.backends import DEFAULT_PLANT, ScreeningPolicy, engine_policy, label_backend
 from twin.engine import Scenario
 from twin.outputs import JobFiles
 from twin.parameters import ParameterError, Parameters
@@ -84,6 +85,11 @@ class FalsifySettings:
     # engine found violating and each batch's least robust run, and only MuJoCo's violations count) or "fast".
     engine: str = "mujoco"
 
+    @property
+    def policy(self) -> ScreeningPolicy:
+        """``engine`` as the backends' screening policy (``twin.backends.engine_policy``)."""
+        return engine_policy(self.engine)
+
 
 @dataclass
 class FalsifyResult:
@@ -104,8 +110,9 @@ class FalsifyResult:
     @property
     def least_robust(self) -> dict[str, Any] | None:
         """The least robust run; a screened search's among the runs MuJoCo made (each batch's least robust)."""
-        confirmed = [r for r in self.runs if r.get("engine") == "mujoco"]
-        pool = confirmed if self.settings.engine == "screen" and confirmed else self.runs
+        policy = self.settings.policy
+        confirmed = [r for r in self.runs if r.get("engine") == policy.label(policy.confirm)]
+        pool = confirmed if policy.screened and confirmed else self.runs
         return min(pool, key=lambda r: r["objective"]) if pool else None
 
     def replay(self, run: dict[str, Any]) -> dict[str, Any]:
@@ -121,7 +128,7 @@ class FalsifyResult:
                 controller_sha256=self.controller_sha256,
                 # the engine that made this run: the fast engine's (the reference plant under the twin's
                 # sensor chain) replays on it
-                plant="reference" if run.get("engine") == "fast" else "twin",
+                plant=label_backend(run["engine"]).name if "engine" in run else DEFAULT_PLANT,
             ),
             **{k: run["values"][k] for k in SCENARIO_AXES if k in run["values"]},
             "searched": run["values"],
@@ -289,7 +296,7 @@ class _Search:
             scheduler=self.scheduler,
             scenarios=scenarios if self.space.scenario else None,
         )
-        label = "fast" if job.plant == "reference" else "mujoco"
+        label = self.space.s.policy.label(job.plant)
         return [None if r is None else {**r, "engine": label} for r in records], complete
 
     def _confirm(
@@ -379,10 +386,12 @@ def _new_search(
             settings.controller, base, settings.duration_s, settings.noise, plant, False, spec.requirements
         )
 
-    if settings.engine not in ("screen", "fast", "mujoco"):
-        raise ParameterError(f"--engine {settings.engine!r}: one of screen, fast, mujoco")
-    runs = job("reference" if settings.engine == "fast" else "twin")
-    fast = job("reference") if settings.engine == "screen" else None
+    try:
+        policy = settings.policy
+    except ValueError:
+        raise ParameterError(f"--engine {settings.engine!r}: one of screen, fast, mujoco") from None
+    runs = job(policy.decider)
+    fast = job(policy.screen) if policy.screen is not None and policy.screened else None
     rng = np.random.default_rng(np.random.SeedSequence([settings.seed, 0x46414C]))  # "FAL"
     return _Search(space, runs, fast, rng, workers, scheduler, progress)
 

@@ -174,7 +174,7 @@ def run_chunk(chunk: _Chunk) -> list[dict[str, Any]]:
 
 
 def _records(chunk: _Chunk, runs: Sequence[int]) -> list[dict[str, Any]]:
-    from twin.app.catalogue import catalogue_for
+    from twin.app.hosts import catalogue_for
     from twin.rigs.batch import run_batch
 
     r = chunk.runs
@@ -188,7 +188,7 @@ def _records(chunk: _Chunk, runs: Sequence[int]) -> list[dict[str, Any]]:
         duration_s=r.duration_s,
         noise=r.noise,
         params=[chunk.params[i] for i in pick] if chunk.params is not None else r.params,
-        plant=r.plant,  # type: ignore[arg-type]
+        plant=r.plant,
         ideal_sensors=r.ideal_sensors,
         nthread=chunk.nthread,
         record=bool(r.requirements),
@@ -404,7 +404,7 @@ def run_served(
             seed=seed,
             noise=runs.noise,
             params=params[i] if params is not None else runs.params,
-            plant=runs.plant,  # type: ignore[arg-type]
+            plant=runs.plant,
             ideal_sensors=runs.ideal_sensors,
             mode=protocol.MODE_LOCKSTEP,
             timeout_s=served.timeout_s,

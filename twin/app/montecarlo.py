@@ -40,6 +40,7 @@ import numpy as np
 
 from twin.app.fanout import Progress, Runs, Served, run_starts
 from twin.app.sweep import point_seeds
+from twin.backends import DEFAULT_PLANT, ScreeningPolicy, engine_policy
 
 if TYPE_CHECKING:
     from twin.app.screening import ListJob
@@ -315,7 +316,7 @@ class MonteCarloSettings:
     theta0_rad: float = 0.3
     duration_s: float = 15.0
     noise: bool = True
-    plant: str = "twin"
+    plant: str = DEFAULT_PLANT
     ideal_sensors: bool = False
     seed: int = 0
     # "mujoco" (MuJoCo alone), "screen" (the fast engine runs every rig, MuJoCo every rig it did not hold or
@@ -323,6 +324,11 @@ class MonteCarloSettings:
     # alone, and the audit).
     engine: str = "mujoco"
     audit: int = 32
+
+    @property
+    def policy(self) -> ScreeningPolicy:
+        """``engine`` for ``plant`` as the backends' policy (a plant no backend stands in for runs alone)."""
+        return engine_policy(self.engine, self.plant, strict=False)
 
 
 @dataclass
@@ -427,21 +433,22 @@ def run_montecarlo(
 
     every = list(range(settings.n))
     screening = None
-    if settings.engine == "mujoco" or settings.plant != "twin":
-        records, complete = job(settings.plant)(every)
-        label = settings.plant if settings.plant != "twin" else "mujoco"
+    policy = settings.policy
+    if policy.screen is None:
+        records, complete = job(policy.confirm)(every)
+        label = policy.label(policy.confirm)
         records = [None if r is None else {**r, "engine": label} for r in records]
     else:
         from twin.app.screening import confirm_list, near_class_change, near_track_end
 
-        fast, complete = job("reference")(every)
+        fast, complete = job(policy.screen)(every)
         confirm = [i for i, r in enumerate(fast) if r and (near_class_change(r) or near_track_end(r, base))]
         records, screening, confirmed = confirm_list(
-            fast, job("twin"), confirm=confirm if settings.engine == "screen" else [], audit=settings.audit,
+            fast, job(policy.confirm), confirm=confirm if policy.screened else [], audit=settings.audit,
             seed=settings.seed,
         )  # fmt: skip
         complete = complete and confirmed
-        if settings.engine == "fast":
+        if policy.stand_alone:
             screening["confirmed"] = "none (the fast engine alone)"
     out: list[dict[str, Any]] = []
     for record, sample in zip(records, values, strict=True):

@@ -28,6 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from twin.app.options import MAX_RUN_S
+from twin.backends import DEFAULT_PLANT, ENGINES, engine_policy, plant_choices
 from twin.image import open_regular
 from twin.parameters import MAX_FILE_BYTES, ParameterError, Parameters, load_json
 from twin.requirements import ROBUSTNESS_LIMIT, Requirement, Spec, parse_requirements
@@ -51,7 +52,6 @@ BULK_KEYS = ("trace", "runs")
 # What precedes the bulk holds at most a few copies of a requirements file and a parameter file (each at most
 # MAX_FILE_BYTES): a search of 100 000 runs writes a trace of ~26 MB after it, never read for a replay.
 REPLAY_HEAD_BYTES = 8 * MAX_FILE_BYTES
-PLANTS = ("twin", "reference")
 TRUST_OPTION = "--trust-replay-controller"
 _HASH_CHUNK = 1 << 20
 
@@ -185,10 +185,11 @@ def load_replay(path: str | Path) -> Replay:
     if run.get("controller_sha256") is not None:
         sha = field("controller_sha256", str, lambda v: re.fullmatch(r"[0-9a-f]{64}", v) is not None)
     if "plant" in run:
-        plant = field("plant", str, lambda v: v in PLANTS)
+        plant = field("plant", str, lambda v: v in plant_choices())
     else:  # a file written before the engine was kept per run: a fast search's runs are the fast engine's
         settings = data.get("settings")
-        plant = "reference" if isinstance(settings, dict) and settings.get("engine") == "fast" else "twin"
+        engine = settings.get("engine") if isinstance(settings, dict) else None
+        plant = engine_policy(engine).decider if engine in ENGINES else DEFAULT_PLANT
     return Replay(
         controller=field("controller", str, lambda v: 0 < len(v) < 4096),
         x0_m=float(field("x0_m", number)),
@@ -229,42 +230,12 @@ def replay_command(path: str | Path, controller: str) -> str:
 
 
 def controller_file(spec: str) -> Path | None:
-    """The file whose bytes ``controller_identity`` hashes: an ``avr:``/``fmu:`` image, or the module file of a
-    ``MODULE:CLASS`` as the import would find it (the current folder first, as ``user_controller``), located
-    without running anything (no package's ``__init__`` is executed); None for a catalogue name or a module
-    that cannot be found."""
-    if spec.startswith("avr:"):
-        from twin.avr.firmware import firmware_spec
+    """The file whose bytes ``controller_identity`` hashes: its host's (``twin.app.hosts``: a firmware image or
+    an FMU, or the module file of a ``MODULE:CLASS`` as the import would find it, located without running
+    anything); None for a catalogue name or a module that cannot be found."""
+    from twin.app.hosts import host_of
 
-        parsed = firmware_spec(spec)
-        return None if parsed is None else parsed[1]
-    if spec.startswith("fmu:"):
-        return Path(spec.removeprefix("fmu:"))
-    if not is_code(spec):
-        return None
-    import importlib.machinery
-    import importlib.util
-
-    module = spec.partition(":")[0]
-    parts = module.split(".")
-    if not all(p.isidentifier() for p in parts):
-        return None
-    cwd = os.getcwd()
-    if "" not in sys.path and cwd not in sys.path:  # as user_controller: the user's modules where they are
-        sys.path.insert(0, cwd)
-    try:
-        found = importlib.util.find_spec(parts[0])  # a top-level name: its finder only looks, runs nothing
-        for depth in range(1, len(parts)):
-            if found is None or found.submodule_search_locations is None:
-                return None
-            found = importlib.machinery.PathFinder.find_spec(
-                ".".join(parts[: depth + 1]), list(found.submodule_search_locations)
-            )
-    except (ImportError, ValueError):
-        return None
-    if found is None or not found.has_location or found.origin is None:
-        return None
-    return Path(found.origin)
+    return host_of(spec).image(spec)
 
 
 def controller_identity(spec: str, *, missing_ok: bool = False) -> str | None:
@@ -272,9 +243,11 @@ def controller_identity(spec: str, *, missing_ok: bool = False) -> str | None:
     ``ParameterError`` naming the file when it cannot be read or is not a regular file. The module file alone
     is hashed, not what it imports. ``missing_ok``: None for a module its file cannot be found for (a writer's
     job still runs: its file then records no hash, and a replay needs the code named or trusted)."""
+    from twin.app.hosts import MODULE, host_of
+
     path = controller_file(spec)
     if path is None:
-        if is_code(spec) and not spec.startswith(("avr:", "fmu:")) and not missing_ok:
+        if host_of(spec) is MODULE and not missing_ok:
             raise ParameterError(f"--controller {spec}: module {spec.partition(':')[0]} not found")
         return None
     fd = open_regular(

@@ -130,7 +130,7 @@ def run_robust(
 
     def job(fast: bool | None) -> Job:
         runs = settings.runs(base, fast=fast)
-        label = "fast" if fast else settings.engine_label() if fast is None else "mujoco"
+        label = settings.policy.label(runs.plant)
 
         def run_job(
             requests: list[tuple[int, int]], within: Progress | None

@@ -63,7 +63,7 @@ def render_robust(result: RobustResult, path: Path) -> None:
             f"\nscreened: MuJoCo decided {100 * result.screening['mujoco_fraction']:.0f} % of the runs"
             if result.screening is not None
             else "\nFAST ENGINE ALONE (not confirmed)"
-            if s.engine == "fast" and s.plant == "twin"
+            if s.policy.stand_alone
             else ""
         ),
         fontsize=9,

@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 
 from twin.app.fanout import Progress
+from twin.backends import ENGINES
 
 __all__ = [
     "ASSUMPTION",
@@ -41,7 +42,7 @@ __all__ = [
     "verdict_class",
 ]
 
-ENGINE_NAMES = ("screen", "fast", "mujoco")
+ENGINE_NAMES = ENGINES  # --engine's words (twin.backends.engine_policy maps them onto backends)
 # (map, start) pairs to run, and the wave's progress (runs done of these) → (records, complete).
 Job = Callable[[list[tuple[int, int]], Progress | None], tuple[list[dict[str, Any] | None], bool]]
 

@@ -28,6 +28,7 @@ from controllers import thesis_numbers as T
 from twin.app.fanout import Progress, Runs, Served, run_starts
 from twin.app.options import MAX_LOCATE
 from twin.app.screening import ENGINE_NAMES, MAP_MARGINAL, Job, Screening, map_marginal, verdict_class
+from twin.backends import DEFAULT_PLANT, ScreeningPolicy, backend, engine_policy
 from twin.outputs import JobFiles
 from twin.parameters import ParameterError, Parameters
 from twin.physics import check_initial_state
@@ -140,7 +141,7 @@ class SweepSettings:
     theta0: Grid = DEFAULT_THETA0
     duration_s: float = 10.0
     noise: bool = True
-    plant: str = "twin"
+    plant: str = DEFAULT_PLANT
     ideal_sensors: bool = False
     seed: int = 0
     refine: int = 0  # boundary refinement: the coarse grid's step in grid intervals (0: every start is run)
@@ -161,26 +162,32 @@ class SweepSettings:
         """The job every start of this sweep is a run of (``fanout.Runs``), on the rig of ``params``; ``fast``:
         on the fast engine (the reference plant compiled, the twin's sensor chain) rather than MuJoCo
         (default: as ``engine`` says when it names one engine)."""
-        on_fast = self.engine == "fast" if fast is None else fast
+        if fast is None:
+            plant = self.policy.decider
+        else:  # the plant's stand-in, or the plant
+            plant = (backend(self.plant).stand_in or self.plant) if fast else self.plant
         return Runs(
             controller=self.controller,
             params=params,
             duration_s=self.duration_s,
             noise=self.noise,
-            plant="reference" if on_fast and self.plant == "twin" else self.plant,
+            plant=plant,
             ideal_sensors=self.ideal_sensors,
         )
 
     @property
     def screened(self) -> bool:
         """Whether the fast engine screens and MuJoCo confirms (``twin.app.screening``)."""
-        return self.engine == "screen" and self.plant == "twin"
+        return self.policy.screened
+
+    @property
+    def policy(self) -> ScreeningPolicy:
+        """``engine`` for ``plant`` as the backends' policy (a plant no backend stands in for runs alone)."""
+        return engine_policy(self.engine, self.plant, strict=False)
 
     def engine_label(self) -> str:
-        """What decided a start run as asked: "mujoco", "fast" or "reference" (the plant asked for)."""
-        if self.plant != "twin":
-            return self.plant
-        return "fast" if self.engine == "fast" else "mujoco"
+        """What decided a start run as asked: "mujoco", "fast" or the plant asked for (``twin.backends``)."""
+        return self.policy.decider_label()
 
 
 @dataclass
@@ -273,7 +280,7 @@ def run_sweep(
 
     def batch_of(fast: bool | None) -> Batch:
         runs = replace(settings.runs(p, fast=fast), requirements=requirements)
-        label = "fast" if fast else settings.engine_label() if fast is None else "mujoco"
+        label = settings.policy.label(runs.plant)
 
         def run_batch(
             batch: np.ndarray, batch_seeds: np.ndarray, progress: Progress | None = None

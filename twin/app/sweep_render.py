@@ -19,6 +19,7 @@ from matplotlib.colors import ListedColormap  # noqa: E402
 from matplotlib.patches import Patch, Rectangle  # noqa: E402
 
 from twin.app.sweep import CLAIMS, OUTPUT_FILES, SweepResult, summarize  # noqa: E402
+from twin.backends import DEFAULT_PLANT  # noqa: E402
 from twin.outputs import atomic_directory  # noqa: E402
 
 __all__ = ["render_map", "write_sweep"]
@@ -36,11 +37,11 @@ def write_sweep(result: SweepResult, out_dir: str | Path, *, overwrite: bool = F
 def _engine_words(result: SweepResult) -> str:
     """Who decided the map's starts, for its title."""
     s = result.settings
-    if s.plant != "twin":
+    if s.plant != DEFAULT_PLANT:
         return f"plant {s.plant}"
     if result.screening is not None:
         return f"screened (MuJoCo decided {100 * result.screening['mujoco_fraction']:.0f} %)"
-    return "FAST ENGINE ALONE (not confirmed)" if s.engine == "fast" else "MuJoCo twin"
+    return "FAST ENGINE ALONE (not confirmed)" if s.policy.stand_alone else "MuJoCo twin"
 
 
 def render_map(result: SweepResult, path: Path) -> None:

@@ -32,6 +32,7 @@ import numpy as np
 
 from controllers import thesis_numbers as T
 from twin.app.fanout import Progress, Runs, Served, Stages, run_starts
+from twin.app.hosts import host_of
 from twin.app.montecarlo import MAX_RUNS, Distribution, MonteCarloSettings, run_montecarlo
 from twin.app.options import MAX_JOB_RUN_S, MAX_RIGS
 from twin.app.robust import run_robust
@@ -324,7 +325,7 @@ def _validate(
         controller, params, c.duration_s, True, "twin", False, spec.requirements if spec is not None else ()
     )
     starts = [*T.CHAPTER4_STARTS, *T.HARDWARE_STARTS.values()]
-    cases = _sensitivity_cases(c, params, controller.startswith("avr:"))
+    cases = _sensitivity_cases(c, params, host_of(controller).kind == "firmware")
     x_required, theta_required = _required_grid(c)
     # One progress over the five stages' runs, counted up front (the region's corner states join its count
     # when it starts). A screened map runs every start on the fast engine and, at most, every start again on
@@ -572,7 +573,7 @@ def _decided_by(region: SweepResult) -> str:
     if region.screening is not None:
         s = region.screening
         return f" (screened: MuJoCo decided {s['mujoco_runs']} of {len(region.points)}, the fast engine the rest)"
-    if region.settings.engine == "fast" and region.settings.plant == "twin":
+    if region.settings.policy.stand_alone:
         return " (the fast engine alone, not confirmed by MuJoCo)"
     return ""
 

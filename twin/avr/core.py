@@ -5,9 +5,9 @@ The C side (``cosim.c``) is a small program compiled on first use with the syste
 else ``~/.cache/ballbeam``); what is missing is named (``AvrUnavailable``). It runs as a child process, spoken to
 over its stdin and stdout, because a firmware can take simavr down with it (a crash path that exits, text
 printed on stdout, a fault in the simulator): that ends the child, and the twin reports it. The core knows pins
-and cycles, not the rig: millivolts go in on ADC channels, the 16-bit SPI frames the DAC's chip select latches
-come out with their cycles, and the stack pointer's low-water mark, the resets and a stack that grew into the
-static data are kept.
+and cycles, not the rig: millivolts go in on ADC channels, the 16-bit SPI frames the DAC's chip select (the
+board's pin) latches come out with their cycles, and the stack pointer's low-water mark, the resets and a stack
+that grew into the static data are kept.
 """
 
 from __future__ import annotations
@@ -23,7 +23,9 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
+from twin.avr.boards import UNO
 from twin.childproc import Child
+from twin.firmware import Pin
 from twin.image import read_image
 
 __all__ = [
@@ -239,7 +241,9 @@ class AvrCore:
         mcu: str = "atmega328p",
         frequency_hz: int = 16_000_000,
         adc_reference_v: float = 5.0,
+        dac_select: Pin = UNO.dac_select,
     ) -> None:
+        """``dac_select``: the pin whose rising edge latches a DAC frame (the board's, ``twin.avr.boards``)."""
         self._child: Child | None = None
         path = Path(elf)
         raw = read_elf(path)
@@ -252,6 +256,8 @@ class AvrCore:
             str(frequency_hz),
             str(1023 * ADC_SCALE),
             str(data_end(raw)),
+            dac_select.port,
+            str(dac_select.bit),
         ]
         self._child = Child(
             argv, name=str(path), what="the co-simulation", error=AvrError, timeout_s=ANSWER_TIMEOUT_S

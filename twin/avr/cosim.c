@@ -4,8 +4,9 @@
  * stdout): whatever a firmware does to simavr — a crash, an exit, text printed by simavr on stdout — ends
  * or disturbs this process, never the twin's. Nothing here knows the rig.
  *
- * A frame is the 16 bits shifted out on SPI while the DAC's chip select (PB2) is low, latched when it rises
- * (an MCP4921 with LDAC tied low updates its output then). */
+ * A frame is the 16 bits shifted out on SPI while the DAC's chip select is low, latched when it rises (an
+ * MCP4921 with LDAC tied low updates its output then). The chip select's port and pin are the board's
+ * (twin/avr/boards.py: PB2 on an Uno, PB0 on a Mega 2560), given on the command line. */
 #include <simavr/avr_adc.h>
 #include <simavr/avr_ioport.h>
 #include <simavr/avr_spi.h>
@@ -128,9 +129,11 @@ static void no_sleep(avr_t *avr, avr_cycle_count_t how_long)
     (void)how_long;
 }
 
-/* NULL with a message in err when the image cannot be read or the MCU is unknown. */
-bb_cosim *bb_new(const char *elf, const char *mcu, uint32_t frequency_hz, uint32_t vref_units, char *err,
-                 int errlen)
+void bb_free(bb_cosim *c);
+
+/* NULL with a message in err when the image cannot be read, the MCU is unknown or has no such chip-select pin. */
+bb_cosim *bb_new(const char *elf, const char *mcu, uint32_t frequency_hz, uint32_t vref_units, char cs_port,
+                 int cs_pin, char *err, int errlen)
 {
     avr_global_logger_set(quiet_logger);
     /* Room beyond the header's struct: the reader fills what the library was built with. */
@@ -180,7 +183,13 @@ bb_cosim *bb_new(const char *elf, const char *mcu, uint32_t frequency_hz, uint32
         avr->io[slot].r.param = c;
         break;
     }
-    avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ('B'), IOPORT_IRQ_PIN2), on_cs, c);
+    avr_irq_t *cs = avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ(cs_port), IOPORT_IRQ_PIN0 + cs_pin);
+    if (!cs) {
+        snprintf(err, (size_t)errlen, "%s has no pin P%c%d for the DAC's chip select", mcu, cs_port, cs_pin);
+        bb_free(c);
+        return NULL;
+    }
+    avr_irq_register_notify(cs, on_cs, c);
     return c;
 }
 
@@ -249,8 +258,8 @@ static void put(const void *p, size_t n) { fwrite(p, 1, n, out); }
 
 int main(int argc, char **argv)
 {
-    if (argc != 6) {
-        fprintf(stderr, "usage: bbcosim FIRMWARE.elf MCU FREQUENCY_HZ VREF_UNITS DATA_END\n");
+    if (argc != 8 || strlen(argv[6]) != 1 || argv[7][0] < '0' || argv[7][0] > '7' || argv[7][1]) {
+        fprintf(stderr, "usage: bbcosim FIRMWARE.elf MCU FREQUENCY_HZ VREF_UNITS DATA_END CS_PORT CS_PIN\n");
         return 2;
     }
     int fd = dup(1);
@@ -259,7 +268,7 @@ int main(int argc, char **argv)
     if (!out) return 2;
     char err[256] = "";
     bb_cosim *c = bb_new(argv[1], argv[2], (uint32_t)strtoul(argv[3], NULL, 10),
-                         (uint32_t)strtoul(argv[4], NULL, 10), err, sizeof err);
+                         (uint32_t)strtoul(argv[4], NULL, 10), argv[6][0], argv[7][0] - '0', err, sizeof err);
     if (!c) {
         fprintf(out, "NO%s\n", err);
         fflush(out);

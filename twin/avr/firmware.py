@@ -1,9 +1,10 @@
 """A firmware image as a controller of the twin: the board between the rig's analog signals and the amplifier.
 
-``AvrFirmware`` implements ``twin.engine.Firmware``: every physics step the rig hands it the two sensor signals
-(the ball chain's RC output and the angle counter's DAC level, in the rig's volts); the board's front end maps
-each onto its ADC pin (``mcu_io``), the core runs to the step's end (``AvrCore``), and the SPI frames the
-firmware latched into its MCP4921 are the amplifier's command input. The core's clock is the twin's: cycle
+``AvrFirmware`` implements ``twin.firmware.Firmware``: every physics step the rig hands it the two sensor
+signals (the ball chain's RC output and the angle counter's DAC level, in the rig's volts); the board's front
+end maps each onto its ADC pin (``mcu_io``; the channels are the board's, ``twin.avr.boards``), the core runs to
+the step's end (``AvrCore``), and the SPI frames the firmware latched into its DAC (the board's chip select and
+chip: an MCP4921) are the amplifier's command input. The core's clock is the twin's: cycle
 c is ``boot_s + c / clock_hz``.
 
 What the target adds to a run's verdict is kept as it runs (``figures``): the cycles from each update's
@@ -22,6 +23,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from twin.avr.boards import board_for
 from twin.avr.core import (
     NO_ENTRY,
     STATE_CRASHED,
@@ -39,6 +41,7 @@ from twin.avr.core import (
     read_elf,
 )
 from twin.engine import ControllerError
+from twin.firmware import MCP4921
 from twin.interface import Telemetry
 from twin.parameters import McuIo, Parameters
 
@@ -48,7 +51,6 @@ __all__ = [
     "STUCK_PERIODS",
     "AvrFirmware",
     "dac_output_v",
-    "firmware_spec",
     "stuck_output",
 ]
 
@@ -58,12 +60,6 @@ DEFAULT_MCU = "atmega328p"
 NO_OUTPUT_PERIODS = 5
 # A failed run whose firmware wrote one word for at least this many periods at its end is said to be stuck.
 STUCK_PERIODS = 10
-# ADC channels of the board (examples/avr/rig.h: IO_BALL_CHANNEL, IO_ANGLE_CHANNEL).
-BALL_CHANNEL = 0
-ANGLE_CHANNEL = 1
-# MCP4921's command word (datasheet, register 5-1): bit 15 0 = write the DAC (1: the command is ignored),
-# bit 13 GA (1: gain 1, 0: gain 2), bit 12 SHDN (0: output shut down), bits 11…0 the code.
-_IGNORE, _GAIN_ONE, _ACTIVE = 0x8000, 0x2000, 0x1000
 
 
 def stuck_output(figures: dict[str, Any], period_s: float) -> str | None:
@@ -79,11 +75,9 @@ def stuck_output(figures: dict[str, Any], period_s: float) -> str | None:
     )
 
 
-def firmware_spec(spec: str) -> tuple[str, Path] | None:
-    """``avr:FILE.elf`` or ``avr:MCU:FILE.elf`` → (MCU or "", the image's path); ``None`` for other specs."""
-    if not spec.startswith("avr:"):
-        return None
-    rest = spec[4:]
+def image_spec(rest: str) -> tuple[str, Path]:
+    """What follows ``avr:`` in a ``--controller`` value (``FILE.elf`` or ``MCU:FILE.elf``) → (MCU or "", the
+    image's path)."""
     mcu, colon, path = rest.partition(":")
     if colon and mcu.isalnum() and mcu.lower().startswith("at"):
         return mcu.lower(), Path(path)
@@ -91,17 +85,9 @@ def firmware_spec(spec: str) -> tuple[str, Path] | None:
 
 
 def dac_output_v(word: int, io: McuIo) -> float | None:
-    """The MCP4921's output for a command word: code·V_ref/2^bits (twice that at gain 2, at most the supply,
-    which is V_ref on this board); ``None`` for a word the DAC ignores. A word that shuts the output down is a
-    ``ValueError``: the amplifier's input would float."""
-    if word & _IGNORE:
-        return None
-    if not word & _ACTIVE:
-        raise ValueError(f"word 0x{word:04X} shuts the DAC's output down (SHDN = 0)")
-    bits = int(io.dac_bits)
-    code = (word & 0x0FFF) >> (12 - bits)
-    gain = 1 if word & _GAIN_ONE else 2
-    return min(code * io.dac_reference_v / (1 << bits) * gain, io.dac_reference_v)
+    """The MCP4921's output for a command word at the front end's resolution and reference
+    (``twin.firmware.DacChip.volts``)."""
+    return MCP4921.volts(word, int(io.dac_bits), io.dac_reference_v)
 
 
 @dataclass
@@ -119,7 +105,8 @@ class _Updates:
 
 
 class AvrFirmware:
-    """One firmware image driving the twin's rig through an Arduino-class board (``mcu_io``)."""
+    """One firmware image driving the twin's rig through an Arduino-class board (``mcu_io``; its pins:
+    ``board``, the MCU's, ``twin.avr.boards.board_for``)."""
 
     def __init__(
         self,
@@ -151,6 +138,7 @@ class AvrFirmware:
                 f"avr:{mcu}:… names; name {device} or build the image for {mcu}"
             )
         self.mcu = mcu or device or DEFAULT_MCU
+        self.board = board_for(self.mcu)
         self.io = params.mcu_io
         self.clock_hz = int(params.mcu_io.clock_hz)
         self.period_s = params.daq.period_s
@@ -177,7 +165,9 @@ class AvrFirmware:
         self._boot_s = time_s
         self._ramend, self._data_end = self._core.ramend, self._core.data_end  # the figures outlive the core
         self._report = None
-        self._units: list[bytes] = [b"", b""]
+        self._units: dict[
+            int, bytes
+        ] = {}  # each ADC channel's last request (sent again only when it changes)
         self._command_v = self._zero_v  # assumed: the motor off until the firmware's first frame (held then)
         self._last_word = -1
         self._words: set[int] = set()
@@ -203,9 +193,10 @@ class AvrFirmware:
             self._check_output(until_s)
             return [(1.0, self._command_v)]
         before = b""
-        for channel, signal_v in ((BALL_CHANNEL, ball_signal_v), (ANGLE_CHANNEL, angle_signal_v)):
+        board = self.board
+        for channel, signal_v in ((board.ball_channel, ball_signal_v), (board.angle_channel, angle_signal_v)):
             request = core.adc_request(channel, io.input_offset_v + io.input_gain_v_per_v * signal_v)
-            if request != self._units[channel]:
+            if request != self._units.get(channel):
                 before += request
                 self._units[channel] = request
         try:
@@ -223,7 +214,7 @@ class AvrFirmware:
         span = max(end - start, 1)
         for frame in report.frames:
             try:
-                volts = dac_output_v(frame.word, io)
+                volts = board.dac.volts(frame.word, int(io.dac_bits), io.dac_reference_v)
             except ValueError as exc:
                 raise ControllerError(self._where(f"{exc}", frame.cycle)) from None
             self._count(frame.word, frame.since_entry, self._time_s(frame.cycle))
@@ -240,7 +231,11 @@ class AvrFirmware:
     def core(self) -> AvrCore:
         """A core with this image, out of reset (``AvrError`` when simavr cannot load it)."""
         return AvrCore(
-            self.path, mcu=self.mcu, frequency_hz=self.clock_hz, adc_reference_v=self.io.adc_reference_v
+            self.path,
+            mcu=self.mcu,
+            frequency_hz=self.clock_hz,
+            adc_reference_v=self.io.adc_reference_v,
+            dac_select=self.board.dac_select,
         )
 
     @property

@@ -1,11 +1,13 @@
 """The rigs a controller runs on, each behind the hardware contract ``twin.interface.Rig``:
 
     sim.SimRig         the MuJoCo twin with its I/O chain, with ideal converters, or the reference model
-                       (``make_rig(params, plant=PlantKind, ideal_sensors=…)``; ``TwinRig``, ``ReferenceRig``;
-                       ``RigError``: a configuration it cannot run)
+                       (``make_rig(params, plant=PlantKind, ideal_sensors=…)``, ``PlantKind`` the built-in
+                       names of the backend registry ``twin.backends``, where any registered name is taken;
+                       ``TwinRig``, ``ReferenceRig``; ``RigError``: a configuration it cannot run)
     remote.RemoteRig   a rig over protocol 1 (UDP or serial): the served twin, or a rig's own firmware
                        (``open_remote(url)``; ``RemoteError``: it cannot be reached or went silent)
-    batch.BatchRig     N simulated rigs stepped together (``run_batch``), each its single rig bit for bit
+    batch.BatchRig     N simulated rigs stepped together (``run_batch``) on a backend's ``BatchPhysics``, each
+                       its single rig bit for bit
     vector.VectorRig   N simulated rigs reset one by one and stepped together (the vector environment)
 
 A new kind of rig is one new module here implementing ``Rig`` (docs/design.md, "One loop, many rigs"); the
@@ -35,7 +37,7 @@ __all__ = [
 _HOMES = {
     "BatchRig": "twin.rigs.batch",
     "run_batch": "twin.rigs.batch",
-    "PlantKind": "twin.rigs.sim",
+    "PlantKind": "twin.backends",
     "ReferenceRig": "twin.rigs.sim",
     "RigError": "twin.rigs.sim",
     "SimRig": "twin.rigs.sim",

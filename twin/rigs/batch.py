@@ -1,8 +1,9 @@
 """The batch engine: N closed-loop runs at once, each bit-identical to ``run_closed_loop`` alone.
 
-    physics           one ``mujoco.batch.Batch`` call per tick for every run still going, on C threads
-                      (one state row per run, solver warm start included, so a run's trajectory is the one
-                      ``twin.plant.Plant`` steps alone)
+    physics           a ``twin.physics.BatchPhysics`` from the backend's registry row (``twin.backends``):
+                      MuJoCo's batch (``twin.plant_batch``: one ``mujoco.batch.Batch`` call per tick for every
+                      run still going, each run the trajectory ``twin.plant.Plant`` steps alone), or the
+                      reference plant's compiled kernel (``twin.screen.plant``, the fast engine)
     sensors, DAQ,     numpy over a leading batch axis with the functions a run alone uses
     output stage      (``twin.plant.Plant.track_coordinates``, ``twin.sensors.angle_block_means_v``,
                       ``BallChainBatch``, ``twin.output_stage.motor_volts``)
@@ -13,8 +14,7 @@ The tick sequence follows the single rig's ``twin.daq.TickSchedule`` (start timi
 output latency: the same object type, so the same plan), its ideal converters are ``IdealSensors.read_v``,
 and lost ball, recording and verdict are ``twin.engine.ClosedLoop``'s step for step; a test checks every log
 array and the verdict against single runs. Runs whose lost ball ends them (``stop_when_lost``) leave the
-batch. Laws on the true state (``StateLaw``) run one by one through ``run_closed_loop``. The reference plant's
-runs are batched too, their physics in the compiled kernel (``ReferenceBatchRig``, the fast engine).
+batch. Laws on the true state (``StateLaw``) run one by one through ``run_closed_loop``.
 """
 
 from __future__ import annotations
@@ -25,10 +25,9 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, fields
 from typing import Protocol, runtime_checkable
 
-import mujoco
 import numpy as np
-from mujoco import batch as mjbatch
 
+from twin.backends import DEFAULT_PLANT, backend
 from twin.daq import block_time_s
 from twin.engine import (
     Catalogue,
@@ -47,17 +46,8 @@ from twin.interface import Controller, DaqSample
 from twin.log import THESIS_FIELDS, TRUTH_FIELDS, RunLog
 from twin.output_stage import ideal_motor_volts, motor_volts
 from twin.parameters import Daq, Parameters
-from twin.physics import check_initial_state
-from twin.plant import (
-    FULL_STATE,
-    Plant,
-    beyond_stops,
-    failure_time_s,
-    numerical_failure,
-    stop_overshoot_bound_rad,
-    warning_text,
-)
-from twin.rigs.sim import PlantKind, RigError, tick_schedule
+from twin.physics import BatchBlock, BatchPhysics
+from twin.rigs.sim import RigError, tick_schedule
 from twin.sensors import BallChainBatch, IdealSensors, angle_block_means_v
 from twin.verdict import Criteria, Trace
 
@@ -67,13 +57,11 @@ __all__ = [
     "BatchController",
     "BatchSamples",
     "BatchTelemetry",
-    "ReferenceBatchRig",
     "ScalarControllers",
     "batch_key",
     "run_batch",
 ]
 
-_INTEGRATION = mujoco.mjtState.mjSTATE_INTEGRATION
 # Two periods agree when they differ by less than this (as twin.engine).
 _PERIOD_TOLERANCE_S = 1e-12
 
@@ -181,7 +169,7 @@ def run_batch(
     duration_s: float = 10.0,
     noise: bool = True,
     params: Parameters | Sequence[Parameters] | None = None,
-    plant: PlantKind = "twin",
+    plant: str = DEFAULT_PLANT,
     ideal_sensors: bool = False,
     stop_when_lost: bool = True,
     criteria: Criteria | None = None,
@@ -224,11 +212,13 @@ def run_batch(
             raise ValueError(f"params has {len(run_params)} entries for {n} runs: give one, or one per run")
     if n == 0:
         return []
-    if plant not in ("twin", "reference"):
-        raise RigError(f"plant = {plant!r}: expected 'twin' or 'reference'")
+    try:
+        physics = backend(plant).batch  # the backend's batch (twin.backends)
+    except ValueError as exc:
+        raise RigError(str(exc)) from None
     probe = catalogue.make(name, run_params[0])
     # The 1 kHz laws on the true state, firmware and runs with a scenario take the single-run path; the others
-    # are batched (the reference plant's in the compiled kernel: ReferenceBatchRig). A controller in a process of
+    # are batched (each group's physics the backend's BatchPhysics). A controller in a process of
     # its own (a controller FMU) runs one run at a time too: a batch would hold one process per run at once.
     every = not isinstance(probe, Controller) or bool(getattr(probe, "own_process", False))
     run_scenarios = list(scenarios) if scenarios is not None else [None] * n
@@ -255,13 +245,15 @@ def run_batch(
             if len(scalar) != len(made):
                 raise TypeError(f"{name}: the catalogue made something that is not a Controller")
             controller = ScalarControllers(scalar, controller_timeout_s, group_params[0].daq)
-        group = _group_rig(plant)(
-            [noisy[id(run_params[i])] for i in idx],
+        group_rig_params = [noisy[id(run_params[i])] for i in idx]
+        tick_schedule(group_rig_params[0])  # a schedule the rig cannot run is refused before any physics
+        group = BatchRig(
+            group_rig_params,
             x0[rows],
             th0[rows],
             seed_arr[rows],
+            physics=physics(group_rig_params, x0[rows], th0[rows], threads),
             ideal_sensors=ideal_sensors,
-            nthread=threads,
             record=record,
         )
         on_tick = None if progress is None else _group_progress(progress, runs_before, len(idx))
@@ -288,11 +280,6 @@ def run_batch(
         if progress is not None:
             progress(float(runs_before))
     return [r for r in results if r is not None]
-
-
-def _group_rig(plant: PlantKind) -> type[BatchRig]:
-    """The rig of a batch's group: MuJoCo's, or the reference plant's in the compiled kernel."""
-    return ReferenceBatchRig if plant == "reference" else BatchRig
 
 
 def _group_progress(progress: Callable[[float], None], before: int, size: int) -> Callable[[int, int], None]:
@@ -360,16 +347,12 @@ class BatchRig:
         theta0: np.ndarray,
         seeds: np.ndarray,
         *,
+        physics: BatchPhysics,
         ideal_sensors: bool,
-        nthread: int,
         record: bool,
-        batch: mjbatch.Batch | None = None,
-        ids: np.ndarray | None = None,
-        plant_cache: dict[Parameters, Plant] | None = None,
     ) -> None:
-        """``batch``/``ids``: step these runs as rows ``ids`` of a batch shared with other groups (whose
-        models the owner sets), instead of a batch of their own. ``plant_cache``: plants already built, by
-        parameters (a group built for each episode need not compile its models again)."""
+        """``physics``: the runs' physics, started from (x0, theta0) with ``params`` (a backend's
+        ``BatchFactory``, ``twin.backends``)."""
         p = self.p = params[0]
         self.n = n = len(params)
         self.ideal = ideal_sensors
@@ -379,7 +362,7 @@ class BatchRig:
         self.dt = dt
         self.schedule = tick_schedule(p)  # the single rig's schedule (held, free run, release, latency)
         self.steps_per_tick = self.schedule.steps_per_tick
-        self._start_physics(params, x0, theta0, nthread, batch, ids, plant_cache)
+        self.physics = physics
         # SimRig.reset
         self.held = np.stack([x0, theta0, np.zeros(n), np.zeros(n)], axis=1)
         chain_start = self.schedule.chain_start_step
@@ -391,67 +374,18 @@ class BatchRig:
         self.command_v = np.full(n, p.amplifier.zero_command_v)
         self.applied_v = self._motor_volts_for(self.command_v, np.arange(n))
         self.pending_v = self.applied_v.copy()
-        self.lost = np.zeros(n, dtype=bool)
-        self.lost_time_s: list[float | None] = [None] * n
-        self.lost_state = np.full((n, 4), math.nan)
         self.live = np.arange(n)  # the runs still going
         self.block_theta = np.zeros((n, 2))
         self.block_on = np.ones((n, 2), dtype=bool)
 
-    # --- the physics: MuJoCo here; ``ReferenceBatchRig`` overrides these three ------------------------------
-    def _start_physics(
-        self,
-        params: list[Parameters],
-        x0: np.ndarray,
-        theta0: np.ndarray,
-        nthread: int,
-        batch: mjbatch.Batch | None,
-        ids: np.ndarray | None,
-        plant_cache: dict[Parameters, Plant] | None,
-    ) -> None:
-        """Each run's physics reset to its start (the single run's reset and its checks); sets
-        ``physics_time_s``."""
-        n = len(params)
-        # One Plant per distinct physics: its model for the batch, its geometry for the numpy stages.
-        plants: dict[Parameters, Plant] = {}
-        for q in params:
-            if q not in plants:
-                cached = None if plant_cache is None else plant_cache.get(q)
-                plants[q] = cached if cached is not None else Plant(q)
-        self.plants = [plants[q] for q in params]
-        self.distinct = list(plants.values())
-        # The numpy of the track's coordinates and the true state, once per track shape (Plant.frame_key)
-        # rather than once per plant: each run's rows through one plant of its shape.
-        shapes: dict[tuple, Plant] = {}
-        for plant in self.distinct:
-            shapes.setdefault(plant.frame_key, plant)
-        self.shapes = list(shapes.values())
-        shape_index = {key: k for k, key in enumerate(shapes)}
-        self.shape_of = np.array([shape_index[plants[q].frame_key] for q in params])
-        states = np.empty((n, mujoco.mj_stateSize(self.distinct[0].model, _INTEGRATION)))
-        nfull = mujoco.mj_stateSize(self.distinct[0].model, FULL_STATE)
-        self.last_row = np.empty((n, nfull))  # each run's state after its last step (MjData's, alone)
-        for i, plant in enumerate(self.plants):
-            plant.reset(float(x0[i]), float(theta0[i]))  # the single run's reset (and its checks)
-            mujoco.mj_getState(plant.model, plant.data, states[i], _INTEGRATION)
-            mujoco.mj_getState(plant.model, plant.data, self.last_row[i], FULL_STATE)
-        if batch is None:
-            self.batch = mjbatch.Batch(self.distinct[0].model, n, nthread=nthread)
-            self.ids = np.arange(n)
-            if len(self.distinct) > 1:
-                self.batch.set_models([plant.model for plant in self.plants])
-        else:
-            assert ids is not None and len(ids) == n
-            self.batch, self.ids = batch, np.asarray(ids)
-            batch.warning[self.ids] = 0  # a row's counters are its run's (MjData's, reset with it)
-        self.batch.state[self.ids] = states
-        # Each run's furthest physical beam angle (Plant._check_numerics): past it, a numerical failure.
-        self.theta_limit_rad = np.array([q.beam.stop_angle_rad + stop_overshoot_bound_rad(q) for q in params])
-        plant0 = self.distinct[0]
-        assert plant0._hinge_qpos is not None
-        self.theta_col = 1 + plant0._hinge_qpos
-        self.ball_col = 1 + plant0._ball_qpos
-        self.physics_time_s = float(self.last_row[0, 0])
+    @property
+    def lost(self) -> np.ndarray:
+        """(n,) bool: each run's ball has left the track (latched; the physics says when)."""
+        return self.physics.lost
+
+    @property
+    def lost_time_s(self) -> list[float | None]:
+        return self.physics.lost_time_s
 
     # --- the rig, over the live runs --------------------------------------------------------------------
     def _motor_volts_for(self, command_v: np.ndarray, rows: np.ndarray) -> np.ndarray:
@@ -478,92 +412,18 @@ class BatchRig:
             self.applied_v[live] = self.pending_v[live]
         return volts
 
-    def _advance(self, volts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Plant.advance for every live run: (times (m+1,), x, θ, on-track (live, m+1))."""
-        t0 = self.physics_time_s
-        out = self.batch.rollout(
-            volts.shape[1], control=volts[:, :, None], record=(FULL_STATE,), ids=self.ids[self.live]
-        )[FULL_STATE]
-        return self._advanced(t0, out)
-
-    def _advanced(self, t0: float, out: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """``_advance`` once the live runs' physics has run from ``t0``: ``out`` their recorded states."""
-        live, m = self.live, out.shape[1]
-        self._check_numerics(t0, out)
-        last = out[:, -1]
-        if not np.isfinite(last).all():
-            i = int(live[np.flatnonzero(~np.isfinite(last).all(axis=1))[0]])
-            raise numerical_failure(
-                self.plants[i].params, f"run {i}: the MuJoCo state is not finite", float(last[0, 0])
-            )
-        if not (last[:, 0] == last[0, 0]).all():
-            raise RuntimeError("the runs of a batch fell out of step")
-        theta = np.concatenate(
-            [self.last_row[live, self.theta_col][:, None], out[:, :, self.theta_col]], axis=1
-        )
-        c = self.ball_col
-        xyz = np.concatenate([self.last_row[live, None, c : c + 3], out[:, :, c : c + 3]], axis=1)
-        along = np.empty_like(theta)
-        on = np.empty(theta.shape, dtype=bool)
-        which = self.shape_of[live]
-        for k, plant in enumerate(self.shapes):
-            rows = which == k
-            if rows.all():
-                along, on = plant.track_coordinates(theta, xyz)
-            elif rows.any():
-                along[rows], on[rows] = plant.track_coordinates(theta[rows], xyz[rows])
-        lost = self.lost[live]
-        on[lost] = False
-        on[~lost, 0] = True
-        for j in np.flatnonzero(
-            ~lost & ~on.all(axis=1)
-        ).tolist():  # latched from the first step off the track
-            i = int(live[j])
-            first_off = int(np.flatnonzero(~on[j])[0])
-            row = out[j, first_off - 1]
-            self.lost[i] = True
-            self.lost_time_s[i] = float(row[0])
-            self.lost_state[i] = self.plants[i]._row_state(row)
-            on[j, first_off:] = False
-        self.last_row[live] = last
-        self.physics_time_s = float(last[0, 0])
-        times = t0 + np.arange(m + 1) * self.dt  # as Plant.advance: its clock plus the step offsets
-        return times, along, theta, on
-
-    def _check_numerics(self, t0: float, out: np.ndarray) -> None:
-        """Plant._check_numerics for every live run: a NumericalError for the first run MuJoCo warned in
-        (a simulation that warns stops stepping: its clock stops) or whose beam went past its stops further
-        than they can yield."""
-        live = self.live
-        # (lastinfo, number) per warning
-        warned = np.flatnonzero(self.batch.warning[self.ids[live], :, 1].any(axis=1))
-        theta = np.abs(out[:, :, self.theta_col])
-        past = np.flatnonzero((theta > self.theta_limit_rad[live, None]).any(axis=1))
-        if not (warned.size or past.size):
-            return
-        run = f"run {int(live[(warned if warned.size else past)[0]])}: " if self.n > 1 else ""
-        if warned.size:
-            j = int(warned[0])
-            i = int(live[j])
-            counts = dict(enumerate(self.batch.warning[self.ids[i], :, 1].tolist()))
-            error = numerical_failure(
-                self.plants[i].params, warning_text(counts), failure_time_s(np.r_[t0, out[j, :, 0]])
-            )
-        else:
-            j = int(past[0])
-            i = int(live[j])
-            k = int(np.flatnonzero(theta[j] > self.theta_limit_rad[i])[0])
-            error = beyond_stops(self.plants[i].params, float(theta[j, k]), float(out[j, k, 0]))
-        raise type(error)(run + str(error))
+    def _advance(self, volts: np.ndarray) -> BatchBlock:
+        """The physics of every live run over ``volts`` (live, steps)."""
+        return self.physics.advance(self.live, volts)
 
     def read(self) -> BatchSamples:
         """SimRig._read for every live run: the same ``TickSchedule`` plan, the pieces as arrays over the runs."""
         live = self.live
         plan = self.schedule.next_block()
-        t_start = plan.start_step * self.dt if plan.start_step < 0 else self.physics_time_s
+        t_start = plan.start_step * self.dt if plan.start_step < 0 else self.physics.time_s
         if plan.free_steps:  # released before this block begins: run free up to it, unobserved
             pre_t, pre_x, _, pre_on = self._advance(self._step_volts(plan.free_steps))
-            t_start = self.physics_time_s
+            t_start = self.physics.time_s
             if self.ball is not None:
                 self.ball.advance(live, pre_t, pre_x, pre_on)
         times: list[np.ndarray] = []
@@ -587,14 +447,14 @@ class BatchRig:
     def begin_observed(self) -> tuple[float, np.ndarray]:
         """The first half of ``read`` when the next block is physics alone (``TickSchedule.next_is_observed``):
         the schedule moves past it; (the physics clock, the live runs' volts per step (live, steps)) for
-        their rollout, which the caller runs (with other groups' rows) before ``end_observed``."""
+        their physics, which the caller runs (with other groups' rows) before ``end_observed``."""
         plan = self.schedule.next_block()
         assert plan.free_steps == 0 and plan.held_end_step is None and plan.observed_steps
-        return self.physics_time_s, self._step_volts(plan.observed_steps)
+        return self.physics.time_s, self._step_volts(plan.observed_steps)
 
-    def end_observed(self, t0: float, out: np.ndarray) -> BatchSamples:
-        """The rest of ``read``: ``out`` the live runs' rollout of ``begin_observed``'s volts from ``t0``."""
-        t, x, th, on = self._advanced(t0, out)
+    def end_observed(self, t0: float, block: BatchBlock) -> BatchSamples:
+        """The rest of ``read``: ``block`` the live runs' physics under ``begin_observed``'s volts from ``t0``."""
+        t, x, th, on = block
         return self._sense(t0, [t], [x], [th], [on])
 
     def _sense(
@@ -635,23 +495,13 @@ class BatchRig:
         live = self.live
         if self.held_now:
             return self.held[live].copy()
-        states = np.empty((len(live), 4))
-        which = self.shape_of[live]
-        for k, plant in enumerate(self.shapes):
-            rows = which == k
-            if rows.all():
-                states = plant.row_states(self.last_row[live])
-            elif rows.any():
-                states[rows] = plant.row_states(self.last_row[live[rows]])
-        lost = self.lost[live]
-        states[lost] = self.lost_state[live[lost]]  # Plant.state: the state at the step it left the track
-        return states
+        return self.physics.true_state(live)
 
     @property
     def time_s(self) -> float:
         if self.held_now:
             return self.schedule.next_start_step * self.dt
-        return self.physics_time_s
+        return self.physics.time_s
 
     # --- the closed loop ----------------------------------------------------------------------------------
     def _add(self, k: int, cols: _Columns, samples: BatchSamples, controller: BatchController) -> None:
@@ -755,71 +605,3 @@ class BatchRig:
         if self.record:
             log = RunLog(**{f: col[:n, i] for f, col in c.items()}, ball_lost=cols.lost[:n, i])
         return RunResult(controller=name, log=log, verdict=verdict)
-
-
-class ReferenceBatchRig(BatchRig):
-    """The fast engine's rig: ``BatchRig`` (the sensor chains, DAQ schedule, output stage and recorder over the
-    batch, the very functions a single run uses) over the analytic reference plant in the compiled kernel
-    (``twin.screen.plant``) instead of MuJoCo: each run is ``run_closed_loop(..., plant="reference")`` of the
-    same start and seed bit for bit (the kernel steps as ``ReferencePlant.advance``; tests/test_screen.py)."""
-
-    def _start_physics(
-        self,
-        params: list[Parameters],
-        x0: np.ndarray,
-        theta0: np.ndarray,
-        nthread: int,
-        batch: mjbatch.Batch | None,
-        ids: np.ndarray | None,
-        plant_cache: dict[Parameters, Plant] | None,
-    ) -> None:
-        """As ``ReferencePlant.reset``: each start checked, at rest, the clock at 0."""
-        from twin.screen.plant import plant_rows  # numba is imported when the fast engine is asked for
-
-        if batch is not None:
-            raise ValueError("the reference plant's runs are not rows of a MuJoCo batch")
-        for i, q in enumerate(params):
-            check_initial_state(q, float(x0[i]), float(theta0[i]), 0.0, 0.0)
-        self.plant = plant_rows(params)
-        self.states = np.zeros((len(params), 4))
-        self.states[:, 0], self.states[:, 1] = x0, theta0
-        self.lost_step = np.full(len(params), -1, dtype=np.int64)  # ≥ 0 once lost: the kernel skips the run
-        self.physics_time_s = 0.0
-
-    def _advance(self, volts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """``ReferencePlant.advance`` for every live run: (times (m+1,), x, θ, on-track (live, m+1))."""
-        from twin.screen.plant import PlantRows, advance_plant
-
-        live, m, h = self.live, volts.shape[1], self.dt
-        t0 = self.physics_time_s
-        every = len(live) == self.n
-        plant = self.plant if every else PlantRows(self.plant.rows[live], self.plant.timestep_s)
-        states, lost_step = self.states[live], self.lost_step[live]
-        recorded = advance_plant(plant, states, lost_step, volts, record=True)
-        assert recorded is not None
-        along, theta = recorded
-        if not np.isfinite(states).all():
-            j = int(np.flatnonzero(~np.isfinite(states).all(axis=1))[0])
-            raise FloatingPointError(
-                f"run {int(live[j])}: reference model state is not finite by t = {t0 + m * h:.3f} s"
-            )
-        on = np.ones(along.shape, dtype=bool)
-        was_lost = self.lost[live]
-        on[was_lost] = False
-        for j in np.flatnonzero(~was_lost & (lost_step >= 0)).tolist():
-            i, k = int(live[j]), int(lost_step[j])
-            self.lost[i] = True
-            self.lost_time_s[i] = t0 + k * h  # ReferencePlant's: its clock plus the step's offset
-            self.lost_state[i] = states[j]  # the state stays where the ball left the track
-            on[j, k:] = False
-        self.states[live], self.lost_step[live] = states, lost_step
-        times = t0 + np.arange(m + 1) * h
-        self.physics_time_s = float(times[-1])
-        return times, along, theta, on
-
-    def true_state(self) -> np.ndarray:
-        """SimRig.true_state for every live run: the held start, or the kernel's state (frozen once lost)."""
-        live = self.live
-        if self.held_now:
-            return self.held[live].copy()
-        return self.states[live]

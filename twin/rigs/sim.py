@@ -24,28 +24,26 @@ from __future__ import annotations
 
 import math
 import warnings
-from typing import Literal, Protocol
 
 import numpy as np
 
+from twin.backends import DEFAULT_PLANT, backend
 from twin.daq import TickSchedule, block_span_s
+from twin.firmware import FirmwareBoard
 from twin.interface import DaqSample, Rig
 from twin.output_stage import (
     CommandClampedWarning,
     amplifier_volts,
     clamped_command_text,
     ideal_motor_volts,
-    motor_volts_of,
 )
 from twin.parameters import Parameters
+from twin.parts import THESIS, AngleSensorChain, BallSensorChain, RigParts
 from twin.physics import PhysicsBackend, PhysicsBlock
 from twin.plant import Plant
-from twin.reference import ReferencePlant
-from twin.sensors import AngleChain, BallPositionChain, IdealSensors
+from twin.sensors import IdealSensors
 
-__all__ = ["DaqSample", "PlantKind", "ReferenceRig", "Rig", "RigError", "SimRig", "TwinRig", "make_rig"]
-
-PlantKind = Literal["twin", "reference"]
+__all__ = ["DaqSample", "ReferenceRig", "Rig", "RigError", "SimRig", "TwinRig", "make_rig"]
 
 # A control period, latency or free-run time must be a whole number of physics steps to this precision.
 _STEP_TOLERANCE = 1e-9
@@ -83,7 +81,8 @@ class SimRig(Rig):
 
     ``seed`` seeds the ball sensor's contact noise (same seed → bit-identical readings). ``noise`` overrides
     ``params.ball_sensor.noise_enabled``. ``ideal_sensors`` replaces the sensor chains and the DAC's
-    quantization by ideal converters."""
+    quantization by ideal converters. ``parts``: the rig's parts (``twin.parts.RigParts``; today's, ``THESIS``,
+    by default), whose sensor chains and output stage the rig runs."""
 
     def __init__(
         self,
@@ -91,26 +90,31 @@ class SimRig(Rig):
         *,
         seed: int = 0,
         noise: bool | None = None,
-        plant: PlantKind = "twin",
+        plant: str = DEFAULT_PLANT,
         ideal_sensors: bool = False,
+        parts: RigParts | None = None,
     ) -> None:
         p = params or Parameters()
         if noise is not None:
             p = p.with_overrides({"ball_sensor.noise_enabled": bool(noise)})
-        if plant not in ("twin", "reference"):
-            raise RigError(f"plant = {plant!r}: expected 'twin' or 'reference'")
+        try:
+            single = backend(plant).single  # the backend's single run (twin.backends)
+        except ValueError as exc:
+            raise RigError(str(exc)) from None
         self.params = p
         self.seed = seed
-        self.plant_kind: PlantKind = plant
+        self.plant_kind = plant
         self.ideal_sensors = bool(ideal_sensors)
         self._schedule = tick_schedule(p)
         self._steps_per_tick = self._schedule.steps_per_tick
-        self.physics: PhysicsBackend = Plant(p) if plant == "twin" else ReferencePlant(p)
+        self.physics: PhysicsBackend = single(p)
         self._chains = not self.ideal_sensors  # the sensor chains read each block (else ideal converters)
-        self._motor_volts = motor_volts_of(p)
+        # the rig's parts (twin.parts; today's by default): its output stage and sensor chains come from them
+        self.parts = parts or THESIS
+        self._motor_volts = self.parts.motor_volts_of(p)
         self._block_span_s = block_span_s(p.daq)
-        self._angle = AngleChain(p)
-        self._ball = BallPositionChain(p, seed)
+        self._angle: AngleSensorChain = self.parts.angle_sensor.chain(p)
+        self._ball: BallSensorChain = self.parts.ball_sensor.chain(p, seed)
         self._ideal = IdealSensors(p)
         self.last_block: PhysicsBlock | None = None
         self.reset()
@@ -146,7 +150,7 @@ class SimRig(Rig):
         return self._read((law_volts, whole_steps(law_period_s, self.params.physics.timestep_s, "period_s")))
 
     def read_with_firmware(self, firmware: FirmwareBoard) -> DaqSample:
-        """One tick of a rig whose controller is firmware on a microcontroller (``twin.engine.Firmware``): every
+        """One tick of a rig whose controller is firmware on a microcontroller (``twin.firmware.Firmware``): every
         physics step its pins see the sensor signals in time (the ball chain's RC output, the angle counter's
         DAC level: no card's block means) and the motor the mean terminal volts of the board's output over the
         step. The first tick after ``reset`` powers the board on (the core leaves reset as the first block
@@ -371,19 +375,6 @@ class SimRig(Rig):
         return DaqSample(time_s=t_start + self._block_span_s, ball_v=ball_v, angle_v=angle_v)
 
 
-class FirmwareBoard(Protocol):
-    """What the rig asks of a firmware's board (``twin.engine.Firmware`` is one)."""
-
-    @property
-    def command_v(self) -> float: ...
-
-    def boot(self, time_s: float) -> None: ...
-
-    def pins(
-        self, time_s: float, ball_signal_v: float, angle_signal_v: float, until_s: float
-    ) -> list[tuple[float, float]]: ...
-
-
 _CONTACT_2 = np.array([True, True])
 
 
@@ -502,11 +493,11 @@ class ReferenceRig(SimRig):
 def make_rig(
     params: Parameters | None = None,
     *,
-    plant: PlantKind = "twin",
+    plant: str = DEFAULT_PLANT,
     ideal_sensors: bool = False,
     seed: int = 0,
     noise: bool | None = None,
 ) -> SimRig:
-    """The simulated rig asked for: ``plant`` 'twin' (MuJoCo) or 'reference' (analytic model), with the full
-    sensor chain or ideal converters."""
+    """The simulated rig asked for: ``plant`` a registered backend's name (``twin.backends``: 'twin', MuJoCo;
+    'reference', the analytic model), with the full sensor chain or ideal converters."""
     return SimRig(params, seed=seed, noise=noise, plant=plant, ideal_sensors=ideal_sensors)

@@ -26,6 +26,7 @@ from mujoco import batch as mjbatch
 
 from twin.parameters import Parameters
 from twin.plant import FULL_STATE, Plant
+from twin.plant_batch import MujocoBatchPhysics
 from twin.rigs.batch import BatchRig, BatchSamples, batch_key
 from twin.rigs.sim import RigError, tick_schedule
 
@@ -69,6 +70,7 @@ class VectorRig:
         self.cohort_of: list[BatchRig | None] = [None] * n  # each rig's cohort
         self.row_in: np.ndarray = np.zeros(n, dtype=np.int64)  # its index within the cohort
         self.cohorts: list[BatchRig] = []
+        self.physics_of: dict[int, MujocoBatchPhysics] = {}  # each cohort's rows of the batch (by id)
         self.rig_params: list[Parameters | None] = [None] * n  # each rig's episode parameters
 
     def _plant(self, params: Parameters) -> Plant:
@@ -120,18 +122,15 @@ class VectorRig:
             members = sorted(listed, key=lambda j: int(rows[j]))  # a rollout takes its rows in order
             ids = rows[members]
             qs = [params[j] for j in members]
-            cohort = BatchRig(
-                qs,
-                np.asarray(x0_m, dtype=float)[members],
-                np.asarray(theta0_rad, dtype=float)[members],
-                np.asarray(seeds)[members],
-                ideal_sensors=self.ideal_sensors,
-                nthread=self.batch.nthread,
-                record=False,
-                batch=self.batch,
-                ids=ids,
-                plant_cache=self._plants,
+            x0, theta0 = np.asarray(x0_m, dtype=float)[members], np.asarray(theta0_rad, dtype=float)[members]
+            physics = MujocoBatchPhysics(
+                qs, x0, theta0, self.batch.nthread, batch=self.batch, ids=ids, plant_cache=self._plants
             )
+            cohort = BatchRig(
+                qs, x0, theta0, np.asarray(seeds)[members], physics=physics, ideal_sensors=self.ideal_sensors,
+                record=False,
+            )  # fmt: skip
+            self.physics_of[id(cohort)] = physics
             self.cohorts.append(cohort)
             for k, r in enumerate(ids.tolist()):
                 self.cohort_of[r] = cohort
@@ -150,6 +149,7 @@ class VectorRig:
         cohort.live = cohort.live[cohort.live != k]
         if not len(cohort.live):
             self.cohorts.remove(cohort)
+            del self.physics_of[id(cohort)]
 
     def step(self, rigs: Sequence[int] | np.ndarray, command_v: np.ndarray) -> VectorBlocks:
         """Write each rig's DAC command (volts) and read its next block: ``SimRig.write`` then ``read()``
@@ -188,7 +188,7 @@ class VectorRig:
             t0, volts = cohort.begin_observed()
             plans.append((cohort, positions[order], t0, volts))
         volts_all = np.concatenate([v for _, _, _, v in plans], axis=0)
-        ids_all = np.concatenate([c.ids[c.live] for c, _, _, _ in plans])
+        ids_all = np.concatenate([self.physics_of[id(c)].ids[c.live] for c, _, _, _ in plans])
         steps = volts_all.shape[1]
         if len(ids_all) < 2 or bool((np.diff(ids_all) > 0).all()):
             out_all = self.batch.rollout(
@@ -203,7 +203,8 @@ class VectorRig:
         at = 0
         for cohort, positions, t0, volts in plans:
             m = len(volts)
-            result.fill(positions, cohort, cohort.end_observed(t0, out_all[at : at + m]))
+            block = self.physics_of[id(cohort)].advanced(cohort.live, t0, out_all[at : at + m])
+            result.fill(positions, cohort, cohort.end_observed(t0, block))
             at += m
         return result.done()
 

@@ -1,12 +1,12 @@
 """The reference plant over N runs in one compiled kernel: ``twin.reference.ReferencePlant.advance`` for every
 run at once, no Python per step.
 
-The equations are compiled from their homes (``twin.reference.ball_beam_accelerations``, eq 3.1.26/3.1.27;
-``twin.dcmotor.torque_nm``, eq 3.3.1), not written again; what this module adds is the loop: classical RK4 at
-``physics.timestep_s`` with each run's motor volts held over a step through the amplifier's rails, the stops
-(θ clamped, an outward θ̇ zeroed) and the ball lost once |x| passes the track's end (its state then frozen), as
-the reference plant does at its step boundary. ``tests/test_screen.py`` holds the kernel to the reference
-plant to 1e-12 over random states and volts.
+The equations and the step are compiled from their homes, not written again: ``twin.reference``'s
+``ball_beam_accelerations`` (eq 3.1.26/3.1.27), ``pivot_friction_nm``, ``rk4_step`` (classical RK4) and
+``step_boundary`` (the stops: θ clamped, an outward θ̇ zeroed; the ball lost once |x| passes the track's end),
+``twin.dcmotor.torque_nm`` (eq 3.3.1). What this module adds is the loop over runs and steps: each run's motor
+volts held over a step through the amplifier's rails, a lost run's state frozen, as the reference plant does.
+``tests/test_screen.py`` holds the kernel to the reference plant over random states and volts.
 
 Why numba: it compiles the core's own Python functions (one home per equation) with no build step and no
 compiler on the user's machine; a C kernel would be a second copy of the equations.
@@ -24,13 +24,22 @@ import numpy as np
 from twin.dcmotor import torque_nm
 from twin.jit import njit_cached
 from twin.parameters import Parameters
-from twin.reference import COULOMB_REGULARIZATION_RAD_S, EquationCoefficients, ball_beam_accelerations
+from twin.physics import BatchBlock, check_initial_state
+from twin.reference import (
+    EquationCoefficients,
+    ball_beam_accelerations,
+    pivot_friction_nm,
+    rk4_step,
+    step_boundary,
+)
 
-__all__ = ["PlantRows", "advance_plant", "derivatives", "plant_rows"]
+__all__ = ["PlantRows", "ReferenceBatchPhysics", "advance_plant", "derivatives", "plant_rows"]
 
 _accelerations = numba.njit(inline="always")(ball_beam_accelerations)
 _torque = numba.njit(inline="always")(torque_nm)
-_EPS = COULOMB_REGULARIZATION_RAD_S
+_friction = numba.njit(inline="always")(pivot_friction_nm)
+_rk4 = numba.njit(inline="always")(rk4_step)
+_boundary = numba.njit(inline="always")(step_boundary)
 
 # A run's row of constants: the 13 of EquationCoefficients.as_row, then the motor's and the rig's.
 K_TAU, K_B, RAIL, STOP, HALF = 13, 14, 15, 16, 17
@@ -66,13 +75,22 @@ def plant_rows(params: Sequence[Parameters], *, motor_inertia: bool = True) -> P
 def _f(
     r: np.ndarray, x: float, th: float, xd: float, thd: float, v: float
 ) -> tuple[float, float, float, float]:
-    friction = r[12] * max(-1.0, min(1.0, thd / _EPS))
+    friction = _friction(r[12], thd)
     tau = _torque(v, thd, r[K_TAU], r[K_B])
     xdd, thdd = _accelerations(
         r[0], r[1], r[2], r[3], r[4], r[5], r[6], r[7], r[8], r[9], r[10], r[11],
         x, xd, thd, math.sin(th), math.cos(th), friction, tau,
     )  # fmt: skip
     return xd, thd, xdd, thdd
+
+
+@numba.njit(inline="always")
+def _f_held(
+    x: float, th: float, xd: float, thd: float, held: tuple[np.ndarray, float]
+) -> tuple[float, float, float, float]:
+    """``_f`` as ``rk4_step`` calls it: the run's row and its held volts passed through as one input."""
+    r, v = held
+    return _f(r, x, th, xd, thd, v)
 
 
 @njit_cached
@@ -110,33 +128,9 @@ def _advance(
         for k in range(m):
             if lost_step[i] < 0:
                 v = min(max(volts[i, k], -r[RAIL]), r[RAIL])
-                a1 = _f(r, x, th, xd, thd, v)
-                a2 = _f(
-                    r,
-                    x + 0.5 * h * a1[0],
-                    th + 0.5 * h * a1[1],
-                    xd + 0.5 * h * a1[2],
-                    thd + 0.5 * h * a1[3],
-                    v,
-                )
-                a3 = _f(
-                    r,
-                    x + 0.5 * h * a2[0],
-                    th + 0.5 * h * a2[1],
-                    xd + 0.5 * h * a2[2],
-                    thd + 0.5 * h * a2[3],
-                    v,
-                )
-                a4 = _f(r, x + h * a3[0], th + h * a3[1], xd + h * a3[2], thd + h * a3[3], v)
-                x = x + h / 6.0 * (a1[0] + 2 * a2[0] + 2 * a3[0] + a4[0])
-                th = th + h / 6.0 * (a1[1] + 2 * a2[1] + 2 * a3[1] + a4[1])
-                xd = xd + h / 6.0 * (a1[2] + 2 * a2[2] + 2 * a3[2] + a4[2])
-                thd = thd + h / 6.0 * (a1[3] + 2 * a2[3] + 2 * a3[3] + a4[3])
-                if abs(th) > r[STOP]:
-                    th = math.copysign(r[STOP], th)
-                    if thd * th > 0:
-                        thd = 0.0
-                if abs(x) > r[HALF]:
+                x, th, xd, thd = _rk4(_f_held, x, th, xd, thd, (r, v), h)
+                th, thd, lost = _boundary(x, th, thd, r[STOP], r[HALF])
+                if lost:
                     lost_step[i] = step0 + k + 1
             elif not record:
                 break
@@ -171,3 +165,68 @@ def advance_plant(
     thetas = np.empty_like(xs)
     _advance(plant.rows, plant.timestep_s, states, lost_step, volts, step0, xs, thetas)
     return xs, thetas
+
+
+class ReferenceBatchPhysics:
+    """The reference plant over N runs in the kernel (``twin.physics.BatchPhysics``): each run is
+    ``ReferencePlant`` from the same start under the same volts (tests/test_screen.py). A lost run's state
+    stays where its ball left the track, as the reference plant's."""
+
+    def __init__(
+        self, params: Sequence[Parameters], x0: np.ndarray, theta0: np.ndarray, nthread: int
+    ) -> None:
+        """As ``ReferencePlant.reset``: each start checked, at rest, the clock at 0 (``nthread``: unused, the
+        kernel runs on the caller's thread)."""
+        for i, q in enumerate(params):
+            check_initial_state(q, float(x0[i]), float(theta0[i]), 0.0, 0.0)
+        self.n = len(params)
+        self.plant = plant_rows(params)
+        self.states = np.zeros((self.n, 4))
+        self.states[:, 0], self.states[:, 1] = x0, theta0
+        self.lost_step = np.full(self.n, -1, dtype=np.int64)  # ≥ 0 once lost: the kernel skips the run
+        self._lost = np.zeros(self.n, dtype=bool)
+        self._lost_time_s: list[float | None] = [None] * self.n
+        self._time_s = 0.0
+
+    @property
+    def time_s(self) -> float:
+        return self._time_s
+
+    @property
+    def lost(self) -> np.ndarray:
+        return self._lost
+
+    @property
+    def lost_time_s(self) -> list[float | None]:
+        return self._lost_time_s
+
+    def advance(self, runs: np.ndarray, volts: np.ndarray) -> BatchBlock:
+        """``ReferencePlant.advance`` for runs ``runs``."""
+        live, m, h = runs, volts.shape[1], self.plant.timestep_s
+        t0 = self._time_s
+        plant = self.plant if len(live) == self.n else PlantRows(self.plant.rows[live], h)
+        states, lost_step = self.states[live], self.lost_step[live]
+        recorded = advance_plant(plant, states, lost_step, volts, record=True)
+        assert recorded is not None
+        along, theta = recorded
+        if not np.isfinite(states).all():
+            j = int(np.flatnonzero(~np.isfinite(states).all(axis=1))[0])
+            raise FloatingPointError(
+                f"run {int(live[j])}: reference model state is not finite by t = {t0 + m * h:.3f} s"
+            )
+        on = np.ones(along.shape, dtype=bool)
+        was_lost = self._lost[live]
+        on[was_lost] = False
+        for j in np.flatnonzero(~was_lost & (lost_step >= 0)).tolist():
+            i, k = int(live[j]), int(lost_step[j])
+            self._lost[i] = True
+            self._lost_time_s[i] = t0 + k * h  # ReferencePlant's: its clock plus the step's offset
+            on[j, k:] = False
+        self.states[live], self.lost_step[live] = states, lost_step
+        times = t0 + np.arange(m + 1) * h
+        self._time_s = float(times[-1])
+        return BatchBlock(times, along, theta, on)
+
+    def true_state(self, runs: np.ndarray) -> np.ndarray:
+        """The kernel's state (frozen once lost: where the ball left the track)."""
+        return self.states[runs]

@@ -15,7 +15,6 @@ import viser
 
 from twin.engine import Catalogue
 from twin.parameters import Parameters
-from twin.rigs.sim import PlantKind
 from twin.viewer.common import (
     DEFAULT_CONTROLLER,
     FRAME_S,
@@ -195,7 +194,7 @@ def serve(
     seed: int = 0,
     duration_s: float | None = None,
     params: Parameters | None = None,
-    plant: PlantKind = "twin",
+    plant: str = "twin",
     ideal_sensors: bool = False,
     announce: bool = True,
     allowed_origins: tuple[str, ...] = (),
@@ -283,7 +282,7 @@ def _serve(
     seed: int,
     duration_s: float | None,
     params: Parameters,
-    plant: PlantKind,
+    plant: str,
     ideal_sensors: bool,
     announce: bool,
     allowed_origins: tuple[str, ...],

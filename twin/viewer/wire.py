@@ -38,7 +38,8 @@ import time
 from collections.abc import Callable, Mapping
 from typing import Any, Literal
 
-from twin.engine import Catalogue, CatalogueEntry, Firmware, StateLaw
+from twin.engine import Catalogue, CatalogueEntry, StateLaw
+from twin.firmware import Firmware
 from twin.interface import Controller, DaqSample
 from twin.parameters import Parameters
 from twin.rigs.sim import SimRig

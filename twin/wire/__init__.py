@@ -11,7 +11,14 @@ The client side of a session is a rig (``twin.rigs.remote.RemoteRig``). The name
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from twin.exports import lazy_exports
+
+if TYPE_CHECKING:  # the names' real types for a type checker; at run time they load on first use (below)
+    from twin.wire.observer import Observer, open_observer
+    from twin.wire.server import Server, SessionResult, SessionSettings
+
 
 __all__ = ["Observer", "Server", "SessionResult", "SessionSettings", "open_observer"]
 

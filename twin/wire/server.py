@@ -40,7 +40,7 @@ from twin.engine import ENDED_BALL_LOST, ClosedLoop, ControllerError, RunResult,
 from twin.interface import Controller, DaqSample
 from twin.parameters import Parameters
 from twin.realtime import TickTiming, WallClockPacer
-from twin.rigs.sim import PlantKind, SimRig, make_rig
+from twin.rigs.sim import SimRig, make_rig
 from twin.warm import warm
 from twin.wire import protocol as p
 from twin.wire.links import Link, LinkError, OverLink, SerialCounts, SerialLink, UdpLink
@@ -83,7 +83,7 @@ class SessionSettings:
     seed: int = 0
     noise: bool = True
     params: Parameters = field(default_factory=Parameters)
-    plant: PlantKind = "twin"
+    plant: str = "twin"
     ideal_sensors: bool = False
     mode: int = p.MODE_LOCKSTEP
     timeout_s: float = DEFAULT_TIMEOUT_S  # the wait for a command (lock-step; the view: for an answer)

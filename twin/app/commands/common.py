@@ -15,8 +15,9 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from twin.app.catalogue import construct, user_controller
+from twin.app.hosts import HOSTS, host_of
 from twin.app.options import MAX_JOB_RUN_S, MAX_RUN_S, count, finite_float, seed
+from twin.backends import DEFAULT_PLANT, ENGINES, backend, engine_policy, plant_choices, plant_help
 from twin.outputs import JobFiles, check_output_folder, writing
 
 if TYPE_CHECKING:
@@ -30,14 +31,6 @@ CONTROLLER_HELP = (
     "a named controller ({names}) or MODULE:CLASS, your own twin.interface.Controller subclass imported from "
     "MODULE (the current directory is searched first); it is built as CLASS(software=params.software), with "
     "the rig software's calibration, if its constructor has a parameter named 'software', else as CLASS()"
-)
-FMU_HELP = (
-    "; or fmu:FILE.fmu, a co-simulation FMU with inputs ball_v, angle_v and output dac_v, run in a process of its "
-    "own (README: The twin in Simulink, OpenModelica and FMPy)"
-)
-FIRMWARE_HELP = (
-    "; or avr:FILE.elf (avr:MCU:FILE.elf), a firmware image run on a simulated microcontroller against the twin "
-    "(README: Validate your firmware)"
 )
 SERVED_CONTROLLER = (
     "; required unless --serve, where it only names what the client runs (never built here; the region "
@@ -57,14 +50,12 @@ WORKERS = count(1, MAX_WORKERS, unit="local processes")
 
 
 def controller_help(firmware: bool = True) -> str:
-    """The help of ``--controller``: the registry's names (importing it loads no design code), MODULE:CLASS and,
-    where the twin runs it (``firmware``), avr:FILE.elf."""
+    """The help of ``--controller``: the registry's names (importing it loads no design code), MODULE:CLASS and
+    the other hosts' values (twin.app.hosts), firmware only where the twin runs it (``firmware``)."""
     from controllers import registry
 
-    return (
-        CONTROLLER_HELP.format(names=", ".join(registry.NAMES))
-        + FMU_HELP
-        + (FIRMWARE_HELP if firmware else "")
+    return CONTROLLER_HELP.format(names=", ".join(registry.NAMES)) + "".join(
+        host.help for host in HOSTS.values() if firmware or host.kind != "firmware"
     )
 
 
@@ -83,9 +74,9 @@ def add_params_options(parser: argparse.ArgumentParser) -> None:
 def add_plant_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--plant",
-        choices=("twin", "reference"),
-        default="twin",
-        help="the MuJoCo twin (default) or the analytic reference model (always with ideal sensors)",
+        choices=plant_choices(),
+        default=DEFAULT_PLANT,
+        help=f"the physics backend (twin.backends): {plant_help()}",
     )
     parser.add_argument(
         "--ideal-sensors",
@@ -102,7 +93,7 @@ def add_engine_options(
     re-runs when it confirms."""
     parser.add_argument(
         "--engine",
-        choices=("screen", "fast", "mujoco"),
+        choices=ENGINES,
         default=None,
         help="who decides each run: 'screen' (the fast engine, the reference plant compiled under the twin's "
         f"sensor chain, runs everything; MuJoCo re-runs every run {near} and an audit sample, and any "
@@ -126,7 +117,7 @@ def resolve_engine(args: argparse.Namespace, default: str) -> str:
     A grid's ``--band`` goes with the screen engine only (refused with another); not given, it is set to 1."""
     engine = _engine(args, default)
     if hasattr(args, "band"):
-        if args.band is not None and engine != "screen":
+        if args.band is not None and not engine_policy(engine, args.plant).screened:
             refuse_unused(
                 [("--band", args.band)], f"the band is the screen engine's; this job's engine is {engine}"
             )
@@ -137,15 +128,16 @@ def resolve_engine(args: argparse.Namespace, default: str) -> str:
 def _engine(args: argparse.Namespace, default: str) -> str:
     engine = args.engine
     if engine is None:
-        plain = getattr(args, "refine", 0) or getattr(args, "serve", None) is not None or args.plant != "twin"
+        alone = backend(args.plant).stand_in is None  # no screening backend stands in for the plant
+        plain = getattr(args, "refine", 0) or getattr(args, "serve", None) is not None or alone
         return "mujoco" if plain else default
     from twin.parameters import ParameterError
 
-    if engine != "mujoco" and args.plant != "twin":
-        raise ParameterError(
-            f"--engine {engine}: the fast engine stands in for the MuJoCo twin; not with --plant reference"
-        )
-    if engine != "mujoco" and getattr(args, "serve", None) is not None:
+    try:
+        policy = engine_policy(engine, args.plant)
+    except ValueError as exc:
+        raise ParameterError(str(exc)) from None
+    if policy.screen is not None and getattr(args, "serve", None) is not None:
         raise ParameterError(
             f"--engine {engine}: a served job's runs are sessions with a client; not with --serve"
         )
@@ -320,20 +312,9 @@ def inputs(args: argparse.Namespace) -> list[tuple[str, str]]:
             ("--calibration", str(Path(calibration) / name)) for name in ("params.toml", "calibration.json")
         ]
     spec = str(getattr(args, "controller", ""))
-    module_name, colon, _ = spec.partition(":")
-    if module_name == "fmu" and colon:  # a controller FMU
-        found.append(("--controller", spec.removeprefix("fmu:")))
-        return found
-    if module_name == "avr":  # a firmware image: avr:[MCU:]FILE
-        from twin.avr.firmware import firmware_spec
-
-        parsed = firmware_spec(spec)
-        if parsed is not None:
-            found.append(("--controller", str(parsed[1])))
-        return found
-    module_file = getattr(sys.modules.get(module_name), "__file__", None) if colon else None
-    if module_file:
-        found.append(("--controller", module_file))
+    image = host_of(spec).image(spec) if spec else None  # its host's file (twin.app.hosts)
+    if image is not None:
+        found.append(("--controller", str(image)))
     return found
 
 
@@ -341,7 +322,7 @@ def check_job(args: argparse.Namespace, params: Parameters, outputs: JobFiles) -
     """What every many-run command checks before the work (its numbers are checked by their types): the
     controller (built once: a failing constructor is refused here) and the output folder the job writes
     ``outputs`` into."""
-    from twin.app.catalogue import catalogue_for
+    from twin.app.hosts import catalogue_for
 
     if args.serve is None:  # served: the client's controller is none of ours
         catalogue_for(args.controller, params)
@@ -593,44 +574,10 @@ def compare_params(args: argparse.Namespace) -> tuple[Parameters, str]:
 
 
 def hardware_controller(spec: str, params: Parameters) -> Callable[[], Controller]:
-    """A factory of fresh hardware controllers named by ``spec`` (one per replayed log); a law on the true state
-    or a failing constructor is refused here, before the work."""
-    from controllers import registry
-    from twin.parameters import ParameterError
-
-    if spec.startswith("avr:"):
-        raise ParameterError(
-            f"--controller {spec}: a firmware image drives the simulated rig through its pins; a log is replayed "
-            "with a hardware controller (raw volts in, DAC volts out)"
-        )
-    if spec.startswith("fmu:"):
-        from twin.app.catalogue import fmu_controller
-
-        fmu_controller(spec, params).close()  # type: ignore[attr-defined]  # a bad unit is refused here
-        return lambda: fmu_controller(spec, params)
-    user = user_controller(spec)
-    if user is None:
-        if registry.simulation_only(spec):
-            raise ParameterError(
-                f"--controller {spec}: a law on the true state (simulation only); a log is replayed with a "
-                "hardware controller (raw volts in, DAC volts out)"
-            )
-
-        def named() -> Controller:
-            from twin.interface import Controller
-
-            made = registry.make(spec, params)
-            if not isinstance(made, Controller):  # the registry's flag says so; the type checker cannot
-                raise ParameterError(f"--controller {spec}: not a hardware controller")
-            return made
-
-        return named
-    construct(user, spec, params)
-
-    def own() -> Controller:
-        return construct(user, spec, params)
-
-    return own
+    """A factory of fresh hardware controllers named by ``spec`` (one per replayed log); a law on the true state,
+    a firmware image or a failing constructor is refused here, before the work (its host's row,
+    twin.app.hosts)."""
+    return host_of(spec).log_replay(spec, params)
 
 
 def package_version() -> str:

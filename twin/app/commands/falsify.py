@@ -24,6 +24,7 @@ from twin.app.commands.common import (
     write_out,
 )
 from twin.app.options import SpanType, count, seed
+from twin.backends import engine_policy
 
 if TYPE_CHECKING:
     from twin.app.falsify import Axis
@@ -187,8 +188,8 @@ def run(args: argparse.Namespace) -> int:
 def _scenario_axes(args: argparse.Namespace, base: Parameters) -> list[Axis]:
     """--flick-time/--flick-speed and --setpoint as inputs of the search (checked: a flick after release, a
     setpoint on the track, for a controller that declares one)."""
-    from twin.app.catalogue import build
     from twin.app.falsify import Axis
+    from twin.app.hosts import build
     from twin.interface import Setpoint
     from twin.parameters import ParameterError
     from twin.physics import check_on_track
@@ -239,7 +240,7 @@ def _print(out: dict, args: argparse.Namespace) -> None:
             f"engines: the fast engine decided {decided['fast']} runs, MuJoCo {decided['mujoco']}"
             + (
                 " (every violation and each batch's least robust run)"
-                if out["settings"]["engine"] == "screen"
+                if engine_policy(out["settings"]["engine"]).screened
                 else ""
             )
         )

@@ -4,17 +4,43 @@ from __future__ import annotations
 
 import argparse
 import json
+from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 from twin.app.commands.common import add_params_options, load_params
 
+if TYPE_CHECKING:
+    import numpy as np
+
+    from twin.parameters import Parameters
+
 HELP = "continuous-time A, B at the origin"
+
+
+def _reference(params: Parameters, input: str) -> tuple[np.ndarray, np.ndarray]:
+    from twin.reference import ReferenceModel
+
+    return ReferenceModel(params).linearize(input)  # type: ignore[arg-type]
+
+
+def _twin(params: Parameters, input: str) -> tuple[np.ndarray, np.ndarray]:
+    from twin.linearize import linearize_mujoco  # imports MuJoCo only when needed
+
+    return linearize_mujoco(params, input)  # type: ignore[arg-type]
+
+
+# Each --source's linearization, by name: the table is the choice (no name is compared).
+SOURCES: dict[str, Callable[[Parameters, str], tuple[np.ndarray, np.ndarray]]] = {
+    "twin": _twin,
+    "reference": _reference,
+}
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--input", choices=("torque", "voltage"), default="torque")
     parser.add_argument(
         "--source",
-        choices=("twin", "reference"),
+        choices=tuple(SOURCES),
         default="twin",
         help="the MuJoCo twin (reduced to its 4 slow modes) or the analytic reference model",
     )
@@ -25,15 +51,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from twin.reference import STATE_NAMES, ReferenceModel
+    from twin.reference import STATE_NAMES
 
     params = load_params(args)
-    if args.source == "reference":
-        a, b = ReferenceModel(params).linearize(args.input)
-    else:
-        from twin.linearize import linearize_mujoco  # imports MuJoCo only when needed
-
-        a, b = linearize_mujoco(params, args.input)
+    a, b = SOURCES[args.source](params, args.input)
     result = {
         "state": list(STATE_NAMES),
         "input": args.input,

@@ -36,6 +36,7 @@ from twin.app.commands.common import (
     write_out,
 )
 from twin.app.options import count, finite_float, seed
+from twin.backends import backend
 
 HELP = "robustness: one start over many perturbed rigs and noise seeds; success rate with its interval"
 
@@ -120,7 +121,7 @@ def run(args: argparse.Namespace) -> int:
         duration_s=args.duration,
         noise=not args.no_noise,
         plant=args.plant,
-        ideal_sensors=bool(args.ideal_sensors or args.plant == "reference"),
+        ideal_sensors=bool(args.ideal_sensors or backend(args.plant).ideal_converters),
         seed=args.seed,
         engine=engine,
         audit=32 if args.audit is None else args.audit,
@@ -176,8 +177,6 @@ def run(args: argparse.Namespace) -> int:
         return interrupted("montecarlo", done, args.out, "montecarlo.json")
     if result.screening is not None and (wrong := result.screening["audit"]["mismatches"]):
         print(screen_audit_failure("montecarlo", wrong), file=sys.stderr)
-        if (
-            settings.engine == "screen"
-        ):  # the fast engine alone was asked for unconfirmed: reported, not failed
+        if settings.policy.screened:  # the fast engine alone was asked for unconfirmed: reported, not failed
             return 1
     return controller_failures(result.runs, "montecarlo")

@@ -9,7 +9,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from twin.app.catalogue import construct, one_line, user_controller
+from twin.app.catalogue import one_line
 from twin.app.commands.common import (
     LOG_SUFFIXES,
     add_controller_timeout,
@@ -26,6 +26,7 @@ from twin.app.commands.common import (
     save_log,
 )
 from twin.app.options import count, finite_float
+from twin.backends import DEFAULT_PLANT, backend
 from twin.outputs import check_outputs, writing
 
 if TYPE_CHECKING:
@@ -302,7 +303,7 @@ def _set_by_the_rig(args: argparse.Namespace) -> list[tuple[str, object]]:
         ("--duration", args.duration),
         ("--seed", args.seed),
         ("--no-noise", args.no_noise),
-        ("--plant", None if args.plant == "twin" else args.plant),
+        ("--plant", None if args.plant == DEFAULT_PLANT else args.plant),
         ("--ideal-sensors", args.ideal_sensors),
         ("--realtime", args.realtime),
         ("--setpoint", args.setpoint),
@@ -337,7 +338,7 @@ def _replayed(args: argparse.Namespace) -> Replay | None:
             ("--setpoint", args.setpoint),
             ("--flick-time", args.flick_time),
             ("--flick-speed", args.flick_speed),
-            ("--plant", None if args.plant == "twin" else args.plant),
+            ("--plant", None if args.plant == DEFAULT_PLANT else args.plant),
             ("--ideal-sensors", args.ideal_sensors),
         ]
     )
@@ -356,7 +357,7 @@ def _ideal_sensors(args: argparse.Namespace) -> bool:
     runs: the reference plant under the twin's sensor chain)."""
     if args.replay is not None:
         return bool(args.ideal_sensors)
-    return bool(args.ideal_sensors or args.plant == "reference")
+    return bool(args.ideal_sensors or backend(args.plant).ideal_converters)
 
 
 def _run_in_process(
@@ -364,7 +365,7 @@ def _run_in_process(
 ) -> int | tuple[RunResult, dict[str, Path], WallClockPacer | None]:
     """The controller built and run on the twin: (the result, the checked output paths, the pacer), or the
     exit code of a failure (reported)."""
-    from twin.app.catalogue import build
+    from twin.app.hosts import build
     from twin.engine import ControllerError, Scenario, run_closed_loop
     from twin.plant import NumericalError
     from twin.realtime import WallClockPacer
@@ -453,7 +454,7 @@ def _run_on_remote_rig(args: argparse.Namespace, params: Parameters) -> int:
     ``--sessions N``: N sessions one after the other (0: until the server stops answering HELLO within
     ``--wait-server``), a fresh controller each, built from that session's CONFIG (a served job's runs,
     ``sweep --serve``)."""
-    from controllers import registry
+    from twin.app.hosts import host_of
     from twin.rigs.session import Waits, run_on_remote_rig
     from twin.wire.links import parse_url
 
@@ -461,32 +462,21 @@ def _run_on_remote_rig(args: argparse.Namespace, params: Parameters) -> int:
         parse_url(args.rig)
     except ValueError as exc:
         raise ValueError(f"--rig {exc}") from None
-    if args.controller.startswith("avr:"):
-        raise ValueError(
-            f"--controller {args.controller}: a firmware image drives the simulated rig through its pins, not "
-            "a rig over the wire (flash it to drive the rig itself)"
-        )
+    host = host_of(args.controller)
+    if host.kind == "firmware":  # refused before the other options are read (its row's message)
+        host.wire(args.controller)
     if args.sessions != 1 and args.log is not None:
         raise ValueError(
             "--log keeps one session's log: with --sessions other than 1 the server keeps every run (its "
             "job's report, or serve --log)"
         )
-    user = None if args.controller.startswith("fmu:") else user_controller(args.controller)
+    make_controller = host.wire(args.controller)  # its host's row (twin.app.hosts): checked once here
     paths = check_outputs(
         [("--log", args.log, LOG_SUFFIXES, log_bytes(args.log, args.duration, params))],
         overwrite=args.overwrite,
         inputs=inputs(args),
     )
     many = args.sessions != 1
-
-    def make_controller(rig_params: Parameters) -> object:
-        if args.controller.startswith("fmu:"):
-            from twin.app.catalogue import fmu_controller
-
-            return fmu_controller(args.controller, rig_params)
-        if user is None:
-            return registry.make(args.controller, rig_params)
-        return construct(user, args.controller, rig_params)
 
     def on_run(done: int, run: RunResult, summary: dict[str, Any]) -> None:
         if "--log" in paths:

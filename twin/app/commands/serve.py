@@ -20,6 +20,7 @@ from twin.app.commands.common import (
     save_log,
 )
 from twin.app.options import count, finite_float
+from twin.backends import backend
 from twin.outputs import check_outputs
 
 HELP = (
@@ -109,7 +110,7 @@ def run(args: argparse.Namespace) -> int:
         overwrite=args.overwrite,
         inputs=inputs(args),
     )
-    ideal = bool(args.ideal_sensors or args.plant == "reference")
+    ideal = bool(args.ideal_sensors or backend(args.plant).ideal_converters)
     settings = SessionSettings(
         x0_m=args.x0,
         theta0_rad=args.theta0,

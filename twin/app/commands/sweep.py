@@ -37,6 +37,7 @@ from twin.app.commands.common import (
     write_out,
 )
 from twin.app.options import DEFAULT_REFINE_STEP, MAX_LOCATE, MAX_RIGS, GridType, count, finite_float, seed
+from twin.backends import backend
 
 if TYPE_CHECKING:
     from twin.app.sweep import SweepResult, SweepSettings
@@ -170,7 +171,7 @@ def run(args: argparse.Namespace) -> int:
         duration_s=args.duration,
         noise=not args.no_noise,
         plant=args.plant,
-        ideal_sensors=bool(args.ideal_sensors or args.plant == "reference"),
+        ideal_sensors=bool(args.ideal_sensors or backend(args.plant).ideal_converters),
         seed=args.seed,
         refine=args.refine,
         audit=args.audit or 0,
@@ -179,7 +180,7 @@ def run(args: argparse.Namespace) -> int:
         band=args.band,
         screen_audit=32 if args.audit is None else args.audit,
     )
-    if args.audit and not args.refine and settings.engine != "screen":
+    if args.audit and not args.refine and not settings.policy.screened:
         raise ParameterError(
             "--audit checks a refined or a screened map: give --refine or --engine screen too"
         )

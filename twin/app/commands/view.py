@@ -7,7 +7,6 @@ import json
 import sys
 from typing import TYPE_CHECKING
 
-from twin.app.catalogue import catalogue_for
 from twin.app.commands.common import (
     add_controller_timeout,
     add_params_options,
@@ -16,7 +15,9 @@ from twin.app.commands.common import (
     load_params,
     params_source,
 )
+from twin.app.hosts import catalogue_for
 from twin.app.options import count, finite_float, seed, serve_address
+from twin.backends import DEFAULT_PLANT, backend
 
 if TYPE_CHECKING:
     from twin.engine import Catalogue
@@ -111,7 +112,7 @@ def run(args: argparse.Namespace) -> int:
     from twin.viewer import ViewerError, serve
 
     initial = None
-    ideal_sensors = args.ideal_sensors or args.plant == "reference"
+    ideal_sensors = args.ideal_sensors or backend(args.plant).ideal_converters
     if args.wire_timeout is not None and args.serve is None:
         print("ballbeam view: error: --wire-timeout is the wire client's: it needs --serve", file=sys.stderr)
         return 2
@@ -127,7 +128,7 @@ def run(args: argparse.Namespace) -> int:
                 ("--params", args.params),
                 ("--set", args.set),
                 ("--no-noise", args.no_noise),
-                ("--plant", None if args.plant == "twin" else args.plant),
+                ("--plant", None if args.plant == DEFAULT_PLANT else args.plant),
                 ("--ideal-sensors", args.ideal_sensors),
             ]
         )

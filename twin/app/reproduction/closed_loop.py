@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Iterable
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 
@@ -42,6 +42,7 @@ from twin.app.reproduction.scenarios import (
     closed_loop_eigenvalues,
     run,
 )
+from twin.backends import backend
 
 __all__ = ["CLAIMS", "FIGURE_SHOW"]
 
@@ -67,14 +68,14 @@ RANGE_FIGURE_CORNERS = {"sf": ((-0.25, 0.2), (0.33, 0.68)), "clp": ((-0.26, 0.3)
 CLAIM_BOXES = {"sf": tn.SF_DISC_RANGE, "clp": tn.CLP_DISC_RANGE}
 LABELS = {"sf": "state feedback", "clp": "control law partitioning", "smc": "sliding mode"}
 
-Plant = Literal["reference", "twin"]
+Plant = str  # a registered backend's name (twin.backends): "reference" (the thesis's model) or "twin"
 
 # what each figure plots (rows of panels) — read by ``figures``
 FIGURE_SHOW: dict[str, tuple[str, ...]] = {}
 
 
 def cont(name: str, x0: float, th0: float, plant: Plant = "reference", dur: float | None = None) -> Scenario:
-    table = CONT_S if plant == "reference" else CONT_TWIN_S
+    table = CONT_TWIN_S if backend(plant).exact else CONT_S
     return Scenario(
         name, plant, x0, th0, dur if dur is not None else table.get(name, CONT_S["thesis-sf-continuous"])
     )
@@ -570,7 +571,9 @@ def _chapter7_ranges() -> list[Claim]:
             for n in (f"thesis-{kind}", f"appendix-{kind}")
             for p in ("reference", "twin")
         )
-        printed_runs = tuple(s for s in runs if s.controller.startswith("thesis") and s.plant == "reference")
+        printed_runs = tuple(
+            s for s in runs if s.controller.startswith("thesis") and not backend(s.plant).exact
+        )
         box = CLAIM_BOXES[kind]
         out.append(
             Claim(
@@ -636,7 +639,7 @@ def _chapter7_ranges() -> list[Claim]:
 # --- Fig 7.20 ---------------------------------------------------------------------------------------------
 def zeroing_runs() -> dict[str, tuple[Scenario, ...]]:
     return {
-        f"{n}, {'twin' if p == 'twin' else 'thesis model'}": tuple(
+        f"{n}, {'twin' if backend(p).exact else 'thesis model'}": tuple(
             disc(n, *ZEROING_START, p, ZEROING_S, e) for e in ZEROING_ERRORS_RAD
         )
         for n in ("appendix-sf", "appendix-clp")

@@ -19,7 +19,7 @@ from __future__ import annotations
 import functools
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Literal
+from typing import Any
 
 import control
 import numpy as np
@@ -28,6 +28,7 @@ from controllers import registry
 from controllers import thesis_numbers as tn
 from controllers.laws import SlidingModeLaw, StateFeedbackLaw
 from controllers.loop import TrueStateLaw
+from twin.backends import backend
 from twin.dcmotor import torque_nm
 from twin.engine import RunResult, StateLaw, run_closed_loop
 from twin.interface import Controller
@@ -118,7 +119,7 @@ def thesis_params(*, continuous: bool = False, zeroing_error_rad: float = 0.0) -
 @dataclass(frozen=True)
 class Scenario:
     controller: str
-    plant: Literal["reference", "twin"]
+    plant: str  # a registered backend's name (twin.backends): "reference" (the thesis's model) or "twin"
     x0_m: float
     theta0_rad: float
     duration_s: float
@@ -130,10 +131,10 @@ class Scenario:
 
     @property
     def label(self) -> str:
-        return f"{self.controller}, {'thesis model' if self.plant == 'reference' else 'twin'}"
+        return f"{self.controller}, {'twin' if backend(self.plant).exact else 'thesis model'}"
 
     def params(self) -> Parameters:
-        if self.plant == "reference":
+        if not backend(self.plant).exact:  # the thesis's analytic model, with the thesis's parameters
             return thesis_params(continuous=self.continuous, zeroing_error_rad=self.zeroing_error_rad)
         if self.zeroing_error_rad:
             return RIG.with_overrides({"angle_sensor.zeroing_error_rad": self.zeroing_error_rad})
@@ -233,7 +234,7 @@ def _round(value: float | None, digits: int) -> float | None:
 def run(scenario: Scenario) -> Trace:
     """The scenario's run (once per process)."""
     params = scenario.params()
-    twin = scenario.plant == "twin"
+    twin = backend(scenario.plant).exact
     x0 = float(np.clip(scenario.x0_m, -TWIN_START_LIMIT_M, TWIN_START_LIMIT_M)) if twin else scenario.x0_m
     result = run_closed_loop(
         scenario.controller_object(params),

@@ -1,0 +1,50 @@
+"""The rig's parts as declared contracts (``twin.parts.contract``) and today's parts (``twin.parts.thesis``).
+
+Part, MjcfFragment, BatchForm      what every part declares: name, role, parameter groups, equations' homes,
+                                   MJCF fragment, batch form
+BallSensorPart, AngleSensorPart,   the parts a simulated rig instantiates per run, with their runtime
+IoBoardPart, ActuatorPart          (BallSensorChain, AngleSensorChain)
+RigParts, THESIS                   a rig as one part per role; today's rig
+ROLES, Role, register, registered  the registry of parts by role; PartError for a part that breaks it
+vary                               parameter sets around a base, for a batch form's inputs
+"""
+
+from twin.parts.contract import (
+    ROLES,
+    ActuatorPart,
+    AngleSensorChain,
+    AngleSensorPart,
+    BallSensorChain,
+    BallSensorPart,
+    BatchForm,
+    IoBoardPart,
+    MjcfFragment,
+    Part,
+    PartError,
+    RigParts,
+    Role,
+    register,
+    registered,
+    vary,
+)
+from twin.parts.thesis import THESIS
+
+__all__ = [
+    "ROLES",
+    "THESIS",
+    "ActuatorPart",
+    "AngleSensorChain",
+    "AngleSensorPart",
+    "BallSensorChain",
+    "BallSensorPart",
+    "BatchForm",
+    "IoBoardPart",
+    "MjcfFragment",
+    "Part",
+    "PartError",
+    "RigParts",
+    "Role",
+    "register",
+    "registered",
+    "vary",
+]
