@@ -606,7 +606,8 @@ def closed_loop_prediction(
     """``controller`` on the twin (MuJoCo, the hardware sensor chain with noise seeded by ``seed``, ``params``)
     from the log's first block for the log's duration; its readings against the log's, tick by tick."""
     from twin.converters import beam_angle_rad
-    from twin.engine import run_closed_loop, update_ticks
+    from twin.engine import update_ticks
+    from twin.rigs.sim import run_closed_loop
     from twin.verdict import evaluate_measured
 
     x0, theta0, row = first_block_state(log, params)

@@ -24,9 +24,10 @@ from calib.logs import RigLog
 from controllers import registry
 from controllers.loop import LoopController
 from twin import converters
-from twin.engine import RunResult, run_closed_loop
+from twin.engine import RunResult
 from twin.interface import Controller, DaqSample, Setpoint
 from twin.parameters import Parameters
+from twin.rigs.sim import run_closed_loop
 
 __all__ = [
     "EXPERIMENTS",

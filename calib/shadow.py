@@ -1,6 +1,6 @@
 """The shadow: the twin following a running rig window by window, with a drift alarm.
 
-While a rig runs (on the wire: ``twin.wire.observer.Observer`` reads its samples and the commands it applies), the
+While a rig runs (on the wire: ``twin.serving.observer.Observer`` reads its samples and the commands it applies), the
 stream is cut into the windows ``calib.compare`` cuts a log into (1 s), and each window, once complete, is
 *predicted* as compare predicts it: its start state is the end of the previous window's state fitted to that
 window's readings, and the model (at the shadow's parameters) runs the window's applied commands for the first

@@ -12,7 +12,7 @@ One run measures, on the same work (a 10 s episode from x0 = 0.2 m, θ0 = 0.3 ra
 - (a) floor: raw ``mujoco.rollout`` of the episode's physics steps in one call, single thread, with the motor
   volts the closed loop applied (so the same trajectory: checked bit for bit); and of the (c) grid's runs on
   2 threads;
-- (b) episodes: the closed loop through the twin with the full I/O chain (``twin.engine.run_closed_loop``):
+- (b) episodes: the closed loop through the twin with the full I/O chain (``twin.rigs.sim.run_closed_loop``):
   appendix-sf (the target: ≤ 1.5 × its floor), appendix-clp, lqr, and the 1 kHz chapter 4 laws on the true
   state (thesis-sf/clp/smc-continuous: ≤ 3 × their floors), each against the floor of its own trajectory.
   Every episode runs to the end (``stop_when_lost=False``);
@@ -83,13 +83,13 @@ from mujoco import rollout
 
 from controllers import registry
 from controllers import thesis_numbers as T
-from twin.engine import RunResult, StateLaw, run_closed_loop, run_on_rig
+from twin.engine import RunResult, StateLaw, run_on_rig
 from twin.interface import Controller, Telemetry
 from twin.parameters import Parameters
 from twin.plant import FULL_STATE, Plant
 from twin.reference import ReferenceModel
 from twin.rigs.batch import run_batch
-from twin.rigs.sim import TwinRig
+from twin.rigs.sim import TwinRig, run_closed_loop
 
 DURATION_S = 10.0
 X0_M, THETA0_RAD = 0.2, 0.3

@@ -15,9 +15,9 @@ from pathlib import Path
 
 from controllers import registry
 from controllers import thesis_numbers as T
-from twin.engine import run_closed_loop
 from twin.outputs import write_atomic
 from twin.parameters import Parameters
+from twin.rigs.sim import run_closed_loop
 from twin.verdict import Criteria
 
 

@@ -1,6 +1,6 @@
 """Print the physical core's acceptance figures: rolling, motor law, linearization, trajectory, lost ball.
 
-Measured by twin.measurements (the tests assert on the same functions).
+Measured by twin.rigs.measurements (the tests assert on the same functions).
 
 python scripts/core_figures.py
 """
@@ -9,9 +9,9 @@ from __future__ import annotations
 
 import math
 
-from twin import measurements as M
 from twin.parameters import Parameters
 from twin.reference import InputKind
+from twin.rigs import measurements as M
 
 
 def rolling(params: Parameters) -> None:

@@ -1,6 +1,6 @@
 """Print the I/O chain's acceptance figures: angle staircase and eq 6.2.4, Table 6.3 readings, RC time
 constant, dropout rate, output stage, seeds, log round trip — measured on the twin's own code by
-twin.measurements (the tests assert on the same functions).
+twin.rigs.measurements (the tests assert on the same functions).
 
     python scripts/io_figures.py
 """
@@ -12,9 +12,9 @@ import math
 import numpy as np
 
 from controllers.appendix import AppendixControlLaw
-from twin import measurements as M
-from twin.engine import run_closed_loop
 from twin.parameters import Parameters
+from twin.rigs import measurements as M
+from twin.rigs.sim import run_closed_loop
 
 P = Parameters()
 

@@ -30,7 +30,7 @@ from controllers import registry
 from controllers import thesis_numbers as T
 from twin.app.screening import render_agreement
 from twin.app.sweep import SweepSettings, run_sweep, verdict_class
-from twin.engine import run_closed_loop
+from twin.rigs.sim import run_closed_loop
 
 REPO = Path(__file__).resolve().parent.parent
 CONTROLLERS = ("appendix-sf", "appendix-clp")

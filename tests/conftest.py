@@ -202,7 +202,7 @@ def no_work(monkeypatch: pytest.MonkeyPatch) -> None:
         raise AssertionError("the work started although an argument was bad")
 
     for target in (
-        "twin.engine.run_closed_loop",
+        "twin.rigs.sim.run_closed_loop",
         "twin.app.validate.run_starts",
         "twin.app.sweep.run_starts",
         "twin.app.montecarlo.run_starts",

@@ -1,4 +1,4 @@
-"""A served twin for the wire tests: ``twin.wire.server.Server.serve`` in a thread, its session or error kept;
+"""A served twin for the wire tests: ``twin.serving.server.Server.serve`` in a thread, its session or error kept;
 and a hand-written client's answer to a sample."""
 
 from __future__ import annotations
@@ -8,8 +8,8 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 
 from twin.interface import Controller, DaqSample
+from twin.serving.server import Server, SessionResult
 from twin.wire import protocol as p
-from twin.wire.server import Server, SessionResult
 
 
 def answer(controller: Controller, sample: p.Sample) -> float:

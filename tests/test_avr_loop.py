@@ -18,8 +18,9 @@ from avr_images import F_CPU, board_image, example_image, host_law
 
 from twin.app.firmware_forms import host_words, period_inputs
 from twin.avr.firmware import AvrFirmware
-from twin.engine import ControllerError, RunResult, run_closed_loop
+from twin.engine import ControllerError, RunResult
 from twin.parameters import Parameters
+from twin.rigs.sim import run_closed_loop
 
 PERIOD_CYCLES = F_CPU // 50
 

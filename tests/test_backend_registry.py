@@ -1,4 +1,4 @@
-"""The physics backends' registry (twin.backends): a backend written from the contract alone is one row away from
+"""The physics backends' registry (twin.rigs.backends): a backend written from the contract alone is one row away from
 the many-run commands, the registry's refusals name the choices, the engine's words map onto a screening policy
 in one place, and no module outside the registry picks a backend by comparing its name.
 
@@ -17,7 +17,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from twin.backends import (
+from twin.parameters import Parameters
+from twin.physics import BatchBlock, PhysicsBlock, check_initial_state
+from twin.rigs.backends import (
     Backend,
     BackendError,
     ScreeningPolicy,
@@ -28,8 +30,6 @@ from twin.backends import (
     register,
     unregister,
 )
-from twin.parameters import Parameters
-from twin.physics import BatchBlock, PhysicsBlock, check_initial_state
 
 ROOT = Path(__file__).resolve().parent.parent
 NAME = "numpy-rk4"
@@ -318,7 +318,7 @@ def test_the_registry_names_its_rows_and_refuses_others(registered: Backend) -> 
 
 @pytest.mark.quick
 def test_the_engine_words_map_onto_one_policy() -> None:
-    """``--engine`` screen | fast | mujoco as screening policies (twin.backends.engine_policy, the one map)."""
+    """``--engine`` screen | fast | mujoco as screening policies (twin.rigs.backends.engine_policy, the one map)."""
     assert engine_policy("screen") == ScreeningPolicy("reference", "twin", confirms=True)
     assert engine_policy("fast") == ScreeningPolicy("reference", "twin", confirms=False)
     assert engine_policy("mujoco") == ScreeningPolicy(None, "twin")
@@ -359,12 +359,12 @@ LOOP = re.compile(r"\bfor\s+\w+\s+in\s+\(")  # iterating over names is not choos
 @pytest.mark.quick
 def test_no_module_outside_the_registry_compares_plant_names() -> None:
     """Every backend choice is a registry lookup: no ``== "twin"``, ``!= "reference"``, ``in ("twin", …)``,
-    ``== "screen"``/``"fast"`` and no ``PlantKind`` use in twin/ and scripts/ but twin/backends.py (and the
+    ``== "screen"``/``"fast"`` and no ``PlantKind`` use in twin/ and scripts/ but twin/rigs/backends.py (and the
     lazy re-export of ``PlantKind`` in twin/rigs/__init__.py)."""
     found = []
     for path in sorted([*(ROOT / "twin").rglob("*.py"), *(ROOT / "scripts").rglob("*.py")]):
         rel = path.relative_to(ROOT).as_posix()
-        if rel == "twin/backends.py":
+        if rel == "twin/rigs/backends.py":
             continue
         for n, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
             compared = COMPARISON.search(line) or (MEMBERSHIP.search(line) and not LOOP.search(line))
@@ -380,7 +380,7 @@ def test_reading_the_table_loads_no_physics() -> None:
     import sys
 
     code = (
-        "import sys\nfrom twin.backends import plant_choices, plant_help\nplant_choices(); plant_help()\n"
+        "import sys\nfrom twin.rigs.backends import plant_choices, plant_help\nplant_choices(); plant_help()\n"
         "print(sorted(m for m in ('numpy', 'mujoco', 'numba') if m in sys.modules))"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=60)

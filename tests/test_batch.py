@@ -9,11 +9,12 @@ import pytest
 
 from controllers import registry
 from twin import converters
-from twin.engine import RunResult, run_closed_loop
+from twin.engine import RunResult
 from twin.interface import Controller, DaqSample
 from twin.log import RunLog
 from twin.parameters import Parameters, SoftwareCalibration
 from twin.rigs.batch import run_batch
+from twin.rigs.sim import run_closed_loop
 
 # Hardware starts, a start that loses the ball quickly, and the origin.
 X0 = np.array([0.14, -0.13, 0.25, 0.0])

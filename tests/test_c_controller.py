@@ -25,11 +25,11 @@ import pytest
 
 from controllers.appendix import AppendixStateFeedback
 from controllers.thesis_numbers import HARDWARE_STARTS
-from twin.engine import ClosedLoop, run_closed_loop, update_ticks
+from twin.engine import ClosedLoop, update_ticks
 from twin.interface import Controller, DaqSample, Telemetry
 from twin.log import RunLog
 from twin.parameters import Parameters
-from twin.rigs.sim import make_rig
+from twin.rigs.sim import make_rig, run_closed_loop
 
 C_DIR = Path(__file__).resolve().parent.parent / "examples" / "c"
 SOURCES = ("bb_sf.c", "bbwire.c", "appendix_sf.c")
@@ -507,12 +507,12 @@ def test_ctrl_c_ends_the_session_with_a_stop_not_a_silent_controller(
 def test_the_c_controller_against_the_served_twin_is_the_python_port_bit_for_bit(
     bb_sf: Path, params: Parameters, figure: str, start: tuple[float, float]
 ) -> None:
-    """``bb_sf udp`` against ``twin.wire.server.Server`` (lock-step, 10 s, seed 0): the session's log and verdict
+    """``bb_sf udp`` against ``twin.serving.server.Server`` (lock-step, 10 s, seed 0): the session's log and verdict
     (true state included) equal the in-process ``appendix-sf`` run's, array by array; held."""
     from serving import in_thread, session_of
 
     from twin.log import REQUIRED_FIELDS, TRUTH_FIELDS
-    from twin.wire.server import Server, SessionSettings
+    from twin.serving.server import Server, SessionSettings
 
     x0, theta0 = start
     settings = SessionSettings(x0_m=x0, theta0_rad=theta0, seed=0, duration_s=10.0, wait_client_s=30.0)

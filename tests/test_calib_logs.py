@@ -18,9 +18,9 @@ from calib.logs import (
 )
 from controllers import registry
 from twin.daq import adc_lsb_v, dac_lsb_v
-from twin.engine import run_closed_loop
 from twin.log import TRUTH_FIELDS, LogError, save_csv, save_mat
 from twin.parameters import Parameters
+from twin.rigs.sim import run_closed_loop
 
 PERIOD_S = 0.02
 REQUIRED = ("timem", "datam1", "datam2", "aout")

@@ -20,7 +20,7 @@ from pathlib import Path
 import pytest
 from cli_checks import refused as _refused
 
-import twin.engine
+import twin.rigs.sim
 from twin import outputs
 from twin.app import cli
 from twin.app.cli import main
@@ -36,7 +36,7 @@ def no_run(monkeypatch: pytest.MonkeyPatch) -> None:
     def fail(*args: object, **kwargs: object) -> None:
         raise AssertionError("the run started although an argument was bad")
 
-    monkeypatch.setattr(twin.engine, "run_closed_loop", fail)
+    monkeypatch.setattr(twin.rigs.sim, "run_closed_loop", fail)
 
 
 def _listing(directory: Path) -> list[str]:
@@ -156,13 +156,13 @@ def test_writing_through_a_link_updates_its_target(tmp_path: Path, capsys) -> No
 
 def test_a_file_that_appears_during_the_run_is_not_replaced(tmp_path: Path, capsys, monkeypatch) -> None:
     log = tmp_path / "run.mat"
-    real_run = twin.engine.run_closed_loop
+    real_run = twin.rigs.sim.run_closed_loop
 
     def run_and_meanwhile(*args: object, **kwargs: object) -> object:
         log.write_text("written by someone else meanwhile")
         return real_run(*args, **kwargs)
 
-    monkeypatch.setattr(twin.engine, "run_closed_loop", run_and_meanwhile)
+    monkeypatch.setattr(twin.rigs.sim, "run_closed_loop", run_and_meanwhile)
     _refused(capsys, [*RUN, "--log", str(log)], "--log", "exists")
     assert log.read_text() == "written by someone else meanwhile"
     assert _listing(tmp_path) == ["run.mat"]

@@ -26,10 +26,10 @@ from calib.experiments import run_experiment
 from calib.logs import RigLog, rig_log
 from controllers import registry
 from twin.app.cli import build_parser, main
-from twin.engine import run_closed_loop
 from twin.interface import Controller
 from twin.log import RunLog, save_csv, save_mat
 from twin.parameters import Parameters
+from twin.rigs.sim import run_closed_loop
 
 P = Parameters()
 # A rig 20 % off the nominal motor and beam, with a 10 mrad zeroing error: what nominal parameters mispredict.

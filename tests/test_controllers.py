@@ -11,10 +11,10 @@ from controllers import thesis_numbers as T
 from controllers.laws import IntegralStateFeedbackLaw
 from controllers.loop import TrueStateLaw
 from twin.app.cli import main
-from twin.engine import run_closed_loop
 from twin.interface import Controller
 from twin.parameters import Parameters
 from twin.reference import ReferenceModel
+from twin.rigs.sim import run_closed_loop
 
 # The thesis's simulations apply the first command at release.
 AT_RELEASE = Parameters().with_overrides({"start.free_run_s": 0.0})

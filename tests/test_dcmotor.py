@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from twin import measurements
 from twin.dcmotor import beam_torque_nm
 from twin.parameters import Parameters
+from twin.rigs import measurements
 
 
 @pytest.mark.quick

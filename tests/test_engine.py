@@ -15,11 +15,11 @@ from controllers import registry
 from controllers.appendix import AppendixControlLaw, AppendixStateFeedback
 from controllers.laws import KalmanState, StateFeedbackLaw
 from controllers.loop import LoopController
-from twin.engine import ClosedLoop, ControllerError, RunResult, run_closed_loop, update_ticks
-from twin.interface import Controller, DaqSample
+from twin.engine import ClosedLoop, ControllerError, RunResult, update_ticks
+from twin.interface import Controller, DaqSample, RigError
 from twin.log import RunLog, load_csv, load_mat, save_csv, save_mat
 from twin.parameters import ParameterError, Parameters
-from twin.rigs.sim import RigError, TwinRig, make_rig
+from twin.rigs.sim import TwinRig, make_rig, run_closed_loop
 
 DATA = Path(__file__).parent / "data"
 

@@ -16,9 +16,9 @@ from gymnasium.utils.env_checker import check_env
 
 from controllers.policy import LinearPolicy
 from twin.app.envs import ENV_ID, BallBeamEnv, BallBeamVectorEnv
-from twin.engine import run_closed_loop
 from twin.learning import REWARD_WEIGHTS, ActionSpec, ObservationSpec, reward
 from twin.parameters import Parameters
+from twin.rigs.sim import run_closed_loop
 
 OPTIONS: list[dict[str, Any]] = [
     {},

@@ -205,8 +205,9 @@ def test_a_flick_and_a_setpoint_are_inputs_of_a_run_the_batch_and_the_search(
     search over a flick finds the kick that loses the ball and ``run --replay`` repeats it; a setpoint reaches
     the requirements' ``setpoint_m``."""
     from controllers import registry
-    from twin.engine import Scenario, run_closed_loop
+    from twin.engine import Scenario
     from twin.rigs.batch import run_batch
+    from twin.rigs.sim import run_closed_loop
 
     def run(scenario: Scenario | None) -> object:
         return run_closed_loop(

@@ -14,9 +14,9 @@ import pytest
 
 from controllers import registry
 from twin.app.cli import main
-from twin.engine import run_closed_loop
 from twin.log import RunLog
 from twin.parameters import Parameters
+from twin.rigs.sim import run_closed_loop
 
 fmpy = pytest.importorskip("fmpy")
 from fmpy.fmi3 import FMU3Slave  # noqa: E402

@@ -165,6 +165,9 @@ def test_no_host_is_recognised_outside_the_registry() -> None:
 @pytest.mark.quick
 def test_each_board_names_its_pins() -> None:
     from twin.avr.boards import ATMEGA644, MEGA2560, UNO, board_for
+    from twin.firmware import Board
+
+    assert all(isinstance(board, Board) for board in (UNO, MEGA2560, ATMEGA644))
 
     assert board_for("atmega328p") is UNO and str(UNO.dac_select) == "PB2"
     assert board_for("ATmega2560") is MEGA2560 and str(MEGA2560.dac_select) == "PB0"

@@ -446,7 +446,7 @@ def test_the_batch_names_the_failing_run_and_the_job_records_it_as_numerical(par
 
 def twin_run(name: str, params: Parameters, seed: int) -> RunResult:
     from controllers import registry
-    from twin.engine import run_closed_loop
+    from twin.rigs.sim import run_closed_loop
 
     return run_closed_loop(registry.make(name, params), x0_m=0.1, theta0_rad=0.0, duration_s=4.0, seed=seed)
 
@@ -455,7 +455,7 @@ def test_an_amplifier_gain_of_1000_hits_the_stops_within_their_softness(params: 
     """The beam slammed into its stops yields a few mrad (soft stops, 2 ms, acting from the next 1 ms step):
     physical for the twin, reported as hit_stops; the bound is 0.234 rad."""
     from controllers import registry
-    from twin.engine import run_closed_loop
+    from twin.rigs.sim import run_closed_loop
 
     p = params.with_overrides({"amplifier.gain_v_per_v": 1000.0})
     r = run_closed_loop(registry.make("appendix-sf", p), x0_m=0.2, theta0_rad=0.3, duration_s=2.0, params=p)
@@ -473,8 +473,8 @@ def test_a_beam_past_what_the_stops_yield_is_numerical(
     import twin.plant
     import twin.rigs.batch
     from controllers import registry
-    from twin.engine import run_closed_loop
     from twin.plant import NumericalError
+    from twin.rigs.sim import run_closed_loop
 
     for module in (twin.plant, twin.rigs.batch):
         monkeypatch.setattr(module, "stop_overshoot_bound_rad", lambda p: 0.001)

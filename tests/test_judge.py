@@ -21,10 +21,11 @@ from controllers import registry
 from controllers.thesis_numbers import CHAPTER4_STARTS, HARDWARE_STARTS
 from twin.app.cli import main
 from twin.converters import angle_volts_v, ball_position_m, ball_volts_v
-from twin.engine import RunResult, run_closed_loop
+from twin.engine import RunResult
 from twin.log import THESIS_FIELDS, RunLog, load_mat, save_csv, save_mat
 from twin.parameters import Parameters
 from twin.rigs.batch import run_batch
+from twin.rigs.sim import run_closed_loop
 from twin.sensors import wiper_static_v
 from twin.verdict import Verdict, ball_step_bound_m, evaluate_measured
 

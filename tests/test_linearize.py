@@ -5,9 +5,9 @@ import json
 import numpy as np
 import pytest
 
-from twin import measurements
 from twin.app.cli import main
 from twin.reference import InputKind
+from twin.rigs import measurements
 
 
 @pytest.mark.quick

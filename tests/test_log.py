@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 import scipy.io
 
-from twin import measurements
 from twin.log import THESIS_FIELDS, TRUTH_FIELDS, LogError, RunLog, load_csv, load_mat, save_csv, save_mat
+from twin.rigs import measurements
 
 
 def make_log(ticks: int = 50, physics_steps: int = 1000, seed: int = 0) -> RunLog:

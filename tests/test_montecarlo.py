@@ -20,8 +20,8 @@ from twin.app.montecarlo import (
     sample_parameters,
     summarize,
 )
-from twin.engine import run_closed_loop
 from twin.parameters import ParameterError, Parameters
+from twin.rigs.sim import run_closed_loop
 
 SPREAD = """
 [motor]

@@ -1,4 +1,4 @@
-"""Nothing imports or compiles on a tick: a served session, a served rig and the live view call ``twin.warm.warm``
+"""Nothing imports or compiles on a tick: a served session, a served rig and the live view call ``twin.rigs.warm.warm``
 before their clocks start, and after it a tick of a simulated rig loads no module and compiles nothing, however
 far into the run its ball chain first meets a dropout, a table point or a track end (a cold ``ballbeam serve``
 used to import numba and scipy there, 0.6–0.7 s of CPU at about the 6th–10th SAMPLE, and lost the ball under
@@ -29,7 +29,7 @@ from twin import sensors
 from twin.jit import njit_cached
 from twin.parameters import Parameters
 from twin.rigs.sim import make_rig
-from twin.warm import warm
+from twin.rigs.warm import warm
 
 ROOT = Path(__file__).resolve().parent.parent
 ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
@@ -56,7 +56,7 @@ from controllers.appendix import AppendixStateFeedback
 from twin.engine import ClosedLoop, update_ticks
 from twin.parameters import Parameters
 from twin.rigs.sim import make_rig
-from twin.warm import warm
+from twin.rigs.warm import warm
 
 params = Parameters()
 warm(params)
@@ -157,7 +157,7 @@ def test_a_chain_alone_gets_the_compiled_dropout_sums_bits() -> None:
 def test_warm_takes_the_ball_chains_rare_paths_once(monkeypatch: pytest.MonkeyPatch) -> None:
     """A dropout in a smooth block, table points crossed and the track left, on a throwaway rig; a second call
     for the same rig kind does nothing."""
-    import twin.warm
+    import twin.rigs.warm
 
     calls = {"dropout": 0, "piecewise": 0}
 
@@ -171,7 +171,7 @@ def test_warm_takes_the_ball_chains_rare_paths_once(monkeypatch: pytest.MonkeyPa
     chain = sensors.BallPositionChain
     monkeypatch.setattr(chain, "_dropout_effect_v", counted("dropout", chain._dropout_effect_v))
     monkeypatch.setattr(chain, "_advance", counted("piecewise", chain._advance))
-    monkeypatch.setattr(twin.warm, "_warmed", set())
+    monkeypatch.setattr(twin.rigs.warm, "_warmed", set())
     warm(Parameters())
     assert calls["dropout"] > 0 and calls["piecewise"] > 0, calls
     before = dict(calls)

@@ -1,4 +1,4 @@
-"""An observer of a served session (``twin.wire.observer.Observer``): it sees every sample and, echoed, every command
+"""An observer of a served session (``twin.serving.observer.Observer``): it sees every sample and, echoed, every command
 the server accepted, bit for bit as the session's log; from them it knows what the DAC held during each
 block; it sees the STOP and the next session of a served job; the fifth is refused, a serial line refused;
 and it never changes the session."""
@@ -23,10 +23,10 @@ from twin.interface import Controller, DaqSample
 from twin.log import THESIS_FIELDS, TRUTH_FIELDS, RunLog
 from twin.rigs.remote import Refused, RemoteRig
 from twin.rigs.sim import SimRig
+from twin.serving import server as serve
+from twin.serving.observer import Joined, Observer, ObserverEvent, held_dac_v, open_observer
+from twin.serving.server import Server, SessionResult, SessionSettings
 from twin.wire import protocol as p
-from twin.wire import server as serve
-from twin.wire.observer import Joined, Observer, ObserverEvent, held_dac_v, open_observer
-from twin.wire.server import Server, SessionResult, SessionSettings
 
 X0, TH0 = next(iter(HARDWARE_STARTS.values()))
 ZERO_V = 2.5

@@ -16,10 +16,10 @@ from pathlib import Path
 
 import numpy as np
 
-from twin.engine import ENDED_LAST_SAMPLE, ENDED_TICKS, ClosedLoop, run_closed_loop, run_on_rig
+from twin.engine import ENDED_LAST_SAMPLE, ENDED_TICKS, ClosedLoop, run_on_rig
 from twin.interface import Controller, DaqSample, Rig
 from twin.parameters import Parameters
-from twin.rigs.sim import make_rig
+from twin.rigs.sim import make_rig, run_closed_loop
 
 ROOT = Path(__file__).resolve().parent.parent
 # The loop's home and the batch's: the only files that call a controller's update per tick.

@@ -79,8 +79,8 @@ def nothing_starts(monkeypatch: pytest.MonkeyPatch, no_work: None) -> None:
     for target in (
         "twin.app.falsify.falsify",
         "twin.app.certify.certify",
-        "twin.wire.server.Server",
-        "twin.wire.observer.open_observer",
+        "twin.serving.server.Server",
+        "twin.serving.observer.open_observer",
         "twin.rigs.session.run_on_remote_rig",
     ):
         monkeypatch.setattr(target, fail)

@@ -50,10 +50,10 @@ def no_work(monkeypatch: pytest.MonkeyPatch) -> None:
     import twin.app.montecarlo
     import twin.app.sweep
     import twin.app.validate
-    import twin.engine
+    import twin.rigs.sim
 
     # Imported first, so that no module binds the failing stand-ins by name for the later tests.
-    monkeypatch.setattr(twin.engine, "run_closed_loop", fail)
+    monkeypatch.setattr(twin.rigs.sim, "run_closed_loop", fail)
     monkeypatch.setattr(fanout, "run_chunk", fail)
     for module in (twin.app.sweep, twin.app.montecarlo, twin.app.validate):
         monkeypatch.setattr(module, "run_starts", fail)

@@ -5,9 +5,9 @@ import math
 import numpy as np
 import pytest
 
-from twin import measurements
 from twin.output_stage import amplifier_volts, motor_volts, motor_volts_of
 from twin.parameters import Parameters
+from twin.rigs import measurements
 
 P = Parameters()
 DAC_LSB = 5.0 / 4096

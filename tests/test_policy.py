@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 
 from controllers.policy import LinearPolicy, PolicyController
-from twin.engine import run_closed_loop
 from twin.interface import Controller, DaqSample, Setpoint
 from twin.learning import ActionSpec, ObservationSpec, observation
 from twin.parameters import Parameters
+from twin.rigs.sim import run_closed_loop
 
 ROOT = Path(__file__).resolve().parents[1]
 

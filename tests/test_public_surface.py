@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
-PACKAGES = ("twin", "controllers", "calib", "twin.app", "twin.rigs", "twin.wire")
+PACKAGES = ("twin", "controllers", "calib", "twin.app", "twin.rigs", "twin.wire", "twin.serving")
 
 
 @pytest.mark.quick

@@ -10,8 +10,8 @@ import pytest
 
 from controllers import registry
 from twin.app.cli import main
-from twin.engine import run_closed_loop
 from twin.realtime import WallClockPacer
+from twin.rigs.sim import run_closed_loop
 
 
 class FakeClock:

@@ -21,8 +21,8 @@ from twin.interface import Controller
 from twin.parameters import Parameters
 from twin.rigs.remote import LATE_PERIODS, RemoteError, RemoteRig
 from twin.rigs.session import remote_session
+from twin.serving.server import Server, SessionSettings
 from twin.wire import protocol as p
-from twin.wire.server import Server, SessionSettings
 
 SESSION = 77
 PERIOD_S = 0.02

@@ -14,9 +14,9 @@ from cli_checks import refused
 
 from controllers import registry
 from twin.app.cli import main
-from twin.engine import run_closed_loop
 from twin.parameters import ParameterError, Parameters
 from twin.requirements import SIGNALS, load_requirements, parse_requirements, robustness, run_signals
+from twin.rigs.sim import run_closed_loop
 
 SPEC = {
     "kept": "always (abs(x_m) <= 0.3)",

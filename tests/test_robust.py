@@ -14,8 +14,8 @@ from controllers import registry
 from twin.app.montecarlo import load_spread, sample_parameters
 from twin.app.robust import lower_bound, refinement_costs, rig_point_seeds, run_robust
 from twin.app.sweep import Grid, SweepSettings
-from twin.engine import run_closed_loop
 from twin.parameters import Parameters
+from twin.rigs.sim import run_closed_loop
 
 ROOT = Path(__file__).resolve().parents[1]
 SPREAD = ROOT / "docs" / "examples" / "spread.toml"

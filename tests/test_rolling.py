@@ -5,9 +5,9 @@ import math
 import numpy as np
 import pytest
 
-from twin import measurements
 from twin.parameters import Parameters
 from twin.plant import Plant
+from twin.rigs import measurements
 
 
 @pytest.mark.quick

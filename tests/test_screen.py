@@ -88,8 +88,8 @@ def _compare_with_single_runs(name: str, x0, theta0, seeds, duration_s: float, p
     alone on the reference plant (ReferencePlant under SimRig): every log array and the verdict."""
     from controllers import registry
     from tests.test_batch import _assert_same_run
-    from twin.engine import run_closed_loop
     from twin.rigs.batch import run_batch
+    from twin.rigs.sim import run_closed_loop
 
     runs = run_batch(
         registry, name, x0_m=x0, theta0_rad=theta0, seeds=seeds, duration_s=duration_s, params=params,

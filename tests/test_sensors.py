@@ -11,9 +11,9 @@ from thesis_data import TABLE_6_3_POSITION_M, TABLE_6_3_VOLTAGE_V
 
 from twin import converters as C
 from twin import daq as D
-from twin import measurements
 from twin import sensors as S
 from twin.parameters import Parameters
+from twin.rigs import measurements
 
 P = Parameters()
 QUIET = P.with_overrides({"ball_sensor.noise_enabled": False})

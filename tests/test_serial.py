@@ -23,14 +23,15 @@ from serving import in_thread, session_of
 
 from controllers import registry
 from controllers.thesis_numbers import HARDWARE_STARTS
-from twin.engine import RunResult, run_closed_loop, run_on_rig, update_ticks
+from twin.engine import RunResult, run_on_rig, update_ticks
 from twin.interface import Controller
 from twin.log import THESIS_FIELDS, TRUTH_FIELDS, RunLog
 from twin.parameters import Parameters
 from twin.rigs.remote import RemoteError, open_remote
+from twin.rigs.sim import run_closed_loop
+from twin.serving.server import Server, SessionResult, SessionSettings
 from twin.wire import protocol as p
 from twin.wire.links import SERIAL_PEER, SYNC, FrameReader, LinkError, SerialLink, open_link, parse_url
-from twin.wire.server import Server, SessionResult, SessionSettings
 
 ROOT = Path(__file__).resolve().parents[1]
 STARTS = list(HARDWARE_STARTS.values())

@@ -32,7 +32,7 @@ from twin.engine import run_on_rig
 from twin.parameters import Parameters
 from twin.rigs.remote import RemoteError
 from twin.rigs.session import connect as _connect
-from twin.wire.server import Server, SessionSettings
+from twin.serving.server import Server, SessionSettings
 
 ROOT = Path(__file__).resolve().parent.parent
 ENV = {**os.environ, "PYTHONPATH": str(ROOT)}

@@ -24,11 +24,12 @@ from calib.shadow import Band, Cusum, Shadow, WindowScore
 from controllers import registry
 from controllers.thesis_numbers import HARDWARE_STARTS
 from twin.app.shadow import reference_band, watch
-from twin.engine import RunResult, run_closed_loop
+from twin.engine import RunResult
 from twin.interface import Controller
 from twin.parameters import Parameters
+from twin.rigs.sim import run_closed_loop
+from twin.serving.observer import Observer
 from twin.wire import protocol as p
-from twin.wire.observer import Observer
 
 ROOT = Path(__file__).resolve().parent.parent
 ENV = {**os.environ, "PYTHONPATH": str(ROOT)}

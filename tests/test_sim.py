@@ -4,10 +4,12 @@ import numpy as np
 import pytest
 from thesis_data import TABLE_6_3_POSITION_M, TABLE_6_3_VOLTAGE_V
 
-from twin import converters, measurements
+from twin import converters
 from twin.daq import adc_lsb_v
+from twin.interface import RigError
 from twin.parameters import Parameters
-from twin.rigs.sim import ReferenceRig, RigError, SimRig, TwinRig
+from twin.rigs import measurements
+from twin.rigs.sim import ReferenceRig, SimRig, TwinRig
 
 SW = Parameters().software
 

@@ -13,11 +13,11 @@ from serving import answer, in_thread, session_of
 
 from controllers import registry
 from controllers.thesis_numbers import HARDWARE_STARTS
-from twin.engine import run_closed_loop
 from twin.log import TRUTH_FIELDS
 from twin.parameters import Parameters
+from twin.rigs.sim import run_closed_loop
+from twin.serving.server import ServeError, Server, SessionSettings
 from twin.wire import protocol as p
-from twin.wire.server import ServeError, Server, SessionSettings
 
 
 def _blocks() -> tuple[socket.socket, socket.socket]:

@@ -13,9 +13,9 @@ from controllers import registry
 from controllers import thesis_numbers as T
 from controllers.laws import ClpLaw, ClpTerms, SlidingModeLaw, StateFeedbackLaw
 from controllers.loop import MotorInverse, TrueStateLaw
-from twin.engine import ControllerError, run_closed_loop
+from twin.engine import ControllerError
 from twin.interface import Telemetry
-from twin.rigs.sim import TwinRig
+from twin.rigs.sim import TwinRig, run_closed_loop
 
 TERMS = ClpTerms(T.CLP_ALPHA_XDD, T.CLP_ALPHA_THDD, T.CLP_ALPHA_THDD_X2, T.CLP_BETA)
 

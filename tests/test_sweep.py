@@ -25,8 +25,8 @@ from twin.app.sweep import (
     verdict_class,
 )
 from twin.app.sweep_render import render_map, write_sweep
-from twin.engine import run_closed_loop
 from twin.parameters import ParameterError
+from twin.rigs.sim import run_closed_loop
 
 SMALL = SweepSettings(
     controller="appendix-sf", x0=Grid(-0.3, 0.3, 3), theta0=Grid(0.0, 0.6, 3), duration_s=2.0, noise=True

@@ -2,7 +2,7 @@
 
 import pytest
 
-from twin import measurements
+from twin.rigs import measurements
 
 
 @pytest.mark.quick

@@ -9,6 +9,7 @@ import importlib
 import re
 import subprocess
 import sys
+import typing
 from pathlib import Path
 
 import pytest
@@ -83,7 +84,9 @@ def test_mypy_reveals_each_public_name_as_its_real_type(tmp_path: Path) -> None:
     assert len(revealed) == len(expected), done.stdout + done.stderr
     for (name, module), kind in zip(expected, revealed, strict=True):
         assert kind != "Any", f"{name} is Any to a type checker"
-        short = name.rsplit(".", 1)[1]
+        package, short = name.rsplit(".", 1)
+        if typing.get_origin(getattr(importlib.import_module(package), short)) is not None:
+            continue  # a type alias (``Literal[...]``): its use in a signature is what a checker reads
         if short[0].isupper():  # a class: its constructor returns the class of its home module
             assert f"{module}.{short}" in kind, f"{name}: revealed {kind!r}, not the class {module}.{short}"
         else:  # a function: a signature, not an unknown

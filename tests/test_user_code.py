@@ -20,11 +20,11 @@ import numpy as np
 import pytest
 
 from twin import guard
-from twin.engine import ClosedLoop, ControllerError, run_closed_loop
+from twin.engine import ClosedLoop, ControllerError
 from twin.interface import Controller, DaqSample
 from twin.parameters import Parameters
 from twin.rigs.batch import run_batch
-from twin.rigs.sim import make_rig
+from twin.rigs.sim import make_rig, run_closed_loop
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -14,8 +14,8 @@ from controllers import thesis_numbers as T
 from twin.app.cli import main
 from twin.app.sweep import point_seeds
 from twin.app.validate import ValidationCriteria, load_criteria, validate
-from twin.engine import run_closed_loop
 from twin.parameters import ParameterError, Parameters
+from twin.rigs.sim import run_closed_loop
 
 QUICK = ValidationCriteria(
     nominal_seeds=1,

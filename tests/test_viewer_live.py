@@ -8,9 +8,10 @@ import pytest
 from viewer_stubs import StubCatalogue
 
 from controllers import registry
-from twin.engine import run_closed_loop, update_ticks
+from twin.engine import update_ticks
 from twin.log import load_csv, load_mat
 from twin.parameters import Parameters
+from twin.rigs.sim import run_closed_loop
 from twin.viewer import LiveTwin, parameter_changes, verdict_text
 
 

@@ -16,9 +16,10 @@ from viewer_stubs import StubCatalogue
 
 from twin import converters
 from twin.app.plots import run_figure
-from twin.engine import CatalogueEntry, run_closed_loop
+from twin.engine import CatalogueEntry
 from twin.interface import Controller, DaqSample
 from twin.parameters import Parameters
+from twin.rigs.sim import run_closed_loop
 from twin.verdict import Criteria
 from twin.viewer import FLICK, SETPOINT, THETA0, X0, LiveTwin, uplot_data, verdict_text
 from twin.viewer.security import send_uplot_data

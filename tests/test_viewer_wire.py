@@ -19,14 +19,15 @@ import pytest
 
 from controllers import registry
 from controllers.thesis_numbers import HARDWARE_STARTS
-from twin.engine import RunResult, run_closed_loop, run_on_rig
+from twin.engine import RunResult, run_on_rig
 from twin.parameters import Parameters
 from twin.rigs.remote import RemoteRig
+from twin.rigs.sim import run_closed_loop
+from twin.serving.server import Server, SessionSettings
 from twin.viewer import FRAME_S, LiveTwin
 from twin.viewer.common import _markdown_text
 from twin.viewer.wire import WIRE_MARGIN_S, WireCatalogue, WireClient
 from twin.wire import protocol as p
-from twin.wire.server import Server, SessionSettings
 
 START = HARDWARE_STARTS["Fig 6.16 (state feedback)"]  # (0.14 m, −0.2 rad)
 

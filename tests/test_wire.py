@@ -25,13 +25,14 @@ from serving import answer, in_thread, session_of
 from controllers import registry
 from controllers.thesis_numbers import HARDWARE_STARTS
 from twin.converters import ball_position_m, beam_angle_rad, clip_command_v, dac_command_v
-from twin.engine import RunResult, run_closed_loop, run_on_rig, update_ticks
+from twin.engine import RunResult, run_on_rig, update_ticks
 from twin.interface import Controller, DaqSample
 from twin.log import THESIS_FIELDS, TRUTH_FIELDS, RunLog
 from twin.parameters import Parameters
 from twin.rigs.remote import RemoteError, RemoteRig
+from twin.rigs.sim import run_closed_loop
+from twin.serving.server import ServeError, Server, SessionResult, SessionSettings
 from twin.wire import protocol as p
-from twin.wire.server import ServeError, Server, SessionResult, SessionSettings
 
 ROOT = Path(__file__).resolve().parents[1]
 STARTS = list(HARDWARE_STARTS.values())

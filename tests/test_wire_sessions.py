@@ -29,10 +29,10 @@ from controllers.thesis_numbers import HARDWARE_STARTS
 from twin.engine import RunResult, run_on_rig
 from twin.parameters import Parameters
 from twin.rigs.remote import RemoteError, RemoteRig
+from twin.serving.server import MAX_OBSERVERS, Server, SessionSettings
 from twin.viewer import FRAME_S, LiveTwin
 from twin.viewer.wire import WIRE_MARGIN_S, WireCatalogue, WireClient
 from twin.wire import protocol as p
-from twin.wire.server import MAX_OBSERVERS, Server, SessionSettings
 
 START = HARDWARE_STARTS["Fig 6.16 (state feedback)"]  # (0.14 m, −0.2 rad)
 
@@ -154,13 +154,13 @@ def test_an_observer_that_keeps_saying_hello_keeps_its_place_and_a_killed_one_lo
     code = textwrap.dedent(
         f"""
         import sys, time
-        from twin.wire.observer import Observer
+        from twin.serving.observer import Observer
         o = Observer("{server.url}", client="doomed")
         print("joined", flush=True)
         time.sleep(60)
         """
     )
-    from twin.wire.observer import Observer
+    from twin.serving.observer import Observer
 
     with in_thread(server) as box:
         kept = Observer(server.url, client="kept")

@@ -6,14 +6,14 @@ name of the package's modules is internal and may change):
     Parameters, ParameterError                 twin.parameters: the rig's description, files, overrides
     Rig, RigEnded, Controller, DaqSample,      twin.interface: the hardware contract (volts in, volts out)
       Telemetry, Setpoint
-    ClosedLoop, run_closed_loop, run_on_rig,   twin.engine: the one closed loop and its runs
-      RunResult, StateLaw, TrueState, ControllerError
+    ClosedLoop, run_on_rig, RunResult,         twin.engine: the one closed loop and its runs
+      StateLaw, TrueState, ControllerError
     Verdict, Criteria, Trace,                  twin.verdict: the verdict of a run (true state or measured)
       evaluate_measured
     RunLog, load_mat, load_csv                 twin.log: the run's columns, data_file.mat and CSV
-    SimRig, make_rig, RemoteRig, open_remote,  twin.rigs: the rigs behind the contract
-      BatchRig, run_batch
-    Server, SessionSettings                    twin.wire: the twin served over protocol 1
+    SimRig, make_rig, run_closed_loop,         twin.rigs: the rigs behind the contract
+      RemoteRig, open_remote, BatchRig, run_batch
+    Server, SessionSettings                    twin.serving: the twin served over protocol 1
     Plant, ReferenceModel                      twin.plant, twin.reference: the physics
 
 The names load on first use, so that importing a light module of the package (the command line's
@@ -26,15 +26,7 @@ from typing import TYPE_CHECKING
 from twin.exports import lazy_exports
 
 if TYPE_CHECKING:  # the names' real types for a type checker; at run time they load on first use (below)
-    from twin.engine import (
-        ClosedLoop,
-        ControllerError,
-        RunResult,
-        StateLaw,
-        TrueState,
-        run_closed_loop,
-        run_on_rig,
-    )
+    from twin.engine import ClosedLoop, ControllerError, RunResult, StateLaw, TrueState, run_on_rig
     from twin.interface import Controller, DaqSample, Rig, RigEnded, Setpoint, Telemetry
     from twin.log import RunLog, load_csv, load_mat
     from twin.parameters import ParameterError, Parameters
@@ -42,9 +34,9 @@ if TYPE_CHECKING:  # the names' real types for a type checker; at run time they 
     from twin.reference import ReferenceModel
     from twin.rigs.batch import BatchRig, run_batch
     from twin.rigs.remote import RemoteRig, open_remote
-    from twin.rigs.sim import SimRig, make_rig
+    from twin.rigs.sim import SimRig, make_rig, run_closed_loop
+    from twin.serving.server import Server, SessionSettings
     from twin.verdict import Criteria, Trace, Verdict, evaluate_measured
-    from twin.wire.server import Server, SessionSettings
 
 
 __all__ = [
@@ -96,7 +88,7 @@ _HOMES = {
     "RunResult": "twin.engine",
     "StateLaw": "twin.engine",
     "TrueState": "twin.engine",
-    "run_closed_loop": "twin.engine",
+    "run_closed_loop": "twin.rigs.sim",
     "run_on_rig": "twin.engine",
     "Criteria": "twin.verdict",
     "Trace": "twin.verdict",
@@ -111,8 +103,8 @@ _HOMES = {
     "open_remote": "twin.rigs.remote",
     "BatchRig": "twin.rigs.batch",
     "run_batch": "twin.rigs.batch",
-    "Server": "twin.wire.server",
-    "SessionSettings": "twin.wire.server",
+    "Server": "twin.serving.server",
+    "SessionSettings": "twin.serving.server",
     "Plant": "twin.plant",
     "ReferenceModel": "twin.reference",
 }

@@ -30,12 +30,11 @@ import numpy as np
 
 from twin.firmware import Firmware
 from twin.guard import Fault, Guard, describe, install_interrupt_handler, is_interrupt, safe_name
-from twin.interface import Controller, DaqSample, Rig, RigEnded, Setpoint, Telemetry
+from twin.interface import Controller, DaqSample, Rig, RigEnded, RigError, Telemetry
 from twin.log import THESIS_FIELDS, TRUTH_FIELDS, RunLog
 from twin.parameters import Daq, Parameters
-from twin.physics import PhysicsBlock, check_on_track
+from twin.physics import PhysicsBlock, whole_steps
 from twin.realtime import TickTiming, arrival_timing
-from twin.rigs.sim import RigError, make_rig, whole_steps
 from twin.verdict import Criteria, Trace, Verdict, evaluate, evaluate_measured
 
 __all__ = [
@@ -54,7 +53,6 @@ __all__ = [
     "check_period_s",
     "checked_start",
     "checked_update",
-    "run_closed_loop",
     "run_on_rig",
     "update_ticks",
 ]
@@ -846,64 +844,6 @@ def update_ticks(duration_s: float, params: Parameters) -> int:
     """Number of ``update`` ticks so that the last block ends at or after ``duration_s`` after release."""
     free, period = params.start.free_run_s, params.daq.period_s
     return 1 + max(0, math.ceil((duration_s - free) / period - 1e-9))
-
-
-def run_closed_loop(
-    controller: Controller | StateLaw | Firmware,
-    *,
-    x0_m: float,
-    theta0_rad: float,
-    duration_s: float = 10.0,
-    seed: int = 0,
-    noise: bool = True,
-    params: Parameters | None = None,
-    plant: str = "twin",
-    ideal_sensors: bool = False,
-    stop_when_lost: bool = True,
-    criteria: Criteria | None = None,
-    pacer: Pacer | None = None,
-    controller_timeout_s: float | None = None,
-    scenario: Scenario | None = None,
-) -> RunResult:
-    """Run ``controller`` on a fresh simulated rig from (x0, θ0) at rest for ``duration_s`` after release.
-
-    The rig is held while the controller's ``start`` reads it, released at t = 0 and driven from
-    t = ``start.free_run_s`` on (twin.rigs.sim). Initial velocities are zero; the controller's observer starts
-    from zero velocity, as on the rig. ``stop_when_lost`` ends the run at the tick the ball is lost.
-    ``controller_timeout_s``: the watchdog's budget per update (``ClosedLoop``). ``scenario``: a flick and a
-    setpoint (``Scenario``)."""
-    if not (isinstance(duration_s, (int, float)) and math.isfinite(duration_s) and duration_s > 0):
-        raise ValueError(f"duration_s = {duration_s!r} must be a positive number of seconds")
-    p = params or Parameters()
-    rig = make_rig(p, plant=plant, ideal_sensors=ideal_sensors, seed=seed, noise=noise)
-    rig.reset(x0_m, theta0_rad)
-    s = scenario or Scenario()
-    if s.setpoint_m is not None:
-        if not isinstance(controller, Setpoint):
-            name = getattr(controller, "name", controller)
-            raise ValueError(f"{name!r} has no ball setpoint (twin.interface.Setpoint)")
-        check_on_track(p, "setpoint_m", s.setpoint_m)
-        controller.setpoint_m = s.setpoint_m
-    loop = ClosedLoop(rig, controller, controller_timeout_s=controller_timeout_s)
-    try:
-        ticks = update_ticks(duration_s, rig.params)
-        first = s.flick_tick(rig.period_s)
-        if first is None:
-            ended = loop.run(ticks, pacer=pacer, stop_when_lost=stop_when_lost)
-        else:
-            first = min(first, ticks)
-            ended = loop.run(first, pacer=pacer, stop_when_lost=stop_when_lost)
-            if ended == ENDED_TICKS:
-                if s.flick_speed_m_s != 0:
-                    rig.kick_ball(s.flick_speed_m_s)  # between two ticks, as the live view's Flick
-                ended = loop.run(ticks - first, pacer=pacer, stop_when_lost=stop_when_lost)
-        result = loop.result(ended, x0_m, criteria)
-        if s.setpoint_m is not None:
-            result.verdict = loop.verdict(x0_m, criteria, x_ref_m=s.setpoint_m)
-        return result
-    finally:
-        if loop.is_firmware:  # its core is a process of its own
-            controller.close()  # type: ignore[union-attr]
 
 
 def run_on_rig(

@@ -24,7 +24,7 @@ import numpy as np
 if TYPE_CHECKING:  # the parameters are a plain-Python module, imported lazily to keep this one bare
     from twin.parameters import Parameters
 
-__all__ = ["DaqSample", "Rig", "RigEnded", "Controller", "Setpoint", "Telemetry"]
+__all__ = ["Controller", "DaqSample", "Rig", "RigEnded", "RigError", "Setpoint", "Telemetry"]
 
 
 @dataclass(frozen=True)
@@ -34,6 +34,10 @@ class DaqSample:
     time_s: float  # time of the block's last sample: time(blocksize)
     ball_v: float  # ball channel, last sample of the block: data(blocksize,1), ADC volts
     angle_v: float  # angle channel, mean of the block: mean(data(:,2)), ADC volts
+
+
+class RigError(ValueError):
+    """A configuration the rig cannot run (period or latency not a whole number of physics steps, …)."""
 
 
 class RigEnded(Exception):

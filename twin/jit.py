@@ -4,7 +4,7 @@ numba caches a compiled function in the first writable place of: ``NUMBA_CACHE_D
 ``__pycache__`` (an editable or user install), the user's cache folder (``~/.cache/numba``: an install the
 user cannot write). Where none is writable (a read-only install and home, no ``NUMBA_CACHE_DIR``) numba
 refuses ``cache=True`` outright; the function is then compiled in each process instead, with one warning
-that says how to keep it. A single run never gets here: only the batch engines compile (``twin.warm``)."""
+that says how to keep it. A single run never gets here: only the batch engines compile (``twin.rigs.warm``)."""
 
 from __future__ import annotations
 

@@ -9,7 +9,7 @@ block the I/O card delivers.
 ``BatchPhysics`` is the same for N runs stepped together (the batch engine, ``twin.rigs.batch.BatchRig``):
 start the runs from their parameters and initial states, advance the live ones by a block of volts per step,
 and report the true state, the track contact, when each ball was lost and the clock. Its signatures carry
-numpy arrays only. ``twin.backends`` names each backend's single-run and batch implementations.
+numpy arrays only. ``twin.rigs.backends`` names each backend's single-run and batch implementations.
 """
 
 from __future__ import annotations
@@ -20,6 +20,7 @@ from typing import NamedTuple, Protocol
 
 import numpy as np
 
+from twin.interface import RigError
 from twin.parameters import Parameters
 
 __all__ = [
@@ -31,6 +32,7 @@ __all__ = [
     "SingleFactory",
     "check_initial_state",
     "check_on_track",
+    "whole_steps",
 ]
 
 
@@ -169,3 +171,19 @@ def check_on_track(params: Parameters, name: str, x_m: object) -> float:
     if abs(x) > half:
         raise ValueError(f"{name} = {x_m!r}{unit} is off the track (|x| ≤ {half:g} m)")
     return x
+
+
+# A period or latency within this share of a whole number of physics steps is that whole number (clock rounding).
+_STEP_TOLERANCE = 1e-9
+
+
+def whole_steps(duration_s: float, step_s: float, name: str) -> int:
+    """``duration_s`` in physics steps; ``RigError`` naming ``name`` unless it is a whole number of them."""
+    n = duration_s / step_s
+    steps = int(round(n))
+    if abs(n - steps) > _STEP_TOLERANCE * max(1.0, n):
+        raise RigError(
+            f"{name} = {duration_s!r} s is not a whole number of physics steps ({step_s!r} s): it would be "
+            f"{n:.6f} steps"
+        )
+    return steps

@@ -1,7 +1,7 @@
 """The MuJoCo twin over N runs (``twin.physics.BatchPhysics``): one ``mujoco.batch.Batch`` call per block for
 every run still going, on C threads, one state row per run (solver warm start included), so that each run's
 trajectory is the one ``twin.plant.Plant`` steps alone. The batch engine (``twin.rigs.batch.BatchRig``) runs
-its sensor chains over these blocks; ``twin.backends`` registers it as the twin's batch.
+its sensor chains over these blocks; ``twin.rigs.backends`` registers it as the twin's batch.
 """
 
 from __future__ import annotations

@@ -39,7 +39,6 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 
 from twin.app.options import MAX_RUN_S
-from twin.backends import DEFAULT_PLANT, backend
 from twin.engine import ClosedLoop, block_peak_abs_theta_rad, judge
 from twin.interface import Controller, DaqSample
 from twin.learning import (
@@ -55,6 +54,7 @@ from twin.learning import (
 )
 from twin.parameters import Parameters
 from twin.physics import check_initial_state, check_on_track
+from twin.rigs.backends import DEFAULT_PLANT, backend
 from twin.rigs.sim import make_rig
 from twin.rigs.vector import VectorBlocks, VectorRig
 from twin.verdict import Criteria, Trace
@@ -84,7 +84,7 @@ class EnvConfig:
     setpoint_range_m: tuple[float, float]
     noise: bool
     ideal_sensors: bool
-    plant: str  # a registered backend's name (twin.backends)
+    plant: str  # a registered backend's name (twin.rigs.backends)
     terminate_at_stops: bool
     criteria: Criteria
 

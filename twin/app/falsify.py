@@ -29,11 +29,11 @@ import numpy as np
 from twin.app.fanout import Progress, Runs, run_starts
 from twin.app.montecarlo import Distribution, apply_values
 from twin.app.replay import controller_identity, replay_entry
-from twin.backends import DEFAULT_PLANT, ScreeningPolicy, engine_policy, label_backend
 from twin.engine import Scenario
 from twin.outputs import JobFiles
 from twin.parameters import ParameterError, Parameters
 from twin.requirements import Spec, stated
+from twin.rigs.backends import DEFAULT_PLANT, ScreeningPolicy, engine_policy, label_backend
 
 __all__ = ["Axis", "FalsifyResult", "FalsifySettings", "OUTPUT_FILES", "falsify", "uniform_search"]
 
@@ -87,7 +87,7 @@ class FalsifySettings:
 
     @property
     def policy(self) -> ScreeningPolicy:
-        """``engine`` as the backends' screening policy (``twin.backends.engine_policy``)."""
+        """``engine`` as the backends' screening policy (``twin.rigs.backends.engine_policy``)."""
         return engine_policy(self.engine)
 
 

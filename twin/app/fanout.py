@@ -33,8 +33,8 @@ from twin.parameters import ParameterError, Parameters
 if TYPE_CHECKING:
     from twin.engine import RunResult, Scenario
     from twin.requirements import Requirement
+    from twin.serving.server import Server
     from twin.verdict import Verdict
-    from twin.wire.server import Server
 
 __all__ = [
     "BATCHES",
@@ -341,7 +341,7 @@ def _dask(
 
 @dataclass
 class Served:
-    """A served job: every run is one lock-step session of ``server`` (``twin.wire.server``), in order, to
+    """A served job: every run is one lock-step session of ``server`` (``twin.serving.server``), in order, to
     whatever controlling client says HELLO; nothing runs a controller here.
 
     ``first_wait_s``: how long the job's first session waits for a client (None: until one comes);
@@ -385,8 +385,8 @@ def run_served(
     no client within the wait ends the job with what came back (``complete`` false)."""
     from twin.engine import ControllerError
     from twin.plant import NumericalError
+    from twin.serving.server import ServeError, SessionSettings
     from twin.wire import protocol
-    from twin.wire.server import ServeError, SessionSettings
 
     n = len(starts)
     results: list[dict[str, Any] | None] = [None] * n

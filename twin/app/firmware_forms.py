@@ -137,7 +137,7 @@ def _replay(elf: Path, params: Parameters, x0_m: float, theta0_rad: float, seed:
             laws: tuple[Path, Path]) -> dict[str, Any]:  # fmt: skip
     """The firmware's run with its ADC results kept, replayed through the host's float and double builds."""
     from twin.avr.firmware import AvrFirmware
-    from twin.engine import run_closed_loop
+    from twin.rigs.sim import run_closed_loop
 
     fw = AvrFirmware(elf, params, record=True)
     run_closed_loop(fw, x0_m=x0_m, theta0_rad=theta0_rad, duration_s=duration_s, seed=seed, params=params)
@@ -160,7 +160,7 @@ def _replay(elf: Path, params: Parameters, x0_m: float, theta0_rad: float, seed:
 def _with_c_client(client: Path, sessions: int, work: Callable[[Served], Any]) -> Any:
     """``work(job)`` with the served ``job``'s ``sessions`` sessions answered by the C client (0: every one, the
     client ending when no session follows within its timeout)."""
-    from twin.wire.server import Server, SessionSettings
+    from twin.serving.server import Server, SessionSettings
 
     job = Served(Server(SessionSettings(), log=lambda _: None), next_wait_s=3.0)
     with job.server:

@@ -40,7 +40,7 @@ import numpy as np
 
 from twin.app.fanout import Progress, Runs, Served, run_starts
 from twin.app.sweep import point_seeds
-from twin.backends import DEFAULT_PLANT, ScreeningPolicy, engine_policy
+from twin.rigs.backends import DEFAULT_PLANT, ScreeningPolicy, engine_policy
 
 if TYPE_CHECKING:
     from twin.app.screening import ListJob

@@ -28,10 +28,10 @@ from pathlib import Path
 from typing import Any
 
 from twin.app.options import MAX_RUN_S
-from twin.backends import DEFAULT_PLANT, ENGINES, engine_policy, plant_choices
 from twin.image import open_regular
 from twin.parameters import MAX_FILE_BYTES, ParameterError, Parameters, load_json
 from twin.requirements import ROBUSTNESS_LIMIT, Requirement, Spec, parse_requirements
+from twin.rigs.backends import DEFAULT_PLANT, ENGINES, engine_policy, plant_choices
 
 __all__ = [
     "TRUST_OPTION",

@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 
 from twin.app.fanout import Progress
-from twin.backends import ENGINES
+from twin.rigs.backends import ENGINES
 
 __all__ = [
     "ASSUMPTION",
@@ -42,7 +42,7 @@ __all__ = [
     "verdict_class",
 ]
 
-ENGINE_NAMES = ENGINES  # --engine's words (twin.backends.engine_policy maps them onto backends)
+ENGINE_NAMES = ENGINES  # --engine's words (twin.rigs.backends.engine_policy maps them onto backends)
 # (map, start) pairs to run, and the wave's progress (runs done of these) → (records, complete).
 Job = Callable[[list[tuple[int, int]], Progress | None], tuple[list[dict[str, Any] | None], bool]]
 

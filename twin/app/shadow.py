@@ -1,8 +1,8 @@
 """``ballbeam shadow``: the twin watching a rig on the wire (``calib.shadow``), and the band it tests against.
 
-The shadow is an observer of the rig's sessions (``twin.wire.observer.Observer``: the samples, and the commands the
+The shadow is an observer of the rig's sessions (``twin.serving.observer.Observer``: the samples, and the commands the
 rig applied, echoed to observers): it never writes to the rig. ``watch`` feeds each sample with the DAC volts
-of its block (``twin.wire.observer.block_dac_v``) to a ``calib.shadow.Shadow`` and works off the complete windows
+of its block (``twin.serving.observer.block_dac_v``) to a ``calib.shadow.Shadow`` and works off the complete windows
 whenever no sample is waiting (a lock-step session outruns the shadow: its windows are worked off in
 batches, none lost).
 
@@ -26,8 +26,8 @@ from calib.compare import windowed_prediction
 from calib.logs import RigLog, load_rig_log, rig_log
 from calib.shadow import MAX_BATCH_WINDOWS, Band, Shadow, WindowScore
 from twin.rigs.remote import RemoteError
+from twin.serving.observer import Joined, Observer, block_dac_v
 from twin.wire import protocol as p
-from twin.wire.observer import Joined, Observer, block_dac_v
 
 if TYPE_CHECKING:
     from twin.interface import Controller
@@ -72,7 +72,8 @@ def reference_band(
     its ticks, the fit of its windows as many again (the two take about as long)."""
     from calib.compare import TickProgress
     from controllers.thesis_numbers import HARDWARE_STARTS
-    from twin.engine import run_closed_loop, update_ticks
+    from twin.engine import update_ticks
+    from twin.rigs.sim import run_closed_loop
 
     n = len(HARDWARE_STARTS)
     ticks = update_ticks(duration_s, params)
@@ -182,7 +183,7 @@ def watch(
     first sample ``start_timeout_s`` (None: ``idle_timeout_s``): a served rig sends nothing until a
     controller says HELLO. ``on_window`` gets each window as it is processed, ``on_session`` each session's
     end (its number, the STOP in words)."""
-    from twin.wire.server import STOP_NAMES
+    from twin.serving.server import STOP_NAMES
 
     result = WatchResult()
     started = time.perf_counter()

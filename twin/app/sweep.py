@@ -28,10 +28,10 @@ from controllers import thesis_numbers as T
 from twin.app.fanout import Progress, Runs, Served, run_starts
 from twin.app.options import MAX_LOCATE
 from twin.app.screening import ENGINE_NAMES, MAP_MARGINAL, Job, Screening, map_marginal, verdict_class
-from twin.backends import DEFAULT_PLANT, ScreeningPolicy, backend, engine_policy
 from twin.outputs import JobFiles
 from twin.parameters import ParameterError, Parameters
 from twin.physics import check_initial_state
+from twin.rigs.backends import DEFAULT_PLANT, ScreeningPolicy, backend, engine_policy
 
 if TYPE_CHECKING:
     from twin.requirements import Requirement
@@ -186,7 +186,7 @@ class SweepSettings:
         return engine_policy(self.engine, self.plant, strict=False)
 
     def engine_label(self) -> str:
-        """What decided a start run as asked: "mujoco", "fast" or the plant asked for (``twin.backends``)."""
+        """What decided a start run as asked: "mujoco", "fast" or the plant asked for (``twin.rigs.backends``)."""
         return self.policy.decider_label()
 
 

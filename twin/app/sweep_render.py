@@ -19,8 +19,8 @@ from matplotlib.colors import ListedColormap  # noqa: E402
 from matplotlib.patches import Patch, Rectangle  # noqa: E402
 
 from twin.app.sweep import CLAIMS, OUTPUT_FILES, SweepResult, summarize  # noqa: E402
-from twin.backends import DEFAULT_PLANT  # noqa: E402
 from twin.outputs import atomic_directory  # noqa: E402
+from twin.rigs.backends import DEFAULT_PLANT  # noqa: E402
 
 __all__ = ["render_map", "write_sweep"]
 

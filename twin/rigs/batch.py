@@ -1,6 +1,6 @@
 """The batch engine: N closed-loop runs at once, each bit-identical to ``run_closed_loop`` alone.
 
-    physics           a ``twin.physics.BatchPhysics`` from the backend's registry row (``twin.backends``):
+    physics           a ``twin.physics.BatchPhysics`` from the backend's registry row (``twin.rigs.backends``):
                       MuJoCo's batch (``twin.plant_batch``: one ``mujoco.batch.Batch`` call per tick for every
                       run still going, each run the trajectory ``twin.plant.Plant`` steps alone), or the
                       reference plant's compiled kernel (``twin.screen.plant``, the fast engine)
@@ -27,7 +27,6 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-from twin.backends import DEFAULT_PLANT, backend
 from twin.daq import block_time_s
 from twin.engine import (
     Catalogue,
@@ -38,16 +37,16 @@ from twin.engine import (
     checked_start,
     checked_update,
     judge,
-    run_closed_loop,
     update_ticks,
 )
 from twin.guard import Guard, install_interrupt_handler, safe_name
-from twin.interface import Controller, DaqSample
+from twin.interface import Controller, DaqSample, RigError
 from twin.log import THESIS_FIELDS, TRUTH_FIELDS, RunLog
 from twin.output_stage import ideal_motor_volts, motor_volts
 from twin.parameters import Daq, Parameters
 from twin.physics import BatchBlock, BatchPhysics
-from twin.rigs.sim import RigError, tick_schedule
+from twin.rigs.backends import DEFAULT_PLANT, backend
+from twin.rigs.sim import run_closed_loop, tick_schedule
 from twin.sensors import BallChainBatch, IdealSensors, angle_block_means_v
 from twin.verdict import Criteria, Trace
 
@@ -194,26 +193,12 @@ def run_batch(
     its T ticks count k/T of each (a job's progress moves before its batch ends; it changes no number).
     ``scenarios``: per run, a flick or a setpoint (``twin.engine.Scenario``) or None; a run with one takes the
     single-run path (``run_closed_loop`` with it), the others the batch."""
-    x0 = np.asarray(x0_m, dtype=float).reshape(-1)
-    th0 = np.asarray(theta0_rad, dtype=float).reshape(-1)
-    seed_arr = np.asarray(seeds).reshape(-1)
+    x0, th0, seed_arr, run_params = _run_inputs(x0_m, theta0_rad, seeds, duration_s, params)
     n = len(x0)
-    if len(th0) != n or len(seed_arr) != n:
-        raise ValueError(
-            f"x0_m, theta0_rad and seeds must have one value per run: {n}, {len(th0)}, {len(seed_arr)}"
-        )
-    if not (isinstance(duration_s, (int, float)) and math.isfinite(duration_s) and duration_s > 0):
-        raise ValueError(f"duration_s = {duration_s!r} must be a positive number of seconds")
-    if params is None or isinstance(params, Parameters):
-        run_params = [params or Parameters()] * n
-    else:
-        run_params = list(params)
-        if len(run_params) != n:
-            raise ValueError(f"params has {len(run_params)} entries for {n} runs: give one, or one per run")
     if n == 0:
         return []
     try:
-        physics = backend(plant).batch  # the backend's batch (twin.backends)
+        physics = backend(plant).batch  # the backend's batch (twin.rigs.backends)
     except ValueError as exc:
         raise RigError(str(exc)) from None
     probe = catalogue.make(name, run_params[0])
@@ -236,15 +221,9 @@ def run_batch(
     runs_before = 0  # the runs of the groups already run (progress)
     for idx in groups.values():
         rows = np.array(idx)
-        make_batch = getattr(catalogue, "make_batch", None) if vectorized else None
-        group_params = [run_params[i] for i in idx]
-        controller = make_batch(name, group_params) if make_batch is not None else None
-        if controller is None:
-            made = [catalogue.make(name, p) for p in group_params]
-            scalar = [c for c in made if isinstance(c, Controller)]
-            if len(scalar) != len(made):
-                raise TypeError(f"{name}: the catalogue made something that is not a Controller")
-            controller = ScalarControllers(scalar, controller_timeout_s, group_params[0].daq)
+        controller = _group_controller(
+            catalogue, name, [run_params[i] for i in idx], vectorized, controller_timeout_s
+        )
         group_rig_params = [noisy[id(run_params[i])] for i in idx]
         tick_schedule(group_rig_params[0])  # a schedule the rig cannot run is refused before any physics
         group = BatchRig(
@@ -280,6 +259,52 @@ def run_batch(
         if progress is not None:
             progress(float(runs_before))
     return [r for r in results if r is not None]
+
+
+def _run_inputs(
+    x0_m: np.ndarray,
+    theta0_rad: np.ndarray,
+    seeds: np.ndarray,
+    duration_s: float,
+    params: Parameters | Sequence[Parameters] | None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[Parameters]]:
+    """``run_batch``'s starts, seeds and parameters as one value per run, or a ``ValueError`` naming the misfit."""
+    x0 = np.asarray(x0_m, dtype=float).reshape(-1)
+    th0 = np.asarray(theta0_rad, dtype=float).reshape(-1)
+    seed_arr = np.asarray(seeds).reshape(-1)
+    n = len(x0)
+    if len(th0) != n or len(seed_arr) != n:
+        raise ValueError(
+            f"x0_m, theta0_rad and seeds must have one value per run: {n}, {len(th0)}, {len(seed_arr)}"
+        )
+    if not (isinstance(duration_s, (int, float)) and math.isfinite(duration_s) and duration_s > 0):
+        raise ValueError(f"duration_s = {duration_s!r} must be a positive number of seconds")
+    if params is None or isinstance(params, Parameters):
+        return x0, th0, seed_arr, [params or Parameters()] * n
+    run_params = list(params)
+    if len(run_params) != n:
+        raise ValueError(f"params has {len(run_params)} entries for {n} runs: give one, or one per run")
+    return x0, th0, seed_arr, run_params
+
+
+def _group_controller(
+    catalogue: Catalogue,
+    name: str,
+    group_params: list[Parameters],
+    vectorized: bool,
+    controller_timeout_s: float | None,
+) -> BatchController:
+    """A group's controller: the catalogue's batched one if it has one (and ``vectorized``), else one scalar
+    controller per run behind ``ScalarControllers``."""
+    make_batch = getattr(catalogue, "make_batch", None) if vectorized else None
+    controller = make_batch(name, group_params) if make_batch is not None else None
+    if controller is not None:
+        return controller
+    made = [catalogue.make(name, p) for p in group_params]
+    scalar = [c for c in made if isinstance(c, Controller)]
+    if len(scalar) != len(made):
+        raise TypeError(f"{name}: the catalogue made something that is not a Controller")
+    return ScalarControllers(scalar, controller_timeout_s, group_params[0].daq)
 
 
 def _group_progress(progress: Callable[[float], None], before: int, size: int) -> Callable[[int, int], None]:
@@ -352,7 +377,7 @@ class BatchRig:
         record: bool,
     ) -> None:
         """``physics``: the runs' physics, started from (x0, theta0) with ``params`` (a backend's
-        ``BatchFactory``, ``twin.backends``)."""
+        ``BatchFactory``, ``twin.rigs.backends``)."""
         p = self.p = params[0]
         self.n = n = len(params)
         self.ideal = ideal_sensors

@@ -30,9 +30,8 @@ import time
 from typing import Any
 from urllib.parse import urlsplit
 
-from twin.interface import DaqSample, Rig, RigEnded
+from twin.interface import DaqSample, Rig, RigEnded, RigError
 from twin.parameters import Daq, Parameters, SoftwareCalibration
-from twin.rigs.sim import RigError
 from twin.wire import protocol as p
 from twin.wire.links import Link, LinkError, OverLink, UdpLink, open_link, parse_url
 

@@ -27,10 +27,10 @@ import warnings
 
 import numpy as np
 
-from twin.backends import DEFAULT_PLANT, backend
 from twin.daq import TickSchedule, block_span_s
-from twin.firmware import FirmwareBoard
-from twin.interface import DaqSample, Rig
+from twin.engine import ENDED_TICKS, ClosedLoop, Pacer, RunResult, Scenario, StateLaw, update_ticks
+from twin.firmware import Firmware, FirmwareBoard
+from twin.interface import Controller, DaqSample, Rig, RigError, Setpoint
 from twin.output_stage import (
     CommandClampedWarning,
     amplifier_volts,
@@ -39,30 +39,15 @@ from twin.output_stage import (
 )
 from twin.parameters import Parameters
 from twin.parts import THESIS, AngleSensorChain, BallSensorChain, RigParts
-from twin.physics import PhysicsBackend, PhysicsBlock
+from twin.physics import PhysicsBackend, PhysicsBlock, check_on_track, whole_steps
 from twin.plant import Plant
+from twin.rigs.backends import DEFAULT_PLANT, backend
 from twin.sensors import IdealSensors
+from twin.verdict import Criteria
 
 __all__ = ["DaqSample", "ReferenceRig", "Rig", "RigError", "SimRig", "TwinRig", "make_rig"]
 
 # A control period, latency or free-run time must be a whole number of physics steps to this precision.
-_STEP_TOLERANCE = 1e-9
-
-
-class RigError(ValueError):
-    """A configuration the rig cannot run (period or latency not a whole number of physics steps, …)."""
-
-
-def whole_steps(duration_s: float, step_s: float, name: str) -> int:
-    """``duration_s`` in physics steps; ``RigError`` naming ``name`` unless it is a whole number of them."""
-    n = duration_s / step_s
-    steps = int(round(n))
-    if abs(n - steps) > _STEP_TOLERANCE * max(1.0, n):
-        raise RigError(
-            f"{name} = {duration_s!r} s is not a whole number of physics steps ({step_s!r} s): it would be "
-            f"{n:.6f} steps"
-        )
-    return steps
 
 
 def tick_schedule(params: Parameters) -> TickSchedule:
@@ -98,7 +83,7 @@ class SimRig(Rig):
         if noise is not None:
             p = p.with_overrides({"ball_sensor.noise_enabled": bool(noise)})
         try:
-            single = backend(plant).single  # the backend's single run (twin.backends)
+            single = backend(plant).single  # the backend's single run (twin.rigs.backends)
         except ValueError as exc:
             raise RigError(str(exc)) from None
         self.params = p
@@ -498,6 +483,64 @@ def make_rig(
     seed: int = 0,
     noise: bool | None = None,
 ) -> SimRig:
-    """The simulated rig asked for: ``plant`` a registered backend's name (``twin.backends``: 'twin', MuJoCo;
+    """The simulated rig asked for: ``plant`` a registered backend's name (``twin.rigs.backends``: 'twin', MuJoCo;
     'reference', the analytic model), with the full sensor chain or ideal converters."""
     return SimRig(params, seed=seed, noise=noise, plant=plant, ideal_sensors=ideal_sensors)
+
+
+def run_closed_loop(
+    controller: Controller | StateLaw | Firmware,
+    *,
+    x0_m: float,
+    theta0_rad: float,
+    duration_s: float = 10.0,
+    seed: int = 0,
+    noise: bool = True,
+    params: Parameters | None = None,
+    plant: str = "twin",
+    ideal_sensors: bool = False,
+    stop_when_lost: bool = True,
+    criteria: Criteria | None = None,
+    pacer: Pacer | None = None,
+    controller_timeout_s: float | None = None,
+    scenario: Scenario | None = None,
+) -> RunResult:
+    """Run ``controller`` on a fresh simulated rig from (x0, θ0) at rest for ``duration_s`` after release.
+
+    The rig is held while the controller's ``start`` reads it, released at t = 0 and driven from
+    t = ``start.free_run_s`` on (twin.rigs.sim). Initial velocities are zero; the controller's observer starts
+    from zero velocity, as on the rig. ``stop_when_lost`` ends the run at the tick the ball is lost.
+    ``controller_timeout_s``: the watchdog's budget per update (``ClosedLoop``). ``scenario``: a flick and a
+    setpoint (``Scenario``)."""
+    if not (isinstance(duration_s, (int, float)) and math.isfinite(duration_s) and duration_s > 0):
+        raise ValueError(f"duration_s = {duration_s!r} must be a positive number of seconds")
+    p = params or Parameters()
+    rig = make_rig(p, plant=plant, ideal_sensors=ideal_sensors, seed=seed, noise=noise)
+    rig.reset(x0_m, theta0_rad)
+    s = scenario or Scenario()
+    if s.setpoint_m is not None:
+        if not isinstance(controller, Setpoint):
+            name = getattr(controller, "name", controller)
+            raise ValueError(f"{name!r} has no ball setpoint (twin.interface.Setpoint)")
+        check_on_track(p, "setpoint_m", s.setpoint_m)
+        controller.setpoint_m = s.setpoint_m
+    loop = ClosedLoop(rig, controller, controller_timeout_s=controller_timeout_s)
+    try:
+        ticks = update_ticks(duration_s, rig.params)
+        first = s.flick_tick(rig.period_s)
+        if first is None:
+            ended = loop.run(ticks, pacer=pacer, stop_when_lost=stop_when_lost)
+        else:
+            first = min(first, ticks)
+            ended = loop.run(first, pacer=pacer, stop_when_lost=stop_when_lost)
+            if ended == ENDED_TICKS:
+                if s.flick_speed_m_s != 0:
+                    rig.kick_ball(s.flick_speed_m_s)  # between two ticks, as the live view's Flick
+                ended = loop.run(ticks - first, pacer=pacer, stop_when_lost=stop_when_lost)
+        result = loop.result(ended, x0_m, criteria)
+        if s.setpoint_m is not None:
+            result.verdict = loop.verdict(x0_m, criteria, x_ref_m=s.setpoint_m)
+        return result
+    finally:
+        if loop.is_firmware:  # its core is a process of its own
+            controller.close()  # type: ignore[union-attr]

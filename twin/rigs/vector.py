@@ -24,11 +24,12 @@ import mujoco
 import numpy as np
 from mujoco import batch as mjbatch
 
+from twin.interface import RigError
 from twin.parameters import Parameters
 from twin.plant import FULL_STATE, Plant
 from twin.plant_batch import MujocoBatchPhysics
 from twin.rigs.batch import BatchRig, BatchSamples, batch_key
-from twin.rigs.sim import RigError, tick_schedule
+from twin.rigs.sim import tick_schedule
 
 __all__ = ["VectorBlocks", "VectorRig"]
 

@@ -1,7 +1,8 @@
 """Live browser view of the twin (viser): the rig in 3D at 50 Hz, controls, and live plots.
 
-One room per concern: ``session`` (the simulation loop's state: it owns the twin and the controller; GUI
-callbacks only enqueue actions, which the loop applies between ticks, a burst coalesced), ``security`` (who
+One room per concern: ``session`` (the simulation loop's state: it owns the twin and the controller, and offers
+typed commands; GUI callbacks only enqueue actions, which the loop applies between ticks, a burst coalesced),
+``actions`` (the GUI's handlers: a control's value checked, then a command of the session), ``security`` (who
 may connect and what a client's messages can reach: the only room touching viser's internals), ``scene`` (the
 3D nodes), ``gui`` (panels, plots, notifications), ``server`` (the viser server, the pacing loop, ``serve``)
 and ``common`` (the controls' ranges, constants, one-line logs).

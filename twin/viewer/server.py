@@ -15,6 +15,8 @@ import viser
 
 from twin.engine import Catalogue
 from twin.parameters import Parameters
+from twin.rigs.warm import warm
+from twin.serving.server import DEFAULT_TIMEOUT_S, ServeError, Server, SessionSettings
 from twin.viewer.common import (
     DEFAULT_CONTROLLER,
     FRAME_S,
@@ -37,9 +39,7 @@ from twin.viewer.security import (
 )
 from twin.viewer.session import LiveTwin, owe
 from twin.viewer.wire import WIRE_MARGIN_S, WireCatalogue
-from twin.warm import warm
 from twin.wire import protocol as p
-from twin.wire.server import DEFAULT_TIMEOUT_S, ServeError, Server, SessionSettings
 
 PLOT_EVERY_FRAMES = 10  # plots and status at 5 Hz: enough for the eye, a tenth of the traffic
 MAX_CATCH_UP_S = 0.25  # after a stall longer than this the pacing restarts instead of racing to catch up

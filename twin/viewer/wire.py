@@ -3,7 +3,7 @@ speaking protocol 1 (docs/protocol.md) over UDP drives the view's twin in real t
 
 ``WireCatalogue`` puts one entry before the catalogue the application hands in; building it gives a
 ``WireClient``, the engine's ``Controller`` for the client at the other end of the shared
-``twin.wire.server.Server``. Every datagram goes through the server's own code (``receive``: HELLOs, refusals,
+``twin.serving.server.Server``. Every datagram goes through the server's own code (``receive``: HELLOs, refusals,
 counts; ``send_sample``, ``await_command``, ``accept``, ``missed``: the exchange and the watchdog), nothing
 is re-implemented here. Each run of the view is one session:
 
@@ -43,9 +43,9 @@ from twin.firmware import Firmware
 from twin.interface import Controller, DaqSample
 from twin.parameters import Parameters
 from twin.rigs.sim import SimRig
+from twin.serving.server import STOP_NAMES, Server
 from twin.viewer.common import _log, _markdown_text, _printable
 from twin.wire import protocol as p
-from twin.wire.server import STOP_NAMES, Server
 
 WIRE_MARGIN_S = 0.0005  # stop waiting this long before the frame's end: the loop's own work after the wait
 MAX_DISCARD = 4096  # datagrams queued before a session began that are thrown away (bounded: a flood)

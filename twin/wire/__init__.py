@@ -1,12 +1,11 @@
-"""Protocol 1, the twin's wire (docs/protocol.md), in one place:
+"""Protocol 1, the twin's wire (docs/protocol.md): the messages and the links that carry them, below every rig.
 
     protocol   the messages and their encoding (HELLO, CONFIG, SAMPLE, COMMAND, STOP)
-    links      UDP and serial links that carry them
-    server     the served twin: a session of the one loop whose controller is across the link
-               (``Server(SessionSettings(...)).serve()`` gives a ``SessionResult``)
-    observer   a client that watches a session without driving it (``Observer``, ``open_observer(url)``)
+    links      UDP and serial links that carry them (``Link``, ``UdpLink``, ``SerialLink``, ``parse_url``;
+               ``LinkError``: a link that cannot be opened or broke)
 
-The client side of a session is a rig (``twin.rigs.remote.RemoteRig``). The names load on first use.
+Both ends use it: the client side of a session is a rig (``twin.rigs.remote.RemoteRig``), the served twin
+and its watcher sit above the rigs (``twin.serving``). The names load on first use.
 """
 
 from __future__ import annotations
@@ -16,18 +15,17 @@ from typing import TYPE_CHECKING
 from twin.exports import lazy_exports
 
 if TYPE_CHECKING:  # the names' real types for a type checker; at run time they load on first use (below)
-    from twin.wire.observer import Observer, open_observer
-    from twin.wire.server import Server, SessionResult, SessionSettings
+    from twin.wire.links import Link, LinkError, SerialLink, UdpLink, parse_url
 
 
-__all__ = ["Observer", "Server", "SessionResult", "SessionSettings", "open_observer"]
+__all__ = ["Link", "LinkError", "SerialLink", "UdpLink", "parse_url"]
 
 _HOMES = {
-    "Observer": "twin.wire.observer",
-    "open_observer": "twin.wire.observer",
-    "Server": "twin.wire.server",
-    "SessionResult": "twin.wire.server",
-    "SessionSettings": "twin.wire.server",
+    "Link": "twin.wire.links",
+    "LinkError": "twin.wire.links",
+    "SerialLink": "twin.wire.links",
+    "UdpLink": "twin.wire.links",
+    "parse_url": "twin.wire.links",
 }
 
 __getattr__ = lazy_exports(__name__, _HOMES)

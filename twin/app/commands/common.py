@@ -17,8 +17,8 @@ from typing import TYPE_CHECKING, Any
 
 from twin.app.hosts import HOSTS, host_of
 from twin.app.options import MAX_JOB_RUN_S, MAX_RUN_S, count, finite_float, seed
-from twin.backends import DEFAULT_PLANT, ENGINES, backend, engine_policy, plant_choices, plant_help
 from twin.outputs import JobFiles, check_output_folder, writing
+from twin.rigs.backends import DEFAULT_PLANT, ENGINES, backend, engine_policy, plant_choices, plant_help
 
 if TYPE_CHECKING:
     from twin.app.fanout import Served
@@ -76,7 +76,7 @@ def add_plant_options(parser: argparse.ArgumentParser) -> None:
         "--plant",
         choices=plant_choices(),
         default=DEFAULT_PLANT,
-        help=f"the physics backend (twin.backends): {plant_help()}",
+        help=f"the physics backend (twin.rigs.backends): {plant_help()}",
     )
     parser.add_argument(
         "--ideal-sensors",
@@ -460,7 +460,7 @@ def serving(args: argparse.Namespace, params: Parameters) -> Iterator[Served | N
         return
     from twin.app.fanout import Served
     from twin.parameters import ParameterError
-    from twin.wire.server import DEFAULT_TIMEOUT_S, ServeError, Server, SessionSettings
+    from twin.serving.server import DEFAULT_TIMEOUT_S, ServeError, Server, SessionSettings
 
     host, port = _serve_address(args.serve)
     settings = SessionSettings(params=params, rig_name=f"ballbeam-twin {package_version()} {args.command}")

@@ -24,7 +24,7 @@ from twin.app.commands.common import (
     write_out,
 )
 from twin.app.options import SpanType, count, seed
-from twin.backends import engine_policy
+from twin.rigs.backends import engine_policy
 
 if TYPE_CHECKING:
     from twin.app.falsify import Axis

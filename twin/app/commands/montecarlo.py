@@ -36,7 +36,7 @@ from twin.app.commands.common import (
     write_out,
 )
 from twin.app.options import count, finite_float, seed
-from twin.backends import backend
+from twin.rigs.backends import backend
 
 HELP = "robustness: one start over many perturbed rigs and noise seeds; success rate with its interval"
 

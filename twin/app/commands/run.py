@@ -26,8 +26,8 @@ from twin.app.commands.common import (
     save_log,
 )
 from twin.app.options import count, finite_float
-from twin.backends import DEFAULT_PLANT, backend
 from twin.outputs import check_outputs, writing
+from twin.rigs.backends import DEFAULT_PLANT, backend
 
 if TYPE_CHECKING:
     from twin.app.replay import Replay
@@ -366,9 +366,10 @@ def _run_in_process(
     """The controller built and run on the twin: (the result, the checked output paths, the pacer), or the
     exit code of a failure (reported)."""
     from twin.app.hosts import build
-    from twin.engine import ControllerError, Scenario, run_closed_loop
+    from twin.engine import ControllerError, Scenario
     from twin.plant import NumericalError
     from twin.realtime import WallClockPacer
+    from twin.rigs.sim import run_closed_loop
 
     paths = check_outputs(
         [

@@ -20,8 +20,8 @@ from twin.app.commands.common import (
     save_log,
 )
 from twin.app.options import count, finite_float
-from twin.backends import backend
 from twin.outputs import check_outputs
+from twin.rigs.backends import backend
 
 HELP = (
     "serve the twin as an I/O card on protocol 1 over UDP or a serial line (docs/protocol.md) for one "
@@ -88,9 +88,9 @@ def run(args: argparse.Namespace) -> int:
     from twin.app.commands.common import package_version
     from twin.engine import ControllerError
     from twin.plant import NumericalError
+    from twin.serving.server import ServeError, Server, SessionSettings
     from twin.wire import protocol
     from twin.wire.links import DEFAULT_BAUD, LinkError, SerialLink
-    from twin.wire.server import ServeError, Server, SessionSettings
 
     if args.serial is not None and (args.host != "127.0.0.1" or args.port != 0):
         print(

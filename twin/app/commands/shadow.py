@@ -24,7 +24,7 @@ if TYPE_CHECKING:
     from calib.shadow import Band, Shadow
     from twin.app.shadow import WatchResult
     from twin.parameters import Parameters
-    from twin.wire.observer import Observer
+    from twin.serving.observer import Observer
 
 HELP = (
     "watch a rig on the wire (never writing to it): each window predicted by the twin, a drift "
@@ -109,7 +109,7 @@ def run(args: argparse.Namespace) -> int:
     from twin.app.shadow import REFERENCE_CONTROLLER, load_reference, logs_band, reference_band
     from twin.parameters import ParameterError
     from twin.rigs.remote import RemoteError
-    from twin.wire.observer import open_observer
+    from twin.serving.observer import open_observer
 
     if args.reference and args.reference_controller:
         raise ParameterError("--reference-controller runs the twin's reference: not with --reference logs")

@@ -37,7 +37,7 @@ from twin.app.commands.common import (
     write_out,
 )
 from twin.app.options import DEFAULT_REFINE_STEP, MAX_LOCATE, MAX_RIGS, GridType, count, finite_float, seed
-from twin.backends import backend
+from twin.rigs.backends import backend
 
 if TYPE_CHECKING:
     from twin.app.sweep import SweepResult, SweepSettings

@@ -17,7 +17,7 @@ from twin.app.commands.common import (
 )
 from twin.app.hosts import catalogue_for
 from twin.app.options import count, finite_float, seed, serve_address
-from twin.backends import DEFAULT_PLANT, backend
+from twin.rigs.backends import DEFAULT_PLANT, backend
 
 if TYPE_CHECKING:
     from twin.engine import Catalogue

@@ -42,7 +42,7 @@ from twin.app.reproduction.scenarios import (
     closed_loop_eigenvalues,
     run,
 )
-from twin.backends import backend
+from twin.rigs.backends import backend
 
 __all__ = ["CLAIMS", "FIGURE_SHOW"]
 
@@ -68,7 +68,7 @@ RANGE_FIGURE_CORNERS = {"sf": ((-0.25, 0.2), (0.33, 0.68)), "clp": ((-0.26, 0.3)
 CLAIM_BOXES = {"sf": tn.SF_DISC_RANGE, "clp": tn.CLP_DISC_RANGE}
 LABELS = {"sf": "state feedback", "clp": "control law partitioning", "smc": "sliding mode"}
 
-Plant = str  # a registered backend's name (twin.backends): "reference" (the thesis's model) or "twin"
+Plant = str  # a registered backend's name (twin.rigs.backends): "reference" (the thesis's model) or "twin"
 
 # what each figure plots (rows of panels) — read by ``figures``
 FIGURE_SHOW: dict[str, tuple[str, ...]] = {}

@@ -1,4 +1,4 @@
-"""Closed-loop scenarios of the reproduction: declared, run once through ``twin.engine.run_closed_loop``, cached.
+"""Closed-loop scenarios of the reproduction: declared, run once through ``twin.rigs.sim.run_closed_loop``, cached.
 
 A ``Scenario`` names a controller (a registry name, or a law of ``LAWS`` built here from printed numbers), the
 plant and the start. Two plants:
@@ -28,12 +28,13 @@ from controllers import registry
 from controllers import thesis_numbers as tn
 from controllers.laws import SlidingModeLaw, StateFeedbackLaw
 from controllers.loop import TrueStateLaw
-from twin.backends import backend
 from twin.dcmotor import torque_nm
-from twin.engine import RunResult, StateLaw, run_closed_loop
+from twin.engine import RunResult, StateLaw
 from twin.interface import Controller
 from twin.parameters import Parameters
 from twin.reference import ReferenceModel
+from twin.rigs.backends import backend
+from twin.rigs.sim import run_closed_loop
 from twin.verdict import Criteria, Verdict
 
 __all__ = ["LAWS", "RIG", "Scenario", "Trace", "closed_loop_eigenvalues", "run", "thesis_params"]
@@ -119,7 +120,7 @@ def thesis_params(*, continuous: bool = False, zeroing_error_rad: float = 0.0) -
 @dataclass(frozen=True)
 class Scenario:
     controller: str
-    plant: str  # a registered backend's name (twin.backends): "reference" (the thesis's model) or "twin"
+    plant: str  # a registered backend's name (twin.rigs.backends): "reference" (the thesis's model) or "twin"
     x0_m: float
     theta0_rad: float
     duration_s: float

@@ -41,7 +41,7 @@ from twin.interface import Controller, DaqSample
 from twin.parameters import Parameters
 from twin.realtime import TickTiming, WallClockPacer
 from twin.rigs.sim import SimRig, make_rig
-from twin.warm import warm
+from twin.rigs.warm import warm
 from twin.wire import protocol as p
 from twin.wire.links import Link, LinkError, OverLink, SerialCounts, SerialLink, UdpLink
 
@@ -59,7 +59,7 @@ __all__ = [
 DEFAULT_WATCHDOG_PERIODS = 5  # 0.1 s at 50 Hz: a dead controller's last command drives the beam no longer
 DEFAULT_TIMEOUT_S = 5.0  # lock-step: the longest wait for one command before the session ends (STOP 3)
 MAX_OBSERVERS = 4  # further clients are refused: the samples sent per tick stay bounded
-# An observer says HELLO every 0.2 s while it watches (twin.wire.observer): one silent this long (at least,
+# An observer says HELLO every 0.2 s while it watches (twin.serving.observer): one silent this long (at least,
 # or the session's timeout_s if longer) has vanished and its place is freed.
 MIN_OBSERVER_SILENCE_S = 1.0
 _RESEND_S = (

@@ -16,8 +16,8 @@ from __future__ import annotations
 
 import bisect
 
-from twin.backends import DEFAULT_PLANT
 from twin.parameters import Parameters
+from twin.rigs.backends import DEFAULT_PLANT
 from twin.rigs.sim import SimRig, make_rig
 
 __all__ = ["warm"]
