@@ -1,5 +1,6 @@
-"""The live view's panels: controls (their callbacks only enqueue actions for the session), status,
-notifications and the live plots. A value the session refused puts its control back."""
+"""The live view's panels: controls (their callbacks, on viser's threads, only enqueue actions for the session;
+the loop applies each through its handler, twin.viewer.actions, which checks the control's value and calls the
+session's typed commands), status, notifications and the live plots. A value refused puts its control back."""
 
 from __future__ import annotations
 

@@ -1,8 +1,9 @@
-"""The session: the simulation side of the live view. It owns the twin and the controller; GUI callbacks only
-enqueue actions (as mjlab's viewer does), which the loop applies between ticks, a burst coalesced to its
-latest value. Every value is checked against the controls' ranges and the current parameters, and a bad one
-is refused with the state unchanged. A controller or rig that fails marks the run failed (``_fail``: the one
-place the view handles a failing controller)."""
+"""The session: the simulation side of the live view. It owns the twin, the controller and the run's state, and
+offers a small set of typed commands (``set_controller``, ``reset``, ``set_initial_state``, ``flick``, …). GUI
+callbacks only enqueue actions (as mjlab's viewer does), which the loop applies between ticks, a burst coalesced
+to its latest value, each through its handler (twin.viewer.actions: the control's input checked, then a
+command). A bad value is refused with the state unchanged. A controller or rig that fails marks the run failed
+(``_fail``: the one place the view handles a failing controller)."""
 
 from __future__ import annotations
 
@@ -26,20 +27,14 @@ from twin.engine import Catalogue, ClosedLoop, ControllerError
 from twin.interface import DaqSample, Setpoint
 from twin.parameters import Parameters
 from twin.physics import check_initial_state
-from twin.rigs.sim import PlantKind, make_rig
+from twin.rigs.sim import make_rig
 from twin.verdict import Criteria, Verdict
+from twin.viewer.actions import HANDLERS, Refused
 from twin.viewer.common import (
-    DRIFT,
-    FLICK,
     FLICK_DEFAULT_M_S,
     FRAME_S,
     MAX_OWED_S,
-    SETPOINT,
-    SPEED,
     SPEED_MAX,
-    THETA0,
-    X0,
-    Slider,
     ViewerError,
     _log,
     _markdown_text,
@@ -95,55 +90,19 @@ class Refusal:
     reason: str
 
 
-class _Refused(Exception):
-    """An action's value is refused; the state is unchanged."""
-
-
-def _number(name: str, value: Any, limit: float, unit: str, *, low: float | None = None) -> float:
-    """A finite real number within [low, limit] (low = −limit by default), or refused naming the control."""
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise _Refused(f"{name} = {_show(value)} is not a number")
-    try:
-        number = float(value)
-    except (OverflowError, ValueError):
-        raise _Refused(f"{name} = {_show(value)} is not a finite number") from None
-    if not math.isfinite(number):
-        raise _Refused(f"{name} = {number!r} is not a finite number")
-    low = -limit if low is None else low
-    if not low <= number <= limit:
-        unit = f" {unit}" if unit else ""
-        raise _Refused(f"{name} = {number:g}{unit} is outside {low:g} … {limit:g}{unit}")
-    return number
-
-
-def _on_slider(name: str, value: Any, slider: Slider, within: float = math.inf) -> float:
-    """A value of a slider's control: inside the slider's range and, where the parameters narrow it (the
-    track, the stops), inside ±``within`` too; refused otherwise."""
-    return _number(name, value, min(slider.high, within), slider.unit, low=max(slider.low, -within))
-
-
-def _boolean(name: str, value: Any) -> bool:
-    if not isinstance(value, (bool, np.bool_)):
-        raise _Refused(f"{name} = {_show(value)} is not a boolean")
-    return bool(value)
-
-
 class LiveTwin:
-    """The simulation side of the viewer: a closed loop (twin.engine), and the actions the GUI asks for.
+    """The simulation side of the viewer: a closed loop (twin.engine), its state, and the typed commands the
+    loop applies (``set_controller``, ``reset``, ``set_running``, ``step``, ``set_initial_state``, ``flick``,
+    ``set_flick_speed``, ``set_noise``, ``set_shadow``, ``set_drift``, ``set_speed``, ``set_reference``,
+    ``client_connected``, ``download``).
 
-    Everything here runs on the loop's thread; ``enqueue`` is the only method other threads call. The
-    controllers come from the catalogue the application hands in (the core never imports them).
-
-    Actions and their values (each checked against the controls' ranges, twin.viewer.common, and the current
-    parameters; a bad one is refused with the state unchanged and recorded in ``refusals``): ``controller``
-    (a catalogue name), ``reset``, ``run`` (bool), ``step``, ``x0`` (m, within the x0 slider and the
-    track), ``theta0`` (rad, within the θ0 slider and the stops), ``initial`` ((x0, θ0)), ``flick_left`` and
-    ``flick_right`` (the flick slider's speed, m/s), ``flick`` (m/s, signed, its size within the flick
-    slider), ``noise`` (bool), ``speed`` (the speed slider), ``reference`` (the setpoint, m, within the
-    setpoint slider and the track). A controller or rig that fails (raises, a non-finite command, a diverged
-    state, a stall) marks the run failed: ``error`` names the reason and the tick, the run pauses, and a
-    reset or another controller starts a new one. A lost ball pauses the run where it left the track; the
-    next run (Reset, another controller) then runs."""
+    Everything here runs on the loop's thread; ``enqueue`` is the only method other threads call. A queued
+    action reaches the commands through its handler (twin.viewer.actions, which checks the control's input);
+    a bad value is refused with the state unchanged and recorded in ``refusals``. The controllers come from
+    the catalogue the application hands in (the core never imports them). A controller or rig that fails
+    (raises, a non-finite command, a diverged state, a stall) marks the run failed: ``error`` names the reason
+    and the tick, the run pauses, and a reset or another controller starts a new one. A lost ball pauses the
+    run where it left the track; the next run (Reset, another controller) then runs."""
 
     def __init__(
         self,
@@ -153,7 +112,7 @@ class LiveTwin:
         seed: int,
         speed: float,
         *,
-        plant: PlantKind = "twin",
+        plant: str = "twin",
         ideal_sensors: bool = False,
         wait_for_client: bool = False,
         criteria: Criteria | None = None,
@@ -175,7 +134,7 @@ class LiveTwin:
         self.speed = speed
         self.criteria = criteria or Criteria()
         self.achieved_speed: float | None = None  # measured by the pacing loop (simulated s per wall s)
-        self.plant: PlantKind = plant
+        self.plant = plant
         self.ideal_sensors = ideal_sensors
         # The default start, inside a track or stops that a parameter file narrowed.
         self.x0_m = min(0.15, 0.5 * params.track.half_length_m)
@@ -210,7 +169,7 @@ class LiveTwin:
         self.controller_name = controller
         try:
             self._start_run(controller)
-        except _Refused as exc:
+        except Refused as exc:
             raise ViewerError(str(exc)) from None
 
     # --- called from any thread ---------------------------------------------------------------------
@@ -246,7 +205,7 @@ class LiveTwin:
             timeout = math.inf if wire is not None else None
             loop = ClosedLoop(rig, controller, record=True, record_limit=limit, controller_timeout_s=timeout)
         except Exception as exc:  # noqa: BLE001 - a controller or rig that cannot start is refused
-            raise _Refused(f"cannot start {_show(name)}: {type(exc).__name__}: {exc}") from exc
+            raise Refused(f"cannot start {_show(name)}: {type(exc).__name__}: {exc}") from exc
         old = self.wire if hasattr(self, "loop") else None
         if old is not None:  # the run is replaced: its client's session is over (STOP 0, the run is done)
             old.end(p.STOP_DONE, "the run was replaced (Reset, another controller): STOP 0")
@@ -364,7 +323,7 @@ class LiveTwin:
         per record state (run, rows recorded) and format: a full record is the same file at every click."""
         writers = {"mat": log_io.write_mat, "csv": log_io.write_csv}
         if kind not in writers:
-            raise _Refused(f"download = {_show(kind)}: the formats are mat and csv")
+            raise Refused(f"download = {_show(kind)}: the formats are mat and csv")
         recorder = self.loop.recorder
         key = (kind, self.runs, recorder.n if recorder is not None else 0)
         if self._download is None or self._download[0] != key:
@@ -427,14 +386,14 @@ class LiveTwin:
         self._start_pending_run()
 
     def _apply(self, action: str, value: Any) -> None:
-        handler = self._HANDLERS.get(action) if isinstance(action, str) else None
+        handler = HANDLERS.get(action) if isinstance(action, str) else None
         if action not in STARTS_A_RUN:
             self._start_pending_run()  # what follows a reset acts on the new run
         try:
             if handler is None:
-                raise _Refused(f"unknown action {_show(action)}")
+                raise Refused(f"unknown action {_show(action)}")
             handler(self, value)
-        except _Refused as exc:
+        except Refused as exc:
             self._refuse(str(action), value, str(exc))
         except Exception as exc:  # noqa: BLE001 - an action that breaks the rig fails the run, not the server
             self._fail(exc)
@@ -450,11 +409,15 @@ class LiveTwin:
         self._start_pending = None
         try:
             self._start_run(name)
-        except _Refused as exc:
+        except Refused as exc:
             self._refuse(action, name if action == "controller" else None, str(exc))
 
-    def _do_connected(self, value: Any) -> None:
-        if self.awaiting_client:  # the first browser: a fresh run from t = 0, running
+    # --- the commands (loop thread): what the GUI's handlers (twin.viewer.actions) call ----------------------
+    # Typed values from code the view trusts; each refuses (``Refused``, the state unchanged) only what depends
+    # on the session's own state. The controls' ranges are the handlers' to check.
+    def client_connected(self) -> None:
+        """A browser connected: the first one gets a fresh run from t = 0, running."""
+        if self.awaiting_client:
             self.awaiting_client = False
             if self.wire is not None:  # never released while waiting; a client may hold its session
                 self.runs = 1
@@ -463,79 +426,62 @@ class LiveTwin:
                 self._start_run(self.controller_name)
             self.running = self.error is None
 
-    def _do_download(self, value: Any) -> None:
-        if not isinstance(value, tuple) or len(value) != 2 or not callable(value[1]):
-            raise _Refused(f"download = {_show(value)} is not (format, receiver)")
-        kind, send = value
+    def download(self, kind: str, send: Callable[[str, bytes], None]) -> None:
+        """This run's record as a ``kind`` file ("mat" or "csv"), handed to ``send(name, contents)``."""
         name, data = self.recording(kind)
         send(name, data)
 
-    def _do_controller(self, value: Any) -> None:
-        if not isinstance(value, str) or value not in self.catalogue.NAMES:
-            raise _Refused(f"unknown controller {_show(value)}; known: {', '.join(self.catalogue.NAMES)}")
+    def set_controller(self, name: str) -> None:
+        """A new run of the catalogue's controller ``name``, started by the loop once, after the actions queued
+        with it (``apply_actions``: a burst of resets and changes builds one run)."""
+        if not isinstance(name, str) or name not in self.catalogue.NAMES:
+            raise Refused(f"unknown controller {_show(name)}; known: {', '.join(self.catalogue.NAMES)}")
         pending = self._start_pending[1] if self._start_pending is not None else self.controller_name
-        if value != pending:
-            self._start_pending = ("controller", value)
+        if name != pending:
+            self._start_pending = ("controller", name)
 
-    def _do_reset(self, value: Any) -> None:
+    def reset(self) -> None:
+        """A new run of the current (or the last asked for) controller from the set initial state, started as
+        ``set_controller``'s."""
         pending = self._start_pending[1] if self._start_pending is not None else self.controller_name
         self._start_pending = ("reset", pending)
 
-    def _do_run(self, value: Any) -> None:
-        self.running = _boolean("run", value) and self.error is None
+    def set_running(self, on: bool) -> None:
+        """Run or pause; a failed run stays paused."""
+        self.running = on and self.error is None
 
-    def _do_step(self, value: Any) -> None:
+    def step(self) -> None:
+        """Pause and advance one frame."""
         self.running = False
         self.tick()
 
-    def _check_initial(self, x0: Any, theta0: Any) -> tuple[float, float]:
-        p = self.params
-        x = _on_slider("x0", x0, X0, p.track.half_length_m)
-        th = _on_slider("θ0", theta0, THETA0, p.beam.stop_angle_rad)
+    def set_initial_state(self, x0_m: float, theta0_rad: float) -> None:
+        """The start of the next run (x0 m, θ0 rad), refused off the track or beyond the stops."""
         try:
-            check_initial_state(p, x, th, 0.0, 0.0)  # the rig's own rule, should it ever be stricter
+            check_initial_state(self.params, x0_m, theta0_rad, 0.0, 0.0)  # the rig's own rule
         except ValueError as exc:
-            raise _Refused(str(exc)) from None
-        return x, th
+            raise Refused(str(exc)) from None
+        self.x0_m, self.theta0_rad = x0_m, theta0_rad
 
-    def _do_x0(self, value: Any) -> None:
-        self.x0_m, self.theta0_rad = self._check_initial(value, self.theta0_rad)
+    def flick(self, velocity_m_s: float) -> None:
+        """Kick the ball along the beam by ``velocity_m_s`` (signed: + towards the + end)."""
+        self.rig.kick_ball(velocity_m_s)
 
-    def _do_theta0(self, value: Any) -> None:
-        self.x0_m, self.theta0_rad = self._check_initial(self.x0_m, value)
+    def set_flick_speed(self, speed_m_s: float) -> None:
+        """The flick speed last accepted (the flick slider is put back to it)."""
+        self.flick_m_s = speed_m_s
 
-    def _do_initial(self, value: Any) -> None:
-        if not isinstance(value, (tuple, list)) or len(value) != 2:
-            raise _Refused(f"initial = {_show(value)} is not a pair (x0, θ0)")
-        self.x0_m, self.theta0_rad = self._check_initial(value[0], value[1])
+    def set_noise(self, on: bool) -> None:
+        """The ball sensor's contact noise on or off, from now on."""
+        if on != self.noise:
+            self.rig.set_noise(on)
+            self.noise = on
 
-    def _do_flick(self, value: Any) -> None:
-        """A signed flick (m/s): its size within the flick slider's range, its sign the direction."""
-        speed = _number("flick", value, FLICK.high, FLICK.unit)
-        _on_slider("flick", abs(speed), FLICK)
-        self.rig.kick_ball(speed)
-
-    def _flick(self, direction: float, value: Any) -> None:
-        # The slider's value is a speed: a negative one is refused, never a flick the other way.
-        self.flick_m_s = _on_slider("flick", value, FLICK)
-        self.rig.kick_ball(direction * self.flick_m_s)
-
-    def _do_flick_left(self, value: Any) -> None:
-        self._flick(-1.0, value)
-
-    def _do_flick_right(self, value: Any) -> None:
-        self._flick(1.0, value)
-
-    def _do_noise(self, value: Any) -> None:
-        noise = _boolean("noise", value)
-        if noise != self.noise:
-            self.rig.set_noise(noise)
-            self.noise = noise
-
-    def _do_shadow(self, value: Any) -> None:
-        on, factory = _boolean("shadow", value), self.monitor_factory
+    def set_shadow(self, on: bool) -> None:
+        """The shadow (twin.viewer.monitor) on or off; refused on when the application gave none."""
+        factory = self.monitor_factory
         if on and factory is None:
-            raise _Refused("this view was started without a shadow (the application gives none)")
+            raise Refused("this view was started without a shadow (the application gives none)")
         if on and factory is not None and self.shadow is None:
             stopping, self._shadow_stopping = self._shadow_stopping, None
             if stopping is not None and stopping.resume():
@@ -548,38 +494,20 @@ class LiveTwin:
             self.shadow.stop()
             self._shadow_stopping, self.shadow = self.shadow, None
 
-    def _do_drift(self, value: Any) -> None:
-        self.drift_pct = _on_slider("drift", value, DRIFT)
+    def set_drift(self, percent: float) -> None:
+        """The rig's motor resistance this many % above the parameters', from the next run."""
+        self.drift_pct = percent
 
-    def _do_speed(self, value: Any) -> None:
-        self.speed = _on_slider("speed", value, SPEED)
+    def set_speed(self, speed: float) -> None:
+        """Simulated seconds per wall second."""
+        self.speed = speed
 
-    def _do_reference(self, value: Any) -> None:
-        x_ref_m = _on_slider("setpoint", value, SETPOINT, self.params.track.half_length_m)
-        if not self.supports_reference:  # the greyed slider's number box still sends: not kept for later
-            raise _Refused(self.setpoint_reason)
-        self.reference_x_m = x_ref_m
+    def set_reference(self, x_m: float) -> None:
+        """The setpoint (m); refused, not kept for later, when the controller takes none."""
+        if not self.supports_reference:  # the greyed slider's number box still sends
+            raise Refused(self.setpoint_reason)
+        self.reference_x_m = x_m
         self._apply_reference()
-
-    _HANDLERS: dict[str, Callable[[LiveTwin, Any], None]] = {
-        "controller": _do_controller,
-        "reset": _do_reset,
-        "run": _do_run,
-        "step": _do_step,
-        "x0": _do_x0,
-        "theta0": _do_theta0,
-        "initial": _do_initial,
-        "flick": _do_flick,
-        "flick_left": _do_flick_left,
-        "flick_right": _do_flick_right,
-        "noise": _do_noise,
-        "shadow": _do_shadow,
-        "drift": _do_drift,
-        "speed": _do_speed,
-        "reference": _do_reference,
-        "connected": _do_connected,
-        "download": _do_download,
-    }
 
     def tick(self, deadline: float | None = None) -> None:
         """One 20 ms frame of simulated time: as many control periods as fit in it. Never raises: a failure
