@@ -162,3 +162,76 @@ def test_the_check_sees_a_cycle_through_functions_and_relative_imports(tmp_path:
     assert cycles(graph) == [["calib.a", "calib.b", "calib.c", "calib.a"]]
     (pkg / "c.py").write_text("def g():\n    pass\n")
     assert cycles(import_graph(tmp_path)) == []
+
+
+# The packages bottom up (docs/design.md, "Layers"): the core's own modules (``twin``), the wire and the
+# kernels it needs, the rig's parts, the rigs, what serves or hosts a rig, the live view, then the layers
+# above the core. A package imports only packages ranked below it (siblings of one rank import neither).
+PACKAGE_RANKS = {
+    "twin": 0,
+    "twin.wire": 1,
+    "twin.screen": 1,
+    "twin.avr": 1,
+    "twin.parts": 2,
+    "twin.rigs": 3,
+    "twin.fmi": 4,
+    "twin.serving": 4,
+    "twin.viewer": 5,
+    "controllers": 6,
+    "calib": 7,
+    "twin.app": 8,
+}
+
+
+def package_of(module: str, root: Path = ROOT) -> str:
+    """The package a module belongs to: ``twin.<sub>`` for a module of a subpackage of ``twin``, ``twin`` for
+    the core's own modules, the top package otherwise."""
+    parts = module.split(".")
+    if parts[0] == "twin" and len(parts) > 1 and (root / "twin" / parts[1] / "__init__.py").is_file():
+        return f"twin.{parts[1]}"
+    return parts[0]
+
+
+def package_graph(root: Path = ROOT) -> dict[str, set[str]]:
+    graph: dict[str, set[str]] = {}
+    for module, targets in import_graph(root).items():
+        own = package_of(module, root)
+        graph.setdefault(own, set()).update(package_of(t, root) for t in targets)
+        graph[own].discard(own)
+    return graph
+
+
+def upward(graph: dict[str, set[str]]) -> list[str]:
+    """The package edges that do not go strictly down the ranks (an unranked package is one too)."""
+    found = [f"{p} is not ranked" for p in sorted(graph) if p not in PACKAGE_RANKS]
+    found += [
+        f"{p} -> {q}"
+        for p in sorted(graph)
+        for q in sorted(graph[p])
+        if p in PACKAGE_RANKS and (q not in PACKAGE_RANKS or PACKAGE_RANKS[q] >= PACKAGE_RANKS[p])
+    ]
+    return found
+
+
+def test_the_package_graph_has_no_cycle_and_no_upward_import() -> None:
+    graph = package_graph()
+    assert set(PACKAGE_RANKS) <= set(graph), sorted(set(PACKAGE_RANKS) - set(graph))
+    found = cycles(graph)
+    assert not found, "package cycles: " + "; ".join(" -> ".join(c) for c in found)
+    assert not upward(graph), upward(graph)
+
+
+def test_the_package_check_sees_a_circle_and_an_upward_import(tmp_path: Path) -> None:
+    """The engine importing a rig made the circle core -> rigs -> core: the check names it."""
+    for package in ("twin", "twin/rigs", "twin/wire"):
+        (tmp_path / package).mkdir(parents=True)
+        (tmp_path / package / "__init__.py").write_text("")
+    (tmp_path / "twin" / "engine.py").write_text("def run():\n    from twin.rigs.sim import make_rig\n")
+    (tmp_path / "twin" / "rigs" / "sim.py").write_text(
+        "from twin.engine import run\nfrom twin.wire import links\n"
+    )
+    (tmp_path / "twin" / "wire" / "links.py").write_text("")
+    graph = package_graph(tmp_path)
+    assert graph["twin"] == {"twin.rigs"} and graph["twin.rigs"] == {"twin", "twin.wire"}
+    assert cycles(graph) == [["twin", "twin.rigs", "twin"]]
+    assert upward(graph) == ["twin -> twin.rigs"]
