@@ -192,7 +192,7 @@ DIAGNOSTIC_EFFECTS = {
 # 0.11–0.16 %, 2.0–3.2 %, 0.03–0.05 mrad), docs/design.md. A relative bound is taken of the larger of the
 # value and the parameter's typical size (``FitSpec.scale``) when the value can be 0 (its search range
 # reaches 0): the pivot damping's statistical deviation hardly depends on its value, and a rig whose damping
-# is near 0 (the twin's: 0) would otherwise be "loosely determined" by any log — the README's recipe on the
+# is near 0 (the twin's: 0) would otherwise be "loosely determined" by any log — the manual's recipe on the
 # twin, 2.3e-5 ± 0.79e-5 N·m·s/rad, is 34 % of its value and 0.79 % of its typical size 1e-3.
 WEAK_EXCITATION: dict[str, tuple[str, float]] = {
     "motor.resistance_ohm": ("relative", 0.01),
@@ -1239,7 +1239,8 @@ def _excitation_problems(names: Sequence[str], z: np.ndarray, std: np.ndarray, c
             0,
             "weak excitation: the logs determine "
             + ", ".join(weak)
-            + " only loosely (README: how to record a log — move the setpoint and add the dither)",
+            + " only loosely (docs/calibrate.md: How to record a log for calibration — move the setpoint and "
+            "add the dither)",
         )
     return problems
 
@@ -1253,7 +1254,7 @@ def _correlation_warnings(problem: WindowProblem, corr: np.ndarray) -> list[str]
             if abs(corr[i, j]) > INSEPARABLE_CORRELATION:
                 warnings.append(
                     f"{problem.fit[i]} and {problem.fit[j]} are correlated ({corr[i, j]:+.2f}): the logs barely "
-                    "separate them; excite the rig differently (README: how to record a log)"
+                    "separate them; excite the rig differently (docs/calibrate.md: How to record a log for calibration)"
                 )
     return warnings
 

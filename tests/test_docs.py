@@ -11,9 +11,9 @@ import pytest
 
 from controllers import registry
 from twin.app.sweep import CLAIMS, Grid, SweepResult, SweepSettings, _judge, summarize
-from twin.engine import run_closed_loop
 from twin.parameters import Parameters
 from twin.rigs.batch import run_batch
+from twin.rigs.sim import run_closed_loop
 
 DOCS = Path(__file__).resolve().parent.parent / "docs"
 MAPS = ("appendix-sf", "appendix-clp")

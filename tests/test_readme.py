@@ -1,4 +1,5 @@
-"""The README's examples run as printed."""
+"""The manual's examples (README.md and the pages of docs/, tests/test_readme_commands.py's ``PAGES``) run as
+printed."""
 
 import contextlib
 import io
@@ -6,10 +7,11 @@ import re
 from pathlib import Path
 
 import pytest
+from test_readme_commands import manual_text
 
 from twin.parameters import Parameters
 
-README = (Path(__file__).resolve().parent.parent / "README.md").read_text(encoding="utf-8")
+README = manual_text()
 
 
 def _blocks(language: str) -> list[str]:
@@ -20,7 +22,7 @@ def test_the_controller_example_holds_the_ball() -> None:
     (code,) = [b for b in _blocks("python") if "class MyController" in b]
     out = io.StringIO()
     with contextlib.redirect_stdout(out):  # run as a script (imported, it defines the class alone)
-        exec(compile(code, "README.md", "exec"), {"__name__": "__main__"})
+        exec(compile(code, "docs/validate.md", "exec"), {"__name__": "__main__"})
     assert out.getvalue().startswith("True held")
 
 
@@ -51,7 +53,7 @@ def test_the_python_surface_example_runs_the_one_loop() -> None:
     (code,) = [b for b in _blocks("python") if "twin.ClosedLoop(" in b]
     out = io.StringIO()
     with contextlib.redirect_stdout(out):
-        exec(compile(code, "README.md", "exec"), {"__name__": "readme"})
+        exec(compile(code, "docs/connect.md", "exec"), {"__name__": "readme"})
     held, steady, unit, ticks, ended = out.getvalue().split(maxsplit=4)
     assert (held, unit, ticks, ended.strip()) == ("True", "m", "501", "all ticks")
     assert abs(float(steady)) < 0.01  # the appendix controllers settle a few mm off centre (docs/design.md)

@@ -1,21 +1,22 @@
-"""README.md's calibration recipe, run as printed: the commands of the code block under "## Calibration" that
+"""The manual's calibration recipe, run as printed: the commands of the first code block of docs/calibrate.md that
 record a log on the twin and fit it (``experiment``, ``calibrate``), read with tests/test_readme_commands.py's
-shell reading, in a fresh directory. A user pasting it gets exit 0 and the twin's own values back."""
+shell reading. A user pasting it gets exit 0 and the twin's own values back: tests/test_readme_in_order.py pastes
+it as printed (exit 0 expected) in its one folder and checks the fit there with ``check_calibration`` (the recipe
+is run once, not twice)."""
 
 import json
 from pathlib import Path
 
 import pytest
-from test_readme_commands import README, _commands
+from test_readme_commands import ROOT, _commands
 
-from twin.app.cli import main
 from twin.parameters import Parameters
 
 
 def _calibration_recipe() -> list[list[str]]:
-    """The ``ballbeam`` commands of the first code block after the "## Calibration" heading."""
-    text = README.read_text(encoding="utf-8")
-    heading = text.index("\n## Calibration\n")
+    """The ``ballbeam`` commands of the first code block after the "## Record, fit, use" heading."""
+    text = (ROOT / "docs" / "calibrate.md").read_text(encoding="utf-8")
+    heading = text.index("\n## Record, fit, use\n")
     start = text.index("```", heading)
     end = text.index("```", start + 3) + 3
     first_line = text[:start].count("\n") + 1
@@ -23,18 +24,18 @@ def _calibration_recipe() -> list[list[str]]:
     return [words for number, words in _commands(text) if first_line <= number <= last_line]
 
 
-@pytest.mark.slow
-def test_the_readme_calibration_recipe_runs_as_printed(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
-) -> None:
+def calibration_recipe() -> list[list[str]]:
+    """The recipe's ``experiment`` and ``calibrate`` commands, in order."""
     recipe = [words for words in _calibration_recipe() if words[0] in ("experiment", "calibrate")]
     assert [words[0] for words in recipe] == ["experiment", "calibrate"]
-    monkeypatch.chdir(tmp_path)
-    for words in recipe:
-        code = main(words)
-        assert code == 0, (words, capsys.readouterr().err[-2000:])
-    calibrate = recipe[1]
-    out = Path(calibrate[calibrate.index("--out") + 1])
+    return recipe
+
+
+def check_calibration(folder: Path) -> None:
+    """The fit the recipe wrote in ``folder`` (where it ran, each command with exit 0): the parameters it was
+    told to fit, no problem, and the twin's own values within their intervals."""
+    calibrate = calibration_recipe()[1]
+    out = folder / calibrate[calibrate.index("--out") + 1]
     result = json.loads((out / "calibration.json").read_text(encoding="utf-8"))
     fitted = calibrate[calibrate.index("--fit") + 1].split(",")
     assert sorted(result["params"]) == sorted(fitted) and not result["problems"]
@@ -44,3 +45,12 @@ def test_the_readme_calibration_recipe_runs_as_printed(
         true = float(getattr(getattr(truth, group), field))
         v = result["params"][name]
         assert v["ci_low"] <= true <= v["ci_high"], (name, v, true)
+
+
+@pytest.mark.quick
+def test_the_calibration_recipe_records_then_fits_four_parameters() -> None:
+    """What tests/test_readme_in_order.py runs as printed (each command exit 0) and checks with
+    ``check_calibration``: a log recorded on the twin, then the fit of the four parameters into ``--out``."""
+    experiment, calibrate = calibration_recipe()
+    assert "--out" in experiment and experiment[experiment.index("--out") + 1] in calibrate
+    assert "--out" in calibrate and len(calibrate[calibrate.index("--fit") + 1].split(",")) == 4

@@ -1,4 +1,5 @@
-"""Every ``ballbeam`` command in README.md's code blocks parses with the command's own parser (nothing runs).
+"""Every ``ballbeam`` command in the code blocks of README.md and the manual's pages (``PAGES``: README.md,
+then the pages of mkdocs.yml's nav in order) parses with the command's own parser (nothing runs).
 
 A command is read as a shell reads it: ``\\`` continuations joined, comments dropped, words split by
 ``shlex``. A synopsis line (``[--duration 15]``, ``torque|voltage``, ``…``) is parsed twice: with every
@@ -12,12 +13,58 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
+import yaml
 
 from twin.app.cli import build_parser, join_negative_numbers
 
 ROOT = Path(__file__).resolve().parent.parent
 README = ROOT / "README.md"
 SHELL_BLOCKS = ("", "bash", "sh", "shell", "console")
+
+
+def _nav_pages(entries: object) -> list[str]:
+    """The Markdown files of an mkdocs nav, in order."""
+    if isinstance(entries, str):
+        return [entries]
+    if isinstance(entries, list):
+        return [page for entry in entries for page in _nav_pages(entry)]
+    if isinstance(entries, dict):
+        return [page for value in entries.values() for page in _nav_pages(value)]
+    return []
+
+
+# The design record and the protocol's specification: their code blocks are diagrams and layouts, no recipe
+# (tests/test_readme_in_order.py checks they hold none).
+RECORDS = ("design.md", "protocol.md")
+
+
+def manual_pages() -> list[Path]:
+    """README.md, then every page of the manual in mkdocs.yml's nav order (the order a newcomer reads them in),
+    the records left out."""
+    config = yaml.safe_load((ROOT / "mkdocs.yml").read_text(encoding="utf-8"))
+    pages = [page for page in _nav_pages(config["nav"]) if page not in RECORDS]
+    return [README, *(ROOT / config["docs_dir"] / page for page in pages)]
+
+
+PAGES = manual_pages()
+
+
+def page_name(path: Path) -> str:
+    return str(path.relative_to(ROOT))
+
+
+def manual_text() -> str:
+    """Every page's text, in order (for checks of what the manual says, wherever it says it)."""
+    return "\n".join(path.read_text(encoding="utf-8") for path in PAGES)
+
+
+def manual_commands() -> list[tuple[str, int, list[str]]]:
+    """(page, line number, words) of every ``ballbeam`` invocation of every page, in order."""
+    return [
+        (page_name(path), number, words)
+        for path in PAGES
+        for number, words in _commands(path.read_text(encoding="utf-8"))
+    ]
 
 
 @dataclass(frozen=True)
@@ -128,28 +175,40 @@ def _parse_error(argv: list[str], capsys: pytest.CaptureFixture[str]) -> str | N
 @pytest.mark.quick
 def test_the_readme_has_its_commands() -> None:
     """The extraction sees the commands it is meant to check (the test is not vacuous)."""
-    commands = [words for _, words in _commands(README.read_text(encoding="utf-8"))]
+    commands = [words for _, _, words in manual_commands()]
     assert len(commands) >= 12
     assert {"view", "run", "sweep", "montecarlo", "validate", "calibrate", "experiment"} <= {
         c[0] for c in commands if c
     }
-    calibrate = next(c for c in commands if c and c[0] == "calibrate")
+    calibrate = next(
+        c for page, _, c in manual_commands() if page == "docs/calibrate.md" and c[0] == "calibrate"
+    )
     assert (
         "--fit" in calibrate and "angle_sensor.zeroing_error_rad" in calibrate[calibrate.index("--fit") + 1]
     )
 
 
+@pytest.mark.quick
+def test_the_readme_and_every_page_with_a_recipe_are_read() -> None:
+    """The pages read are README.md and the nav's pages; each page that holds commands is one of them."""
+    assert PAGES[0] == README and len(PAGES) == len(set(PAGES)) and all(p.is_file() for p in PAGES)
+    pages = {page for page, _, _ in manual_commands()}
+    assert {"README.md", "docs/watch.md", "docs/validate.md", "docs/calibrate.md", "docs/connect.md"} <= pages
+    readme = [words[0] for page, _, words in manual_commands() if page == "README.md"]
+    assert {"view", "calibrate", "validate"} <= set(readme)  # the three jobs, one command each
+
+
 @pytest.mark.parametrize(
-    "number,words",
-    _commands(README.read_text(encoding="utf-8")),
-    ids=lambda v: f"line{v}" if isinstance(v, int) else " ".join(v)[:40],
+    "page,number,words",
+    manual_commands(),
+    ids=lambda v: f"line{v}" if isinstance(v, int) else (" ".join(v)[:40] if isinstance(v, list) else v),
 )
 def test_every_readme_command_parses(
-    number: int, words: list[str], capsys: pytest.CaptureFixture[str]
+    page: str, number: int, words: list[str], capsys: pytest.CaptureFixture[str]
 ) -> None:
     for argv in _expansions(words):
         error = _parse_error(argv, capsys)
-        assert error is None, f"README.md line {number}: ballbeam {' '.join(argv)}: {error}"
+        assert error is None, f"{page} line {number}: ballbeam {' '.join(argv)}: {error}"
 
 
 @pytest.mark.quick

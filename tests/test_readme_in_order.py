@@ -1,18 +1,21 @@
-"""README.md's recipes pasted in order, as a newcomer does: every code block that is meant to be pasted, top to
-bottom, in ONE working directory (a fresh copy of what the recipes read from a clone: ``docs/examples/``,
+"""The manual's recipes pasted in order, as a newcomer does: every code block of README.md and the manual's
+pages (tests/test_readme_commands.py's ``PAGES``: README.md, then mkdocs.yml's nav in order) that is meant to be
+pasted, top to bottom, in ONE working directory (a fresh copy of what the recipes read from a clone: ``docs/examples/``,
 ``examples/``, ``scripts/``), each shell line run by ``bash`` as typed, each Python block by ``python``, each
 file the README names (``(here `requirements.toml`)``, ``Saved as `mypkg/ctrl.py```) written where it says.
 A recipe that starts a server (``ballbeam serve``, ``--serve PORT``) runs in its own "terminal" while the rest
 of its block runs in another, as the README tells. Each exits 0, or the code its comment documents (``# exit
 1: …``, ``# 0 pass, 1 fail``), and no recipe refuses an output because an earlier one wrote it.
 
-docs/*.md holds no recipe to paste (diagrams only); examples/*/README.md's are their own tests' (tests/
-test_c_controller.py, tests/test_avr*.py, tests/test_fmi.py).
+The design record and the protocol (docs/design.md, docs/protocol.md) and the generated pages hold no recipe to
+paste (diagrams only); examples/*/README.md's are their own tests' (tests/test_c_controller.py,
+tests/test_avr*.py, tests/test_fmi.py).
 
 What is shrunk, and only through documented options appended to the line (the last of a repeated option
 wins), so that the whole takes minutes on two cores: ``SHRUNK`` below, each with where the recipe runs at its
 printed size. What is not run at all: ``SKIPPED``, each with its reason. The test prints every step's line,
-exit code and seconds.
+exit code and seconds. A quick test plans the paste without running it: every shell and Python block is pasted,
+or skipped whole for a reason in ``SKIPPED`` and counted in ``SKIPPED_BLOCKS``.
 """
 
 from __future__ import annotations
@@ -25,11 +28,23 @@ import socket
 import subprocess
 import sys
 import time
+from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
-from test_readme_commands import README, Block, _expansions, code_blocks, logical_lines, shell_words
+from test_readme_calibration import check_calibration
+from test_readme_commands import (
+    PAGES,
+    README,
+    RECORDS,
+    Block,
+    _expansions,
+    code_blocks,
+    logical_lines,
+    page_name,
+    shell_words,
+)
 
 ROOT = README.parent
 COPIED = ("docs/examples", "examples", "scripts")  # what the recipes read or build, from a clone
@@ -65,9 +80,19 @@ class Shrink:
 
 SHRUNK = (
     Shrink(
-        ("ballbeam", "sweep", "--out", "roa/"), ("--x0=-0.32:0.32:5", "--theta0=-0.7:0.7:5"), "5 × 5 starts"
+        ("ballbeam", "experiment", "--out", "data_file.mat"),
+        ("--duration", "20"),
+        "a 20 s log for README.md's two-parameter fit (docs/calibrate.md's recipe runs at its printed size)",
+    ),
+    Shrink(
+        ("ballbeam", "sweep", "--out", "roa/"), ("--x0=-0.32:0.32:3", "--theta0=-0.7:0.7:3"), "3 × 3 starts"
     ),
     Shrink(("ballbeam", "montecarlo"), ("--n", "12"), "12 rigs (tests/test_montecarlo.py)"),
+    Shrink(
+        ("ballbeam", "run", "--realtime"),
+        ("--duration", "6"),
+        "6 s of wall clock, not 15: held within it (tests/test_realtime.py paces longer runs)",
+    ),
     Shrink(
         ("ballbeam", "validate"), ("--criteria", CRITERIA_FILE), "few short runs (tests/test_validate.py)"
     ),
@@ -265,15 +290,15 @@ def _file_named_around(text_lines: list[str], block: Block) -> str | None:
     return None
 
 
-def _paste_block(me: Newcomer, block: Block, text_lines: list[str]) -> None:
-    where = f"README.md:{block.first_line}"
+def _paste_block(me: Newcomer, block: Block, text_lines: list[str], page: str) -> None:
+    where = f"{page}:{block.first_line}"
     name = _file_named_around(text_lines, block)
     if name is not None:
         path = me.work / name
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(block.text, encoding="utf-8")
     if block.language == "python":
-        me.run(where, f"python <<'EOF' (README.md:{block.first_line})", frozenset({0}), stdin=block.text)
+        me.run(where, f"python <<'EOF' ({where})", frozenset({0}), stdin=block.text)
         return
     if not block.shell:
         return
@@ -283,7 +308,7 @@ def _paste_block(me: Newcomer, block: Block, text_lines: list[str]) -> None:
         return
     servers: list[Server] = []
     for number, raw in logical_lines(block):
-        where = f"README.md:{number}"
+        where = f"{page}:{number}"
         line = raw.strip()
         reason = _line_skip_reason(line)
         if reason is not None:
@@ -314,40 +339,119 @@ def _newcomers_folder(work: Path) -> None:
     (work / CRITERIA_FILE).write_text(QUICK_CRITERIA, encoding="utf-8")
 
 
+# The blocks no test can paste, counted (page, the reason's needle): installs and the test suite itself, the
+# live view (it serves until closed), the shadow's three terminals and the view's wire recipe (each run by the
+# test its reason names).
+SKIPPED_BLOCKS = Counter(
+    {
+        ("README.md", "pip install"): 1,
+        ("docs/index.md", "pip install"): 1,
+        ("README.md", "ballbeam view"): 1,
+        ("docs/watch.md", "ballbeam view"): 1,
+        ("docs/watch.md", "ballbeam shadow"): 1,
+        ("docs/connect.md", "ballbeam view"): 1,
+    }
+)
+
+
+@dataclass(frozen=True)
+class Planned:
+    """A shell or Python block of a page, and the reason it is not pasted (None: it is)."""
+
+    page: str
+    block: Block
+    skipped: str | None
+
+
+def paste_plan() -> list[Planned]:
+    """Every shell and Python block of the manual, in paste order: pasted, or skipped whole (the block's own
+    reason, or every line of it skipped) with the needle of its reason."""
+    plan = []
+    for path in PAGES:
+        for block in code_blocks(path.read_text(encoding="utf-8")):
+            if block.language != "python" and not block.shell:
+                continue
+            needle = None
+            if block.shell:
+                needle = next(
+                    (n for n in ("ballbeam shadow", "ballbeam view --serve") if n in block.text), None
+                )
+                lines = [line.strip() for _, line in logical_lines(block)]
+                if needle is None and all(_line_skip_reason(line) for line in lines):
+                    needle = next(n for n, _ in SKIPPED if n in lines[0])
+            plan.append(Planned(page_name(path), block, needle))
+    return plan
+
+
+@pytest.mark.quick
+def test_every_block_is_pasted_or_skipped_for_a_counted_reason() -> None:
+    """The doc blocks: each shell and Python block is pasted by the in-order run below, or is one of the
+    counted blocks that cannot be (none skipped otherwise)."""
+    plan = paste_plan()
+    skipped = Counter(
+        (p.page, "ballbeam view" if p.skipped == "ballbeam view --serve" else p.skipped)
+        for p in plan
+        if p.skipped
+    )
+    assert skipped == SKIPPED_BLOCKS, skipped
+    pasted = [p for p in plan if not p.skipped]
+    print(
+        f"\n{len(plan)} shell and Python blocks: {len(pasted)} pasted, {sum(skipped.values())} skipped (counted)"
+    )
+    assert len(pasted) >= 20 and {p.page for p in pasted} >= {
+        "README.md",
+        "docs/validate.md",
+        "docs/connect.md",
+    }
+
+
 @pytest.mark.slow
 def test_the_readme_recipes_run_in_order_in_one_folder(tmp_path: Path) -> None:
-    text = README.read_text(encoding="utf-8")
     work, terminal = tmp_path / "clone", tmp_path / "terminal"
     work.mkdir()
     terminal.mkdir()
     _newcomers_folder(work)
     me = Newcomer(work, terminal)
-    text_lines = text.splitlines()
     began = time.monotonic()
-    for block in code_blocks(text):
-        _paste_block(me, block, text_lines)
+    plan = paste_plan()
+    ran_blocks = 0
+    for path in PAGES:
+        text = path.read_text(encoding="utf-8")
+        text_lines = text.splitlines()
+        for block in code_blocks(text):
+            before = len([s for s in me.steps if s.code >= 0])
+            _paste_block(me, block, text_lines, page_name(path))
+            ran_blocks += len([s for s in me.steps if s.code >= 0]) > before
     total = time.monotonic() - began
-    print(f"\n{len(me.steps)} steps in {total:.0f} s")
+    print(f"\n{len(me.steps)} steps of {ran_blocks} blocks in {total:.0f} s")
     for s in me.steps:
         print(
-            f"{s.where:<16} {s.code:>3} {s.seconds:6.1f} s  {s.shown[:110]}  {s.note if s.code < 0 else ''}"
+            f"{s.where:<24} {s.code:>3} {s.seconds:6.1f} s  {s.shown[:110]}  {s.note if s.code < 0 else ''}"
         )
     failed = [s for s in me.steps if s.code >= 0 and s.code not in s.expected]
     assert not failed, "\n\n".join(
         f"{s.where}: {s.shown}\nexit {s.code}, expected {sorted(s.expected)}:\n{me.output(s)}" for s in failed
     )
+    assert ran_blocks == len([p for p in plan if not p.skipped])  # every planned block ran a step
     ran = [s for s in me.steps if s.code >= 0]
     assert len(ran) >= 40, [s.shown for s in ran]  # the extraction is not vacuous
     assert {"roa", "roa-c", "report", "report-c", "cal", "cmp", "cmp_run", "fz", "cert"} <= {
         p.name for p in work.iterdir()
     }
+    check_calibration(work)  # docs/calibrate.md's recipe, run above as printed, fitted the twin's own values
 
 
 @pytest.mark.quick
 def test_the_docs_hold_no_recipe_to_paste() -> None:
-    """docs/*.md's code blocks are diagrams: a recipe added there (a shell block, a command line) must join the
-    in-order run above, which pastes README.md's alone."""
+    """docs/*.md's code blocks outside the manual's pages are diagrams (the design record, the protocol, the
+    generated pages): a recipe added there (a shell block, a command line) must join a page the in-order run
+    above pastes."""
+    pasted = set(PAGES)
+    records = {ROOT / "docs" / name for name in RECORDS}
+    assert records and not records & pasted
     for path in sorted((ROOT / "docs").rglob("*.md")):
+        if path in pasted:
+            continue
         for block in code_blocks(path.read_text(encoding="utf-8")):
             assert block.language not in ("bash", "sh", "shell", "console", "python"), (
                 path,

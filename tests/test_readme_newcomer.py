@@ -2,7 +2,8 @@
 collide, a file path given as ``--controller`` is refused naming the module to give, the README's controller
 example is importable as ``mypkg.ctrl:MyController``, the Gymnasium snippet prints what it shows, ``run
 --realtime`` warns when it did not keep real time, and the README pins what a firmware's summary and a
-controller FMU's steps mean. tests/test_readme_in_order.py pastes every recipe in order."""
+controller FMU's steps mean. The manual's pages count as the README (tests/test_readme_commands.py's ``PAGES``);
+tests/test_readme_in_order.py pastes every recipe in order."""
 
 from __future__ import annotations
 
@@ -16,14 +17,14 @@ from pathlib import Path
 
 import pytest
 from cli_checks import refused
-from test_readme_commands import README, _commands, code_blocks
+from test_readme_commands import README, code_blocks, manual_commands, manual_text
 
 from twin.app.cli import main
 from twin.interface import DaqSample
 from twin.realtime import OVERRUN_WARNING_SHARE, TickTiming, overrun_warning
 
 ROOT = README.parent
-TEXT = README.read_text(encoding="utf-8")
+TEXT = manual_text()
 
 
 def _python_block(needle: str) -> str:
@@ -48,13 +49,13 @@ def user_folder(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[Pat
 @pytest.mark.quick
 def test_the_readmes_output_folders_and_files_do_not_collide() -> None:
     """Pasted in order, no command writes an ``--out`` another already wrote (unless it says ``--overwrite``)."""
-    seen: dict[str, int] = {}
-    for number, words in _commands(TEXT):
+    seen: dict[str, str] = {}
+    for page, number, words in manual_commands():
         if "--out" not in words or "--overwrite" in words:
             continue
         out = words[words.index("--out") + 1].rstrip("/")
-        assert out not in seen, f"README.md lines {seen[out]} and {number} both write --out {out}"
-        seen[out] = number
+        assert out not in seen, f"{seen[out]} and {page}:{number} both write --out {out}"
+        seen[out] = f"{page}:{number}"
     assert {"roa", "roa-c", "report", "report-c"} <= set(seen)
 
 
@@ -133,7 +134,7 @@ def test_run_realtime_that_overruns_warns_and_keeps_the_verdicts_exit(
 def test_the_gymnasium_snippet_prints_what_it_shows() -> None:
     out = io.StringIO()
     with contextlib.redirect_stdout(out):
-        exec(compile(_python_block("gymnasium.make("), "README.md", "exec"), {"__name__": "__main__"})
+        exec(compile(_python_block("gymnasium.make("), "docs/learn.md", "exec"), {"__name__": "__main__"})
     first, second = out.getvalue().splitlines()
     words = first.replace("[", " ").replace("]", " ").split()
     assert len(words) == 7 and words[-2:] == ["False", "False"], first  # 4 volts, the reward, two flags
@@ -150,7 +151,7 @@ def test_every_figure_of_a_firmwares_summary_is_in_the_readmes_table(
     figures = json.loads(capsys.readouterr().out)["firmware"]
     table = TEXT[TEXT.index("| `update_cycles_max`") : TEXT.index("`validate` adds a `target` check")]
     missing = [name for name in figures if f"`{name}`" not in table]
-    assert not missing, f"README.md's firmware table lacks {missing}"
+    assert not missing, f"docs/firmware.md's firmware table lacks {missing}"
 
 
 def test_a_controller_fmu_steps_at_the_times_the_readme_states(monkeypatch: pytest.MonkeyPatch) -> None:

@@ -1,5 +1,5 @@
-"""README.md's three-terminal ``ballbeam shadow`` recipe run as printed: a served twin with a warm motor, the
-shadow at the nominal parameters, a controller — each command read from the README's block, the controller
+"""The manual's three-terminal ``ballbeam shadow`` recipe (docs/watch.md) run as printed: a served twin with a
+warm motor, the shadow at the nominal parameters, a controller — each command read from the page's block, the controller
 started as a user would, once the shadow says it is watching and then some seconds more (switching
 terminals: longer than the shadow's ``--idle``). The shadow scores the session's windows and raises the
 drift alarm the README shows (its documented exit for an alarm, 1)."""
@@ -17,16 +17,16 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
-README = ROOT / "README.md"
+README = ROOT / "docs" / "watch.md"  # where the recipe lives
 ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
 CLI = [sys.executable, "-m", "twin.app.cli"]
 
 
 def recipe() -> list[list[str]]:
-    """The commands of the README's block that begins ``# three terminals``, as a shell splits them."""
+    """The commands of the page's block that begins ``# three terminals``, as a shell splits them."""
     text = README.read_text(encoding="utf-8")
     block = re.search(r"```bash\n(# three terminals[^\n]*\n.*?)```", text, re.S)
-    assert block is not None, "README.md: the shadow's three-terminal block"
+    assert block is not None, "docs/watch.md: the shadow's three-terminal block"
     lines = [line for line in block.group(1).splitlines() if line and not line.startswith("#")]
     commands = [shlex.split(line) for line in lines]
     assert [c[:2] for c in commands] == [["ballbeam", "serve"], ["ballbeam", "shadow"], ["ballbeam", "run"]]

@@ -47,7 +47,7 @@ __all__ = [
 
 @dataclass(frozen=True)
 class Criteria:
-    """What ``held`` and the settling time mean (defaults and their reasons in the README)."""
+    """What ``held`` and the settling time mean (defaults and their reasons in docs/validate.md: "The verdict")."""
 
     # ≥ 4 periods of the slowest limit cycle seen on the twin (0.73 s) and ≤ a fifth of a 15 s run.
     window_s: float = 3.0

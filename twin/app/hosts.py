@@ -210,7 +210,7 @@ AVR = Host(
     log_replay=_avr_log_replay,
     wire=_avr_wire,
     help="; or avr:FILE.elf (avr:MCU:FILE.elf), a firmware image run on a simulated microcontroller against the "
-    "twin (README: Validate your firmware)",
+    "twin (docs/firmware.md: Firmware in the loop)",
 )
 
 
@@ -240,7 +240,7 @@ FMU = controller_host(
     lambda spec: f"your controller FMU {spec} (its own process)",
     lambda spec: Path(_rest(spec)),
     help="; or fmu:FILE.fmu, a co-simulation FMU with inputs ball_v, angle_v and output dac_v, run in a process "
-    "of its own (README: The twin in Simulink, OpenModelica and FMPy)",
+    "of its own (docs/firmware.md: Controllers as FMUs)",
 )
 
 

@@ -3,7 +3,7 @@
 ``ballbeam_fmu.py`` (FMI 3.0, pythonfmu3) and ``ballbeam_fmu2.py`` (FMI 2.0, pythonfmu) are the scripts
 ``ballbeam export-fmu`` packs; each registers ``RigUnit``'s variables with its library's classes and hands it
 the FMI calls. The convention (one step of the DAQ's period is one tick of the engine ``ballbeam run`` uses) is
-in the README, "The twin in Simulink, OpenModelica and FMPy".
+in the manual, docs/connect.md: "The twin as an FMU".
 """
 
 from __future__ import annotations
