@@ -471,12 +471,13 @@ def test_a_beam_past_what_the_stops_yield_is_numerical(
     """With the yield bound shrunk to 1 mrad, the same gain-1000 run (3.55 mrad past the stops) fails
     numerically, in the single run and in the batch: the check reads every step's angle."""
     import twin.plant
+    import twin.plant_batch
     import twin.rigs.batch
     from controllers import registry
     from twin.plant import NumericalError
     from twin.rigs.sim import run_closed_loop
 
-    for module in (twin.plant, twin.rigs.batch):
+    for module in (twin.plant, twin.plant_batch):  # the single run's plant and MuJoCo's batch
         monkeypatch.setattr(module, "stop_overshoot_bound_rad", lambda p: 0.001)
     p = params.with_overrides({"amplifier.gain_v_per_v": 1000.0})
     pattern = r"numerical failure: the beam at 0\.7\d+ rad, past its stops \(0\.7575 rad\) by more than they can yield"

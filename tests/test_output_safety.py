@@ -341,7 +341,8 @@ def test_a_user_controllers_module_is_an_input(tmp_path: Path, monkeypatch: pyte
     """The module of ``--controller MODULE:CLASS`` is one of the job's inputs: an output never replaces it."""
     from twin.app import cli
     from twin.app.catalogue import user_controller
-    from twin.app.commands.common import inputs
+    from twin.app.commands import sweep
+    from twin.app.commands.common import options_from
 
     module = tmp_path / "myctl_outputs.py"
     module.write_text(
@@ -353,14 +354,15 @@ def test_a_user_controllers_module_is_an_input(tmp_path: Path, monkeypatch: pyte
     monkeypatch.syspath_prepend(str(tmp_path))
     user_controller("myctl_outputs:C")  # the command imports it before the output checks
     args = cli.build_parser().parse_args(["sweep", "--controller", "myctl_outputs:C"])
-    assert ("--controller", str(module)) in inputs(args)
+    inputs = options_from(sweep.Options, args).job().inputs  # the files the sweep job reads
+    assert ("--controller", str(module)) in inputs()
     with pytest.raises(OutputError, match="is the input --controller"):
         outputs.check_output_folder(
             "--out",
             str(tmp_path),
             JobFiles("x", ("myctl_outputs.py",)),
             overwrite=True,
-            inputs=inputs(args),
+            inputs=inputs(),
         )
 
 

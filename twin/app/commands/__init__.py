@@ -1,6 +1,8 @@
-"""The ``ballbeam`` subcommands, one module each: its help (``HELP``), its options (``add_arguments``) and
-its handler (``run``, returning the exit code). ``COMMANDS`` lists them once, in the order ``ballbeam --help``
-shows them; ``twin.app.cli`` builds its parser from it. What several commands share is in ``common``.
+"""The ``ballbeam`` subcommands, one module each: its help (``HELP``), its options (``add_arguments``), the
+frozen record they are read into once (``Options``, filled by ``common.options_from``) and its handler
+(``run``, returning the exit code). ``COMMANDS`` lists them once, in the order ``ballbeam --help`` shows them;
+``twin.app.cli`` builds its parser from it. What several commands share is in ``common``, the many-run jobs'
+skeleton in ``job``.
 
 Every module imports only light code at its top (``--help`` imports them all); a handler imports what it
 needs when it runs.
@@ -9,7 +11,7 @@ needs when it runs.
 from __future__ import annotations
 
 import argparse
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
 from twin.app.commands import (
     calibrate,
@@ -31,9 +33,15 @@ from twin.app.commands import (
     view,
 )
 
+if TYPE_CHECKING:
+    from _typeshed import DataclassInstance
+
 
 class Command(Protocol):
-    """A command's module: its options and its handler (the exit code)."""
+    """A command's module: its options, their typed record and its handler (the exit code)."""
+
+    @property
+    def Options(self) -> type[DataclassInstance]: ...  # noqa: N802 (the module's class)
 
     def add_arguments(self, parser: argparse.ArgumentParser) -> None: ...
 

@@ -5,13 +5,16 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from dataclasses import dataclass
 from pathlib import Path
 
 from twin.app.commands.common import (
+    ParamsOptions,
     add_params_options,
     check_overwrite,
     inputs,
     load_params,
+    options_from,
     progress_bar,
     write_out,
 )
@@ -45,36 +48,59 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_params_options(parser)
 
 
+@dataclass(frozen=True)
+class Options:
+    """``calibrate``'s options."""
+
+    logs: list[str]
+    fit: str
+    out: str | None
+    overwrite: bool
+    window: float
+    json: bool
+    parameters: ParamsOptions
+
+
 def run(args: argparse.Namespace) -> int:
+    return handle(options_from(Options, args))
+
+
+def handle(o: Options) -> int:
     from calib.identify import FITTABLE, calibrate
     from calib.logs import check_period, load_rig_log
     from calib.report import OUTPUT_FILES, write_report
     from twin.parameters import ParameterError
 
-    check_overwrite(args, "--out")
-    start = load_params(args)
-    fit = [name.strip() for name in args.fit.split(",") if name.strip()]
+    check_overwrite(o.overwrite, [("--out", o.out)])
+    start = load_params(o.parameters)
+    fit = [name.strip() for name in o.fit.split(",") if name.strip()]
     unknown = [n for n in fit if n not in FITTABLE]
     if not fit or unknown:
-        raise ParameterError(f"--fit {args.fit!r}: choose from {', '.join(FITTABLE)}")
-    if args.out is not None:
-        check_output_folder("--out", args.out, OUTPUT_FILES, overwrite=args.overwrite, inputs=inputs(args))
-    logs = [load_rig_log(path) for path in args.logs]
+        raise ParameterError(f"--fit {o.fit!r}: choose from {', '.join(FITTABLE)}")
+    if o.out is not None:
+        check_output_folder(
+            "--out",
+            o.out,
+            OUTPUT_FILES,
+            overwrite=o.overwrite,
+            inputs=inputs(params=o.parameters.params, logs=o.logs),
+        )
+    logs = [load_rig_log(path) for path in o.logs]
     for log in logs:  # a log at another period (or in ms) is the log's fault, not the window's
         check_period(log, start.daq.period_s)
     period_s = min(log.period_s for log in logs)
-    if args.window < 2 * period_s:  # a window is fitted from its ticks' differences: at least two
+    if o.window < 2 * period_s:  # a window is fitted from its ticks' differences: at least two
         raise ParameterError(
-            f"--window = {args.window:g}: at least 2 ticks of the logs' {period_s * 1e3:g} ms period "
+            f"--window = {o.window:g}: at least 2 ticks of the logs' {period_s * 1e3:g} ms period "
             f"({2 * period_s:g} s)"
         )
 
     # A bar per stage over its evaluation budget: the ETA is an upper bound (a fit stops when it converges). It
     # goes to stderr, with --json too (the JSON is stdout's): a 1-hour log's fit is minutes of work.
     progress = progress_bar("calibrate", unit="evaluation")
-    cal = calibrate(logs, fit, start, window_s=args.window, progress=progress)
-    write_out(args, write_report, cal)
-    if args.json:
+    cal = calibrate(logs, fit, start, window_s=o.window, progress=progress)
+    write_out(o.out, o.overwrite, write_report, cal)
+    if o.json:
         print(json.dumps(cal.to_json()))
     else:
         for name, v in cal.values.items():
@@ -86,8 +112,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"converged: {cal.converged} ({cal.message}); {cal.wall_s:.1f} s")
         for warning in cal.warnings:
             print(f"warning: {warning}")
-        if args.out is not None:
-            print(f"wrote {Path(args.out) / 'params.toml'}, calibration.json, report.md")
+        if o.out is not None:
+            print(f"wrote {Path(o.out) / 'params.toml'}, calibration.json, report.md")
     # A fit that did not converge, or whose residuals or information say it cannot be trusted (model
     # mismatch, weak excitation, a parameter the logs do not identify: kept at its start value in
     # params.toml), exits 1: its files are written for inspection, its message is on stderr.

@@ -4,9 +4,17 @@ from __future__ import annotations
 
 import argparse
 import json
+from dataclasses import dataclass
 from pathlib import Path
 
-from twin.app.commands.common import add_params_options, check_overwrite, inputs, load_params
+from twin.app.commands.common import (
+    ParamsOptions,
+    add_params_options,
+    check_overwrite,
+    inputs,
+    load_params,
+    options_from,
+)
 from twin.outputs import check_outputs, writing
 
 PARAMS_OUT_SUFFIXES = (".toml",)
@@ -29,20 +37,37 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_params_options(parser)
 
 
+@dataclass(frozen=True)
+class Options:
+    """``calibrate-static``'s options."""
+
+    table: str
+    out: str | None
+    overwrite: bool
+    json: bool
+    parameters: ParamsOptions
+
+
 def run(args: argparse.Namespace) -> int:
+    return handle(options_from(Options, args))
+
+
+def handle(o: Options) -> int:
     from calib.static import calibrate, load_table
     from calib.static_render import render_lines, render_toml
     from twin.outputs import atomic_output
 
-    check_overwrite(args, "--out")
-    params = load_params(args)
+    check_overwrite(o.overwrite, [("--out", o.out)])
+    params = load_params(o.parameters)
     paths = check_outputs(
-        [("--out", args.out, PARAMS_OUT_SUFFIXES, 0)], overwrite=args.overwrite, inputs=inputs(args)
+        [("--out", o.out, PARAMS_OUT_SUFFIXES, 0)],
+        overwrite=o.overwrite,
+        inputs=inputs(params=o.parameters.params, table=o.table),
     )
-    result = calibrate(load_table(table_path(args.table)), params)
-    print(json.dumps(result.to_json(), indent=2) if args.json else "\n".join(render_lines(result)))
-    if "--out" in paths:
-        with writing("--out", args.out), atomic_output(paths["--out"], overwrite=args.overwrite) as fh:
+    result = calibrate(load_table(table_path(o.table)), params)
+    print(json.dumps(result.to_json(), indent=2) if o.json else "\n".join(render_lines(result)))
+    if o.out is not None and "--out" in paths:
+        with writing("--out", o.out), atomic_output(paths["--out"], overwrite=o.overwrite) as fh:
             fh.write(render_toml(result).encode("utf-8"))
     return 0
 

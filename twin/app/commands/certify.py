@@ -5,22 +5,25 @@ from __future__ import annotations
 
 import argparse
 import json
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from twin.app.commands.common import (
     JOB_RUN_S,
+    OutputOptions,
+    ParamsOptions,
+    SpreadOptions,
     add_controller_timeout,
     add_job_outputs,
     add_params_options,
     add_requirements_job,
-    check_job,
     check_start_box,
     interrupted,
-    params_and_spread,
+    options_from,
     progress_bar,
-    write_out,
 )
+from twin.app.commands.job import ManyRunJob
 from twin.app.options import SpanType, count, finite_float, seed
 
 HELP = (
@@ -76,57 +79,96 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_controller_timeout(parser)
 
 
+@dataclass(frozen=True)
+class Options:
+    """``certify``'s options (a statement is made here: no client is served)."""
+
+    controller: str
+    spec: str
+    x0: tuple[float, float]
+    theta0: tuple[float, float]
+    guarantee: float
+    confidence: float
+    duration: float
+    no_noise: bool
+    seed: int
+    batch: int
+    workers: int
+    scheduler: str | None
+    controller_timeout: float | None
+    parameters: ParamsOptions
+    spread: SpreadOptions
+    output: OutputOptions
+
+    def job(self) -> ManyRunJob:
+        return ManyRunJob(
+            "certify",
+            self.controller,
+            self.parameters,
+            self.spread,
+            self.output,
+            workers=self.workers,
+            scheduler=self.scheduler,
+            controller_timeout=self.controller_timeout,
+            spec=self.spec,
+        )
+
+
 def run(args: argparse.Namespace) -> int:
+    return handle(options_from(Options, args))
+
+
+def handle(o: Options) -> int:
     from twin.app.certify import OUTPUT_FILES, CertifySettings, certify, runs_needed
     from twin.parameters import ParameterError
     from twin.requirements import check_timing, load_spec
 
-    args.serve = None
-    if (args.spread is None) == (args.calibration is None):
+    job = o.job()
+    if (o.spread.spread is None) == (o.spread.calibration is None):
         raise ParameterError(
             "give one of --spread FILE or --calibration DIR (the rigs the statement is over)"
         )
-    base, spread = params_and_spread(args)
+    base, spread = job.params_and_spread()
     assert spread is not None
-    spec = load_spec(args.spec)
-    check_timing(spec.requirements, args.spec, base.daq.period_s, args.duration)
-    x, th = args.x0, args.theta0
+    spec = load_spec(o.spec)
+    check_timing(spec.requirements, o.spec, base.daq.period_s, o.duration)
+    x, th = o.x0, o.theta0
     check_start_box(base, x, th)
-    runs_needed(args.guarantee, args.confidence)  # refused here if it cannot be stated
-    check_job(args, base, OUTPUT_FILES)
+    runs_needed(o.guarantee, o.confidence)  # refused here if it cannot be stated
+    job.check(base, OUTPUT_FILES)
     settings = CertifySettings(
-        args.controller,
+        o.controller,
         x,
         th,
-        args.guarantee,
-        args.confidence,
-        args.duration,
-        not args.no_noise,
-        args.seed,
-        args.batch,
+        o.guarantee,
+        o.confidence,
+        o.duration,
+        not o.no_noise,
+        o.seed,
+        o.batch,
     )
     result = certify(
         settings,
         base,
         spec,
         spread,
-        workers=args.workers,
-        scheduler=args.scheduler,
+        workers=o.workers,
+        scheduler=o.scheduler,
         progress=progress_bar("certify"),
     )
-    write_out(args, _write, result)
+    job.write(_write, result)
     out = result.to_json()
-    if args.json:
+    if o.output.json:
         print(json.dumps(out))
     else:
         print(out["statement"])
         for name, r in out["requirements"].items():
             sd = f", noise sd {r['noise_sd']:.3g}" if "noise_reruns" in r else ""
             print(f"  {name}: {r['status']}, least robustness {r['least_robustness']:+.4g}{sd}")
-        if result.counterexample is not None and args.out is not None:
+        if result.counterexample is not None and o.output.out is not None:
             from twin.app.replay import replay_command
 
-            print(f"repeat it: {replay_command(Path(args.out) / 'certify.json', args.controller)}")
+            print(f"repeat it: {replay_command(Path(o.output.out) / 'certify.json', o.controller)}")
     if result.outcome == "interrupted":
         return interrupted("certify", ": no statement")
     return 0 if result.outcome == "pass" else 1

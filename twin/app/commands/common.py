@@ -1,6 +1,10 @@
-"""What several ``ballbeam`` commands share: their option groups, the parameters (``--params``, ``--set``,
-``--calibration``, ``--spread``), the files a command reads and writes, a many-run job's served clients
-(``--serve``), its progress bar and its exit code.
+"""What several ``ballbeam`` commands share: their option groups and the typed records they are read into
+(``options_from``), the parameters (``--params``, ``--set``, ``--calibration``, ``--spread``), the files a
+command reads and writes, its progress bar and its exit code. A many-run job's skeleton (its checks, served
+clients, writing and interrupts) is ``twin.app.commands.job``.
+
+Each command reads its parsed options once, into its own frozen record (``options_from``); the functions here
+take those records or plain values, never the parsed namespace.
 
 Nothing heavy is imported at the top: ``--help`` builds every command's options from here.
 """
@@ -8,19 +12,22 @@ Nothing heavy is imported at the top: ``--help`` builds every command's options 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
-from collections.abc import Callable, Iterator, Sequence
-from contextlib import contextmanager
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypeVar, get_type_hints
 
 from twin.app.hosts import HOSTS, host_of
 from twin.app.options import MAX_JOB_RUN_S, MAX_RUN_S, count, finite_float, seed
-from twin.outputs import JobFiles, check_output_folder, writing
+from twin.outputs import writing
 from twin.rigs.backends import DEFAULT_PLANT, ENGINES, backend, engine_policy, plant_choices, plant_help
 
 if TYPE_CHECKING:
+    from _typeshed import DataclassInstance
+
     from twin.app.fanout import Served
     from twin.app.montecarlo import Distribution
     from twin.interface import Controller
@@ -47,6 +54,73 @@ JOB_RUN_S = finite_float(
     0, MAX_JOB_RUN_S, lo_open=True, unit="s", why="each run of a many-run job; its verdict is kept"
 )
 WORKERS = count(1, MAX_WORKERS, unit="local processes")
+
+Record = TypeVar("Record", bound="DataclassInstance")
+
+
+def options_from(kind: type[Record], args: argparse.Namespace) -> Record:
+    """A command's typed record of its options, filled from the parsed ``args`` by field name; a field that is
+    itself a record (an option group such as ``ParamsOptions``) is filled the same way. A field the parser did
+    not define is a programming error (TypeError), never a silent default."""
+    values = vars(args)
+    hints = get_type_hints(kind)
+    filled: dict[str, Any] = {}
+    for field in dataclasses.fields(kind):
+        hint = hints[field.name]
+        if isinstance(hint, type) and dataclasses.is_dataclass(hint):
+            filled[field.name] = options_from(hint, args)
+        elif field.name in values:
+            filled[field.name] = values[field.name]
+        else:
+            raise TypeError(f"{kind.__name__}.{field.name}: the parser defines no option {field.name!r}")
+    return kind(**filled)
+
+
+def option_names(kind: type[DataclassInstance]) -> set[str]:
+    """The parsed options a record reads (its groups' too): the ``dest`` of each."""
+    hints = get_type_hints(kind)
+    names: set[str] = set()
+    for field in dataclasses.fields(kind):
+        hint = hints[field.name]
+        if isinstance(hint, type) and dataclasses.is_dataclass(hint):
+            names |= option_names(hint)
+        else:
+            names.add(field.name)
+    return names
+
+
+@dataclass(frozen=True)
+class ParamsOptions:
+    """``--params FILE`` and the ``--set`` items (every command)."""
+
+    params: str | None
+    set: list[str] | None
+
+
+@dataclass(frozen=True)
+class SpreadOptions:
+    """``--spread FILE`` or ``--calibration DIR``: what a many-run job's rigs are drawn from."""
+
+    spread: str | None
+    calibration: str | None
+
+
+@dataclass(frozen=True)
+class ServedOptions:
+    """``--serve [HOST:]PORT`` and its waits (sweep, montecarlo, validate)."""
+
+    serve: str | None
+    timeout: float | None
+    wait_client: float | None
+
+
+@dataclass(frozen=True)
+class OutputOptions:
+    """A many-run job's outputs: ``--out DIR``, ``--overwrite`` and ``--json``."""
+
+    out: str | None
+    overwrite: bool
+    json: bool
 
 
 def controller_help(firmware: bool = True) -> str:
@@ -106,42 +180,39 @@ def add_engine_options(
     parser.add_argument(
         "--band",
         type=count(1, 64),
-        default=None,  # 1, set by resolve_engine: given, it is refused where the engine is not screen
+        default=None,  # 1, set by resolve_band: given, it is refused where the engine is not screen
         metavar="N",
         help="with --engine screen: the grid steps around each class change that MuJoCo decides (default 1)",
     )
 
 
-def resolve_engine(args: argparse.Namespace, default: str) -> str:
-    """The engine asked for, or the command's default where the job allows it (refused where it does not).
-    A grid's ``--band`` goes with the screen engine only (refused with another); not given, it is set to 1."""
-    engine = _engine(args, default)
-    if hasattr(args, "band"):
-        if args.band is not None and not engine_policy(engine, args.plant).screened:
-            refuse_unused(
-                [("--band", args.band)], f"the band is the screen engine's; this job's engine is {engine}"
-            )
-        args.band = 1 if args.band is None else args.band
-    return engine
-
-
-def _engine(args: argparse.Namespace, default: str) -> str:
-    engine = args.engine
+def resolve_engine(
+    engine: str | None, plant: str, default: str, *, plain: bool = False, served: bool = False
+) -> str:
+    """The engine asked for, or the command's default where the job allows it (refused where it does not):
+    MuJoCo alone for a ``plain`` job (``sweep --refine``), a ``served`` one, or a plant no screening backend
+    stands in for."""
     if engine is None:
-        alone = backend(args.plant).stand_in is None  # no screening backend stands in for the plant
-        plain = getattr(args, "refine", 0) or getattr(args, "serve", None) is not None or alone
-        return "mujoco" if plain else default
+        alone = backend(plant).stand_in is None  # no screening backend stands in for the plant
+        return "mujoco" if plain or served or alone else default
     from twin.parameters import ParameterError
 
     try:
-        policy = engine_policy(engine, args.plant)
+        policy = engine_policy(engine, plant)
     except ValueError as exc:
         raise ParameterError(str(exc)) from None
-    if policy.screen is not None and getattr(args, "serve", None) is not None:
+    if policy.screen is not None and served:
         raise ParameterError(
             f"--engine {engine}: a served job's runs are sessions with a client; not with --serve"
         )
     return str(engine)
+
+
+def resolve_band(band: int | None, engine: str, plant: str) -> int:
+    """A grid's ``--band``: it goes with the screen engine only (refused with another); not given, 1."""
+    if band is not None and not engine_policy(engine, plant).screened:
+        refuse_unused([("--band", band)], f"the band is the screen engine's; this job's engine is {engine}")
+    return 1 if band is None else band
 
 
 def screen_summary(screen: dict[str, Any]) -> str:
@@ -233,12 +304,12 @@ def add_controller_timeout(command: argparse.ArgumentParser) -> None:
     )
 
 
-def load_params(args: argparse.Namespace) -> Parameters:
+def load_params(options: ParamsOptions) -> Parameters:
     from twin.parameters import ParameterError, Parameters
 
-    params = Parameters.from_file(args.params) if args.params else Parameters()
+    params = Parameters.from_file(options.params) if options.params else Parameters()
     overrides: dict[str, object] = {}
-    for item in getattr(args, "set", None) or ():
+    for item in options.set or ():
         name, sep, text = item.partition("=")
         if not sep or "." not in name:
             raise ParameterError(f"--set {item!r}: expected GROUP.NAME=VALUE, e.g. start.free_run_s=0.02")
@@ -246,10 +317,10 @@ def load_params(args: argparse.Namespace) -> Parameters:
     return params.with_overrides(overrides, origin="--set") if overrides else params
 
 
-def params_source(args: argparse.Namespace) -> str:
+def params_source(options: ParamsOptions) -> str:
     """Where the parameters came from, as typed: ``--params FILE`` and the ``--set`` items."""
-    parts = [f"--params {args.params}"] if args.params else []
-    parts += [f"--set {item}" for item in getattr(args, "set", None) or ()]
+    parts = [f"--params {options.params}"] if options.params else []
+    parts += [f"--set {item}" for item in options.set or ()]
     return " ".join(parts)
 
 
@@ -294,46 +365,45 @@ def save_log(log: RunLog, option: str, text: str, path: Path, overwrite: bool) -
         save(log, path, overwrite=overwrite)
 
 
-def inputs(args: argparse.Namespace) -> list[tuple[str, str]]:
-    """The files a command reads, as (option, path): no output may replace one. A calibration folder brings
-    its two files; a user controller its module's file (imported by then)."""
+def inputs(
+    *,
+    params: str | None = None,
+    spread: str | None = None,
+    criteria: str | None = None,
+    table: str | None = None,
+    spec: str | None = None,
+    replay: str | None = None,
+    logs: Sequence[str] | None = None,
+    reference: Sequence[str] | None = None,
+    calibration: str | None = None,
+    controller: str | None = None,
+) -> list[tuple[str, str]]:
+    """The files a command reads (the options it has), as (option, path): no output may replace one. A
+    calibration folder brings its two files; a user controller its module's file (imported by then)."""
     found: list[tuple[str, str]] = []
-    for option in ("params", "spread", "criteria", "table", "spec", "replay"):
-        value = getattr(args, option, None)
+    for option, value in (
+        ("--params", params),
+        ("--spread", spread),
+        ("--criteria", criteria),
+        ("TABLE", table),
+        ("--spec", spec),
+        ("--replay", replay),
+    ):
         if value:
-            found.append((f"--{option}" if option != "table" else "TABLE", value))
-    for log in getattr(args, "logs", None) or ():
+            found.append((option, value))
+    for log in logs or ():
         found.append(("LOG", log))
-    for log in getattr(args, "reference", None) or ():
+    for log in reference or ():
         found.append(("--reference", log))
-    calibration = getattr(args, "calibration", None)
     if calibration:
         found += [
             ("--calibration", str(Path(calibration) / name)) for name in ("params.toml", "calibration.json")
         ]
-    spec = str(getattr(args, "controller", ""))
-    image = host_of(spec).image(spec) if spec else None  # its host's file (twin.app.hosts)
+    spec_text = str(controller or "")
+    image = host_of(spec_text).image(spec_text) if spec_text else None  # its host's file (twin.app.hosts)
     if image is not None:
         found.append(("--controller", str(image)))
     return found
-
-
-def check_job(args: argparse.Namespace, params: Parameters, outputs: JobFiles) -> None:
-    """What every many-run command checks before the work (its numbers are checked by their types): the
-    controller (built once: a failing constructor is refused here) and the output folder the job writes
-    ``outputs`` into."""
-    from twin.app.hosts import catalogue_for
-
-    if args.serve is None:  # served: the client's controller is none of ours
-        catalogue_for(args.controller, params)
-    check_overwrite(args, "--out")
-    if getattr(args, "scheduler", None) is not None:  # the scheduler's workers run the job, not local ones
-        refuse_unused(
-            [("--workers", args.workers if args.workers > 1 else None)],
-            f"--scheduler {args.scheduler} fans the runs out to its own workers: drop one",
-        )
-    if args.out is not None:
-        check_output_folder("--out", args.out, outputs, overwrite=args.overwrite, inputs=inputs(args))
 
 
 def given(value: object) -> bool:
@@ -364,13 +434,11 @@ def _shown(value: object) -> str:
     return f" {text[:60]}"
 
 
-def check_overwrite(args: argparse.Namespace, *outputs: str) -> None:
-    """``--overwrite`` with none of the command's ``outputs`` (option names) given replaces nothing: refused."""
-    named = [getattr(args, option[2:].replace("-", "_"), None) for option in outputs]
-    if getattr(args, "overwrite", False) and not any(given(value) for value in named):
-        refuse_unused(
-            [("--overwrite", True)], f"it replaces an existing {' or '.join(outputs)}: none is given"
-        )
+def check_overwrite(overwrite: bool, outputs: Sequence[tuple[str, object]]) -> None:
+    """``--overwrite`` with none of the command's ``outputs`` (option, value) given replaces nothing: refused."""
+    if overwrite and not any(given(value) for _, value in outputs):
+        names = " or ".join(option for option, _ in outputs)
+        refuse_unused([("--overwrite", True)], f"it replaces an existing {names}: none is given")
 
 
 def check_flick(
@@ -405,97 +473,18 @@ def check_flick(
         )
 
 
-def params_and_spread(args: argparse.Namespace) -> tuple[Parameters, Distribution | None]:
+def params_and_spread(options: ParamsOptions, rigs: SpreadOptions) -> tuple[Parameters, Distribution | None]:
     """The parameters and the Monte Carlo spread: a calibration brings both; else --params/--set and an
     optional --spread file."""
     from twin.app.montecarlo import load_calibration_spread, load_spread
     from twin.parameters import ParameterError
 
-    if args.calibration is not None:
-        if args.params or args.set:
+    if rigs.calibration is not None:
+        if options.params or options.set:
             raise ParameterError("--calibration brings its own parameters: drop --params/--set")
-        return load_calibration_spread(args.calibration)
-    params = load_params(args)
-    return params, load_spread(args.spread, params) if args.spread is not None else None
-
-
-def check_served(args: argparse.Namespace) -> None:
-    """The options of a many-run job that go with --serve or without it (a ParameterError: exit 2)."""
-    from twin.parameters import ParameterError
-
-    if args.serve is None:
-        if args.controller is None:
-            raise ParameterError("--controller is required (unless --serve: the client's controller)")
-        for option, value in (("--timeout", args.timeout), ("--wait-client", args.wait_client)):
-            if value is not None:
-                raise ParameterError(f"{option} is a served job's wait: it needs --serve")
-        return
-    _serve_address(args.serve)
-    if getattr(args, "workers", 1) > 1 or getattr(args, "scheduler", None) is not None:
-        raise ParameterError(
-            "--serve runs every session here, one after the other on one socket: drop --workers/--scheduler"
-        )
-    if getattr(args, "controller_timeout", None) is not None:
-        raise ParameterError("--controller-timeout: with --serve the client's budget is --timeout")
-
-
-def _serve_address(text: str) -> tuple[str, int]:
-    """--serve's ``[HOST:]PORT`` (a bare port: 127.0.0.1, this machine only)."""
-    from twin.parameters import ParameterError
-
-    host, colon, port_text = text.rpartition(":")
-    host = host.strip("[]") if colon else "127.0.0.1"  # [::1]:PORT
-    port = int(port_text) if port_text.isdigit() else -1
-    if not 0 <= port <= 65535 or not host:
-        raise ParameterError(f"--serve {text!r}: expected [HOST:]PORT, a UDP port 0…65535 (0: a free one)")
-    return host, port
-
-
-@contextmanager
-def serving(args: argparse.Namespace, params: Parameters) -> Iterator[Served | None]:
-    """With --serve: the job's server (one socket for all its sessions, bound before the work; its URL
-    printed first), closed after the job; else None."""
-    if args.serve is None:
-        yield None
-        return
-    from twin.app.fanout import Served
-    from twin.parameters import ParameterError
-    from twin.serving.server import DEFAULT_TIMEOUT_S, ServeError, Server, SessionSettings
-
-    host, port = _serve_address(args.serve)
-    settings = SessionSettings(params=params, rig_name=f"ballbeam-twin {package_version()} {args.command}")
-    try:
-        server = Server(settings, host, port)
-    except ServeError as exc:
-        raise ParameterError(f"--serve {args.serve}: {exc}") from None
-    timeout_s = args.timeout if args.timeout is not None else DEFAULT_TIMEOUT_S
-    with server:
-        # The address first; with --json stdout is JSON lines (this one, then the job's summary).
-        address = (
-            json.dumps({"serving_on": server.url})
-            if getattr(args, "json", False)
-            else f"serving on {server.url}"
-        )
-        print(address, flush=True)
-        yield Served(
-            server,
-            timeout_s=timeout_s,
-            first_wait_s=args.wait_client,
-            next_wait_s=args.wait_client if args.wait_client is not None else timeout_s,
-        )
-
-
-def job_name(args: argparse.Namespace) -> str:
-    """What a job's report calls its controller: --controller, else (served) a placeholder until the
-    client has said its name (``client_name``)."""
-    return str(args.controller) if args.controller is not None else "served client"
-
-
-def client_name(args: argparse.Namespace, served: Served | None) -> str | None:
-    """A served job without --controller: the clients' HELLO names, which the report then carries."""
-    if served is None or args.controller is not None:
-        return None
-    return ", ".join(served.client_names()) or "served client (none came)"
+        return load_calibration_spread(rigs.calibration)
+    params = load_params(options)
+    return params, load_spread(rigs.spread, params) if rigs.spread is not None else None
 
 
 def served_stopped(served: Served | None, what: str, done: int, total: int) -> int | None:
@@ -523,11 +512,11 @@ def controller_failures(records: Sequence[dict[str, Any] | None], what: str) -> 
     return 1
 
 
-def write_out(args: argparse.Namespace, write: Callable[..., Any], result: Any) -> None:
+def write_out(out: str | None, overwrite: bool, write: Callable[..., Any], result: Any) -> None:
     """Write a job's result to ``--out`` (checked before the job), an OSError as one line naming it."""
-    if args.out is not None:
-        with writing("--out", args.out):
-            write(result, args.out, overwrite=args.overwrite)
+    if out is not None:
+        with writing("--out", out):
+            write(result, out, overwrite=overwrite)
 
 
 def progress_bar(what: str, unit: str = "run") -> Callable[..., None]:
@@ -557,20 +546,20 @@ def progress_bar(what: str, unit: str = "run") -> Callable[..., None]:
     return update
 
 
-def compare_params(args: argparse.Namespace) -> tuple[Parameters, str]:
+def compare_params(options: ParamsOptions, calibration: str | None) -> tuple[Parameters, str]:
     """compare's parameters: a calibration folder's params.toml, or --params/--set (the defaults without)."""
     from twin.parameters import ParameterError, Parameters
 
-    if args.calibration is not None:
-        if args.params or args.set:
+    if calibration is not None:
+        if options.params or options.set:
             raise ParameterError("--calibration brings its own parameters: drop --params/--set")
-        path = Path(args.calibration) / "params.toml"
+        path = Path(calibration) / "params.toml"
         if not path.is_file():
             raise ParameterError(
-                f"--calibration {args.calibration}: no params.toml in it (calibrate --out DIR writes one)"
+                f"--calibration {calibration}: no params.toml in it (calibrate --out DIR writes one)"
             )
-        return Parameters.from_file(path), f"--calibration {args.calibration}"
-    return load_params(args), params_source(args) or "the defaults (thesis values)"
+        return Parameters.from_file(path), f"--calibration {calibration}"
+    return load_params(options), params_source(options) or "the defaults (thesis values)"
 
 
 def hardware_controller(spec: str, params: Parameters) -> Callable[[], Controller]:

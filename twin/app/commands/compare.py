@@ -5,16 +5,19 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from dataclasses import dataclass
 from pathlib import Path
 
 from twin.app.catalogue import one_line
 from twin.app.commands.common import (
+    ParamsOptions,
     add_controller_timeout,
     add_params_options,
     compare_params,
     controller_help,
     hardware_controller,
     inputs,
+    options_from,
     progress_bar,
     write_out,
 )
@@ -81,30 +84,61 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_controller_timeout(parser)
 
 
+@dataclass(frozen=True)
+class Options:
+    """``compare``'s options."""
+
+    logs: list[str]
+    out: str
+    overwrite: bool
+    calibration: str | None
+    controller: str | None
+    window: float
+    horizon: float
+    min_fit: float
+    max_floor_ratio: float
+    seed: int
+    json: bool
+    controller_timeout: float | None
+    parameters: ParamsOptions
+
+
 def run(args: argparse.Namespace) -> int:
+    return handle(options_from(Options, args))
+
+
+def handle(o: Options) -> int:
     from calib.compare import OUTPUT_FILES, Criterion, compare
     from calib.logs import check_period, read_log, rig_log
     from twin.engine import ControllerError
     from twin.parameters import ParameterError
     from twin.plant import NumericalError
 
-    params, source = compare_params(args)
-    criterion = Criterion(min_fit_percent=args.min_fit, max_floor_ratio=args.max_floor_ratio)
-    factory = None if args.controller is None else hardware_controller(args.controller, params)
-    check_output_folder("--out", args.out, OUTPUT_FILES, overwrite=args.overwrite, inputs=inputs(args))
-    logs = [(path, read_log(path)) for path in args.logs]
+    params, source = compare_params(o.parameters, o.calibration)
+    criterion = Criterion(min_fit_percent=o.min_fit, max_floor_ratio=o.max_floor_ratio)
+    factory = None if o.controller is None else hardware_controller(o.controller, params)
+    check_output_folder(
+        "--out",
+        o.out,
+        OUTPUT_FILES,
+        overwrite=o.overwrite,
+        inputs=inputs(
+            params=o.parameters.params, logs=o.logs, calibration=o.calibration, controller=o.controller
+        ),
+    )
+    logs = [(path, read_log(path)) for path in o.logs]
     rigs = [rig_log(log, path) for path, log in logs]  # every log checked before the work
     for rig in rigs:  # a log at another period (or in ms) is the log's fault, not the window's
         check_period(rig, params.daq.period_s)
     period_s = min(r.period_s for r in rigs)
-    if args.window < 2 * period_s:
+    if o.window < 2 * period_s:
         raise ParameterError(
-            f"--window = {args.window:g}: at least 2 ticks of the logs' {period_s * 1e3:g} ms period "
+            f"--window = {o.window:g}: at least 2 ticks of the logs' {period_s * 1e3:g} ms period "
             f"({2 * period_s:g} s)"
         )
-    if not period_s <= args.horizon <= args.window:
+    if not period_s <= o.horizon <= o.window:
         raise ParameterError(
-            f"--horizon = {args.horizon:g}: from one tick ({period_s:g} s) to the window ({args.window:g} s)"
+            f"--horizon = {o.horizon:g}: from one tick ({period_s:g} s) to the window ({o.window:g} s)"
         )
     bar = progress_bar("compare", unit="step")
     try:
@@ -113,11 +147,11 @@ def run(args: argparse.Namespace) -> int:
             params,
             params_source=source,
             controller=factory,
-            controller_name=args.controller or "",
-            window_s=args.window,
-            horizon_s=args.horizon,
+            controller_name=o.controller or "",
+            window_s=o.window,
+            horizon_s=o.horizon,
             criterion=criterion,
-            seed=args.seed,
+            seed=o.seed,
             progress=bar,
         )
     except ControllerError as exc:
@@ -128,8 +162,8 @@ def run(args: argparse.Namespace) -> int:
         return 1
     from calib.compare_render import write_comparison  # matplotlib: after the run
 
-    write_out(args, write_comparison, result)
-    if args.json:
+    write_out(o.out, o.overwrite, write_comparison, result)
+    if o.json:
         print(json.dumps(result.to_json()))
         return 0 if result.passed else 1
     wp = result.windowed
@@ -164,5 +198,5 @@ def run(args: argparse.Namespace) -> int:
         )
     else:
         print(f"does not conform: {'; '.join(result.failures)}")
-    print(f"wrote {Path(args.out) / 'report.md'}, comparison.json and the figures")
+    print(f"wrote {Path(o.out) / 'report.md'}, comparison.json and the figures")
     return 0 if result.passed else 1

@@ -3,14 +3,17 @@
 from __future__ import annotations
 
 import argparse
+from dataclasses import dataclass
 
 from twin.app.commands.common import (
     LOG_SUFFIXES,
     MAX_RUN_S,
+    ParamsOptions,
     add_params_options,
     inputs,
     load_params,
     log_bytes,
+    options_from,
     save_log,
 )
 from twin.app.options import finite_float, seed
@@ -36,22 +39,38 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_params_options(parser)
 
 
+@dataclass(frozen=True)
+class Options:
+    """``experiment``'s options."""
+
+    name: str
+    out: str
+    duration: float
+    seed: int
+    overwrite: bool
+    parameters: ParamsOptions
+
+
 def run(args: argparse.Namespace) -> int:
+    return handle(options_from(Options, args))
+
+
+def handle(o: Options) -> int:
     from calib.experiments import EXPERIMENTS, run_experiment
     from twin.parameters import ParameterError
 
-    params = load_params(args)
-    if args.name not in EXPERIMENTS:
-        raise ParameterError(f"unknown experiment {args.name!r}; known: {', '.join(EXPERIMENTS)}")
+    params = load_params(o.parameters)
+    if o.name not in EXPERIMENTS:
+        raise ParameterError(f"unknown experiment {o.name!r}; known: {', '.join(EXPERIMENTS)}")
     out = check_outputs(
-        [("--out", args.out, LOG_SUFFIXES, log_bytes(args.out, args.duration, params))],
-        overwrite=args.overwrite,
-        inputs=inputs(args),
+        [("--out", o.out, LOG_SUFFIXES, log_bytes(o.out, o.duration, params))],
+        overwrite=o.overwrite,
+        inputs=inputs(params=o.parameters.params),
     )["--out"]
-    result = run_experiment(args.name, params, duration_s=args.duration, seed=args.seed)
-    save_log(result.log, "--out", args.out, out, args.overwrite)
+    result = run_experiment(o.name, params, duration_s=o.duration, seed=o.seed)
+    save_log(result.log, "--out", o.out, out, o.overwrite)
     print(
-        f"{args.name}: {args.duration:g} s, {result.log.k} ticks, ball lost: {result.verdict.ball_lost}; "
-        f"wrote {args.out}"
+        f"{o.name}: {o.duration:g} s, {result.log.k} ticks, ball lost: {result.verdict.ball_lost}; "
+        f"wrote {o.out}"
     )
     return 0 if not result.verdict.ball_lost else 1

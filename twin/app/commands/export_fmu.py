@@ -5,9 +5,18 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from dataclasses import dataclass
 from pathlib import Path
 
-from twin.app.commands.common import add_params_options, inputs, load_params, package_version, params_source
+from twin.app.commands.common import (
+    ParamsOptions,
+    add_params_options,
+    inputs,
+    load_params,
+    options_from,
+    package_version,
+    params_source,
+)
 
 HELP = "export the rig as an FMI 3.0 (or 2.0) co-simulation unit (.fmu) for Simulink, OpenModelica, FMPy"
 
@@ -35,34 +44,50 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="print what was written as JSON")
 
 
+@dataclass(frozen=True)
+class Options:
+    """``export-fmu``'s options."""
+
+    out: str
+    overwrite: bool
+    calibration: str | None
+    fmi: int
+    json: bool
+    parameters: ParamsOptions
+
+
 def run(args: argparse.Namespace) -> int:
+    return handle(options_from(Options, args))
+
+
+def handle(o: Options) -> int:
     from twin.app.commands.common import compare_params
     from twin.fmi.export import check_rig, export_fmu, rig_description
     from twin.outputs import check_outputs
 
     paths = check_outputs(
-        [("--out", args.out, (".fmu",), _FMU_BYTES)], overwrite=args.overwrite, inputs=inputs(args)
+        [("--out", o.out, (".fmu",), _FMU_BYTES)],
+        overwrite=o.overwrite,
+        inputs=inputs(params=o.parameters.params, calibration=o.calibration),
     )
     uncertainty: dict[str, float] = {}
-    if args.calibration is not None:
-        params, source = compare_params(args)
-        uncertainty = _uncertainties(Path(args.calibration) / "calibration.json")
+    if o.calibration is not None:
+        params, source = compare_params(o.parameters, o.calibration)
+        uncertainty = _uncertainties(Path(o.calibration) / "calibration.json")
     else:
-        params = load_params(args)
-        source = params_source(args) or "the defaults (thesis values)"
+        params = load_params(o.parameters)
+        source = params_source(o.parameters) or "the defaults (thesis values)"
     check_rig(params, source)
     description = rig_description(params, version=package_version(), source=source, uncertainty=uncertainty)
-    out = export_fmu(paths["--out"], description, overwrite=args.overwrite, fmi_version=args.fmi)
+    out = export_fmu(paths["--out"], description, overwrite=o.overwrite, fmi_version=o.fmi)
     summary = {
         "fmu": str(out),
-        "fmi": f"{args.fmi}.0",
+        "fmi": f"{o.fmi}.0",
         "bytes": out.stat().st_size,
         "version": description["version"],
         "source": source,
     }
-    print(
-        json.dumps(summary) if args.json else f"wrote {out} ({summary['bytes']} bytes): parameters {source}"
-    )
+    print(json.dumps(summary) if o.json else f"wrote {out} ({summary['bytes']} bytes): parameters {source}")
     return 0
 
 

@@ -4,25 +4,27 @@ from __future__ import annotations
 
 import argparse
 import json
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from twin.app.commands.common import (
     JOB_RUN_S,
+    OutputOptions,
+    ParamsOptions,
+    SpreadOptions,
     add_controller_timeout,
     add_engine_options,
     add_job_outputs,
     add_params_options,
     add_requirements_job,
     check_flick,
-    check_job,
     check_start_box,
-    interrupted,
-    params_and_spread,
+    options_from,
     progress_bar,
     resolve_engine,
-    write_out,
 )
+from twin.app.commands.job import ManyRunJob
 from twin.app.options import SpanType, count, seed
 from twin.rigs.backends import engine_policy
 
@@ -120,26 +122,76 @@ def _max_budget() -> float:
     return MAX_BUDGET
 
 
+# The search runs the twin itself (MuJoCo, or the fast engine screened), here: no client is served.
+PLANT = "twin"
+
+Span = tuple[float, float]
+
+
+@dataclass(frozen=True)
+class Options:
+    """``falsify``'s options."""
+
+    controller: str
+    spec: str
+    x0: Span
+    theta0: Span
+    latency: Span | None
+    zeroing: Span | None
+    flick_time: Span | None
+    flick_speed: Span | None
+    setpoint: Span | None
+    duration: float
+    no_noise: bool
+    budget: int
+    population: int | None
+    keep_going: bool
+    seed: int
+    engine: str | None
+    workers: int
+    scheduler: str | None
+    controller_timeout: float | None
+    parameters: ParamsOptions
+    spread: SpreadOptions
+    output: OutputOptions
+
+    def job(self) -> ManyRunJob:
+        return ManyRunJob(
+            "falsify",
+            self.controller,
+            self.parameters,
+            self.spread,
+            self.output,
+            workers=self.workers,
+            scheduler=self.scheduler,
+            controller_timeout=self.controller_timeout,
+            spec=self.spec,
+        )
+
+
 def run(args: argparse.Namespace) -> int:
+    return handle(options_from(Options, args))
+
+
+def handle(o: Options) -> int:
     from twin.app.falsify import OUTPUT_FILES, Axis, FalsifySettings, falsify
     from twin.parameters import ParameterError
     from twin.requirements import check_timing, load_spec
 
-    args.serve = None  # a search runs here (check_job's served case does not apply)
-    args.plant = "twin"
-    if args.population is not None and args.population > args.budget:
+    job = o.job()
+    if o.population is not None and o.population > o.budget:
         raise ParameterError(
-            f"--population {args.population}: above --budget {args.budget}: not one generation would run whole"
+            f"--population {o.population}: above --budget {o.budget}: not one generation would run whole"
         )
-    base, spread = params_and_spread(args)
-    spec = load_spec(args.spec)
-    check_timing(spec.requirements, args.spec, base.daq.period_s, args.duration)
-    x, th = args.x0, args.theta0
+    base, spread = job.params_and_spread()
+    spec = load_spec(o.spec)
+    check_timing(spec.requirements, o.spec, base.daq.period_s, o.duration)
+    x, th = o.x0, o.theta0
     check_start_box(base, x, th)
     axes = [Axis("x0_m", *x), Axis("theta0_rad", *th)]
     for option, span, name, grid in (
-        ("--latency", args.latency, "daq.output_latency_s", base.physics.timestep_s),
-        ("--zeroing", args.zeroing, "angle_sensor.zeroing_error_rad", 0.0),
+        ("--latency", o.latency, "daq.output_latency_s", base.physics.timestep_s),
+        ("--zeroing", o.zeroing, "angle_sensor.zeroing_error_rad", 0.0),
     ):
         if span is not None:
             for v in span:
@@ -148,44 +200,44 @@ def run(args: argparse.Namespace) -> int:
                 except ParameterError as exc:
                     raise ParameterError(f"{option} {span[0]:g}:{span[1]:g}: {exc}") from None
             axes.append(Axis(name, span[0], span[1], grid))
-    axes += _scenario_axes(args, base)
-    check_job(args, base, OUTPUT_FILES)
+    axes += _scenario_axes(o, base)
+    job.check(base, OUTPUT_FILES)
     settings = FalsifySettings(
-        controller=args.controller,
+        controller=o.controller,
         axes=tuple(axes),
         x0_m=x[0],
         theta0_rad=th[0],
-        duration_s=args.duration,
-        noise=not args.no_noise,
-        budget=args.budget,
-        seed=args.seed,
-        population=args.population or 0,
-        keep_going=args.keep_going,
-        engine=resolve_engine(args, "screen"),
+        duration_s=o.duration,
+        noise=not o.no_noise,
+        budget=o.budget,
+        seed=o.seed,
+        population=o.population or 0,
+        keep_going=o.keep_going,
+        engine=resolve_engine(o.engine, PLANT, "screen"),
     )
     result = falsify(
         settings,
         base,
         spec,
         spread,
-        workers=args.workers,
-        scheduler=args.scheduler,
+        workers=o.workers,
+        scheduler=o.scheduler,
         progress=progress_bar("falsify"),
     )
     from twin.app.falsify_render import write_falsify  # matplotlib: after the runs
 
-    write_out(args, write_falsify, result)
+    job.write(write_falsify, result)
     out = result.to_json()
-    if args.json:
+    if o.output.json:
         print(json.dumps(out, allow_nan=False))
     else:
-        _print(out, args)
+        _print(out, o)
     if not result.complete:
-        return interrupted("falsify", ": the runs done are reported")
+        return job.interrupted(": the runs done are reported")
     return 1 if out["found"] else 0
 
 
-def _scenario_axes(args: argparse.Namespace, base: Parameters) -> list[Axis]:
+def _scenario_axes(o: Options, base: Parameters) -> list[Axis]:
     """--flick-time/--flick-speed and --setpoint as inputs of the search (checked: a flick after release, a
     setpoint on the track, for a controller that declares one)."""
     from twin.app.falsify import Axis
@@ -195,28 +247,25 @@ def _scenario_axes(args: argparse.Namespace, base: Parameters) -> list[Axis]:
     from twin.physics import check_on_track
 
     axes = []
-    check_flick(
-        args.flick_time, args.flick_speed, args.duration
-    )  # both, within the run and the Flick's range
-    if args.flick_time is not None:
-        if args.flick_time[0] < 0:
-            raise ParameterError(f"--flick-time {args.flick_time[0]:g}: a time after release (≥ 0 s)")
-        axes += [Axis("flick_time_s", *args.flick_time), Axis("flick_speed_m_s", *args.flick_speed)]
-    if args.setpoint is not None:
-        for v in args.setpoint:
+    check_flick(o.flick_time, o.flick_speed, o.duration)  # both, within the run and the Flick's range
+    if o.flick_time is not None:
+        if o.flick_time[0] < 0:
+            raise ParameterError(f"--flick-time {o.flick_time[0]:g}: a time after release (≥ 0 s)")
+        assert o.flick_speed is not None  # check_flick: both or neither
+        axes += [Axis("flick_time_s", *o.flick_time), Axis("flick_speed_m_s", *o.flick_speed)]
+    if o.setpoint is not None:
+        for v in o.setpoint:
             try:
                 check_on_track(base, "--setpoint", v)
             except ValueError as exc:
                 raise ParameterError(str(exc)) from None
-        if not isinstance(build(args.controller, base), Setpoint):
-            raise ParameterError(
-                f"--setpoint: {args.controller} has no ball setpoint (twin.interface.Setpoint)"
-            )
-        axes.append(Axis("setpoint_m", *args.setpoint))
+        if not isinstance(build(o.controller, base), Setpoint):
+            raise ParameterError(f"--setpoint: {o.controller} has no ball setpoint (twin.interface.Setpoint)")
+        axes.append(Axis("setpoint_m", *o.setpoint))
     return axes
 
 
-def _print(out: dict, args: argparse.Namespace) -> None:
+def _print(out: dict, o: Options) -> None:
     best = out["least_robust"]
     if best is None:
         print("no run")
@@ -226,12 +275,12 @@ def _print(out: dict, args: argparse.Namespace) -> None:
     if out["found"]:
         print(
             f"counterexample at run {out['runs_to_first_violation']} ({out['runs_spent']} spent of "
-            f"{args.budget}): {where}; seed {best['seed']}; robustness {margins}"
+            f"{o.budget}): {where}; seed {best['seed']}; robustness {margins}"
             + ("; the ball is lost" if best["ball_lost"] else "")
         )
     else:
         print(
-            f"no violation in {out['runs_spent']} runs (budget {args.budget}); the least robust: {where}; "
+            f"no violation in {out['runs_spent']} runs (budget {o.budget}); the least robust: {where}; "
             f"robustness {margins}"
         )
     decided = out["decided_by"]
@@ -244,8 +293,8 @@ def _print(out: dict, args: argparse.Namespace) -> None:
                 else ""
             )
         )
-    if args.out is not None:
-        path = Path(args.out) / "falsify.json"
+    if o.output.out is not None:
+        path = Path(o.output.out) / "falsify.json"
         from twin.app.replay import replay_command
 
-        print(f"wrote {path}; repeat it: {replay_command(path, args.controller)}")
+        print(f"wrote {path}; repeat it: {replay_command(path, o.controller)}")

@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import argparse
 import json
+from dataclasses import dataclass
 
-from twin.app.commands.common import add_params_options, load_params
+from twin.app.commands.common import ParamsOptions, add_params_options, load_params, options_from
 from twin.app.options import finite_float
 
 HELP = (
@@ -25,24 +26,38 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="print the verdict as JSON")
 
 
+@dataclass(frozen=True)
+class Options:
+    """``judge``'s options."""
+
+    log: str
+    setpoint: float | None
+    json: bool
+    parameters: ParamsOptions
+
+
 def run(args: argparse.Namespace) -> int:
+    return handle(options_from(Options, args))
+
+
+def handle(o: Options) -> int:
     from calib.logs import load_judged_log
     from twin.physics import check_on_track
     from twin.verdict import evaluate_measured
 
-    params = load_params(args)
-    if args.setpoint is not None:
-        check_on_track(params, "--setpoint", args.setpoint)
-    log = load_judged_log(args.log, params.daq.period_s)  # checked as every command checks a rig log
-    verdict = evaluate_measured(log, params, x_ref_m=args.setpoint or 0.0)
+    params = load_params(o.parameters)
+    if o.setpoint is not None:
+        check_on_track(params, "--setpoint", o.setpoint)
+    log = load_judged_log(o.log, params.daq.period_s)  # checked as every command checks a rig log
+    verdict = evaluate_measured(log, params, x_ref_m=o.setpoint or 0.0)
     summary = {
-        "log": args.log,
+        "log": o.log,
         "source": "measured",
         "ticks": log.k,
-        **({} if args.setpoint is None else {"setpoint_m": args.setpoint}),
+        **({} if o.setpoint is None else {"setpoint_m": o.setpoint}),
         **verdict.to_json(),
     }
-    if args.json:
+    if o.json:
         print(json.dumps(summary))
     else:
         for key, value in summary.items():

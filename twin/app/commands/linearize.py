@@ -5,9 +5,10 @@ from __future__ import annotations
 import argparse
 import json
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from twin.app.commands.common import add_params_options, load_params
+from twin.app.commands.common import ParamsOptions, add_params_options, load_params, options_from
 
 if TYPE_CHECKING:
     import numpy as np
@@ -48,25 +49,39 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="print JSON")
 
 
+@dataclass(frozen=True)
+class Options:
+    """``linearize``'s options."""
+
+    input: str
+    source: str
+    json: bool
+    parameters: ParamsOptions
+
+
 def run(args: argparse.Namespace) -> int:
+    return handle(options_from(Options, args))
+
+
+def handle(o: Options) -> int:
     import numpy as np
 
     from twin.reference import STATE_NAMES
 
-    params = load_params(args)
-    a, b = SOURCES[args.source](params, args.input)
+    params = load_params(o.parameters)
+    a, b = SOURCES[o.source](params, o.input)
     result = {
         "state": list(STATE_NAMES),
-        "input": args.input,
-        "source": args.source,
+        "input": o.input,
+        "source": o.source,
         "A": a.tolist(),
         "B": b.tolist(),
     }
-    if args.json:
+    if o.json:
         print(json.dumps(result))
     else:
-        unit = "N·m" if args.input == "torque" else "V"
-        print(f"Continuous-time linearization at the origin ({args.source}, input: {args.input} [{unit}])")
+        unit = "N·m" if o.input == "torque" else "V"
+        print(f"Continuous-time linearization at the origin ({o.source}, input: {o.input} [{unit}])")
         print("state:", ", ".join(STATE_NAMES))
         with np.printoptions(precision=6, suppress=True, linewidth=120):
             print("A =\n", a)

@@ -4,37 +4,31 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from twin.app.commands.common import (
     JOB_RUN_S,
     SERVED_CONTROLLER,
     WORKERS,
+    OutputOptions,
+    ParamsOptions,
+    ServedOptions,
+    SpreadOptions,
     add_controller_timeout,
     add_engine_options,
     add_params_options,
     add_plant_options,
     add_served_options,
     add_spread_options,
-    check_job,
-    check_served,
-    client_name,
-    controller_failures,
     controller_help,
-    interrupted,
-    job_name,
-    params_and_spread,
+    options_from,
     progress_bar,
     refuse_unused,
     resolve_engine,
-    screen_audit_failure,
     screen_summary,
-    served_stopped,
-    serving,
-    write_out,
 )
+from twin.app.commands.job import ManyRunJob
 from twin.app.options import count, finite_float, seed
 from twin.rigs.backends import backend
 
@@ -90,64 +84,106 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_controller_timeout(parser)
 
 
+@dataclass(frozen=True)
+class Options:
+    """``montecarlo``'s options."""
+
+    controller: str | None
+    n: int
+    x0: float
+    theta0: float
+    duration: float
+    seed: int
+    no_noise: bool
+    plant: str
+    ideal_sensors: bool
+    engine: str | None
+    audit: int | None
+    workers: int
+    scheduler: str | None
+    controller_timeout: float | None
+    parameters: ParamsOptions
+    spread: SpreadOptions
+    served: ServedOptions
+    output: OutputOptions
+
+    def job(self) -> ManyRunJob:
+        return ManyRunJob(
+            "montecarlo",
+            self.controller,
+            self.parameters,
+            self.spread,
+            self.output,
+            workers=self.workers,
+            scheduler=self.scheduler,
+            served=self.served,
+            controller_timeout=self.controller_timeout,
+        )
+
+
 def run(args: argparse.Namespace) -> int:
+    return handle(options_from(Options, args))
+
+
+def handle(o: Options) -> int:
     from twin.app.montecarlo import OUTPUT_FILES, MonteCarloSettings, run_montecarlo
     from twin.parameters import ParameterError
     from twin.physics import check_initial_state
 
-    check_served(args)
-    if (args.spread is None) == (args.calibration is None):
+    job = o.job()
+    job.check_served()
+    if (o.spread.spread is None) == (o.spread.calibration is None):
         raise ParameterError(
             "give one of --spread FILE or --calibration DIR (what to perturb, and by how much)"
         )
-    base, spread = params_and_spread(args)
+    base, spread = job.params_and_spread()
     assert spread is not None
     try:
-        check_initial_state(base, args.x0, args.theta0, 0.0, 0.0)
+        check_initial_state(base, o.x0, o.theta0, 0.0, 0.0)
     except ValueError as exc:
         raise ParameterError(f"--x0/--theta0: {exc}") from None
-    check_job(args, base, OUTPUT_FILES)
-    engine = resolve_engine(args, "mujoco")
+    job.check(base, OUTPUT_FILES)
+    engine = resolve_engine(o.engine, o.plant, "mujoco", served=job.is_served)
     if engine == "mujoco":
         refuse_unused(
-            [("--audit", args.audit)],
+            [("--audit", o.audit)],
             "it re-runs the fast engine's runs on MuJoCo: with --engine screen or fast",
         )
     settings = MonteCarloSettings(
-        controller=job_name(args),
-        n=args.n,
-        x0_m=args.x0,
-        theta0_rad=args.theta0,
-        duration_s=args.duration,
-        noise=not args.no_noise,
-        plant=args.plant,
-        ideal_sensors=bool(args.ideal_sensors or backend(args.plant).ideal_converters),
-        seed=args.seed,
+        controller=job.name,
+        n=o.n,
+        x0_m=o.x0,
+        theta0_rad=o.theta0,
+        duration_s=o.duration,
+        noise=not o.no_noise,
+        plant=o.plant,
+        ideal_sensors=bool(o.ideal_sensors or backend(o.plant).ideal_converters),
+        seed=o.seed,
         engine=engine,
-        audit=32 if args.audit is None else args.audit,
+        audit=32 if o.audit is None else o.audit,
     )
-    with serving(args, base) as served:
+    with job.serving(base) as served:
         result = run_montecarlo(
             settings,
             base,
             spread,
-            workers=args.workers,
-            scheduler=args.scheduler,
+            workers=o.workers,
+            scheduler=o.scheduler,
             progress=progress_bar("montecarlo"),
             serve=served,
         )
-    if (client := client_name(args, served)) is not None:
+    if (client := job.client_name(served)) is not None:
         result.settings = settings = replace(settings, controller=client)
     from twin.app.montecarlo_render import write_montecarlo  # matplotlib: after the runs
 
-    write_out(args, write_montecarlo, result)
-    if args.json:
+    job.write(write_montecarlo, result)
+    if o.output.json:
         print(json.dumps(result.to_json()))
     else:
         s = result.summary
         ci = s["success_ci"]
         print(
-            f"{settings.controller} from ({args.x0:g} m, {args.theta0:g} rad): held {s['held']} of {s['runs']}"
+            f"{settings.controller} from ({o.x0:g} m, {o.theta0:g} rad): held {s['held']} of {s['runs']}"
             + (
                 f" ({100 * s['success_rate']:.1f} %, 95 % CI {100 * ci[0]:.1f}–{100 * ci[1]:.1f} %)"
                 if ci
@@ -167,16 +203,15 @@ def run(args: argparse.Namespace) -> int:
             print(f"  worst: {run['reason']} (seed {run['seed']}): {changed}")
         if result.screening is not None:
             print(screen_summary(result.screening))
-        if args.out is not None:
-            print(f"wrote {Path(args.out) / 'montecarlo.json'} and {Path(args.out) / 'distributions.png'}")
-    stopped = served_stopped(served, "montecarlo", len(result.runs), settings.n)
+        if (out := o.output.out) is not None:
+            print(f"wrote {Path(out) / 'montecarlo.json'} and {Path(out) / 'distributions.png'}")
+    stopped = job.stopped(served, len(result.runs), settings.n)
     if stopped is not None:
         return stopped
     if not result.complete:
         done = f" after {len(result.runs)} of {settings.n} runs: the runs done are kept"
-        return interrupted("montecarlo", done, args.out, "montecarlo.json")
-    if result.screening is not None and (wrong := result.screening["audit"]["mismatches"]):
-        print(screen_audit_failure("montecarlo", wrong), file=sys.stderr)
-        if settings.policy.screened:  # the fast engine alone was asked for unconfirmed: reported, not failed
-            return 1
-    return controller_failures(result.runs, "montecarlo")
+        return job.interrupted(done, "montecarlo.json")
+    # The fast engine alone, asked for unconfirmed: its audit is reported, not failed.
+    if job.audit_failed(result.screening) and settings.policy.screened:
+        return 1
+    return job.failures(result.runs)

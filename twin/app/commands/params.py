@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import argparse
 import json
+from dataclasses import dataclass
 
-from twin.app.commands.common import add_params_options, load_params
+from twin.app.commands.common import ParamsOptions, add_params_options, load_params, options_from
 
 HELP = "list every parameter with its unit and source"
 
@@ -15,11 +16,23 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="print JSON")
 
 
+@dataclass(frozen=True)
+class Options:
+    """``params``'s options."""
+
+    json: bool
+    parameters: ParamsOptions
+
+
 def run(args: argparse.Namespace) -> int:
+    return handle(options_from(Options, args))
+
+
+def handle(o: Options) -> int:
     from twin.parameters import Parameters
 
-    params = load_params(args)
-    if args.json:
+    params = load_params(o.parameters)
+    if o.json:
         print(json.dumps(params.to_dict(), indent=2))
     else:
         for row in Parameters.describe():

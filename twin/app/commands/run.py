@@ -6,12 +6,14 @@ import argparse
 import contextlib
 import json
 import sys
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from twin.app.catalogue import one_line
 from twin.app.commands.common import (
     LOG_SUFFIXES,
+    ParamsOptions,
     add_controller_timeout,
     add_episode_options,
     add_params_options,
@@ -22,6 +24,7 @@ from twin.app.commands.common import (
     inputs,
     load_params,
     log_bytes,
+    options_from,
     refuse_unused,
     save_log,
 )
@@ -153,35 +156,72 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_controller_timeout(parser)
 
 
+@dataclass(frozen=True)
+class Options:
+    """``run``'s options."""
+
+    controller: str | None
+    replay: str | None
+    trust_replay_controller: bool
+    x0: float | None
+    theta0: float | None
+    rig: str | None
+    duration: float | None
+    seed: int | None
+    no_noise: bool
+    sessions: int
+    wait_server: float | None
+    wait_sample: float | None
+    wait_start: float | None
+    spec: str | None
+    setpoint: float | None
+    flick_time: float | None
+    flick_speed: float | None
+    realtime: bool
+    plant: str
+    ideal_sensors: bool
+    log: str | None
+    plot: str | None
+    overwrite: bool
+    json: bool
+    controller_timeout: float | None
+    parameters: ParamsOptions
+
+
 def run(args: argparse.Namespace) -> int:
-    replay = _replayed(args)
-    _check_options(args, replay)
+    return handle(options_from(Options, args))
+
+
+def handle(o: Options) -> int:
+    replay, o = _replayed(o)
+    _check_options(o, replay)
     if replay is None:
-        if args.controller is None:
+        if o.controller is None:
             print("ballbeam run: error: --controller is required (unless --replay)", file=sys.stderr)
             return 2
-        args.duration = 15.0 if args.duration is None else args.duration
-        args.seed = 0 if args.seed is None else args.seed
-    params = replay.params if replay is not None else load_params(args)
+        o = replace(
+            o, duration=15.0 if o.duration is None else o.duration, seed=0 if o.seed is None else o.seed
+        )
+    params = replay.params if replay is not None else load_params(o.parameters)
     requirements = replay.requirements if replay is not None else None
-    if args.spec is not None:
+    if o.spec is not None:
         from twin.requirements import load_requirements
 
-        if args.rig is not None:
+        if o.rig is not None:
             raise ValueError("--spec judges the twin's true state: not with --rig (a rig's measured signals)")
-        requirements = load_requirements(args.spec)
-    _check_timing(args, requirements, params)
-    if args.rig is not None:
-        return _run_on_remote_rig(args, params)
-    rig_only = (args.wait_server, args.wait_sample, args.wait_start)
-    if args.sessions != 1 or any(wait is not None for wait in rig_only):
+        requirements = load_requirements(o.spec)
+    _check_timing(o, requirements, params)
+    if o.rig is not None:
+        return _run_on_remote_rig(o, params)
+    rig_only = (o.wait_server, o.wait_sample, o.wait_start)
+    if o.sessions != 1 or any(wait is not None for wait in rig_only):
         print(
             "ballbeam run: error: --sessions, --wait-server, --wait-sample and --wait-start are a rig's: they "
             "need --rig",
             file=sys.stderr,
         )
         return 2
-    if args.x0 is None or args.theta0 is None:
+    if o.x0 is None or o.theta0 is None:
         print(
             "ballbeam run: error: --x0 and --theta0 are required (unless --rig: the server's)",
             file=sys.stderr,
@@ -190,30 +230,30 @@ def run(args: argparse.Namespace) -> int:
     # With --json, stdout carries the summary alone: what the controller prints (at import, in its
     # constructor or its ticks) goes to stderr.
     out = sys.stdout
-    with contextlib.redirect_stdout(sys.stderr) if args.json else contextlib.nullcontext():
-        outcome = _run_in_process(args, params)
+    with contextlib.redirect_stdout(sys.stderr) if o.json else contextlib.nullcontext():
+        outcome = _run_in_process(o, params)
     if isinstance(outcome, int):
         return outcome
     result, paths, pacer = outcome
-    if args.setpoint is not None:
-        result.verdict = _verdict_about(result, params, args.x0, args.setpoint)
-    if "--log" in paths:
-        save_log(result.log, "--log", args.log, paths["--log"], args.overwrite)
-    if "--plot" in paths:
+    if o.setpoint is not None:
+        result.verdict = _verdict_about(result, params, o.x0, o.setpoint)
+    if o.log is not None and "--log" in paths:
+        save_log(result.log, "--log", o.log, paths["--log"], o.overwrite)
+    if o.plot is not None and "--plot" in paths:
         from twin.app.plots import plot_run
 
-        with writing("--plot", args.plot):
-            plot_run(result, paths["--plot"], overwrite=args.overwrite, software=params.software)
+        with writing("--plot", o.plot):
+            plot_run(result, paths["--plot"], overwrite=o.overwrite, software=params.software)
     summary = {
-        "controller": args.controller,
-        "x0_m": args.x0,
-        "theta0_rad": args.theta0,
-        "seed": args.seed,
-        "noise": not args.no_noise,
-        "plant": args.plant,
-        "ideal_sensors": _ideal_sensors(args),
+        "controller": o.controller,
+        "x0_m": o.x0,
+        "theta0_rad": o.theta0,
+        "seed": o.seed,
+        "noise": not o.no_noise,
+        "plant": o.plant,
+        "ideal_sensors": _ideal_sensors(o),
         "free_run_s": params.start.free_run_s,
-        **({} if args.setpoint is None else {"setpoint_m": args.setpoint}),
+        **({} if o.setpoint is None else {"setpoint_m": o.setpoint}),
         **result.verdict.to_json(),
     }
     if result.firmware is not None:
@@ -236,7 +276,7 @@ def run(args: argparse.Namespace) -> int:
     if requirements is not None:
         from twin.requirements import margins, violated
 
-        values = margins(requirements, result.log, params, args.setpoint or 0.0)
+        values = margins(requirements, result.log, params, o.setpoint or 0.0)
         summary["requirements"] = values
         if replay is not None:
             summary["replayed"] = {
@@ -250,7 +290,7 @@ def run(args: argparse.Namespace) -> int:
         held = held and not bad
         if bad:
             print(f"ballbeam run: requirements violated: {', '.join(bad)}", file=sys.stderr)
-    if args.json:
+    if o.json:
         print(json.dumps(summary), file=out)
     else:
         for key, value in summary.items():
@@ -270,98 +310,107 @@ def _realtime_summary(pacer: WallClockPacer) -> dict[str, object]:
     return {"realtime": timing.to_json(), "realtime_warning": late}
 
 
-def _check_options(args: argparse.Namespace, replay: Replay | None) -> None:
+def _check_options(o: Options, replay: Replay | None) -> None:
     """Options this run would not use are refused, not ignored: those a run on ``--rig`` leaves to the server,
     ``--overwrite`` with nothing to write, a flick without its time or kick, after the run or beyond the live
     view's Flick range."""
-    if args.rig is not None:
-        refuse_unused(_set_by_the_rig(args), "with --rig the server sets the run and its rig: drop it")
-    check_overwrite(args, "--log", "--plot")
-    if replay is None and args.rig is None:
-        duration = 15.0 if args.duration is None else args.duration
-        flick = [None if v is None else (v, v) for v in (args.flick_time, args.flick_speed)]
+    if o.rig is not None:
+        refuse_unused(_set_by_the_rig(o), "with --rig the server sets the run and its rig: drop it")
+    check_overwrite(o.overwrite, [("--log", o.log), ("--plot", o.plot)])
+    if replay is None and o.rig is None:
+        duration = 15.0 if o.duration is None else o.duration
+        flick = [None if v is None else (v, v) for v in (o.flick_time, o.flick_speed)]
         check_flick(flick[0], flick[1], duration)
 
 
-def _check_timing(
-    args: argparse.Namespace, requirements: tuple[Requirement, ...] | None, params: Parameters
-) -> None:
+def _check_timing(o: Options, requirements: tuple[Requirement, ...] | None, params: Parameters) -> None:
     """The requirements' time bounds against this run's duration and period (``check_timing``)."""
     if requirements is not None:
         from twin.requirements import check_timing
 
-        where = args.spec if args.spec is not None else f"{args.replay}: requirements"
-        check_timing(requirements, where, params.daq.period_s, args.duration)
+        where = o.spec if o.spec is not None else f"{o.replay}: requirements"
+        assert o.duration is not None  # the default's, or the replay's
+        check_timing(requirements, where, params.daq.period_s, o.duration)
 
 
-def _set_by_the_rig(args: argparse.Namespace) -> list[tuple[str, object]]:
+def _set_by_the_rig(o: Options) -> list[tuple[str, object]]:
     """The options of a run here that a run on ``--rig`` does not use (the server's start, duration, noise,
     plant and pacing; a flick, setpoint or plot of the run here)."""
     return [
-        ("--x0", args.x0),
-        ("--theta0", args.theta0),
-        ("--duration", args.duration),
-        ("--seed", args.seed),
-        ("--no-noise", args.no_noise),
-        ("--plant", None if args.plant == DEFAULT_PLANT else args.plant),
-        ("--ideal-sensors", args.ideal_sensors),
-        ("--realtime", args.realtime),
-        ("--setpoint", args.setpoint),
-        ("--flick-time", args.flick_time),
-        ("--flick-speed", args.flick_speed),
-        ("--plot", args.plot),
+        ("--x0", o.x0),
+        ("--theta0", o.theta0),
+        ("--duration", o.duration),
+        ("--seed", o.seed),
+        ("--no-noise", o.no_noise),
+        ("--plant", None if o.plant == DEFAULT_PLANT else o.plant),
+        ("--ideal-sensors", o.ideal_sensors),
+        ("--realtime", o.realtime),
+        ("--setpoint", o.setpoint),
+        ("--flick-time", o.flick_time),
+        ("--flick-speed", o.flick_speed),
+        ("--plot", o.plot),
     ]
 
 
-def _replayed(args: argparse.Namespace) -> Replay | None:
-    """``--replay FILE``: the run it names, put into ``args`` (options the file sets are refused; its
-    controller only as ``replay_controller`` allows); None without ``--replay``."""
+def _replayed(o: Options) -> tuple[Replay | None, Options]:
+    """``--replay FILE``: the run it names and the options with its values (options the file sets are refused;
+    its controller only as ``replay_controller`` allows); (None, the options) without ``--replay``."""
     from twin.app.replay import load_replay, refuse_given, replay_controller
     from twin.parameters import ParameterError
 
-    if args.replay is None:
-        if args.trust_replay_controller:
+    if o.replay is None:
+        if o.trust_replay_controller:
             raise ParameterError("--trust-replay-controller goes with --replay FILE")
-        return None
+        return None, o
 
     refuse_given(
         [
-            ("--x0", args.x0),
-            ("--theta0", args.theta0),
-            ("--duration", args.duration),
-            ("--seed", args.seed),
-            ("--no-noise", args.no_noise),
-            ("--params", args.params),
-            ("--set", args.set),
-            ("--spec", args.spec),
-            ("--rig", args.rig),
-            ("--setpoint", args.setpoint),
-            ("--flick-time", args.flick_time),
-            ("--flick-speed", args.flick_speed),
-            ("--plant", None if args.plant == DEFAULT_PLANT else args.plant),
-            ("--ideal-sensors", args.ideal_sensors),
+            ("--x0", o.x0),
+            ("--theta0", o.theta0),
+            ("--duration", o.duration),
+            ("--seed", o.seed),
+            ("--no-noise", o.no_noise),
+            ("--params", o.parameters.params),
+            ("--set", o.parameters.set),
+            ("--spec", o.spec),
+            ("--rig", o.rig),
+            ("--setpoint", o.setpoint),
+            ("--flick-time", o.flick_time),
+            ("--flick-speed", o.flick_speed),
+            ("--plant", None if o.plant == DEFAULT_PLANT else o.plant),
+            ("--ideal-sensors", o.ideal_sensors),
         ]
     )
-    replay = load_replay(args.replay)
-    replay_controller(replay, args.controller, args.trust_replay_controller, "ballbeam run")
-    args.plant, args.ideal_sensors = replay.plant, replay.ideal_sensors
-    args.controller, args.x0, args.theta0 = replay.controller, replay.x0_m, replay.theta0_rad
-    args.seed, args.no_noise, args.duration = replay.seed, not replay.noise, replay.duration_s
-    args.setpoint = replay.setpoint_m
-    args.flick_time, args.flick_speed = replay.flick if replay.flick is not None else (None, None)
-    return replay
+    replay = load_replay(o.replay)
+    replay_controller(replay, o.controller, o.trust_replay_controller, "ballbeam run")
+    flick_time, flick_speed = replay.flick if replay.flick is not None else (None, None)
+    replayed = replace(
+        o,
+        plant=replay.plant,
+        ideal_sensors=replay.ideal_sensors,
+        controller=replay.controller,
+        x0=replay.x0_m,
+        theta0=replay.theta0_rad,
+        seed=replay.seed,
+        no_noise=not replay.noise,
+        duration=replay.duration_s,
+        setpoint=replay.setpoint_m,
+        flick_time=flick_time,
+        flick_speed=flick_speed,
+    )
+    return replay, replayed
 
 
-def _ideal_sensors(args: argparse.Namespace) -> bool:
+def _ideal_sensors(o: Options) -> bool:
     """``--ideal-sensors``, always with ``--plant reference``; a replay's as its file states (the fast engine's
     runs: the reference plant under the twin's sensor chain)."""
-    if args.replay is not None:
-        return bool(args.ideal_sensors)
-    return bool(args.ideal_sensors or backend(args.plant).ideal_converters)
+    if o.replay is not None:
+        return bool(o.ideal_sensors)
+    return bool(o.ideal_sensors or backend(o.plant).ideal_converters)
 
 
 def _run_in_process(
-    args: argparse.Namespace, params: Parameters
+    o: Options, params: Parameters
 ) -> int | tuple[RunResult, dict[str, Path], WallClockPacer | None]:
     """The controller built and run on the twin: (the result, the checked output paths, the pacer), or the
     exit code of a failure (reported)."""
@@ -371,31 +420,34 @@ def _run_in_process(
     from twin.realtime import WallClockPacer
     from twin.rigs.sim import run_closed_loop
 
+    # run_command checked these or set them (its defaults, or the replay's)
+    assert o.controller is not None and o.x0 is not None and o.theta0 is not None
+    assert o.duration is not None and o.seed is not None
     paths = check_outputs(
         [
-            ("--log", args.log, LOG_SUFFIXES, log_bytes(args.log, args.duration, params)),
-            ("--plot", args.plot, PLOT_SUFFIXES, _PLOT_BYTES),
+            ("--log", o.log, LOG_SUFFIXES, log_bytes(o.log, o.duration, params)),
+            ("--plot", o.plot, PLOT_SUFFIXES, _PLOT_BYTES),
         ],
-        overwrite=args.overwrite,
-        inputs=inputs(args),
+        overwrite=o.overwrite,
+        inputs=inputs(params=o.parameters.params, spec=o.spec, replay=o.replay, controller=o.controller),
     )
-    controller = build(args.controller, params)
-    if args.setpoint is not None:
-        _apply_setpoint(controller, args.controller, args.setpoint, params)
-    pacer = WallClockPacer(params.daq.period_s) if args.realtime else None
+    controller = build(o.controller, params)
+    if o.setpoint is not None:
+        _apply_setpoint(controller, o.controller, o.setpoint, params)
+    pacer = WallClockPacer(params.daq.period_s) if o.realtime else None
     try:
         result = run_closed_loop(
             controller,
-            x0_m=args.x0,
-            theta0_rad=args.theta0,
-            duration_s=args.duration,
-            seed=args.seed,
-            noise=not args.no_noise,
+            x0_m=o.x0,
+            theta0_rad=o.theta0,
+            duration_s=o.duration,
+            seed=o.seed,
+            noise=not o.no_noise,
             params=params,
-            plant=args.plant,
-            ideal_sensors=_ideal_sensors(args),
+            plant=o.plant,
+            ideal_sensors=_ideal_sensors(o),
             pacer=pacer,
-            scenario=None if args.flick_time is None else Scenario(args.flick_time, args.flick_speed or 0.0),
+            scenario=None if o.flick_time is None else Scenario(o.flick_time, o.flick_speed or 0.0),
         )
     except ControllerError as exc:
         print(f"ballbeam run: the controller failed: {exc}", file=sys.stderr)
@@ -448,7 +500,7 @@ def _verdict_about(result: RunResult, params: Parameters, x0_m: float, setpoint_
     )
 
 
-def _run_on_remote_rig(args: argparse.Namespace, params: Parameters) -> int:
+def _run_on_remote_rig(o: Options, params: Parameters) -> int:
     """``run --rig udp://HOST:PORT`` (or ``serial:///dev/ttyX?baud=N``): the controller through
     ``twin.rigs.remote.RemoteRig`` (``twin.rigs.session``). The rig's initial state, duration and noise are the
     server's; the verdict is judged from the measured signals (``ballbeam serve`` prints the true state's).
@@ -459,32 +511,33 @@ def _run_on_remote_rig(args: argparse.Namespace, params: Parameters) -> int:
     from twin.rigs.session import Waits, run_on_remote_rig
     from twin.wire.links import parse_url
 
+    assert o.rig is not None and o.controller is not None and o.duration is not None  # run_command's
     try:
-        parse_url(args.rig)
+        parse_url(o.rig)
     except ValueError as exc:
         raise ValueError(f"--rig {exc}") from None
-    host = host_of(args.controller)
+    host = host_of(o.controller)
     if host.kind == "firmware":  # refused before the other options are read (its row's message)
-        host.wire(args.controller)
-    if args.sessions != 1 and args.log is not None:
+        host.wire(o.controller)
+    if o.sessions != 1 and o.log is not None:
         raise ValueError(
             "--log keeps one session's log: with --sessions other than 1 the server keeps every run (its "
             "job's report, or serve --log)"
         )
-    make_controller = host.wire(args.controller)  # its host's row (twin.app.hosts): checked once here
+    make_controller = host.wire(o.controller)  # its host's row (twin.app.hosts): checked once here
     paths = check_outputs(
-        [("--log", args.log, LOG_SUFFIXES, log_bytes(args.log, args.duration, params))],
-        overwrite=args.overwrite,
-        inputs=inputs(args),
+        [("--log", o.log, LOG_SUFFIXES, log_bytes(o.log, o.duration, params))],
+        overwrite=o.overwrite,
+        inputs=inputs(params=o.parameters.params, spec=o.spec, replay=o.replay, controller=o.controller),
     )
-    many = args.sessions != 1
+    many = o.sessions != 1
 
     def on_run(done: int, run: RunResult, summary: dict[str, Any]) -> None:
-        if "--log" in paths:
-            save_log(run.log, "--log", args.log, paths["--log"], args.overwrite)
+        if o.log is not None and "--log" in paths:
+            save_log(run.log, "--log", o.log, paths["--log"], o.overwrite)
         if many:
             summary = {"session": done, **summary}
-        if args.json:
+        if o.json:
             print(json.dumps(summary), flush=True)
         elif many:
             print(
@@ -497,12 +550,12 @@ def _run_on_remote_rig(args: argparse.Namespace, params: Parameters) -> int:
                 print(f"{key:<26} {value}")
 
     return run_on_remote_rig(
-        args.rig,
+        o.rig,
         params,
         make_controller,
-        name=args.controller,
-        sessions=args.sessions,
-        wait_s=args.wait_server or 5.0,
+        name=o.controller,
+        sessions=o.sessions,
+        wait_s=o.wait_server or 5.0,
         on_run=on_run,
-        waits=Waits(args.wait_sample or 5.0, args.wait_start),
+        waits=Waits(o.wait_sample or 5.0, o.wait_start),
     )

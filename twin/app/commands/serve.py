@@ -5,10 +5,13 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from dataclasses import dataclass
+from typing import Any
 
 from twin.app.catalogue import one_line
 from twin.app.commands.common import (
     LOG_SUFFIXES,
+    ParamsOptions,
     add_episode_options,
     add_params_options,
     add_plant_options,
@@ -16,6 +19,7 @@ from twin.app.commands.common import (
     inputs,
     load_params,
     log_bytes,
+    options_from,
     refuse_unused,
     save_log,
 )
@@ -84,7 +88,36 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="print the summary and verdict as JSON")
 
 
+@dataclass(frozen=True)
+class Options:
+    """``serve``'s options."""
+
+    mode: str
+    host: str
+    port: int
+    serial: str | None
+    baud: int | None
+    x0: float
+    theta0: float
+    duration: float
+    seed: int
+    no_noise: bool
+    plant: str
+    ideal_sensors: bool
+    timeout: float
+    watchdog: int | None
+    wait_client: float | None
+    log: str | None
+    overwrite: bool
+    json: bool
+    parameters: ParamsOptions
+
+
 def run(args: argparse.Namespace) -> int:
+    return handle(options_from(Options, args))
+
+
+def handle(o: Options) -> int:
     from twin.app.commands.common import package_version
     from twin.engine import ControllerError
     from twin.plant import NumericalError
@@ -92,55 +125,56 @@ def run(args: argparse.Namespace) -> int:
     from twin.wire import protocol
     from twin.wire.links import DEFAULT_BAUD, LinkError, SerialLink
 
-    if args.serial is not None and (args.host != "127.0.0.1" or args.port != 0):
+    if o.serial is not None and (o.host != "127.0.0.1" or o.port != 0):
         print(
             "ballbeam serve: error: --serial replaces --host and --port: give one or the other",
             file=sys.stderr,
         )
         return 2
-    if args.baud is not None and args.serial is None:
+    if o.baud is not None and o.serial is None:
         print("ballbeam serve: error: --baud is the serial line's speed: it needs --serial", file=sys.stderr)
         return 2
-    if args.mode == "lockstep":  # a lock-step session waits for each command (--timeout): no watchdog
-        refuse_unused([("--watchdog", args.watchdog)], "the real-time watchdog: it needs --mode realtime")
-    check_overwrite(args, "--log")
-    params = load_params(args)
+    if o.mode == "lockstep":  # a lock-step session waits for each command (--timeout): no watchdog
+        refuse_unused([("--watchdog", o.watchdog)], "the real-time watchdog: it needs --mode realtime")
+    check_overwrite(o.overwrite, [("--log", o.log)])
+    params = load_params(o.parameters)
     paths = check_outputs(
-        [("--log", args.log, LOG_SUFFIXES, log_bytes(args.log, args.duration, params))],
-        overwrite=args.overwrite,
-        inputs=inputs(args),
+        [("--log", o.log, LOG_SUFFIXES, log_bytes(o.log, o.duration, params))],
+        overwrite=o.overwrite,
+        inputs=inputs(params=o.parameters.params),
     )
-    ideal = bool(args.ideal_sensors or backend(args.plant).ideal_converters)
+    ideal = bool(o.ideal_sensors or backend(o.plant).ideal_converters)
+    watchdog: dict[str, Any] = {} if o.watchdog is None else {"watchdog_periods": o.watchdog}
     settings = SessionSettings(
-        x0_m=args.x0,
-        theta0_rad=args.theta0,
-        duration_s=args.duration,
-        seed=args.seed,
-        noise=not args.no_noise,
+        x0_m=o.x0,
+        theta0_rad=o.theta0,
+        duration_s=o.duration,
+        seed=o.seed,
+        noise=not o.no_noise,
         params=params,
-        plant=args.plant,
+        plant=o.plant,
         ideal_sensors=ideal,
-        mode=protocol.MODE_REALTIME if args.mode == "realtime" else protocol.MODE_LOCKSTEP,
-        timeout_s=args.timeout,
-        **({} if args.watchdog is None else {"watchdog_periods": args.watchdog}),
-        wait_client_s=args.wait_client,
-        rig_name=f"ballbeam-twin {package_version()} {args.plant}",
+        mode=protocol.MODE_REALTIME if o.mode == "realtime" else protocol.MODE_LOCKSTEP,
+        timeout_s=o.timeout,
+        **watchdog,
+        wait_client_s=o.wait_client,
+        rig_name=f"ballbeam-twin {package_version()} {o.plant}",
     )
     try:
-        if args.serial is not None:
+        if o.serial is not None:
             try:
-                link = SerialLink.open(args.serial, args.baud or DEFAULT_BAUD)
+                link = SerialLink.open(o.serial, o.baud or DEFAULT_BAUD)
             except LinkError as exc:
                 raise ServeError(str(exc)) from None
             server = Server(settings, link=link)
         else:
-            server = Server(settings, args.host, args.port)
+            server = Server(settings, o.host, o.port)
     except ServeError as exc:
         print(f"ballbeam serve: error: {exc}", file=sys.stderr)
         return 2
     with server:
         # The address first (port 0 picks one): with --json stdout is JSON lines, this one and the summary.
-        print(json.dumps({"serving_on": server.url}) if args.json else f"serving on {server.url}", flush=True)
+        print(json.dumps({"serving_on": server.url}) if o.json else f"serving on {server.url}", flush=True)
         try:
             session = server.serve()
         except ServeError as exc:
@@ -149,20 +183,20 @@ def run(args: argparse.Namespace) -> int:
         except (ControllerError, NumericalError) as exc:
             print(f"ballbeam serve: {one_line(exc)}", file=sys.stderr)
             return 1
-    if "--log" in paths:
-        save_log(session.result.log, "--log", args.log, paths["--log"], args.overwrite)
+    if o.log is not None and "--log" in paths:
+        save_log(session.result.log, "--log", o.log, paths["--log"], o.overwrite)
     summary = {
-        "mode": args.mode,
-        "x0_m": args.x0,
-        "theta0_rad": args.theta0,
-        "seed": args.seed,
-        "noise": not args.no_noise,
-        "plant": args.plant,
+        "mode": o.mode,
+        "x0_m": o.x0,
+        "theta0_rad": o.theta0,
+        "seed": o.seed,
+        "noise": not o.no_noise,
+        "plant": o.plant,
         "ideal_sensors": ideal,
         **session.summary(),
         **session.result.verdict.to_json(),
     }
-    if args.json:
+    if o.json:
         print(json.dumps(summary))
     else:
         for key, value in summary.items():

@@ -5,15 +5,18 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from twin.app.commands.common import (
+    ParamsOptions,
     add_params_options,
     check_overwrite,
     compare_params,
     hardware_controller,
     inputs,
+    options_from,
     progress_bar,
     refuse_unused,
 )
@@ -104,33 +107,59 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_params_options(parser)
 
 
+@dataclass(frozen=True)
+class Options:
+    """``shadow``'s options."""
+
+    rig: str
+    calibration: str | None
+    reference: list[str] | None
+    reference_controller: str | None
+    sessions: int
+    idle: float
+    start_wait: float
+    cusum_k: float | None
+    cusum_h: float | None
+    log: str | None
+    overwrite: bool
+    quiet: bool
+    json: bool
+    parameters: ParamsOptions
+
+
 def run(args: argparse.Namespace) -> int:
+    return handle(options_from(Options, args))
+
+
+def handle(o: Options) -> int:
     """``ballbeam shadow --rig udp://HOST:PORT``: observe, predict each window, test for drift."""
     from twin.app.shadow import REFERENCE_CONTROLLER, load_reference, logs_band, reference_band
     from twin.parameters import ParameterError
     from twin.rigs.remote import RemoteError
     from twin.serving.observer import open_observer
 
-    if args.reference and args.reference_controller:
+    if o.reference and o.reference_controller:
         raise ParameterError("--reference-controller runs the twin's reference: not with --reference logs")
-    check_overwrite(args, "--log")
-    if args.json:  # JSON prints the summary alone: there is nothing for --quiet to leave out
-        refuse_unused([("--quiet", args.quiet)], "--json prints the summary alone: drop one")
-    base, source = compare_params(args)
-    reference = args.reference_controller or REFERENCE_CONTROLLER
-    factory = None if args.reference else hardware_controller(reference, base)
+    check_overwrite(o.overwrite, [("--log", o.log)])
+    if o.json:  # JSON prints the summary alone: there is nothing for --quiet to leave out
+        refuse_unused([("--quiet", o.quiet)], "--json prints the summary alone: drop one")
+    base, source = compare_params(o.parameters, o.calibration)
+    reference = o.reference_controller or REFERENCE_CONTROLLER
+    factory = None if o.reference else hardware_controller(reference, base)
     paths = check_outputs(
-        [("--log", args.log, (".jsonl", ".json"), 1 << 20)], overwrite=args.overwrite, inputs=inputs(args)
+        [("--log", o.log, (".jsonl", ".json"), 1 << 20)],
+        overwrite=o.overwrite,
+        inputs=inputs(params=o.parameters.params, reference=o.reference, calibration=o.calibration),
     )
-    reference_logs = load_reference(args.reference) if args.reference else None
+    reference_logs = load_reference(o.reference) if o.reference else None
     try:
-        observer = open_observer(args.rig, client="ballbeam shadow", timeout_s=args.idle)
+        observer = open_observer(o.rig, client="ballbeam shadow", timeout_s=o.idle)
     except RemoteError as exc:
         print(f"ballbeam shadow: {exc}", file=sys.stderr)
         return 1
     with observer:
         params = observer.parameters(base)  # the rig's period, DAC range and software calibration
-        if not args.json:
+        if not o.json:
             print(
                 f"shadow of {observer.url}: parameters {source}; measuring the band (progress on stderr), "
                 "the session's samples queued meanwhile",
@@ -145,15 +174,15 @@ def run(args: argparse.Namespace) -> int:
             band = reference_band(
                 params, hardware_controller(reference, params), name=reference, progress=bar
             )
-        shadow, head = _start(args, observer.url, params, band, source)
-        if not args.json:
+        shadow, head = _start(o, observer.url, params, band, source)
+        if not o.json:
             print(
                 f"watching {observer.url}: start the rig's controller now if it has not started (a session "
-                f"waits up to {args.start_wait:g} s for it, --start-wait)",
+                f"waits up to {o.start_wait:g} s for it, --start-wait)",
                 flush=True,
             )
-        result, summary = _watch(args, observer, shadow, head, paths.get("--log"))
-    if args.json:
+        result, summary = _watch(o, observer, shadow, head, paths.get("--log"))
+    if o.json:
         print(json.dumps({**head, "summary": summary}))
     else:
         print(
@@ -171,7 +200,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _start(
-    args: argparse.Namespace, url: str, params: Parameters, band: Band, source: str
+    o: Options, url: str, params: Parameters, band: Band, source: str
 ) -> tuple[Shadow, dict[str, Any]]:
     """The shadow of the rig at ``url`` on ``band`` with its drift test (``--cusum-k``, ``--cusum-h``), and
     the head of its report (printed unless ``--json``)."""
@@ -181,8 +210,8 @@ def _start(
 
     default = Cusum()
     test = Cusum(
-        k=default.k if args.cusum_k is None else args.cusum_k,
-        h=default.h if args.cusum_h is None else args.cusum_h,
+        k=default.k if o.cusum_k is None else o.cusum_k,
+        h=default.h if o.cusum_h is None else o.cusum_h,
     )
     shadow = Shadow(params, band, test)
     p_hour = test.false_alarm_probability(band, int(round(3600.0 / shadow.window_s)))
@@ -193,7 +222,7 @@ def _start(
         "cusum": test.to_json(),
         "false_alarm_probability_per_hour": p_hour,
     }
-    if not args.json:
+    if not o.json:
         print(
             f"band: {band.windows} windows of {band.source}; median error ball "
             f"{1e3 * math.exp(band.mean['ball']):.3g} mm, angle {1e3 * math.exp(band.mean['angle']):.3g} mrad"
@@ -207,7 +236,7 @@ def _start(
 
 
 def _watch(
-    args: argparse.Namespace, observer: Observer, shadow: Shadow, head: dict[str, Any], log: Path | None
+    o: Options, observer: Observer, shadow: Shadow, head: dict[str, Any], log: Path | None
 ) -> tuple[WatchResult, dict[str, Any]]:
     """Watch ``--sessions`` sessions: every window scored, its alarms (and unless ``--quiet`` its scores)
     printed, every record written to ``log`` (JSON lines, atomically) if given; the result and summary."""
@@ -220,7 +249,7 @@ def _watch(
     from twin.outputs import atomic_output
 
     band, test = shadow.band, shadow.test
-    out = atomic_output(log, overwrite=args.overwrite) if log is not None else contextlib.nullcontext(None)
+    out = atomic_output(log, overwrite=o.overwrite) if log is not None else contextlib.nullcontext(None)
     with out as fh:
 
         def line(record: dict[str, object]) -> None:
@@ -238,7 +267,7 @@ def _watch(
                     f"the band's median, CUSUM {a.cusum:.1f} > {test.h:g}",
                     flush=True,
                 )
-            if not args.quiet and not args.json and not w.skipped:
+            if not o.quiet and not o.json and not w.skipped:
                 print(
                     f"{w.end_s:8.2f} s  ball {1e3 * w.rms['ball']:7.3f} mm z {w.z['ball']:+5.2f}  angle "
                     f"{1e3 * w.rms['angle']:7.3f} mrad z {w.z['angle']:+5.2f}  cusum "
@@ -248,15 +277,15 @@ def _watch(
 
         def on_session(n: int, stop: str) -> None:
             line({"session_end": n, "stop": stop})
-            if not args.json:
+            if not o.json:
                 print(f"session {n} ended: {stop}", flush=True)
 
         result = watch(
             observer,
             shadow,
-            sessions=args.sessions,
-            idle_timeout_s=args.idle,
-            start_timeout_s=args.start_wait,
+            sessions=o.sessions,
+            idle_timeout_s=o.idle,
+            start_timeout_s=o.start_wait,
             on_window=on_window,
             on_session=on_session,
         )

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -13,29 +13,24 @@ from twin.app.commands.common import (
     JOB_RUN_S,
     SERVED_CONTROLLER,
     WORKERS,
+    OutputOptions,
+    ParamsOptions,
+    ServedOptions,
+    SpreadOptions,
     add_controller_timeout,
     add_engine_options,
     add_params_options,
     add_plant_options,
     add_served_options,
     add_spread_options,
-    check_job,
-    check_served,
-    client_name,
-    controller_failures,
     controller_help,
-    interrupted,
-    job_name,
-    load_params,
-    params_and_spread,
+    options_from,
     progress_bar,
+    resolve_band,
     resolve_engine,
-    screen_audit_failure,
     screen_summary,
-    served_stopped,
-    serving,
-    write_out,
 )
+from twin.app.commands.job import ManyRunJob
 from twin.app.options import DEFAULT_REFINE_STEP, MAX_LOCATE, MAX_RIGS, GridType, count, finite_float, seed
 from twin.rigs.backends import backend
 
@@ -140,7 +135,52 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_controller_timeout(parser)
 
 
+@dataclass(frozen=True)
+class Options:
+    """``sweep``'s options."""
+
+    controller: str | None
+    x0: str | None
+    theta0: str | None
+    duration: float
+    seed: int
+    no_noise: bool
+    plant: str
+    ideal_sensors: bool
+    engine: str | None
+    band: int | None
+    refine: int
+    audit: int | None
+    locate: int
+    rigs: int | None
+    level: float | None
+    workers: int
+    scheduler: str | None
+    controller_timeout: float | None
+    parameters: ParamsOptions
+    spread: SpreadOptions
+    served: ServedOptions
+    output: OutputOptions
+
+    def job(self) -> ManyRunJob:
+        return ManyRunJob(
+            "sweep",
+            self.controller,
+            self.parameters,
+            self.spread,
+            self.output,
+            workers=self.workers,
+            scheduler=self.scheduler,
+            served=self.served,
+            controller_timeout=self.controller_timeout,
+        )
+
+
 def run(args: argparse.Namespace) -> int:
+    return handle(options_from(Options, args))
+
+
+def handle(o: Options) -> int:
     from twin.app.sweep import (
         DEFAULT_THETA0,
         DEFAULT_X0,
@@ -152,39 +192,43 @@ def run(args: argparse.Namespace) -> int:
     )
     from twin.parameters import ParameterError
 
-    check_served(args)
-    if args.level is not None and args.rigs is None:
+    job = o.job()
+    job.check_served()
+    if o.level is not None and o.rigs is None:
         raise ParameterError(
-            f"--level {args.level:g}: the robust map's level, given with --rigs N (and --spread or --calibration)"
+            f"--level {o.level:g}: the robust map's level, given with --rigs N (and --spread or --calibration)"
         )
-    robust = args.rigs is not None or args.spread is not None or args.calibration is not None
+    robust = o.rigs is not None or o.spread.spread is not None or o.spread.calibration is not None
     if robust:
-        if args.rigs is None or (args.spread is None and args.calibration is None):
+        if o.rigs is None or (o.spread.spread is None and o.spread.calibration is None):
             raise ParameterError("a robust map needs --rigs N and one of --spread FILE or --calibration DIR")
-        if args.serve is not None:
+        if job.is_served:
             raise ParameterError("a robust map runs here or on workers, not as served sessions")
-    params, spread = params_and_spread(args) if robust else (load_params(args), None)
+    params, spread = job.params_and_spread() if robust else (job.params(), None)
+    x0 = parse_range("--x0", o.x0) if o.x0 else DEFAULT_X0
+    theta0 = parse_range("--theta0", o.theta0) if o.theta0 else DEFAULT_THETA0
+    engine = resolve_engine(o.engine, o.plant, "screen", plain=bool(o.refine), served=job.is_served)
     settings = SweepSettings(
-        controller=job_name(args),
-        x0=parse_range("--x0", args.x0) if args.x0 else DEFAULT_X0,
-        theta0=parse_range("--theta0", args.theta0) if args.theta0 else DEFAULT_THETA0,
-        duration_s=args.duration,
-        noise=not args.no_noise,
-        plant=args.plant,
-        ideal_sensors=bool(args.ideal_sensors or backend(args.plant).ideal_converters),
-        seed=args.seed,
-        refine=args.refine,
-        audit=args.audit or 0,
-        locate=args.locate,
-        engine=resolve_engine(args, "screen"),
-        band=args.band,
-        screen_audit=32 if args.audit is None else args.audit,
+        controller=job.name,
+        x0=x0,
+        theta0=theta0,
+        duration_s=o.duration,
+        noise=not o.no_noise,
+        plant=o.plant,
+        ideal_sensors=bool(o.ideal_sensors or backend(o.plant).ideal_converters),
+        seed=o.seed,
+        refine=o.refine,
+        audit=o.audit or 0,
+        locate=o.locate,
+        engine=engine,
+        band=resolve_band(o.band, engine, o.plant),
+        screen_audit=32 if o.audit is None else o.audit,
     )
-    if args.audit and not args.refine and not settings.policy.screened:
+    if o.audit and not o.refine and not settings.policy.screened:
         raise ParameterError(
             "--audit checks a refined or a screened map: give --refine or --engine screen too"
         )
-    if args.locate and robust:
+    if o.locate and robust:
         raise ParameterError("--locate finds one rig's boundary: not with a robust map (--rigs)")
     points = settings.x0.n * settings.theta0.n
     if points > MAX_POINTS:  # refused before the grid is built (its arrays alone may not fit in memory)
@@ -192,31 +236,31 @@ def run(args: argparse.Namespace) -> int:
             f"--x0 {settings.x0.n} × --theta0 {settings.theta0.n} = {points} starts: at most {MAX_POINTS}"
         )
     if robust:
-        return _robust_sweep(args, settings, params, spread)
-    check_job(args, params, OUTPUT_FILES)
-    with serving(args, params) as served:
+        return _robust_sweep(o, job, settings, params, spread)
+    job.check(params, OUTPUT_FILES)
+    with job.serving(params) as served:
         result = run_sweep(
             settings,
             params,
-            workers=args.workers,
-            scheduler=args.scheduler,
+            workers=o.workers,
+            scheduler=o.scheduler,
             progress=progress_bar("sweep"),
             serve=served,
         )
-    if (client := client_name(args, served)) is not None:
+    if (client := job.client_name(served)) is not None:
         result.settings = settings = replace(settings, controller=client)
     from twin.app.sweep_render import write_sweep  # matplotlib: after the runs
 
-    write_out(args, write_sweep, result)
-    if args.json:
+    job.write(write_sweep, result)
+    if o.output.json:
         print(json.dumps(result.to_json()))
     else:
-        _print_sweep(args, settings, result)
-    stopped = served_stopped(served, "sweep", sum(map(bool, result.points)), len(result.points))
+        _print_sweep(o.output.out, settings, result)
+    stopped = job.stopped(served, sum(map(bool, result.points)), len(result.points))
     if stopped is not None:
         return stopped
     if not result.complete:
-        return _interrupted(args, "sweep.json", sum(map(bool, result.points)), len(result.points))
+        return _interrupted(job, "sweep.json", sum(map(bool, result.points)), len(result.points))
     if result.refinement is not None and (wrong := result.refinement["audit"]["mismatches"]):
         first = wrong[0]
         print(
@@ -226,13 +270,12 @@ def run(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return 1
-    if result.screening is not None and (wrong := result.screening["audit"]["mismatches"]):
-        print(screen_audit_failure("sweep", wrong), file=sys.stderr)
+    if job.audit_failed(result.screening):
         return 1
-    return controller_failures(result.points, "sweep")
+    return job.failures(result.points)
 
 
-def _print_sweep(args: argparse.Namespace, settings: SweepSettings, result: SweepResult) -> None:
+def _print_sweep(out: str | None, settings: SweepSettings, result: SweepResult) -> None:
     """A map's summary in words: its classes, refinement, boundary and the region claims it judges."""
     report = result.to_json()
     summary = report["summary"]
@@ -263,38 +306,39 @@ def _print_sweep(args: argparse.Namespace, settings: SweepSettings, result: Swee
             f"claim ({claim['source']}): {claim['statement']}: {claim['verdict']} "
             f"({claim['kept']} of {claim['grid_points_inside']} grid starts keep the ball)"
         )
-    if args.out is not None:
-        print(f"wrote {Path(args.out) / 'sweep.json'} and {Path(args.out) / 'map.png'}")
+    if out is not None:
+        print(f"wrote {Path(out) / 'sweep.json'} and {Path(out) / 'map.png'}")
 
 
-def _robust_sweep(args: argparse.Namespace, settings: Any, params: Parameters, spread: Any) -> int:
+def _robust_sweep(o: Options, job: ManyRunJob, settings: Any, params: Parameters, spread: Any) -> int:
     """``sweep --rigs N --spread|--calibration``: the nominal rig's map, then every start on N drawn rigs."""
     from twin.app.robust import DEFAULT_LEVEL, OUTPUT_FILES, run_robust
     from twin.app.sweep import run_sweep
 
-    check_job(args, params, OUTPUT_FILES)
+    assert o.rigs is not None  # a robust map's (sweep checked it)
+    job.check(params, OUTPUT_FILES)
     nominal = run_sweep(
         settings,
         params,
-        workers=args.workers,
-        scheduler=args.scheduler,
+        workers=o.workers,
+        scheduler=o.scheduler,
         progress=progress_bar("nominal map"),
     )
     result = run_robust(
         settings,
         params,
         spread,
-        args.rigs,
-        level=DEFAULT_LEVEL if args.level is None else args.level,
+        o.rigs,
+        level=DEFAULT_LEVEL if o.level is None else o.level,
         nominal=nominal.points,
-        workers=args.workers,
-        scheduler=args.scheduler,
+        workers=o.workers,
+        scheduler=o.scheduler,
         progress=progress_bar("robust sweep"),
     )
     from twin.app.robust_render import write_robust  # matplotlib: after the runs
 
-    write_out(args, write_robust, result)
-    if args.json:
+    job.write(write_robust, result)
+    if o.output.json:
         print(json.dumps(result.to_json()))
     else:
         m = result.summary
@@ -307,19 +351,17 @@ def _robust_sweep(args: argparse.Namespace, settings: Any, params: Parameters, s
         )
         if result.screening is not None:
             print(screen_summary(result.screening))
-        if args.out is not None:
-            print(f"wrote {Path(args.out) / 'robust.json'} and {Path(args.out) / 'robust.png'}")
+        if o.output.out is not None:
+            print(f"wrote {Path(o.output.out) / 'robust.json'} and {Path(o.output.out) / 'robust.png'}")
     if not result.complete:
         run_on_every_rig = sum(p["rigs"] == result.rigs for p in result.points)
-        return _interrupted(args, "robust.json", run_on_every_rig, len(result.points), " on every rig")
+        return _interrupted(job, "robust.json", run_on_every_rig, len(result.points), " on every rig")
     for screened in (nominal.screening, result.screening):
-        if screened is not None and (wrong := screened["audit"]["mismatches"]):
-            print(screen_audit_failure("sweep", wrong), file=sys.stderr)
+        if job.audit_failed(screened):
             return 1
     return 0
 
 
-def _interrupted(args: argparse.Namespace, name: str, done: int, total: int, where: str = "") -> int:
+def _interrupted(job: ManyRunJob, name: str, done: int, total: int, where: str = "") -> int:
     """An interrupted map (Ctrl-C, SIGTERM): what it kept, where, and 128 + the signal."""
-    kept = f" with {done} of {total} starts run{where}: the runs done are kept"
-    return interrupted("sweep", kept, args.out, name)
+    return job.interrupted(f" with {done} of {total} starts run{where}: the runs done are kept", name)

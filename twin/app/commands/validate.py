@@ -5,30 +5,29 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from dataclasses import dataclass
 from pathlib import Path
 
 from twin.app.commands.common import (
     SERVED_CONTROLLER,
     WORKERS,
+    OutputOptions,
+    ParamsOptions,
+    ServedOptions,
+    SpreadOptions,
     add_controller_timeout,
     add_engine_options,
     add_params_options,
     add_served_options,
     add_spread_options,
-    check_job,
-    check_served,
-    client_name,
     controller_help,
-    interrupted,
-    job_name,
-    params_and_spread,
+    options_from,
     progress_bar,
+    resolve_band,
     resolve_engine,
-    screen_audit_failure,
     screen_summary,
-    serving,
-    write_out,
 )
+from twin.app.commands.job import ManyRunJob
 from twin.app.options import seed
 
 HELP = (
@@ -66,7 +65,47 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_controller_timeout(parser)
 
 
+# validate judges the twin itself: its runs are MuJoCo's (or the fast engine's, screened).
+PLANT = "twin"
+
+
+@dataclass(frozen=True)
+class Options:
+    """``validate``'s options."""
+
+    controller: str | None
+    criteria: str | None
+    spec: str | None
+    seed: int
+    engine: str | None
+    band: int | None
+    workers: int
+    controller_timeout: float | None
+    parameters: ParamsOptions
+    spread: SpreadOptions
+    served: ServedOptions
+    output: OutputOptions
+
+    def job(self) -> ManyRunJob:
+        return ManyRunJob(
+            "validate",
+            self.controller,
+            self.parameters,
+            self.spread,
+            self.output,
+            workers=self.workers,
+            served=self.served,
+            controller_timeout=self.controller_timeout,
+            criteria=self.criteria,
+            spec=self.spec,
+        )
+
+
 def run(args: argparse.Namespace) -> int:
+    return handle(options_from(Options, args))
+
+
+def handle(o: Options) -> int:
     from twin.app.validate import (
         OUTPUT_FILES,
         ValidationCriteria,
@@ -76,45 +115,46 @@ def run(args: argparse.Namespace) -> int:
     )
     from twin.parameters import ParameterError
 
-    check_served(args)
-    params, spread = params_and_spread(args)
-    criteria = load_criteria(args.criteria) if args.criteria else ValidationCriteria()
+    job = o.job()
+    job.check_served()
+    params, spread = job.params_and_spread()
+    criteria = load_criteria(o.criteria) if o.criteria else ValidationCriteria()
     spec = None
-    if args.spec is not None:
+    if o.spec is not None:
         from twin.app.validate import SPEC_CHECKS
         from twin.requirements import check_timing, load_spec
 
-        spec = load_spec(args.spec, SPEC_CHECKS)
+        spec = load_spec(o.spec, SPEC_CHECKS)
         for asking in SPEC_CHECKS:  # each check's runs are as long as the criteria say
             duration = criteria.region_duration_s if asking == "region" else criteria.duration_s
-            check_timing(spec.asked(asking), args.spec, params.daq.period_s, duration)
+            check_timing(spec.asked(asking), o.spec, params.daq.period_s, duration)
     try:
         check_criteria_for(criteria, params)
     except ParameterError as exc:
-        raise ParameterError(f"{args.criteria or 'the default criteria'}: {exc}") from None
-    check_job(args, params, OUTPUT_FILES)
-    args.plant = "twin"
-    settings_engine = resolve_engine(args, "screen")
-    with serving(args, params) as served:
+        raise ParameterError(f"{o.criteria or 'the default criteria'}: {exc}") from None
+    job.check(params, OUTPUT_FILES)
+    settings_engine = resolve_engine(o.engine, PLANT, "screen", served=job.is_served)
+    band = resolve_band(o.band, settings_engine, PLANT)
+    with job.serving(params) as served:
         report = validate(
-            job_name(args),
+            job.name,
             params,
             criteria,
             spread=spread,
-            seed=args.seed,
-            workers=args.workers,
+            seed=o.seed,
+            workers=o.workers,
             progress=progress_bar("validate"),
             serve=served,
             spec=spec,
             engine=settings_engine,
-            band=args.band,
+            band=band,
         )
-    if (client := client_name(args, served)) is not None:
+    if (client := job.client_name(served)) is not None:
         report.controller = client
     from twin.app.validate_render import write_validation  # matplotlib: after the runs
 
-    write_out(args, write_validation, report)
-    if args.json:
+    job.write(write_validation, report)
+    if o.output.json:
         print(json.dumps(report.to_json()))
     else:
         mark = {True: "pass", False: "FAIL", None: "not run"}
@@ -122,19 +162,18 @@ def run(args: argparse.Namespace) -> int:
             shown = "stopped" if check.measured.startswith("interrupted") else mark[check.passed]
             print(f"{shown:<8} {check.name}: {check.measured}  [{check.criterion}]")
         print(f"{report.controller}: {'PASS' if report.passed else 'FAIL'} ({report.wall_s:.0f} s)")
-        if args.out is not None:
-            print(f"wrote {Path(args.out) / 'report.md'}")
+        if o.output.out is not None:
+            print(f"wrote {Path(o.output.out) / 'report.md'}")
     if served is not None and served.stopped:
         print(f"ballbeam validate: {served.stopped}: the checks done so far are reported", file=sys.stderr)
         return 1
     if not report.complete:
         done = ": the checks done and the runs of the stage interrupted are reported"
-        return interrupted("validate", done, args.out, "validation.json")
+        return job.interrupted(done, "validation.json")
     screened = report.region.screening if report.region is not None else None
     if screened is not None:
-        if not args.json:  # the JSON holds it (the region's "screening")
+        if not o.output.json:  # the JSON holds it (the region's "screening")
             print(f"region: {screen_summary(screened)}")
-        if wrong := screened["audit"]["mismatches"]:
-            print(screen_audit_failure("validate", wrong), file=sys.stderr)
+        if job.audit_failed(screened):
             return 1
     return 0 if report.passed else 1

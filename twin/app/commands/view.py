@@ -5,14 +5,17 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 from twin.app.commands.common import (
+    ParamsOptions,
     add_controller_timeout,
     add_params_options,
     add_plant_options,
     controller_help,
     load_params,
+    options_from,
     params_source,
 )
 from twin.app.hosts import catalogue_for
@@ -105,71 +108,100 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_controller_timeout(parser)
 
 
+@dataclass(frozen=True)
+class Options:
+    """``view``'s options."""
+
+    allow_origin: list[str] | None
+    host: str
+    port: int
+    controller: str | None
+    serve: tuple[str, int] | None
+    wire_timeout: float | None
+    speed: float
+    seed: int | None
+    replay: str | None
+    trust_replay_controller: bool
+    no_noise: bool
+    duration: float | None
+    plant: str
+    ideal_sensors: bool
+    controller_timeout: float | None
+    parameters: ParamsOptions
+
+
 def run(args: argparse.Namespace) -> int:
+    return handle(options_from(Options, args))
+
+
+def handle(o: Options) -> int:
     from controllers import registry
     from twin.app.commands.common import package_version
     from twin.app.shadow import view_monitor
     from twin.viewer import ViewerError, serve
 
     initial = None
-    ideal_sensors = args.ideal_sensors or backend(args.plant).ideal_converters
-    if args.wire_timeout is not None and args.serve is None:
+    ideal_sensors = o.ideal_sensors or backend(o.plant).ideal_converters
+    if o.wire_timeout is not None and o.serve is None:
         print("ballbeam view: error: --wire-timeout is the wire client's: it needs --serve", file=sys.stderr)
         return 2
-    if args.trust_replay_controller and args.replay is None:
+    if o.trust_replay_controller and o.replay is None:
         print("ballbeam view: error: --trust-replay-controller goes with --replay FILE", file=sys.stderr)
         return 2
-    if args.replay is not None:
+    if o.replay is not None:
         from twin.app.replay import load_replay, refuse_given, replay_controller
 
         refuse_given(
             [
-                ("--seed", args.seed),
-                ("--params", args.params),
-                ("--set", args.set),
-                ("--no-noise", args.no_noise),
-                ("--plant", None if args.plant == DEFAULT_PLANT else args.plant),
-                ("--ideal-sensors", args.ideal_sensors),
+                ("--seed", o.seed),
+                ("--params", o.parameters.params),
+                ("--set", o.parameters.set),
+                ("--no-noise", o.no_noise),
+                ("--plant", None if o.plant == DEFAULT_PLANT else o.plant),
+                ("--ideal-sensors", o.ideal_sensors),
             ]
         )
-        replay = load_replay(args.replay)
-        replay_controller(replay, args.controller, args.trust_replay_controller, "ballbeam view")
+        replay = load_replay(o.replay)
+        replay_controller(replay, o.controller, o.trust_replay_controller, "ballbeam view")
         params = replay.params
-        args.controller, args.seed, args.no_noise = replay.controller, replay.seed, not replay.noise
-        args.plant, ideal_sensors = replay.plant, replay.ideal_sensors  # the engine the run was made on
+        # the engine the run was made on
+        o = replace(
+            o, controller=replay.controller, seed=replay.seed, no_noise=not replay.noise, plant=replay.plant
+        )
+        ideal_sensors = replay.ideal_sensors
         initial = (replay.x0_m, replay.theta0_rad)
     else:
-        params = load_params(args)
-    args.seed = 0 if args.seed is None else args.seed
-    if args.no_noise:  # the view's noise switch starts off
+        params = load_params(o.parameters)
+    seed = 0 if o.seed is None else o.seed
+    if o.no_noise:  # the view's noise switch starts off
         params = params.with_overrides({"ball_sensor.noise_enabled": False})
     # a failing constructor or a bad image is refused here, not in the view
-    catalogue: Catalogue = registry if args.controller is None else catalogue_for(args.controller, params)
+    catalogue: Catalogue = registry if o.controller is None else catalogue_for(o.controller, params)
     # With --serve the wire client starts unless --controller names another (both are in the menu).
-    controller = args.controller or (None if args.serve is not None else "appendix-clp")
+    controller = o.controller or (None if o.serve is not None else "appendix-clp")
     try:
         stats = serve(
             catalogue,
             monitor=view_monitor(),
-            host=args.host,
-            port=args.port,
+            host=o.host,
+            port=o.port,
             controller=controller,
-            speed=args.speed,
-            seed=args.seed,
-            duration_s=args.duration,
+            speed=o.speed,
+            seed=seed,
+            duration_s=o.duration,
             params=params,
-            plant=args.plant,
+            plant=o.plant,
             ideal_sensors=ideal_sensors,
-            allowed_origins=tuple(args.allow_origin or ()),
-            params_source=params_source(args),
-            wire=args.serve,
-            wire_timeout_s=5.0 if args.wire_timeout is None else args.wire_timeout,
-            rig_name=f"ballbeam-twin {package_version()} {args.plant}",
+            allowed_origins=tuple(o.allow_origin or ()),
+            params_source=params_source(o.parameters),
+            wire=o.serve,
+            wire_timeout_s=5.0 if o.wire_timeout is None else o.wire_timeout,
+            rig_name=f"ballbeam-twin {package_version()} {o.plant}",
             initial=initial,
         )
     except ViewerError as exc:
         print(f"ballbeam view: error: {exc}", file=sys.stderr)
         return 2
-    if args.duration is not None and stats:
+    if o.duration is not None and stats:
         print(json.dumps(stats))
     return 0
