@@ -101,17 +101,7 @@ class Options:
     output: OutputOptions
 
     def job(self) -> ManyRunJob:
-        return ManyRunJob(
-            "certify",
-            self.controller,
-            self.parameters,
-            self.spread,
-            self.output,
-            workers=self.workers,
-            scheduler=self.scheduler,
-            controller_timeout=self.controller_timeout,
-            spec=self.spec,
-        )
+        return ManyRunJob.of("certify", self, scheduler=self.scheduler, spec=self.spec)
 
 
 def run(args: argparse.Namespace) -> int:

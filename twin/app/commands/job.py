@@ -13,7 +13,7 @@ import sys
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 from twin.app.commands.common import (
     OutputOptions,
@@ -43,6 +43,23 @@ if TYPE_CHECKING:
 NOT_SERVED = ServedOptions(serve=None, timeout=None, wait_client=None)
 
 
+class JobOptions(Protocol):
+    """What every many-run command's record gives its job (``ManyRunJob.of``)."""
+
+    @property
+    def controller(self) -> str | None: ...
+    @property
+    def workers(self) -> int: ...
+    @property
+    def controller_timeout(self) -> float | None: ...
+    @property
+    def parameters(self) -> ParamsOptions: ...
+    @property
+    def spread(self) -> SpreadOptions: ...
+    @property
+    def output(self) -> OutputOptions: ...
+
+
 @dataclass(frozen=True)
 class ManyRunJob:
     """One many-run job of ``command``: what it reads (its controller, parameters, rigs and the files named by
@@ -59,6 +76,32 @@ class ManyRunJob:
     controller_timeout: float | None = None
     criteria: str | None = None
     spec: str | None = None
+
+    @classmethod
+    def of(
+        cls,
+        command: str,
+        options: JobOptions,
+        *,
+        scheduler: str | None = None,
+        served: ServedOptions = NOT_SERVED,
+        criteria: str | None = None,
+        spec: str | None = None,
+    ) -> ManyRunJob:
+        """The job of ``command`` from its record's common fields and what only some commands have."""
+        return cls(
+            command,
+            options.controller,
+            options.parameters,
+            options.spread,
+            options.output,
+            workers=options.workers,
+            scheduler=scheduler,
+            served=served,
+            controller_timeout=options.controller_timeout,
+            criteria=criteria,
+            spec=spec,
+        )
 
     @property
     def is_served(self) -> bool:

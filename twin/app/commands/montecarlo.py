@@ -108,17 +108,7 @@ class Options:
     output: OutputOptions
 
     def job(self) -> ManyRunJob:
-        return ManyRunJob(
-            "montecarlo",
-            self.controller,
-            self.parameters,
-            self.spread,
-            self.output,
-            workers=self.workers,
-            scheduler=self.scheduler,
-            served=self.served,
-            controller_timeout=self.controller_timeout,
-        )
+        return ManyRunJob.of("montecarlo", self, scheduler=self.scheduler, served=self.served)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -163,17 +163,7 @@ class Options:
     output: OutputOptions
 
     def job(self) -> ManyRunJob:
-        return ManyRunJob(
-            "sweep",
-            self.controller,
-            self.parameters,
-            self.spread,
-            self.output,
-            workers=self.workers,
-            scheduler=self.scheduler,
-            served=self.served,
-            controller_timeout=self.controller_timeout,
-        )
+        return ManyRunJob.of("sweep", self, scheduler=self.scheduler, served=self.served)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -87,18 +87,7 @@ class Options:
     output: OutputOptions
 
     def job(self) -> ManyRunJob:
-        return ManyRunJob(
-            "validate",
-            self.controller,
-            self.parameters,
-            self.spread,
-            self.output,
-            workers=self.workers,
-            served=self.served,
-            controller_timeout=self.controller_timeout,
-            criteria=self.criteria,
-            spec=self.spec,
-        )
+        return ManyRunJob.of("validate", self, served=self.served, criteria=self.criteria, spec=self.spec)
 
 
 def run(args: argparse.Namespace) -> int:
