@@ -25,6 +25,7 @@ from twin.parameters import Parameters
 
 __all__ = [
     "BatchBlock",
+    "BatchClock",
     "BatchFactory",
     "BatchPhysics",
     "PhysicsBackend",
@@ -100,6 +101,28 @@ class BatchBlock(NamedTuple):
     x_m: np.ndarray  # (live, m + 1) ball centre along the beam (m)
     theta_rad: np.ndarray  # (live, m + 1) beam angle (rad)
     on_track: np.ndarray  # (live, m + 1) bool: false from the first step off the track on (a lost run: all)
+
+
+class BatchClock:
+    """The bookkeeping every ``BatchPhysics`` shares: the runs' clock and which runs are lost, and when (a
+    backend subclasses it and moves ``_time_s``, ``_lost`` and ``_lost_time_s`` as its runs advance)."""
+
+    def __init__(self, n: int, time_s: float = 0.0) -> None:
+        self._time_s = time_s
+        self._lost = np.zeros(n, dtype=bool)
+        self._lost_time_s: list[float | None] = [None] * n
+
+    @property
+    def time_s(self) -> float:
+        return self._time_s
+
+    @property
+    def lost(self) -> np.ndarray:
+        return self._lost
+
+    @property
+    def lost_time_s(self) -> list[float | None]:
+        return self._lost_time_s
 
 
 class BatchPhysics(Protocol):

@@ -14,7 +14,7 @@ import numpy as np
 from mujoco import batch as mjbatch
 
 from twin.parameters import Parameters
-from twin.physics import BatchBlock
+from twin.physics import BatchBlock, BatchClock
 from twin.plant import (
     FULL_STATE,
     Plant,
@@ -30,7 +30,7 @@ __all__ = ["MujocoBatchPhysics"]
 _INTEGRATION = mujoco.mjtState.mjSTATE_INTEGRATION
 
 
-class MujocoBatchPhysics:
+class MujocoBatchPhysics(BatchClock):
     """N runs of ``Plant`` as rows of one ``mujoco.batch.Batch`` (see the module)."""
 
     def __init__(
@@ -89,22 +89,8 @@ class MujocoBatchPhysics:
         assert plant0._hinge_qpos is not None
         self.theta_col = 1 + plant0._hinge_qpos
         self.ball_col = 1 + plant0._ball_qpos
-        self._time_s = float(self.last_row[0, 0])
-        self._lost = np.zeros(n, dtype=bool)
-        self._lost_time_s: list[float | None] = [None] * n
+        super().__init__(n, float(self.last_row[0, 0]))
         self.lost_state = np.full((n, 4), math.nan)
-
-    @property
-    def time_s(self) -> float:
-        return self._time_s
-
-    @property
-    def lost(self) -> np.ndarray:
-        return self._lost
-
-    @property
-    def lost_time_s(self) -> list[float | None]:
-        return self._lost_time_s
 
     def advance(self, runs: np.ndarray, volts: np.ndarray) -> BatchBlock:
         """Plant.advance for runs ``runs``: one rollout of their rows."""

@@ -24,7 +24,7 @@ import numpy as np
 from twin.dcmotor import torque_nm
 from twin.jit import njit_cached
 from twin.parameters import Parameters
-from twin.physics import BatchBlock, check_initial_state
+from twin.physics import BatchBlock, BatchClock, check_initial_state
 from twin.reference import (
     EquationCoefficients,
     ball_beam_accelerations,
@@ -167,7 +167,7 @@ def advance_plant(
     return xs, thetas
 
 
-class ReferenceBatchPhysics:
+class ReferenceBatchPhysics(BatchClock):
     """The reference plant over N runs in the kernel (``twin.physics.BatchPhysics``): each run is
     ``ReferencePlant`` from the same start under the same volts (tests/test_screen.py). A lost run's state
     stays where its ball left the track, as the reference plant's."""
@@ -184,21 +184,7 @@ class ReferenceBatchPhysics:
         self.states = np.zeros((self.n, 4))
         self.states[:, 0], self.states[:, 1] = x0, theta0
         self.lost_step = np.full(self.n, -1, dtype=np.int64)  # ≥ 0 once lost: the kernel skips the run
-        self._lost = np.zeros(self.n, dtype=bool)
-        self._lost_time_s: list[float | None] = [None] * self.n
-        self._time_s = 0.0
-
-    @property
-    def time_s(self) -> float:
-        return self._time_s
-
-    @property
-    def lost(self) -> np.ndarray:
-        return self._lost
-
-    @property
-    def lost_time_s(self) -> list[float | None]:
-        return self._lost_time_s
+        super().__init__(self.n)
 
     def advance(self, runs: np.ndarray, volts: np.ndarray) -> BatchBlock:
         """``ReferencePlant.advance`` for runs ``runs``."""
