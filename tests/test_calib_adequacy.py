@@ -334,7 +334,7 @@ def test_heavier_contact_noise_is_white_excess_and_the_fit_stays_within_toleranc
     _assert_recovered(cal, TRUTH, intervals=False)
 
 
-@pytest.mark.slow
+@pytest.mark.study  # ~4 min on one core: run with -m study
 def test_missing_pivot_coulomb_friction_is_model_mismatch_and_named(tmp_path: Path, capsys) -> None:
     """The rig has 0.01 N·m of dry friction in the pivot, the fit does not include it: the angle residual is
     many times its floor and coloured; the refit with beam.pivot_friction_nm freed finds it and explains the
@@ -396,7 +396,7 @@ def test_contact_losses_are_in_the_noise_model() -> None:
     )
 
 
-@pytest.mark.slow
+@pytest.mark.study  # ~1 min on one core: run with -m study
 @pytest.mark.parametrize("max_s", [1e-3, 5e-3])
 def test_contact_losses_beyond_the_studied_rigs_are_told(max_s: float, monkeypatch) -> None:
     """30 contact losses a second (six times the twin's nominal rate) lasting up to 1 or 5 ms: beyond the
@@ -418,7 +418,7 @@ def test_contact_losses_beyond_the_studied_rigs_are_told(max_s: float, monkeypat
         assert one_sided < 0.5 * symmetric, (one_sided, symmetric)
 
 
-@pytest.mark.slow
+@pytest.mark.study  # ~2 min on one core: run with -m study
 def test_an_amplifier_rail_the_fit_does_not_know_is_named_and_then_fitted() -> None:
     """The rig's amplifier saturates at ±9 V, the fit's at ±12 V. The angle residual is only 1.3× its floor
     but coloured (ρ(1) = 0.74; the damping 9 % off): model mismatch, and the refit with amplifier.rail_v free

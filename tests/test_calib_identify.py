@@ -38,7 +38,7 @@ def _error(name: str, fitted: float, true: float) -> float:
     return abs(fitted - true) if name == FIT[3] else abs(fitted / true - 1)
 
 
-@pytest.mark.slow
+@pytest.mark.study  # five calibrations, ~2 min on one core: run with -m study
 def test_recovery_from_twin_logs_five_seeds() -> None:
     """60 s of the recommended experiment on the twin (full sensor chain, noise on) for five perturbed rigs:
     every parameter within tolerance, and the 95 % intervals contain the truth in at least 4 of 5 seeds."""

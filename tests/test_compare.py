@@ -305,7 +305,7 @@ def _independent(truth: dict[str, float], duration_s: float, seed: int) -> RigLo
     )
 
 
-@pytest.mark.slow
+@pytest.mark.study  # a calibration and an independent simulator, ~1 min: run with -m study
 def test_calibrated_parameters_predict_a_held_out_independent_log_better_than_nominal() -> None:
     """tests/independent_rig.py (its own equations, integrator, noise and controller) with resistance +15 %,
     inertia −15 %, pivot damping 1.2e-3 and a 10 mrad zeroing error: calibrate on 30 s (seed 1), compare on

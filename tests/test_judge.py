@@ -123,7 +123,7 @@ def test_measured_and_true_verdicts_agree_for_the_hardware_controllers_from_the_
     assert figures["runs"] == 36 and figures["held"] == 36  # these controllers hold every hardware start
 
 
-@pytest.mark.slow
+@pytest.mark.study  # every controller from many starts, ~1.5 min: run with -m study
 def test_measured_and_true_verdicts_agree_over_the_registry() -> None:
     starts = list(CHAPTER4_STARTS) + list(HARDWARE_STARTS.values())
     figures = _check_agreement(_runs(registry.NAMES, starts))

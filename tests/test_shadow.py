@@ -230,7 +230,7 @@ def test_on_the_wire_a_server_whose_motor_is_warm_alarms_within_10_s() -> None:
     assert shadow.alarmed and shadow.alarms[0].time_s <= 10.0, shadow.summary()
 
 
-@pytest.mark.slow
+@pytest.mark.study  # 10 minutes of rig time served, ~1 min: run with -m study
 def test_on_the_wire_a_nominal_server_for_10_minutes_raises_no_alarm() -> None:
     shadow = _watched("--seed", "4", duration_s=600.0)
     # Every window is accounted for, scored or skipped with its reason; on a loaded machine the observer's

@@ -230,7 +230,10 @@ def test_a_failing_controller_fails_its_own_run_not_the_sweep(
     assert result.to_json()["summary"]["failed"] == 1
 
 
-@pytest.mark.parametrize("controller", ["appendix-sf", "appendix-clp"])
+@pytest.mark.parametrize(
+    "controller",
+    ["appendix-sf", pytest.param("appendix-clp", marks=pytest.mark.study)],  # clp: ~1 min
+)
 def test_a_refined_map_is_the_brute_force_map(controller: str) -> None:
     """--refine runs a coarse grid and only the cells whose corners disagree: every start's class is brute
     force's, every start it ran has brute force's record, at a fraction of the runs."""

@@ -13,7 +13,10 @@ from twin.parameters import ParameterError, Parameters
 EXAMPLE = Path(__file__).parents[1] / "docs" / "examples" / "requirements.toml"
 
 
-@pytest.mark.parametrize("controller", ["appendix-sf", "appendix-clp"])
+@pytest.mark.parametrize(
+    "controller",
+    ["appendix-sf", pytest.param("appendix-clp", marks=pytest.mark.study)],  # each ~1 min
+)
 def test_the_example_requirements_give_the_default_validations_verdicts_run_for_run(controller: str) -> None:
     """docs/examples/requirements.toml is validate's checks in STL: over every run of the default validation,
     each run meets the file's held requirements exactly when its verdict held, kept exactly when the ball was
