@@ -109,3 +109,23 @@ def test_a_field_the_parser_lacks_is_refused_not_defaulted() -> None:
         options_from(Record, argparse.Namespace(seed=3, params="p.toml"))
     with pytest.raises(TypeError, match="seed"):
         options_from(Record, argparse.Namespace(params=None, set=None))
+
+
+@pytest.mark.quick
+def test_a_many_run_commands_job_carries_its_records_fields() -> None:
+    from twin.app import cli
+    from twin.app.commands import sweep, validate
+    from twin.app.commands.common import options_from
+    from twin.app.commands.job import ManyRunJob
+
+    args = cli.build_parser().parse_args(["sweep", "--controller", "lqr", "--workers", "2"])
+    record = options_from(sweep.Options, args)
+    job = record.job()
+    assert isinstance(job, ManyRunJob)
+    assert (job.command, job.controller, job.workers) == ("sweep", "lqr", 2)
+    assert (job.parameters, job.rigs, job.output) == (record.parameters, record.spread, record.output)
+    assert job.scheduler is None and not job.is_served
+    served = options_from(
+        validate.Options, cli.build_parser().parse_args(["validate", "--serve", "udp://127.0.0.1:0"])
+    )
+    assert served.job().is_served and served.job().command == "validate"
