@@ -128,11 +128,11 @@ SHRUNK = (
 )
 
 SKIPPED = (
-    ("pip install", "installs the package: the test runs in the installed one"),
+    ("pip install", "installs the package: the test runs in the installed one (.ci/run runs the test line)"),
     ("python -m pytest", "the test suite itself"),
     (
         "ballbeam view",
-        "serves a browser until it is closed (tests/test_viewer_*.py, tests/test_app_browser.py)",
+        "serves a browser until it is closed: tests/test_docs_view_blocks.py runs it as pasted and ends it",
     ),
     (" PORT", "a placeholder: the next block runs the client on its port"),
     (
