@@ -81,7 +81,7 @@ def test_recovery_from_an_independent_simulator(seed: int) -> None:
         assert _error(name, cal.values[name].value, truth[name]) <= TOLERANCE[name], (name, cal.values[name])
 
 
-@pytest.mark.slow
+@pytest.mark.study  # a calibration and a held-out log, ~30 s: run with -m study
 def test_fitted_parameters_predict_a_held_out_log_better_than_nominal() -> None:
     """Fit on one log, replay a second log of the same rig (another seed of the experiment) in closed loop."""
     truth = NOMINAL.with_overrides(_truth(4))
