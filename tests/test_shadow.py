@@ -179,7 +179,7 @@ def test_samples_that_are_not_a_log_are_skipped_with_the_reason(nominal_run: Run
     assert shadow.skipped >= 2 and shadow.scored >= 50
 
 
-@pytest.mark.study  # an hour of stream, ~45 s: run with -m study
+@pytest.mark.study  # three minutes of stream scored, ~45 s: run with -m study
 def test_a_long_stream_keeps_a_few_windows(nominal_run: RunResult) -> None:
     shadow = Shadow(P, _band())
     log = nominal_run.log
