@@ -17,7 +17,7 @@ from twin.outputs import atomic_directory  # noqa: E402
 
 __all__ = ["render_falsify", "render_table", "write_falsify"]
 
-# The bench's problems (scripts/bench.py, (k)) as the README's table names them.
+# The bench's problems (scripts/bench.py, (k)) as the manual's table names them.
 PROBLEMS = {
     "corner": "start box across appendix-sf's region at a corner (x0 −0.05…0.105 m, θ0 −0.70…0 rad)",
     "spread_tail": "appendix-sf from (0.12 m, −0.535 rad) over docs/examples/spread.toml's rigs",
@@ -70,7 +70,7 @@ def render_falsify(result: FalsifyResult, path: Path) -> None:
 
 
 def render_table(bench: dict[str, float]) -> str:
-    """The README's falsifier-against-sampling table from the bench's (k) figures (``bench.py --only-falsify``)."""
+    """The manual's falsifier-against-sampling table from the bench's (k) figures (``bench.py --only-falsify``)."""
     seeds = int(bench["seeds"])
     budget = int(bench["budget"])
     lines = [

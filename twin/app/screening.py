@@ -61,7 +61,7 @@ DEFAULT_AUDIT = 32  # starts per map decided by the fast engine alone that MuJoC
 ASSUMPTION = (
     "a start further than the band from every class change of the map, whose offsets are further than their "
     "margins from their bands, has the same class on MuJoCo as on the fast engine (the two engines' "
-    "disagreements sit at class changes and at marginal runs; measured in the README's agreement table)"
+    "disagreements sit at class changes and at marginal runs; measured in docs/validation/engines.md's agreement table)"
 )
 
 
@@ -351,7 +351,7 @@ def confirm_list(
 
 
 def render_agreement(data: dict[str, Any]) -> str:
-    """The README's agreement table from ``scripts/screen_agreement.py``'s JSON (markdown)."""
+    """The agreement table of docs/validation/engines.md from ``scripts/screen_agreement.py``'s JSON (markdown)."""
     lines = [
         "| controller | start | noise | max Δx (mm) | RMS Δx (mm) | max Δθ (mrad) | RMS Δθ (mrad) |",
         "|---|---|---|---|---|---|---|",

@@ -33,7 +33,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--fit",
         required=True,
         metavar="NAME,NAME,…",
-        help="parameters to fit, e.g. motor.resistance_ohm,beam.inertia_pivot_kgm2 (see README)",
+        help="parameters to fit, e.g. motor.resistance_ohm,beam.inertia_pivot_kgm2 (docs/calibrate.md)",
     )
     parser.add_argument("--out", metavar="DIR", help="write params.toml, calibration.json and report.md here")
     parser.add_argument("--overwrite", action="store_true", help="replace its own files in an existing --out")

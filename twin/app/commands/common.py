@@ -244,7 +244,7 @@ def add_spread_options(parser: argparse.ArgumentParser, use: str) -> None:
     """``--spread FILE`` or ``--calibration DIR`` (one of them): what rigs are drawn from, for ``use``."""
     what = parser.add_mutually_exclusive_group()
     what.add_argument(
-        "--spread", metavar="FILE", help=f"each parameter's uncertainty (TOML/JSON; see the README), {use}"
+        "--spread", metavar="FILE", help=f"each parameter's uncertainty (TOML/JSON; docs/validate.md), {use}"
     )
     what.add_argument(
         "--calibration",
@@ -596,7 +596,7 @@ def add_requirements_job(parser: argparse.ArgumentParser, spec_use: str, spread_
         "--spec",
         required=True,
         metavar="FILE",
-        help=f"requirements in signal temporal logic (TOML; README: Requirements and counterexamples): {spec_use}",
+        help=f"requirements in signal temporal logic (TOML; docs/requirements.md): {spec_use}",
     )
     add_spread_options(parser, spread_use)
 

@@ -114,8 +114,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--spec",
         metavar="FILE",
-        help='requirements in signal temporal logic (TOML [requirements] name = "formula"; README: '
-        "Requirements and counterexamples): each one's robustness in the summary; exit 1 when one is violated",
+        help='requirements in signal temporal logic (TOML [requirements] name = "formula"; '
+        "docs/requirements.md): each one's robustness in the summary; exit 1 when one is violated",
     )
     parser.add_argument(
         "--setpoint",

@@ -94,7 +94,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         type=finite_float(0, lo_open=True, unit="sd"),
         default=None,
         metavar="H",
-        help="the CUSUM's alarm threshold in band sd (default 7: see the README for its false-alarm rate)",
+        help="the CUSUM's alarm threshold in band sd (default 7: docs/watch.md gives its false-alarm rate)",
     )
     parser.add_argument(
         "--log", metavar="FILE.jsonl", help="write every window and alarm as JSON lines (atomically)"
