@@ -47,8 +47,6 @@ from twin.verdict import Criteria
 
 __all__ = ["DaqSample", "ReferenceRig", "Rig", "RigError", "SimRig", "TwinRig", "make_rig"]
 
-# A control period, latency or free-run time must be a whole number of physics steps to this precision.
-
 
 def tick_schedule(params: Parameters) -> TickSchedule:
     """The rig's ``TickSchedule`` from ``daq.period_s``, ``daq.output_latency_s`` and ``start.free_run_s``,
