@@ -22,7 +22,9 @@ def _cell(text: str) -> str:
 
 
 def parameters_markdown() -> str:
-    """The parameter table: name, default, unit, source, one row per parameter."""
+    """The parameter table: name, default, unit, source, one row per parameter (the parts' own groups too:
+    importing twin.parts registers them)."""
+    import twin.parts  # noqa: F401  # registers every built-in part's parameter group
     from twin.parameters import Parameters
 
     rows = ["| parameter | default | unit | source |", "| --- | --- | --- | --- |"]

@@ -103,12 +103,12 @@ def test_a_field_the_parser_lacks_is_refused_not_defaulted() -> None:
         seed: int
         parameters: ParamsOptions
 
-    given = argparse.Namespace(seed=3, params="p.toml", set=["a.b=1"])
-    assert options_from(Record, given) == Record(3, ParamsOptions("p.toml", ["a.b=1"]))
+    given = argparse.Namespace(seed=3, rig_file=None, params="p.toml", set=["a.b=1"])
+    assert options_from(Record, given) == Record(3, ParamsOptions(None, "p.toml", ["a.b=1"]))
     with pytest.raises(TypeError, match="set"):
-        options_from(Record, argparse.Namespace(seed=3, params="p.toml"))
+        options_from(Record, argparse.Namespace(seed=3, rig_file=None, params="p.toml"))
     with pytest.raises(TypeError, match="seed"):
-        options_from(Record, argparse.Namespace(params=None, set=None))
+        options_from(Record, argparse.Namespace(rig_file=None, params=None, set=None))
 
 
 @pytest.mark.quick

@@ -166,7 +166,7 @@ def test_the_rig_runs_todays_parts_and_its_write_is_the_output_stages() -> None:
     from twin.output_stage import motor_volts
 
     rig = SimRig(Parameters(), seed=3)
-    assert rig.parts is THESIS
+    assert rig.parts == THESIS  # the parts Parameters() names (twin.parts.rig_parts)
     commands = np.random.default_rng(5).uniform(-1.0, 6.0, 200)
     write = THESIS.motor_volts_of(rig.params)
     assert [write(c) for c in commands.tolist()] == np.asarray(motor_volts(commands, rig.params)).tolist()

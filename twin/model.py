@@ -28,6 +28,10 @@ __all__ = [
     "apply_physics",
     "apply_track",
     "build_model",
+    "drive_joint",
+    "register_drive_joint",
+    "fragments_of",
+    "register_fragment",
     "build_spec",
     "measure_rest_gap_m",
     "model_path",
@@ -85,15 +89,15 @@ def build_spec(
     fragments: Sequence[Callable[[mujoco.MjSpec, Parameters], None]] | None = None,
 ) -> mujoco.MjSpec:
     """The rig's MjSpec with every physical value taken from ``params``: the numerical options, then each
-    part's fragment patched from its parameters (``fragments``, default ``THESIS_FRAGMENTS``: the parts' MJCF
-    fragments, ``twin.parts``; each writes its own elements, so their order does not matter).
+    part's fragment patched from its parameters (``fragments``, default the fragments of the parts ``params``
+    names, ``fragments_of``: ``twin.parts`` registers each part's; each writes or replaces its own elements).
 
     ``hold_beam_rad`` replaces the hinge by a rigid mount at that angle (the beam "held" by hand, for
     rolling checks and static sensor calibration); the motor is then removed with the hinge."""
     p = params or Parameters()
     spec = mujoco.MjSpec.from_file(str(model_path()))
     apply_physics(spec, p)
-    for apply in THESIS_FRAGMENTS if fragments is None else fragments:
+    for apply in fragments_of(p) if fragments is None else fragments:
         apply(spec, p)
     if hold_beam_rad is not None:
         if not math.isfinite(hold_beam_rad):
@@ -208,6 +212,78 @@ THESIS_FRAGMENTS: tuple[Callable[[mujoco.MjSpec, Parameters], None], ...] = (
     apply_ball,
     apply_actuator,
 )
+
+
+Fragment = Callable[[mujoco.MjSpec, Parameters], None]
+# The role order fragments are applied in: the thesis's (beam drive, track, ball, actuator), then the sensors and
+# the board, whose fragments (a sensor's housing and its beam, drawn) add elements of their own.
+FRAGMENT_ROLES = ("beam_drive", "track", "ball", "actuator", "ball_sensor", "angle_sensor", "io_board")
+_FRAGMENTS: dict[tuple[str, str], Fragment] = {
+    ("beam_drive", "pivot"): apply_beam_drive,
+    ("track", "two_wires"): apply_track,
+    ("ball", "steel_ball"): apply_ball,
+    ("actuator", "escap_dc_motor"): apply_actuator,
+}
+# The parts whose fragment is nothing (a sensor outside MuJoCo): registered as such, so a name never registered
+# is told apart from a part that owns no element.
+_NO_FRAGMENT: set[tuple[str, str]] = {
+    ("ball_sensor", "resistive_wire"),
+    ("angle_sensor", "encoder_counter"),
+    ("io_board", "pci1712"),
+}
+
+
+def register_fragment(role: str, name: str, apply: Fragment | None) -> None:
+    """The MJCF fragment of the part ``name`` in ``role`` (``twin.parts.register`` calls this for every part;
+    None: the part owns no element). A rig's model applies the fragments of the parts its parameters name."""
+    if role not in FRAGMENT_ROLES:
+        raise ModelError(f"no role {role!r} in a rig's model (roles: {list(FRAGMENT_ROLES)})")
+    key = (role, name)
+    if key in _FRAGMENTS or key in _NO_FRAGMENT:
+        if _FRAGMENTS.get(key) is apply or (apply is None and key in _NO_FRAGMENT):
+            return  # the thesis's own, registered again by its part
+        raise ModelError(f"the {role} {name!r} has a fragment already")
+    if apply is None:
+        _NO_FRAGMENT.add(key)
+    else:
+        _FRAGMENTS[key] = apply
+
+
+# The joint each beam drive takes its input at, by the drive's name: the actuator's fragment puts the actuator
+# "motor" on it (``drive_joint``). The thesis's pivot is driven at the beam's hinge; a lever drive at its servo's
+# shaft (``twin.parts.linkage``).
+_DRIVE_JOINTS: dict[str, str] = {"pivot": HINGE}
+
+
+def register_drive_joint(drive: str, joint: str) -> None:
+    """Name the joint the beam drive ``drive`` takes its input at (its module calls this once, beside its
+    ``register``); a drive named twice with another joint is refused."""
+    if _DRIVE_JOINTS.get(drive, joint) != joint:
+        raise ModelError(f"the beam drive {drive!r} takes its input at {_DRIVE_JOINTS[drive]!r} already")
+    _DRIVE_JOINTS[drive] = joint
+
+
+def drive_joint(params: Parameters) -> str:
+    """The joint the actuator of the rig ``params`` names drives: its beam drive's input joint."""
+    drive = params.parts.beam_drive
+    if drive not in _DRIVE_JOINTS:
+        raise ModelError(f"parts.beam_drive = {drive!r}: no input joint is registered for it (twin.model)")
+    return _DRIVE_JOINTS[drive]
+
+
+def fragments_of(params: Parameters) -> tuple[Fragment, ...]:
+    """The fragments of the parts ``params.parts`` names, in ``FRAGMENT_ROLES`` order (``ModelError`` for a
+    part whose fragment was never registered: its module, under ``twin.parts``, was not imported)."""
+    out = []
+    for role in FRAGMENT_ROLES:
+        key = (role, getattr(params.parts, role))
+        if key in _FRAGMENTS:
+            out.append(_FRAGMENTS[key])
+        elif key not in _NO_FRAGMENT:
+            raise ModelError(
+                f"parts.{role} = {key[1]!r}: no such part's MJCF fragment is registered (twin.parts)"
+            )
+    return tuple(out)
 
 
 def build_model(params: Parameters | None = None, *, hold_beam_rad: float | None = None) -> mujoco.MjModel:

@@ -19,7 +19,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from types import MappingProxyType
-from typing import Any
+from typing import Any, TypeVar
 
 from twin.image import open_regular
 
@@ -38,7 +38,11 @@ __all__ = [
     "SoftwareCalibration",
     "Start",
     "Parameters",
+    "PartNames",
     "GROUPS",
+    "all_groups",
+    "choice",
+    "register_group",
     "READING",
     "check_group",
     "declaration",
@@ -133,6 +137,16 @@ def flag(default: bool, source: str) -> Any:
     return field(default=default, metadata={"unit": "on/off", "source": source, "flag": True})
 
 
+def choice(default: str, source: str, *, why: str) -> Any:
+    """A dataclass field naming an entry of a registry (a rig part by name: ``PartNames``); the registry that
+    knows the names checks it (``twin.parts``), the group only that it is a name (``why``: what it names)."""
+    return field(default=default, metadata={"unit": "name", "source": source, "choice": True, "why": why})
+
+
+# A registry name: what a rig description may write for a part (letters, digits, '_' and '-', at most 40).
+_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_-]{0,39}")
+
+
 def _show(value: Any) -> str:
     """``repr(value)``, shortened for a message (a refused value may be a 1 MiB string or list)."""
     try:
@@ -172,6 +186,13 @@ def _check_fields(obj: Any, group: str) -> None:
             continue
         if md.get("curve"):
             object.__setattr__(obj, f.name, _check_curve(name, value, md))
+            continue
+        if md.get("choice"):
+            if not isinstance(value, str) or not _NAME.fullmatch(value):
+                raise ParameterError(
+                    f"{name} = {_show(value)} is not a name ({md['why']}: a letter, then letters, digits, "
+                    f"'_' or '-', at most 40)"
+                )
             continue
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ParameterError(f"{name} = {_show(value)} is not a number")
@@ -1045,6 +1066,30 @@ class McuIo:
         _check_fields(self, "mcu_io")
 
 
+@dataclass(frozen=True)
+class PartNames:
+    """Which part takes each place in the rig, by its registered name (``twin.parts``: the registry refuses a name
+    it does not know for the role, naming the field). The defaults are the thesis's rig; a rig description
+    (``twin.parts.description``) names others, each with its own parameter group (``register_group``)."""
+
+    ball: str = choice("steel_ball", "Table 3.1: the thesis's steel ball", why="the ball's part")
+    track: str = choice("two_wires", "§3, Table 3.1: two wires", why="the track's part")
+    beam_drive: str = choice(
+        "pivot", "§3: the beam turned at its pivot through the gearbox", why="how the beam is driven"
+    )
+    actuator: str = choice(
+        "escap_dc_motor", "Table 3.2, §6.4: the Escap motor and its amplifier", why="the actuator's part"
+    )
+    ball_sensor: str = choice("resistive_wire", "§6.3: the resistive wire", why="the ball sensor's part")
+    angle_sensor: str = choice(
+        "encoder_counter", "§6.2: the encoder, counter and DAC", why="the angle sensor's part"
+    )
+    io_board: str = choice("pci1712", "Table 6.4: the Advantech PCI-1712", why="the I/O board's part")
+
+    def __post_init__(self) -> None:
+        _check_fields(self, "parts")
+
+
 # The ball reading's gain and offset relative to the sensor curve, with their units: what a calibration fits of
 # the ball channel beside the parameters; no field, folded into the curve (``Parameters.with_values``). Any
 # value that leaves the curve increasing is physical, so they declare no bounds of their own.
@@ -1066,6 +1111,33 @@ _GROUPS: dict[str, type] = {
 }
 # The parameter table's groups by name, read-only: each rig part points at its own (``twin.parts``).
 GROUPS: Mapping[str, type] = MappingProxyType(_GROUPS)
+# Which part takes each place: a group of names, beside the values (``Parameters.parts``).
+PARTS_GROUP = "parts"
+
+# The parameter groups of parts beyond the thesis's, registered by their part's module (``register_group``): a
+# rig holds the values of those it has set (``Parameters.part_groups``), every other one reads as its defaults.
+_PART_GROUPS: dict[str, type] = {}
+G = TypeVar("G")
+
+
+def register_group(name: str, cls: type[G]) -> type[G]:
+    """Add a part's parameter group ``cls`` (a frozen dataclass of ``param``/``curve``/``flag``/``choice`` fields
+    whose ``__post_init__`` calls ``check_group``) to the table under ``name``; returns ``cls``. A name the
+    table has (the thesis's groups, ``parts``, a registered group) is refused, as is a class registered twice."""
+    if not _NAME.fullmatch(name) or "-" in name:
+        raise ParameterError(f"parameter group name {_show(name)} is not an identifier")
+    if name in _GROUPS or name == PARTS_GROUP or name in _PART_GROUPS:
+        raise ParameterError(f"parameter group '{name}' is in the table already")
+    if cls in _PART_GROUPS.values() or cls in _GROUPS.values():
+        raise ParameterError(f"{cls.__name__} is a parameter group already")
+    cls()  # its defaults must make a valid group: refused here, not in a user's run
+    _PART_GROUPS[name] = cls
+    return cls
+
+
+def all_groups() -> Mapping[str, type]:
+    """Every parameter group by name: the thesis's (``GROUPS``), then the parts' registered ones."""
+    return MappingProxyType({**_GROUPS, **_PART_GROUPS})
 
 
 def check_group(obj: Any, group: str) -> None:
@@ -1100,10 +1172,22 @@ def declaration(name: str) -> Mapping[str, Any]:
     if name in READING:
         return MappingProxyType({"unit": READING[name]})
     group, _, field_name = name.partition(".")
-    declared = {f.name: f.metadata for f in fields(_GROUPS[group])} if group in _GROUPS else {}
+    cls = _group_class(group)
+    declared = {f.name: f.metadata for f in fields(cls)} if cls is not None else {}
     if field_name not in declared:
         raise ParameterError(f"unknown parameter '{_clip(name)}'")
     return declared[field_name]
+
+
+def _group_class(group: str) -> type | None:
+    """The class of the group ``group`` (the thesis's, ``parts`` or a part's registered one), None if unknown."""
+    if group == PARTS_GROUP:
+        return PartNames
+    return _GROUPS.get(group) or _PART_GROUPS.get(group)
+
+
+def _known_groups() -> list[str]:
+    return sorted([*_GROUPS, PARTS_GROUP, *_PART_GROUPS])
 
 
 def within_bounds(name: str, value: float) -> bool:
@@ -1129,14 +1213,43 @@ class Parameters:
     software: SoftwareCalibration = field(default_factory=SoftwareCalibration)
     start: Start = field(default_factory=Start)
     mcu_io: McuIo = field(default_factory=McuIo)
+    # Which part takes each place (the thesis's by default) and the values of the parts' own groups that differ
+    # from their defaults' group, as (name, group) pairs sorted by name: hashable, so a rig stays a cache key.
+    parts: PartNames = field(default_factory=PartNames)
+    part_groups: tuple[tuple[str, Any], ...] = ()
 
     def __post_init__(self) -> None:
+        for name, group in self.part_groups:
+            cls = _PART_GROUPS.get(name)
+            if cls is None or type(group) is not cls:
+                raise ParameterError(f"part_groups: '{_clip(str(name))}' is not a registered part's group")
         r, d = self.ball.radius_m, self.track.contact_spacing_m
         if d >= 2 * r:
             raise ParameterError(
                 f"track.contact_spacing_m = {d!r} m is impossible: the ball (radius {r!r} m) falls between "
                 f"the wires unless d < 2r = {2 * r!r} m"
             )
+
+    # --- the parts' groups ------------------------------------------------------------------------
+    def group(self, name: str) -> Any:
+        """The group ``name``: the thesis's, ``parts``, or a part's registered one (its values here, else its
+        defaults). An unknown name raises ``ParameterError``."""
+        if name in _GROUPS or name == PARTS_GROUP:
+            return getattr(self, name)
+        cls = _PART_GROUPS.get(name)
+        if cls is None:
+            raise ParameterError(
+                f"unknown parameter group '{_clip(name)}' (expected one of {_known_groups()})"
+            )
+        return dict(self.part_groups).get(name) or cls()
+
+    def of(self, cls: type[G]) -> G:
+        """A part's registered group by its class (typed): its values here, else its defaults."""
+        for name, registered in _PART_GROUPS.items():
+            if registered is cls:
+                group: G = self.group(name)
+                return group
+        raise ParameterError(f"{cls.__name__} is not a registered parameter group")
 
     # --- derived geometry -------------------------------------------------------------------------
     @property
@@ -1177,21 +1290,31 @@ class Parameters:
                     f"{origin}: '{_clip(key)}' is not a parameter group (expected one of {sorted(_GROUPS)})"
                 )
         changes: dict[str, Any] = {}
+        part_groups = dict(self.part_groups)
         for group, values in nested.items():
-            if group not in _GROUPS:
+            cls = _group_class(group)
+            if cls is None:
                 raise ParameterError(
-                    f"{origin}: unknown parameter group '{_clip(group)}' (expected one of {sorted(_GROUPS)})"
+                    f"{origin}: unknown parameter group '{_clip(group)}' (expected one of {_known_groups()})"
                 )
-            known = {f.name for f in fields(_GROUPS[group])}
+            known = {f.name for f in fields(cls)}
             for name in values:
                 if name not in known:
                     raise ParameterError(
                         f"{origin}: unknown parameter '{group}.{_clip(str(name))}' (known: {sorted(known)})"
                     )
             try:
-                changes[group] = dataclasses.replace(getattr(self, group), **values)
+                replaced = dataclasses.replace(self.group(group), **values)
             except ParameterError as exc:
                 raise ParameterError(f"{origin}: {exc}") from None
+            if group in _PART_GROUPS:
+                part_groups[group] = replaced
+            else:
+                changes[group] = replaced
+        if part_groups != dict(self.part_groups):
+            # a group equal to its defaults is not held: the same rig has one value, whichever way it was made
+            held = {k: v for k, v in part_groups.items() if v != _PART_GROUPS[k]()}
+            changes["part_groups"] = tuple(sorted(held.items()))
         try:
             return dataclasses.replace(self, **changes)
         except ParameterError as exc:
@@ -1222,8 +1345,9 @@ class Parameters:
         return out
 
     @classmethod
-    def from_file(cls, path: str | Path) -> Parameters:
-        """Defaults overridden by a TOML or JSON file (groups as tables/objects, e.g. ``[ball] mass_kg = …``).
+    def from_file(cls, path: str | Path, *, base: Parameters | None = None) -> Parameters:
+        """Defaults (``base``'s values, if given) overridden by a TOML or JSON file (groups as tables/objects,
+        e.g. ``[ball] mass_kg = …``).
 
         Anything that is not a parameter file raises ``ParameterError`` naming the file: a file larger than
         ``MAX_FILE_BYTES`` (only that much is read), one that does not parse, or one nested deeper than a
@@ -1261,17 +1385,21 @@ class Parameters:
         where = _file_depth_error(data)
         if where is not None:
             raise ParameterError(f"{nested}: at {where}")
-        return cls().with_overrides(data, origin=str(path))
+        return (base or cls()).with_overrides(data, origin=str(path))
+
+    def held_groups(self) -> list[str]:
+        """The groups this rig holds values of: the thesis's, ``parts`` and the parts' groups it has set."""
+        return [*_GROUPS, PARTS_GROUP, *(name for name, _ in self.part_groups)]
 
     def to_dict(self) -> dict[str, dict[str, Any]]:
-        return {group: dataclasses.asdict(getattr(self, group)) for group in _GROUPS}
+        return {group: dataclasses.asdict(self.group(group)) for group in self.held_groups()}
 
     def changed(self) -> dict[str, Any]:
         """The values that differ from the defaults, by dotted name (``{"motor.resistance_ohm": 1e-09}``)."""
         default = Parameters()
         out: dict[str, Any] = {}
-        for group in _GROUPS:
-            mine, theirs = getattr(self, group), getattr(default, group)
+        for group in self.held_groups():
+            mine, theirs = self.group(group), default.group(group)
             for f in fields(mine):
                 value = getattr(mine, f.name)
                 if value != getattr(theirs, f.name):
@@ -1289,9 +1417,11 @@ class Parameters:
         lines = []
         for group, values in self.to_dict().items():
             lines.append(f"[{group}]")
-            for f in fields(_GROUPS[group]):
+            for f in fields(self.group(group)):
                 value = values[f.name]
-                if isinstance(value, bool):
+                if isinstance(value, str):
+                    text = json.dumps(value)
+                elif isinstance(value, bool):
                     text = "true" if value else "false"
                 elif isinstance(value, tuple):
                     text = "[" + ", ".join(repr(v) for v in value) + "]"
@@ -1305,7 +1435,7 @@ class Parameters:
     def describe() -> list[dict[str, str]]:
         """Name, default, unit and source of every parameter (for documentation and reports)."""
         rows = []
-        for group, cls_ in _GROUPS.items():
+        for group, cls_ in {**_GROUPS, PARTS_GROUP: PartNames, **_PART_GROUPS}.items():
             default = cls_()
             for f in fields(cls_):
                 rows.append(

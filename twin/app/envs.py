@@ -53,6 +53,7 @@ from twin.learning import (
     reward,
 )
 from twin.parameters import Parameters
+from twin.parts.description import rig_of
 from twin.physics import check_initial_state, check_on_track
 from twin.rigs.backends import DEFAULT_PLANT, backend
 from twin.rigs.sim import make_rig
@@ -95,6 +96,7 @@ class EnvConfig:
 
 def make_config(
     *,
+    rig: str | Path | None = None,
     params: Parameters | str | Path | None = None,
     spread: str | Path | None = None,
     calibration: str | Path | None = None,
@@ -117,9 +119,17 @@ def make_config(
     from twin.app.montecarlo import load_calibration_spread, load_spread
 
     _check_types(params, spread, calibration, criteria)
+    if rig is not None and not isinstance(rig, (str, Path)):
+        raise ValueError(f"rig = {rig!r:.80}: a rig description's path (….toml) or a preset's name")
     if calibration is not None and spread is not None:
         raise ValueError("give a spread or a calibration, not both")
-    base = Parameters.from_file(params) if isinstance(params, (str, Path)) else (params or Parameters())
+    if rig is not None and isinstance(params, Parameters):
+        raise ValueError("a Parameters is a whole rig: give rig or a Parameters as params, not both")
+    described = rig_of(str(rig)) if rig is not None else Parameters()
+    if isinstance(params, (str, Path)):
+        base = Parameters.from_file(params, base=described)
+    else:
+        base = params or described
     dist = None
     if calibration is not None:
         if params is not None:

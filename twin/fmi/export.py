@@ -16,7 +16,7 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-from twin.parameters import _GROUPS, Parameters
+from twin.parameters import Parameters
 
 __all__ = ["MODEL", "SCRIPT", "SCRIPTS", "check_rig", "export_fmu", "rig_description"]
 
@@ -44,8 +44,8 @@ def rig_description(
     """What ``resources/rig.json`` holds (see the module's doc)."""
     declared = {
         f"{group}.{f.name}": {"unit": str(f.metadata["unit"]), "source": str(f.metadata["source"])}
-        for group, cls in _GROUPS.items()
-        for f in dataclasses.fields(cls)
+        for group in params.held_groups()
+        for f in dataclasses.fields(params.group(group))
     }
     for name, sd in (uncertainty or {}).items():
         if name in declared:

@@ -105,8 +105,8 @@ class RigUnit:
         ]
         for group, items in self.exported.items():
             for field, value in items.items():
-                if isinstance(value, list):
-                    continue  # the measured curves stay as exported
+                if isinstance(value, (list, str)):
+                    continue  # the measured curves and the parts' names stay as exported
                 name = f"{group}.{field}"
                 self.values[name] = value
                 kind = "bool" if isinstance(value, bool) else "int" if isinstance(value, int) else "float"

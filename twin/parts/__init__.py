@@ -6,6 +6,7 @@ BallSensorPart, AngleSensorPart,   the parts a simulated rig instantiates per ru
 IoBoardPart, ActuatorPart          (BallSensorChain, AngleSensorChain)
 RigParts, THESIS                   a rig as one part per role; today's rig
 ROLES, Role, register, registered  the registry of parts by role; PartError for a part that breaks it
+rig_parts, part_named              the rig a set of parameters names (``Parameters.parts``); one part by name
 vary                               parameter sets around a base, for a batch form's inputs
 """
 
@@ -23,8 +24,10 @@ from twin.parts.contract import (
     PartError,
     RigParts,
     Role,
+    part_named,
     register,
     registered,
+    rig_parts,
     vary,
 )
 from twin.parts.thesis import THESIS
@@ -44,7 +47,9 @@ __all__ = [
     "PartError",
     "RigParts",
     "Role",
+    "part_named",
     "register",
     "registered",
+    "rig_parts",
     "vary",
 ]

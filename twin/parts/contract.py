@@ -20,6 +20,7 @@ actuator what it makes of the DAC's volts (``ActuatorPart.drive``). ``RigParts``
 from __future__ import annotations
 
 import dataclasses
+import functools
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Literal, Protocol, TypeVar, get_args
@@ -27,8 +28,8 @@ from typing import Any, Literal, Protocol, TypeVar, get_args
 import mujoco
 import numpy as np
 
-from twin.model import build_spec
-from twin.parameters import Parameters
+from twin.model import build_spec, register_fragment
+from twin.parameters import ParameterError, Parameters
 from twin.physics import PhysicsBlock
 
 __all__ = [
@@ -45,8 +46,10 @@ __all__ = [
     "PartError",
     "RigParts",
     "Role",
+    "part_named",
     "register",
     "registered",
+    "rig_parts",
     "vary",
 ]
 
@@ -64,8 +67,9 @@ MJCF_KINDS: Mapping[str, mujoco.mjtObj] = {
 }
 
 
-class PartError(ValueError):
-    """A part that breaks its contract (an unknown role, a name registered twice, a part in the wrong role)."""
+class PartError(ParameterError):
+    """A part that breaks its contract (an unknown role, a name registered twice, a part in the wrong role), or
+    a rig that names a part the registry does not have."""
 
 
 @dataclass(frozen=True)
@@ -188,10 +192,14 @@ class AngleSensorPart(Part):
 
 @dataclass(frozen=True, kw_only=True)
 class IoBoardPart(Part):
-    """An I/O board: ``dac_writer(params)`` gives the volts its output puts out for a command (one float)."""
+    """An I/O board: ``dac_writer(params)`` gives what its output puts out for a command (one float: the DAC's
+    volts on the PCI-1712, a servo pulse's width in µs on an Arduino); ``adc(params)`` what it reads for an
+    analog input's volts at its pin (the ADC's volts on the PCI-1712, ``analogRead``'s counts on an Arduino),
+    for the analog sensors' chains."""
 
     role: Role = "io_board"
     dac_writer: Callable[[Parameters], Callable[[float], float]]
+    adc: Callable[[Parameters], Callable[[float], float]]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -234,8 +242,34 @@ def register(part: P) -> P:
     parts = _REGISTRY[part.role]
     if part.name in parts:
         raise PartError(f"a {part.role} named {part.name!r} is registered already")
+    register_fragment(part.role, part.name, part.mjcf.apply)  # a rig's model applies it (twin.model)
     parts[part.name] = part
     return part
+
+
+def part_named(role: Role, name: str) -> Part:
+    """The registered ``role`` part called ``name`` (``PartError`` naming the field ``parts.<role>`` and the
+    role's parts if there is none)."""
+    if role not in ROLES:
+        raise PartError(f"role {role!r} is not one of {list(ROLES)}")
+    part = _REGISTRY[role].get(name)
+    if part is None:
+        raise PartError(
+            f"parts.{role} = {name!r}: no {role} of that name (there are: {sorted(_REGISTRY[role])})"
+        )
+    return part
+
+
+def rig_parts(params: Parameters) -> RigParts:
+    """The rig ``params`` describes: the part its ``parts`` group names for each role (``PartError`` naming the
+    first unknown one)."""
+    return _rig_parts(tuple(getattr(params.parts, role) for role in ROLES))
+
+
+@functools.lru_cache(maxsize=64)
+def _rig_parts(names: tuple[str, ...]) -> RigParts:
+    chosen: dict[str, Any] = {role: part_named(role, name) for role, name in zip(ROLES, names, strict=True)}
+    return RigParts(**chosen)
 
 
 def registered(role: Role | None = None) -> list[Part]:

@@ -374,6 +374,10 @@ def _card_dac(params: Parameters) -> Callable[[float], float]:
     return dac_quantizer(params.daq)
 
 
+def _card_adc(params: Parameters) -> Callable[[float], float]:
+    return adc_quantizer(params.daq)
+
+
 IO_BOARD = register(
     IoBoardPart(
         name="pci1712",
@@ -391,6 +395,7 @@ IO_BOARD = register(
         mjcf=MjcfFragment(),
         batch=BatchForm(_card_single, _card_batch, _card_inputs, "twin.daq.adc_quantize_v"),
         dac_writer=_card_dac,
+        adc=_card_adc,
     )
 )
 

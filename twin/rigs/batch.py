@@ -43,12 +43,14 @@ from twin.guard import Guard, install_interrupt_handler, safe_name
 from twin.interface import Controller, DaqSample, RigError
 from twin.log import THESIS_FIELDS, TRUTH_FIELDS, RunLog
 from twin.output_stage import ideal_motor_volts, motor_volts
-from twin.parameters import Daq, Parameters
+from twin.parameters import Daq, Parameters, PartNames
 from twin.physics import BatchBlock, BatchPhysics
 from twin.rigs.backends import DEFAULT_PLANT, backend
 from twin.rigs.sim import run_closed_loop, tick_schedule
 from twin.sensors import BallChainBatch, IdealSensors, angle_block_means_v
 from twin.verdict import Criteria, Trace
+
+THESIS_PART_NAMES = PartNames()  # the parts whose batch forms the batch rig runs
 
 __all__ = [
     "BatchCatalogue",
@@ -379,6 +381,12 @@ class BatchRig:
         """``physics``: the runs' physics, started from (x0, theta0) with ``params`` (a backend's
         ``BatchFactory``, ``twin.rigs.backends``)."""
         p = self.p = params[0]
+        odd = [role for role, name in vars(p.parts).items() if name != getattr(THESIS_PART_NAMES, role)]
+        if odd:  # its chains and output stage are the thesis parts' batch forms: never another rig's silently
+            raise RigError(
+                f"the batch engine runs the thesis's parts only: this rig has "
+                f"{', '.join(f'parts.{r} = {getattr(p.parts, r)!r}' for r in odd)} (run it one run at a time)"
+            )
         self.n = n = len(params)
         self.ideal = ideal_sensors
         self.record = record

@@ -38,7 +38,7 @@ from twin.output_stage import (
     ideal_motor_volts,
 )
 from twin.parameters import Parameters
-from twin.parts import THESIS, AngleSensorChain, BallSensorChain, RigParts
+from twin.parts import AngleSensorChain, BallSensorChain, RigParts, rig_parts
 from twin.physics import PhysicsBackend, PhysicsBlock, check_on_track, whole_steps
 from twin.plant import Plant
 from twin.rigs.backends import DEFAULT_PLANT, backend
@@ -64,8 +64,8 @@ class SimRig(Rig):
 
     ``seed`` seeds the ball sensor's contact noise (same seed → bit-identical readings). ``noise`` overrides
     ``params.ball_sensor.noise_enabled``. ``ideal_sensors`` replaces the sensor chains and the DAC's
-    quantization by ideal converters. ``parts``: the rig's parts (``twin.parts.RigParts``; today's, ``THESIS``,
-    by default), whose sensor chains and output stage the rig runs."""
+    quantization by ideal converters. ``parts``: the rig's parts (``twin.parts.RigParts``; by default the parts
+    ``params.parts`` names, ``twin.parts.rig_parts``), whose sensor chains and output stage the rig runs."""
 
     def __init__(
         self,
@@ -93,7 +93,7 @@ class SimRig(Rig):
         self.physics: PhysicsBackend = single(p)
         self._chains = not self.ideal_sensors  # the sensor chains read each block (else ideal converters)
         # the rig's parts (twin.parts; today's by default): its output stage and sensor chains come from them
-        self.parts = parts or THESIS
+        self.parts = parts or rig_parts(p)
         self._motor_volts = self.parts.motor_volts_of(p)
         self._block_span_s = block_span_s(p.daq)
         self._angle: AngleSensorChain = self.parts.angle_sensor.chain(p)
@@ -182,6 +182,8 @@ class SimRig(Rig):
         self._ball.reset(x_m, self._step_time(self._schedule.chain_start_step), seed=self.seed)
         self._ticks = 0
         self.clamped_commands = 0  # commands written outside the DAC's range this run (the card clamped them)
+        # a fresh write path each run: an actuator may hold state across ticks (a servo's dead band)
+        self._motor_volts = self.parts.motor_volts_of(self.params)
         self.command_v = self.params.amplifier.zero_command_v
         self._pending_motor_v = self._applied_motor_v = self._motor_volts_for(self.command_v)
         self.last_block = None

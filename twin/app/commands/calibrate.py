@@ -83,7 +83,7 @@ def handle(o: Options) -> int:
             o.out,
             OUTPUT_FILES,
             overwrite=o.overwrite,
-            inputs=inputs(params=o.parameters.params, logs=o.logs),
+            inputs=inputs(params=o.parameters.params, rig_file=o.parameters.rig_file, logs=o.logs),
         )
     logs = [load_rig_log(path) for path in o.logs]
     for log in logs:  # a log at another period (or in ms) is the log's fault, not the window's

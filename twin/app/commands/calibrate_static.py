@@ -62,7 +62,7 @@ def handle(o: Options) -> int:
     paths = check_outputs(
         [("--out", o.out, PARAMS_OUT_SUFFIXES, 0)],
         overwrite=o.overwrite,
-        inputs=inputs(params=o.parameters.params, table=o.table),
+        inputs=inputs(params=o.parameters.params, rig_file=o.parameters.rig_file, table=o.table),
     )
     result = calibrate(load_table(table_path(o.table)), params)
     print(json.dumps(result.to_json(), indent=2) if o.json else "\n".join(render_lines(result)))

@@ -91,8 +91,9 @@ def option_names(kind: type[DataclassInstance]) -> set[str]:
 
 @dataclass(frozen=True)
 class ParamsOptions:
-    """``--params FILE`` and the ``--set`` items (every command)."""
+    """``--rig-file FILE|PRESET``, ``--params FILE`` and the ``--set`` items (every command)."""
 
+    rig_file: str | None
     params: str | None
     set: list[str] | None
 
@@ -135,7 +136,15 @@ def controller_help(firmware: bool = True) -> str:
 
 def add_params_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
-        "--params", metavar="FILE", help="parameter file (TOML or JSON) overriding the defaults"
+        "--rig-file",
+        metavar="FILE.toml|PRESET",
+        help="the rig: a rig description (a TOML file naming its parts and their values) or a preset's name "
+        "(thesis, the default; `ballbeam params --rig-file X` lists a rig's parameters)",
+    )
+    parser.add_argument(
+        "--params",
+        metavar="FILE",
+        help="parameter file (TOML or JSON) overriding the defaults (the rig's, with --rig-file)",
     )
     parser.add_argument(
         "--set",
@@ -306,8 +315,10 @@ def add_controller_timeout(command: argparse.ArgumentParser) -> None:
 
 def load_params(options: ParamsOptions) -> Parameters:
     from twin.parameters import ParameterError, Parameters
+    from twin.parts.description import rig_of
 
-    params = Parameters.from_file(options.params) if options.params else Parameters()
+    base = rig_of(options.rig_file) if options.rig_file else Parameters()
+    params = Parameters.from_file(options.params, base=base) if options.params else base
     overrides: dict[str, object] = {}
     for item in options.set or ():
         name, sep, text = item.partition("=")
@@ -318,8 +329,9 @@ def load_params(options: ParamsOptions) -> Parameters:
 
 
 def params_source(options: ParamsOptions) -> str:
-    """Where the parameters came from, as typed: ``--params FILE`` and the ``--set`` items."""
-    parts = [f"--params {options.params}"] if options.params else []
+    """Where the parameters came from, as typed: ``--rig-file``, ``--params FILE`` and the ``--set`` items."""
+    parts = [f"--rig-file {options.rig_file}"] if options.rig_file else []
+    parts += [f"--params {options.params}"] if options.params else []
     parts += [f"--set {item}" for item in options.set or ()]
     return " ".join(parts)
 
@@ -368,6 +380,7 @@ def save_log(log: RunLog, option: str, text: str, path: Path, overwrite: bool) -
 def inputs(
     *,
     params: str | None = None,
+    rig_file: str | None = None,
     spread: str | None = None,
     criteria: str | None = None,
     table: str | None = None,
@@ -381,7 +394,9 @@ def inputs(
     """The files a command reads (the options it has), as (option, path): no output may replace one. A
     calibration folder brings its two files; a user controller its module's file (imported by then)."""
     found: list[tuple[str, str]] = []
+    described = rig_file if rig_file and rig_file.lower().endswith(".toml") else None  # a preset is no file
     for option, value in (
+        ("--rig-file", described),
         ("--params", params),
         ("--spread", spread),
         ("--criteria", criteria),

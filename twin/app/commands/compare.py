@@ -123,7 +123,11 @@ def handle(o: Options) -> int:
         OUTPUT_FILES,
         overwrite=o.overwrite,
         inputs=inputs(
-            params=o.parameters.params, logs=o.logs, calibration=o.calibration, controller=o.controller
+            params=o.parameters.params,
+            rig_file=o.parameters.rig_file,
+            logs=o.logs,
+            calibration=o.calibration,
+            controller=o.controller,
         ),
     )
     logs = [(path, read_log(path)) for path in o.logs]

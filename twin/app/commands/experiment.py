@@ -65,7 +65,7 @@ def handle(o: Options) -> int:
     out = check_outputs(
         [("--out", o.out, LOG_SUFFIXES, log_bytes(o.out, o.duration, params))],
         overwrite=o.overwrite,
-        inputs=inputs(params=o.parameters.params),
+        inputs=inputs(params=o.parameters.params, rig_file=o.parameters.rig_file),
     )["--out"]
     result = run_experiment(o.name, params, duration_s=o.duration, seed=o.seed)
     save_log(result.log, "--out", o.out, out, o.overwrite)

@@ -68,7 +68,7 @@ def handle(o: Options) -> int:
     paths = check_outputs(
         [("--out", o.out, (".fmu",), _FMU_BYTES)],
         overwrite=o.overwrite,
-        inputs=inputs(params=o.parameters.params, calibration=o.calibration),
+        inputs=inputs(params=o.parameters.params, rig_file=o.parameters.rig_file, calibration=o.calibration),
     )
     uncertainty: dict[str, float] = {}
     if o.calibration is not None:

@@ -141,6 +141,7 @@ class ManyRunJob:
         """The files the job reads: no output may replace one."""
         return inputs(
             params=self.parameters.params,
+            rig_file=self.parameters.rig_file,
             spread=self.rigs.spread,
             criteria=self.criteria,
             spec=self.spec,

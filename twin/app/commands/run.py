@@ -370,6 +370,7 @@ def _replayed(o: Options) -> tuple[Replay | None, Options]:
             ("--duration", o.duration),
             ("--seed", o.seed),
             ("--no-noise", o.no_noise),
+            ("--rig-file", o.parameters.rig_file),
             ("--params", o.parameters.params),
             ("--set", o.parameters.set),
             ("--spec", o.spec),
@@ -429,7 +430,13 @@ def _run_in_process(
             ("--plot", o.plot, PLOT_SUFFIXES, _PLOT_BYTES),
         ],
         overwrite=o.overwrite,
-        inputs=inputs(params=o.parameters.params, spec=o.spec, replay=o.replay, controller=o.controller),
+        inputs=inputs(
+            params=o.parameters.params,
+            rig_file=o.parameters.rig_file,
+            spec=o.spec,
+            replay=o.replay,
+            controller=o.controller,
+        ),
     )
     controller = build(o.controller, params)
     if o.setpoint is not None:
@@ -528,7 +535,13 @@ def _run_on_remote_rig(o: Options, params: Parameters) -> int:
     paths = check_outputs(
         [("--log", o.log, LOG_SUFFIXES, log_bytes(o.log, o.duration, params))],
         overwrite=o.overwrite,
-        inputs=inputs(params=o.parameters.params, spec=o.spec, replay=o.replay, controller=o.controller),
+        inputs=inputs(
+            params=o.parameters.params,
+            rig_file=o.parameters.rig_file,
+            spec=o.spec,
+            replay=o.replay,
+            controller=o.controller,
+        ),
     )
     many = o.sessions != 1
 

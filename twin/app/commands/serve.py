@@ -141,7 +141,7 @@ def handle(o: Options) -> int:
     paths = check_outputs(
         [("--log", o.log, LOG_SUFFIXES, log_bytes(o.log, o.duration, params))],
         overwrite=o.overwrite,
-        inputs=inputs(params=o.parameters.params),
+        inputs=inputs(params=o.parameters.params, rig_file=o.parameters.rig_file),
     )
     ideal = bool(o.ideal_sensors or backend(o.plant).ideal_converters)
     watchdog: dict[str, Any] = {} if o.watchdog is None else {"watchdog_periods": o.watchdog}

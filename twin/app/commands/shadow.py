@@ -149,7 +149,12 @@ def handle(o: Options) -> int:
     paths = check_outputs(
         [("--log", o.log, (".jsonl", ".json"), 1 << 20)],
         overwrite=o.overwrite,
-        inputs=inputs(params=o.parameters.params, reference=o.reference, calibration=o.calibration),
+        inputs=inputs(
+            params=o.parameters.params,
+            rig_file=o.parameters.rig_file,
+            reference=o.reference,
+            calibration=o.calibration,
+        ),
     )
     reference_logs = load_reference(o.reference) if o.reference else None
     try:

@@ -154,6 +154,8 @@ def handle(o: Options) -> int:
         refuse_given(
             [
                 ("--seed", o.seed),
+                ("--rig-file", o.parameters.rig_file),
+                ("--rig-file", o.parameters.rig_file),
                 ("--params", o.parameters.params),
                 ("--set", o.parameters.set),
                 ("--no-noise", o.no_noise),
