@@ -41,7 +41,7 @@ def test_a_2500_volt_command_warns_once_naming_the_tick_and_the_value() -> None:
     text = str(clamped[0].message)
     assert "command_v = 2500.0 V written at tick k = 3" in text
     assert "outside the DAC's range daq.dac_min_v … daq.dac_max_v = 0.0 … 5.0 V" in text
-    assert "the card outputs 5.0 V" in text
+    assert "the board outputs 5.0 V" in text
     assert clamped[0].filename == __file__  # the warning points at the caller's write
     assert rig.clamped_commands == 4
     rig.reset(0.1, 0.05)  # a new run: counted and warned afresh

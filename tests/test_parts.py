@@ -68,14 +68,36 @@ def _parameter_problems(part: Part) -> list[str]:
     return problems
 
 
+def _home_module(part: Part) -> str | None:
+    """The module under twin.parts that defines ``part`` (the thesis's parts point at the core: None)."""
+    import sys
+
+    for name, module in list(sys.modules.items()):
+        if name.startswith("twin.parts.") and name != "twin.parts.thesis":
+            if any(value is part for value in vars(module).values()):
+                return name
+    return None
+
+
+def _defines_parts(module_name: str) -> bool:
+    """Whether a module under twin.parts defines a part (or is the contract): not a home of shared equations."""
+    import sys
+
+    module = sys.modules[module_name]
+    return module_name == "twin.parts.contract" or any(isinstance(v, Part) for v in vars(module).values())
+
+
 def _equation_problems(part: Part, *, own_home: bool) -> list[str]:
     problems = [f"{eq!r} is not callable" for eq in part.equations if not callable(eq)]
     problems += [f"{eq!r} has no docstring" for eq in part.equations if not (eq.__doc__ or "").strip()]
-    if own_home:  # today's parts point at the core's homes: none is a copy in twin.parts
+    if own_home:  # a part's equations live in the core, its own module or a module of shared equations
+        home = _home_module(part)  # (twin.parts.ranging), never in another part's module
         problems += [
             f"{eq!r} lives in {eq.__module__}"
             for eq in part.equations
             if eq.__module__.startswith("twin.parts")
+            and eq.__module__ != home
+            and _defines_parts(eq.__module__)
         ]
     return problems or ([] if part.equations else ["names no equation"])
 
@@ -85,7 +107,9 @@ def _check_part(part: Part, seed: int, *, own_home: bool = True) -> None:
     assert isinstance(part, contract.ROLE_TYPES[part.role])
     assert not _parameter_problems(part), _parameter_problems(part)
     assert not _equation_problems(part, own_home=own_home), _equation_problems(part, own_home=own_home)
-    assert not part.mjcf.missing(build_model()), part.mjcf.missing(build_model())
+    # its elements are in the model of the thesis's rig with this part in its role
+    model = build_model(Parameters().with_overrides({f"parts.{part.role}": part.name}))
+    assert not part.mjcf.missing(model), part.mjcf.missing(model)
     assert part.batch.difference(np.random.default_rng(seed), 24) <= part.batch.tolerance
 
 

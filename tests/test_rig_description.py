@@ -245,3 +245,21 @@ def test_a_parts_group_is_registered_held_saved_and_read_back(tmp_path: Path) ->
     hash(q)  # a cache key (the compiled model's)
     q.save(tmp_path / "q.toml")
     assert Parameters.from_file(tmp_path / "q.toml") == q
+
+
+@pytest.mark.quick
+def test_every_description_in_the_manual_loads_or_names_a_part_still_being_built() -> None:
+    import re
+
+    page = (Path(__file__).parents[1] / "docs" / "rigs.md").read_text()
+    blocks = re.findall(r"```toml\n(.*?)```", page, flags=re.S)
+    assert blocks
+    loaded = 0
+    for text in blocks:
+        try:
+            rig_from_text(text, origin="docs/rigs.md")
+            loaded += 1
+        except ParameterError as exc:  # only a part the page marks as being built may be missing
+            (name,) = re.findall(r"parts\.\w+ = '([\w-]+)': no \w+ of that name", str(exc))
+            assert re.search(rf"{name}.*being built|being built.*{name}", page), str(exc)
+    assert loaded >= 1

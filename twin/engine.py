@@ -30,9 +30,9 @@ import numpy as np
 
 from twin.firmware import Firmware
 from twin.guard import Fault, Guard, describe, install_interrupt_handler, is_interrupt, safe_name
-from twin.interface import Controller, DaqSample, Rig, RigEnded, RigError, Telemetry
+from twin.interface import CommandRange, Controller, DaqSample, Rig, RigEnded, RigError, Telemetry
 from twin.log import THESIS_FIELDS, TRUTH_FIELDS, RunLog
-from twin.parameters import Daq, Parameters
+from twin.parameters import Parameters
 from twin.physics import PhysicsBlock, whole_steps
 from twin.realtime import TickTiming, arrival_timing
 from twin.verdict import Criteria, Trace, Verdict, evaluate, evaluate_measured
@@ -158,12 +158,13 @@ def checked_update(
     sample: DaqSample,
     where: str | Callable[[], str],
     guard: Guard | None = None,
-    daq: Daq | None = None,
+    limits: CommandRange | None = None,
 ) -> float:
-    """``controller.update(sample)`` as a DAC command in volts; a ``ControllerError`` naming the controller
-    and ``where`` (the tick, the run; a function giving it, so that the text is only made for an error)
-    if it raises anything (only the process's own Ctrl-C passes), does not return within the ``guard``'s
-    update budget, or returns anything but a finite real number (in ``daq``'s DAC range, when given)."""
+    """``controller.update(sample)`` as the board's command (DAC volts on the PCI-1712); a ``ControllerError``
+    naming the controller and ``where`` (the tick, the run; a function giving it, so that the text is only
+    made for an error) if it raises anything (only the process's own Ctrl-C passes), does not return within
+    the ``guard``'s update budget, or returns anything but a finite real number (within ``limits``, the
+    board's output range, when given)."""
     try:
         if guard is None:
             command = controller.update(sample)
@@ -171,14 +172,14 @@ def checked_update(
             command = guard.call(controller.update, sample, guard.update_budget_s)
     except BaseException as exc:  # noqa: BLE001 - a user's controller may raise anything: report, do not crash
         raise ControllerError(_failure(controller, "update", exc, where)) from _cause(exc)
-    low, high = (-_MAX_FLOAT, _MAX_FLOAT) if daq is None else (daq.dac_min_v, daq.dac_max_v)
+    low, high = (-_MAX_FLOAT, _MAX_FLOAT) if limits is None else (limits.low, limits.high)
     if type(command) is float and low <= command <= high:  # the common case (nan and ±inf fail it)
         return command
-    return _refused_command(controller, command, where, low, high)
+    return _refused_command(controller, command, where, limits or CommandRange(low, high))
 
 
 def _refused_command(
-    controller: Controller, command: object, where: str | Callable[[], str], low: float, high: float
+    controller: Controller, command: object, where: str | Callable[[], str], limits: CommandRange
 ) -> float:
     """A command that is not a plain float in range: a real number converted, anything else refused."""
     name = safe_name(controller)
@@ -198,10 +199,9 @@ def _refused_command(
             f"{name}.update returned {_short_repr(command)} {_where(where)}: the DAC command must be a "
             "finite number of volts"
         )
-    if not low <= volts <= high:
+    if not limits.low <= volts <= limits.high:
         raise ControllerError(
-            f"{name}.update returned {volts!r} V {_where(where)}: outside the DAC's range "
-            f"daq.dac_min_v … daq.dac_max_v = {low!r} … {high!r} V"
+            f"{name}.update returned {volts!r} {limits.unit} {_where(where)}: outside {limits.text()}"
         )
     return volts
 
@@ -572,6 +572,7 @@ class ClosedLoop:
         self.rig = rig
         self.controller = controller
         self.params = params if params is not None else rig.parameters()
+        self.command_range = rig.command_range()  # what the guard lets through: the board's output range
         self.truth: TrueState | None = rig if isinstance(rig, TrueState) else None
         install_interrupt_handler()  # before any user code runs: its KeyboardInterrupt is not the Ctrl-C
         # (a Controller first: the protocol's check reads attributes, which user code may make raise)
@@ -685,7 +686,7 @@ class ClosedLoop:
                 sample,
                 lambda: f"at tick k = {self.reads} (t = {sample.time_s:.3f} s)",
                 self.guard,
-                self.params.daq,
+                self.command_range,
             )
         )
 

@@ -24,7 +24,7 @@ import numpy as np
 if TYPE_CHECKING:  # the parameters are a plain-Python module, imported lazily to keep this one bare
     from twin.parameters import Parameters
 
-__all__ = ["Controller", "DaqSample", "Rig", "RigEnded", "RigError", "Setpoint", "Telemetry"]
+__all__ = ["CommandRange", "Controller", "DaqSample", "Rig", "RigEnded", "RigError", "Setpoint", "Telemetry"]
 
 
 @dataclass(frozen=True)
@@ -34,6 +34,23 @@ class DaqSample:
     time_s: float  # time of the block's last sample: time(blocksize)
     ball_v: float  # ball channel, last sample of the block: data(blocksize,1), ADC volts
     angle_v: float  # angle channel, mean of the block: mean(data(:,2)), ADC volts
+
+
+@dataclass(frozen=True)
+class CommandRange:
+    """What a rig's board can output, in its unit: the DAC's volts on the PCI-1712 (the default), a servo
+    pulse's width in µs on an Arduino. ``names``: the parameters that set it (for a message); ``what``: the
+    output, as a message names it."""
+
+    low: float
+    high: float
+    unit: str = "V"
+    names: str = "daq.dac_min_v … daq.dac_max_v"
+    what: str = "the DAC's range"
+
+    def text(self) -> str:
+        """``the DAC's range daq.dac_min_v … daq.dac_max_v = 0.0 … 5.0 V``: the range as a message gives it."""
+        return f"{self.what} {self.names} = {self.low!r} … {self.high!r} {self.unit}"
 
 
 class RigError(ValueError):
@@ -72,6 +89,12 @@ class Rig(ABC):
     def parameters(self) -> Parameters:
         """The rig as far as it describes itself: its period, DAC range and zero command, software
         calibration (the guard's range check, the log and a verdict from the measured volts read them)."""
+
+    def command_range(self) -> CommandRange:
+        """What the board can output (the guard refuses a command outside it): the DAC's range of the rig's
+        parameters (``daq.dac_min_v`` … ``daq.dac_max_v``) unless the rig's board says otherwise."""
+        daq = self.parameters().daq
+        return CommandRange(daq.dac_min_v, daq.dac_max_v)
 
     @property
     def held(self) -> bool:

@@ -29,7 +29,9 @@ __all__ = [
     "apply_track",
     "build_model",
     "drive_joint",
+    "drive_pose",
     "register_drive_joint",
+    "register_drive_pose",
     "fragments_of",
     "register_fragment",
     "build_spec",
@@ -197,6 +199,7 @@ def apply_actuator(spec: mujoco.MjSpec, p: Parameters) -> None:
         motorconst=[p.motor.torque_constant_nm_per_a, p.motor.backemf_constant_v_s_per_rad],
         resistance=p.motor.resistance_ohm,
     )
+    motor.target = drive_joint(p)  # the beam's hinge on the thesis's pivot; a lever's servo shaft
     motor.gear = [p.motor.gear_ratio, 0, 0, 0, 0, 0]
     motor.armature = p.motor.rotor_inertia_kgm2
     motor.damping = [p.motor.viscous_damping_nm_s_per_rad, 0.0, 0.0]
@@ -261,6 +264,28 @@ def register_drive_joint(drive: str, joint: str) -> None:
     if _DRIVE_JOINTS.get(drive, joint) != joint:
         raise ModelError(f"the beam drive {drive!r} takes its input at {_DRIVE_JOINTS[drive]!r} already")
     _DRIVE_JOINTS[drive] = joint
+
+
+# A beam drive with joints of its own besides the beam's hinge (a lever's horn and push-rod): the values that close
+# it with the beam at θ, by joint name (``drive_pose``), registered beside its input joint.
+_DRIVE_POSES: dict[str, Callable[[Parameters, float], dict[str, float]]] = {}
+
+
+def register_drive_pose(drive: str, pose: Callable[[Parameters, float], dict[str, float]]) -> None:
+    """How the drive ``drive`` stands with the beam at θ: ``pose(params, θ)`` gives its own joints' values (qpos)
+    by name (a rig held at θ starts with its linkage closed there, not snapping shut in the first steps)."""
+    _DRIVE_POSES[drive] = pose
+
+
+def drive_pose(params: Parameters, theta_rad: float, thetadot_rad_s: float) -> dict[str, tuple[float, float]]:
+    """The drive's own joints (qpos, qvel) with the beam at θ turning at θ̇ (none for the pivot): the velocities
+    by the pose's central difference (a rigid linkage's joints move as θ does)."""
+    pose = _DRIVE_POSES.get(params.parts.beam_drive)
+    if pose is None:
+        return {}
+    h = 1e-6
+    here, up, down = pose(params, theta_rad), pose(params, theta_rad + h), pose(params, theta_rad - h)
+    return {name: (value, (up[name] - down[name]) / (2 * h) * thetadot_rad_s) for name, value in here.items()}
 
 
 def drive_joint(params: Parameters) -> str:

@@ -17,7 +17,8 @@ import numpy as np
 
 from twin.converters import finite_input, finite_values
 from twin.daq import dac_quantize_v, dac_quantizer
-from twin.parameters import Amplifier, Daq, Parameters
+from twin.interface import CommandRange
+from twin.parameters import Amplifier, Parameters
 
 __all__ = [
     "CommandClampedWarning",
@@ -33,15 +34,14 @@ class CommandClampedWarning(RuntimeWarning):
     """A command written to the DAC outside its range: the card outputs the nearest end of the range."""
 
 
-def clamped_command_text(command_v: float, daq: Daq, tick: int, time_s: float) -> str:
-    """Why a command outside the DAC's range is worth a warning: the card clamps it, so the motor gets its
-    full drive (the amplifier's rail) whatever the command asked for, silently."""
-    end = daq.dac_max_v if command_v > daq.dac_max_v else daq.dac_min_v
+def clamped_command_text(command: float, limits: CommandRange, tick: int, time_s: float) -> str:
+    """Why a command outside the board's output range is worth a warning: the board clamps it, so the actuator
+    gets the end of its range (the DC motor its amplifier's rail) whatever the command asked for, silently."""
+    end = limits.high if command > limits.high else limits.low
     return (
-        f"command_v = {command_v!r} V written at tick k = {tick} (t = {time_s:.3f} s) is outside the DAC's "
-        f"range daq.dac_min_v … daq.dac_max_v = {daq.dac_min_v!r} … {daq.dac_max_v!r} V: the card outputs "
-        f"{end!r} V (the motor at its rail); warned once per run, the clamped commands are counted "
-        "(clamped_commands)"
+        f"command_v = {command!r} {limits.unit} written at tick k = {tick} (t = {time_s:.3f} s) is outside "
+        f"{limits.text()}: the board outputs {end!r} {limits.unit} (the actuator at the end of its range); "
+        "warned once per run, the clamped commands are counted (clamped_commands)"
     )
 
 

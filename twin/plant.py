@@ -260,6 +260,10 @@ class Plant:
         if self._hinge_qpos is not None:
             d.qpos[self._hinge_qpos] = theta_rad
             d.qvel[self._hinge_dof] = thetadot_rad_s
+            for name, (qpos, qvel) in mdl.drive_pose(p, theta_rad, thetadot_rad_s).items():
+                joint = m.joint(name)  # a lever's horn and push-rod, closed with the beam at θ
+                d.qpos[joint.qposadr[0]] = qpos
+                d.qvel[joint.dofadr[0]] = qvel
         mujoco.mj_kinematics(m, d)
         rot = d.xmat[self._beam].reshape(3, 3).tolist()  # products in a fixed order (twin.fixedorder)
         pivot = d.xpos[self._beam].copy()

@@ -18,7 +18,7 @@ constraint too, and a fixed-step integrator cannot follow an exact sign function
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, fields
 from typing import Any, Generic, Literal, TypeVar
 
@@ -30,6 +30,13 @@ from twin.physics import PhysicsBlock, check_initial_state
 
 __all__ = [
     "COULOMB_REGULARIZATION_RAD_S",
+    "DriveKinematics",
+    "DriveLaw",
+    "ShaftMap",
+    "ShaftTorque",
+    "drive_law",
+    "register_actuator_law",
+    "register_shaft_map",
     "STATE_NAMES",
     "EquationCoefficients",
     "ReferenceModel",
@@ -298,6 +305,102 @@ def rk4_step(f: Any, x: Any, th: Any, xd: Any, thd: Any, u: Any, h: float) -> tu
     )
 
 
+# --- a beam driven otherwise than the thesis's geared motor at its pivot -------------------------------------
+# θ → (φ, dφ/dθ, d²φ/dθ²): the actuator's shaft angle for the beam's angle and its first two derivatives.
+ShaftMap = Callable[[float], tuple[float, float, float]]
+# (ctrl, φ, φ̇) → the actuator's torque at its shaft (N·m), its own damping included.
+ShaftTorque = Callable[[float, float, float], float]
+
+
+@dataclass(frozen=True)
+class DriveKinematics:
+    """What a beam drive gives the reference model (``register_shaft_map``): θ → (φ, φ′, φ″) (``shaft``), the
+    inertia its own links add at the shaft and on the beam, and the beam's travel its linkage allows (a horn's
+    stops; None: the beam's own stops only)."""
+
+    shaft: ShaftMap
+    shaft_inertia_kgm2: float = 0.0
+    beam_inertia_kgm2: float = 0.0
+    theta_limits_rad: tuple[float, float] | None = None
+
+
+@dataclass(frozen=True)
+class DriveLaw:
+    """How the beam is driven, for the reference model, when it is not the thesis's motor at the pivot (``drive_law``):
+    the drive's kinematics ``shaft`` (the shaft angle φ(θ), a lever's exact closure), the actuator's ``torque`` at
+    its shaft, the inertia turning with the shaft (``shaft_inertia_kgm2``: the actuator's reflected rotor, a horn,
+    a push-rod's share) and what the drive adds to the beam's own about the pivot (``beam_inertia_kgm2``).
+
+    The beam's equation (eq 3.1.27) then holds with α₂ + J_s·φ′² + J_b in place of α₂ and, as the torque at the
+    beam, φ′·τ_s − J_s·φ′·φ″·θ̇² (Lagrange: the shaft's kinetic energy ½·J_s·φ′²·θ̇², its torque's virtual work
+    τ_s·δφ = τ_s·φ′·δθ)."""
+
+    shaft: ShaftMap
+    torque: ShaftTorque
+    shaft_inertia_kgm2: float
+    beam_inertia_kgm2: float = 0.0
+    theta_limits_rad: tuple[float, float] | None = None
+
+
+# Registered by the parts (twin.parts): a drive's kinematics and extra inertia (shaft, beam), and an actuator's
+# torque law and inertia at its shaft, each from a rig's parameters.
+_SHAFT_MAPS: dict[str, Callable[[Parameters], DriveKinematics]] = {}
+_ACTUATOR_LAWS: dict[str, Callable[[Parameters], tuple[ShaftTorque, float]]] = {}
+THESIS_DRIVE = ("pivot", "escap_dc_motor")  # eq 3.1.27 as the thesis writes it: no ``DriveLaw``
+
+
+def _pivot(theta_rad: float) -> tuple[float, float, float]:
+    return theta_rad, 1.0, 0.0
+
+
+def _geared_motor(params: Parameters) -> tuple[ShaftTorque, float]:
+    """The geared DC motor (eq 3.3.1) at its output shaft: its volts within the amplifier's rails, the reflected
+    rotor inertia and viscous damping (Table 3.2, reflected by N²)."""
+    p = params
+    rail, k_tau, k_b = (
+        p.amplifier.rail_v,
+        p.motor.torque_per_volt_nm_per_v,
+        p.motor.backemf_at_beam_v_s_per_rad,
+    )
+    gear2 = p.motor.gear_ratio**2
+    b_a = p.motor.viscous_damping_nm_s_per_rad * gear2
+
+    def torque(volts: float, phi: float, phidot: float) -> float:
+        return float(torque_nm(min(max(volts, -rail), rail), phidot, k_tau, k_b)) - b_a * phidot
+
+    return torque, p.motor.rotor_inertia_kgm2 * gear2
+
+
+def register_shaft_map(drive: str, factory: Callable[[Parameters], DriveKinematics]) -> None:
+    """A beam drive's kinematics for the reference model, ``factory(params)`` (``twin.parts`` registers its
+    drives' own)."""
+    _SHAFT_MAPS[drive] = factory
+
+
+def register_actuator_law(actuator: str, factory: Callable[[Parameters], tuple[ShaftTorque, float]]) -> None:
+    """An actuator's torque law and inertia at its shaft for the reference model (``twin.parts`` registers its
+    actuators' own)."""
+    _ACTUATOR_LAWS[actuator] = factory
+
+
+def drive_law(params: Parameters) -> DriveLaw | None:
+    """The reference model's law for the drive and actuator ``params.parts`` names: None for the thesis's (eq
+    3.1.27 as written), else the registered kinematics and torque law (``ValueError`` naming the part if none is
+    registered: its module under twin.parts was not imported, or it has no reference form)."""
+    names = (params.parts.beam_drive, params.parts.actuator)
+    if names == THESIS_DRIVE:
+        return None
+    if names[0] != "pivot" and names[0] not in _SHAFT_MAPS:
+        raise ValueError(f"parts.beam_drive = {names[0]!r}: the reference model has no kinematics for it")
+    if names[1] != "escap_dc_motor" and names[1] not in _ACTUATOR_LAWS:
+        raise ValueError(f"parts.actuator = {names[1]!r}: the reference model has no torque law for it")
+    kin = DriveKinematics(_pivot) if names[0] == "pivot" else _SHAFT_MAPS[names[0]](params)
+    torque, inertia = (_geared_motor if names[1] == "escap_dc_motor" else _ACTUATOR_LAWS[names[1]])(params)
+    return DriveLaw(
+        kin.shaft, torque, inertia + kin.shaft_inertia_kgm2, kin.beam_inertia_kgm2, kin.theta_limits_rad
+    )
+
+
 class ReferencePlant:
     """The reference model as a physics backend (``twin.physics.PhysicsBackend``): fixed-step RK4 at
     ``physics.timestep_s`` with the motor volts held over each step (eq 3.3.1 through the amplifier's rails).
@@ -308,7 +411,9 @@ class ReferencePlant:
 
     def __init__(self, params: Parameters | None = None, *, motor_inertia: bool = True) -> None:
         self.params = params or Parameters()
-        self.model = ReferenceModel(self.params, motor_inertia=motor_inertia)
+        # another drive than the thesis's brings its actuator's inertia through its law, not eq 3.1.27's J_a
+        self._law = drive_law(self.params)
+        self.model = ReferenceModel(self.params, motor_inertia=motor_inertia and self._law is None)
         self._q = self.model.coefficients
         self.reset(0.0, 0.0)
 
@@ -369,11 +474,20 @@ class ReferencePlant:
             xdd, thdd = acc(x, th, xd, thd, float(torque_nm(v, thd, k_tau, k_b)))
             return xd, thd, xdd, thdd
 
+        law = self._law
+        lo, hi = -math.inf, math.inf
+        if law is not None:
+            f = self._driven_derivative(law)
+            rail = math.inf  # the ctrl is a servo's target angle, say: the actuator's law bounds it
+            lo, hi = law.theta_limits_rad or (lo, hi)
         for i in range(n):
             if self._lost_time_s is None:
                 v = min(max(float(volts[i]), -rail), rail)
                 x, th, xd, thd = rk4_step(f, x, th, xd, thd, v, h)
-                th, thd, lost = step_boundary(x, th, thd, stop, half)
+                if law is None:
+                    th, thd, lost = step_boundary(x, th, thd, stop, half)
+                else:
+                    th, xd, thd, lost = self._driven_boundary(x, th, xd, thd, (lo, hi))
                 if not all(math.isfinite(v_) for v_ in (x, th, xd, thd)):
                     raise FloatingPointError(
                         f"reference model state is not finite at t = {t0 + (i + 1) * h:.3f} s"
@@ -385,3 +499,46 @@ class ReferencePlant:
         self._s = (x, th, xd, thd)
         self._time_s = float(times[-1])
         return PhysicsBlock(time_s=times, x_m=xs, theta_rad=thetas, on_track=on)
+
+    def _driven_boundary(
+        self, x: float, th: float, xd: float, thd: float, limits: tuple[float, float]
+    ) -> tuple[float, float, float, bool]:
+        """``step_boundary`` for a driven beam, with the drive's own stops (a horn at its travel's ends) and the
+        ball's share of a stop's impulse: the stop acts on the beam alone, so across it eq 3.1.26 gives
+        (1 + k₁)·Δẋ = (k₂ + c)·Δθ̇ (a beam stopped while the ball rolls on keeps the ball's momentum consistent
+        with the coupling, as MuJoCo's joint limit does). (θ, ẋ, θ̇, lost)."""
+        p, q = self.params, self._q
+        before = thd
+        th, thd, lost = step_boundary(x, th, thd, p.beam.stop_angle_rad, p.track.half_length_m)
+        lo, hi = limits
+        if th > hi:
+            th, thd = hi, min(thd, 0.0)
+        elif th < lo:
+            th, thd = lo, max(thd, 0.0)
+        if thd != before:
+            xd += (q.k2 + q.c) / (1.0 + q.k1) * (thd - before)
+        return th, xd, thd, lost
+
+    def _driven_derivative(self, law: DriveLaw) -> Callable[..., tuple[float, float, float, float]]:
+        """The state's derivative with the beam driven through ``law`` (see ``DriveLaw``)."""
+        q = self._q
+        b1, b2, b3, b4 = q.beta
+        alpha, j_s = q.alpha_thdd + law.beam_inertia_kgm2, law.shaft_inertia_kgm2
+        shaft, shaft_torque = law.shaft, law.torque
+        lo, hi = law.theta_limits_rad or (-math.inf, math.inf)
+
+        def f(x: float, th: float, xd: float, thd: float, ctrl: float) -> tuple[float, float, float, float]:
+            phi, dphi, ddphi = shaft(th)
+            torque = dphi * shaft_torque(ctrl, phi, dphi * thd) - j_s * dphi * ddphi * thd * thd
+            s, co = math.sin(th), math.cos(th)
+            xdd, thdd = ball_beam_accelerations(
+                q.k1, q.k2, q.c, q.g, q.alpha_xdd, alpha + j_s * dphi * dphi, q.alpha_thdd_x2,
+                b1, b2, b3, b4, q.beta_thetadot, x, xd, thd, s, co, pivot_friction_nm(q.coulomb_nm, thd), torque,
+            )  # fmt: skip
+            if (th >= hi and thdd > 0.0) or (th <= lo and thdd < 0.0):
+                # at the drive's stop and pushed into it: the stop holds the beam, the ball rolls on a still
+                # beam (eq 3.1.26 with θ̈ = 0), as MuJoCo's joint limit holds it; not a step's spurious θ̈
+                return xd, 0.0, (x * thd * thd - q.g * s) / (1.0 + q.k1), 0.0
+            return xd, thd, xdd, thdd
+
+        return f

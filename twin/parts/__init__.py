@@ -32,6 +32,23 @@ from twin.parts.contract import (
 )
 from twin.parts.thesis import THESIS
 
+# The built-in parts beyond the thesis's: importing the package registers each (its group, fragment and laws),
+# after the thesis's, which each role lists first.
+# isort: off
+from twin.parts import (  # noqa: F401
+    arduino,
+    as5600,
+    gp2y0a21,
+    hcsr04,
+    linkage,
+    no_angle,
+    potentiometer,
+    servo,
+    vl53l0x,
+)
+
+# isort: on
+
 __all__ = [
     "ROLES",
     "THESIS",

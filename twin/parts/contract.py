@@ -28,6 +28,7 @@ from typing import Any, Literal, Protocol, TypeVar, get_args
 import mujoco
 import numpy as np
 
+from twin.interface import CommandRange
 from twin.model import build_spec, register_fragment
 from twin.parameters import ParameterError, Parameters
 from twin.physics import PhysicsBlock
@@ -126,6 +127,16 @@ class Part:
     batch: BatchForm
 
 
+def dac_range(params: Parameters) -> CommandRange:
+    """The PCI-1712's output: its DAC's volts, ``daq.dac_min_v`` … ``daq.dac_max_v``."""
+    return CommandRange(params.daq.dac_min_v, params.daq.dac_max_v)
+
+
+def zero_command(params: Parameters) -> float:
+    """The DC motor's amplifier at 0 V: its zero command (``amplifier.zero_command_v``, §6.4)."""
+    return params.amplifier.zero_command_v
+
+
 class BallSensorChain(Protocol):
     """What a simulated rig asks of a ball sensor's chain for one run (``twin.sensors.BallPositionChain``):
     the analog signal at the board's pin now (``filtered_v``) and the board's last reading (``reading_v``),
@@ -195,19 +206,26 @@ class IoBoardPart(Part):
     """An I/O board: ``dac_writer(params)`` gives what its output puts out for a command (one float: the DAC's
     volts on the PCI-1712, a servo pulse's width in µs on an Arduino); ``adc(params)`` what it reads for an
     analog input's volts at its pin (the ADC's volts on the PCI-1712, ``analogRead``'s counts on an Arduino),
-    for the analog sensors' chains."""
+    for the analog sensors' chains; ``output_range(params)`` what its output can be (the guard refuses a
+    controller's command outside it; default the DAC's, ``dac_range``)."""
 
     role: Role = "io_board"
     dac_writer: Callable[[Parameters], Callable[[float], float]]
     adc: Callable[[Parameters], Callable[[float], float]]
+    output_range: Callable[[Parameters], CommandRange] = dac_range
 
 
 @dataclass(frozen=True, kw_only=True)
 class ActuatorPart(Part):
-    """An actuator: ``drive(params)`` gives the motor's terminal volts for the board's output volts."""
+    """An actuator: ``drive(params)`` gives the MuJoCo actuator's control (the motor's terminal volts; a
+    servo's target angle) for the board's output, a fresh write path per run (it may hold state);
+    ``rest_command(params)`` is the board's command that leaves the beam at rest where it is held (the
+    amplifier's zero command, 2.5 V, by default: ``zero_command``), what the rig writes before the
+    controller's first command."""
 
     role: Role = "actuator"
     drive: Callable[[Parameters], Callable[[float], float]]
+    rest_command: Callable[[Parameters], float] = zero_command
 
 
 # The part type each role needs (its runtime), for ``RigParts`` and ``register``.

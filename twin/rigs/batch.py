@@ -40,7 +40,7 @@ from twin.engine import (
     update_ticks,
 )
 from twin.guard import Guard, install_interrupt_handler, safe_name
-from twin.interface import Controller, DaqSample, RigError
+from twin.interface import CommandRange, Controller, DaqSample, RigError
 from twin.log import THESIS_FIELDS, TRUTH_FIELDS, RunLog
 from twin.output_stage import ideal_motor_volts, motor_volts
 from twin.parameters import Daq, Parameters, PartNames
@@ -127,7 +127,7 @@ class ScalarControllers:
         for c in self.controllers[1:]:
             check_period_s(c)
         self.guard = Guard.for_period(self.period_s, timeout_s)
-        self.daq = daq
+        self.limits = None if daq is None else CommandRange(daq.dac_min_v, daq.dac_max_v)
         self.tick = 1  # the blocks read, as ``SimRig.ticks``: the start's block is the first
         self.telemetry = BatchTelemetry(np.empty((0, 4)), np.empty(0), np.empty(0))
 
@@ -152,7 +152,7 @@ class ScalarControllers:
             sample = DaqSample(samples.time_s, float(samples.ball_v[i]), float(samples.angle_v[i]))
             run = f", run {i}" if len(self.controllers) > 1 else ""  # a run alone is the run
             where = f"at tick k = {self.tick} (t = {samples.time_s:.3f} s{run})"
-            out[i] = checked_update(c, sample, where, self.guard, self.daq)
+            out[i] = checked_update(c, sample, where, self.guard, self.limits)
         self._collect()
         return out
 

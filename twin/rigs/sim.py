@@ -30,7 +30,7 @@ import numpy as np
 from twin.daq import TickSchedule, block_span_s
 from twin.engine import ENDED_TICKS, ClosedLoop, Pacer, RunResult, Scenario, StateLaw, update_ticks
 from twin.firmware import Firmware, FirmwareBoard
-from twin.interface import Controller, DaqSample, Rig, RigError, Setpoint
+from twin.interface import CommandRange, Controller, DaqSample, Rig, RigError, Setpoint
 from twin.output_stage import (
     CommandClampedWarning,
     amplifier_volts,
@@ -95,6 +95,9 @@ class SimRig(Rig):
         # the rig's parts (twin.parts; today's by default): its output stage and sensor chains come from them
         self.parts = parts or rig_parts(p)
         self._motor_volts = self.parts.motor_volts_of(p)
+        self._limits = self.parts.io_board.output_range(
+            p
+        )  # the board's output: the DAC's volts, a pulse's µs
         self._block_span_s = block_span_s(p.daq)
         self._angle: AngleSensorChain = self.parts.angle_sensor.chain(p)
         self._ball: BallSensorChain = self.parts.ball_sensor.chain(p, seed)
@@ -113,15 +116,18 @@ class SimRig(Rig):
     def parameters(self) -> Parameters:
         return self.params
 
+    def command_range(self) -> CommandRange:
+        return self._limits
+
     def write(self, command_v: float) -> None:
         if not isinstance(command_v, (int, float, np.floating, np.integer)) or not math.isfinite(command_v):
             raise ValueError(f"command_v = {command_v!r}: the DAC command must be a finite number of volts")
         self.command_v = float(command_v)
-        daq = self.params.daq
-        if not daq.dac_min_v <= self.command_v <= daq.dac_max_v:  # the card clamps it: said once a run
+        limits = self._limits
+        if not limits.low <= self.command_v <= limits.high:  # the board clamps it: said once a run
             self.clamped_commands += 1
             if self.clamped_commands == 1:
-                text = clamped_command_text(self.command_v, daq, self._ticks, self.time_s)
+                text = clamped_command_text(self.command_v, limits, self._ticks, self.time_s)
                 warnings.warn(text, CommandClampedWarning, stacklevel=2)
         self._set_motor_volts(self._motor_volts_for(self.command_v))
 
@@ -184,7 +190,7 @@ class SimRig(Rig):
         self.clamped_commands = 0  # commands written outside the DAC's range this run (the card clamped them)
         # a fresh write path each run: an actuator may hold state across ticks (a servo's dead band)
         self._motor_volts = self.parts.motor_volts_of(self.params)
-        self.command_v = self.params.amplifier.zero_command_v
+        self.command_v = self.parts.actuator.rest_command(self.params)
         self._pending_motor_v = self._applied_motor_v = self._motor_volts_for(self.command_v)
         self.last_block = None
 

@@ -39,7 +39,13 @@ def handle(o: Options) -> int:
 
     params = load_params(o.parameters)
     if o.json:
-        print(json.dumps(params.to_dict(), indent=2))
+        values = params.to_dict()
+        if o.parameters.rig_file:  # the rig's parts' own groups too, at their defaults where not set
+            from twin.parts import rig_parts
+
+            for part in rig_parts(params):
+                values.update({g: dataclasses.asdict(params.group(g)) for g in part.groups})
+        print(json.dumps(values, indent=2))
     elif o.parameters.rig_file:
         _print_rig(params)
     else:
@@ -47,7 +53,7 @@ def handle(o: Options) -> int:
 
         for row in Parameters.describe():
             group, name = row["name"].split(".")
-            value = getattr(getattr(params, group), name)
+            value = getattr(params.group(group), name)
             print(f"{row['name']:<40} {value!r:>22} {row['unit']:<10} {row['source']}")
     return 0
 

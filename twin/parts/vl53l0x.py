@@ -1,0 +1,280 @@
+"""The VL53L0X time-of-flight ball sensor (ST VL53L0X, read over I²C): its parameter group ``vl53l0x``, its
+equations, its chain (one run and a batch), its MJCF fragment (the housing drawn at the +x end of the beam) and
+its ``BallSensorPart``, registered as ``vl53l0x``.
+
+The sensor sits at ``mount_x_m`` on the beam and ranges along it toward −x, continuously back to back: a new
+range every timing budget, the mean distance to the ball's near surface over that budget, plus noise whose
+standard deviation grows with the distance, less a cover glass's crosstalk offset. Off a round ball the return
+is weak: with a probability per range the sensor ranges the background beyond the ball instead. No target
+within range (the ball gone, the background too far) reads ``OUT_OF_RANGE_MM``. The board reads the last range
+in whole millimetres (what ``VL53L0X_GetRangingMeasurementData`` returns in ``RangeMilliMeter``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from twin.parameters import Parameters, check_group, param, register_group
+from twin.parts.contract import BallSensorPart, BatchForm, MjcfFragment, register
+from twin.parts.ranging import (
+    SampledBatch,
+    SampledChain,
+    add_housing,
+    form_batch,
+    form_inputs,
+    form_single,
+    near_distance_m,
+    runs_of,
+)
+
+__all__ = [
+    "OUT_OF_RANGE_MM",
+    "SIGMA_BUDGET_S",
+    "VL53L0X",
+    "Vl53l0x",
+    "Vl53l0xBatch",
+    "Vl53l0xChain",
+    "apply_vl53l0x",
+    "vl53l0x_range_mm",
+    "vl53l0x_sigma_mm",
+]
+
+# What the ST API (and the Pololu and Adafruit libraries after it) reports when no target is found: the range
+# register's 8190 mm (pololu/vl53l0x-arduino issue #28: "8190 means out of range").
+OUT_OF_RANGE_MM = 8190.0
+# The timing budget the data sheet's ranging accuracy is given for (Table 12, the 33 ms column).
+SIGMA_BUDGET_S = 0.033
+
+HOUSING = "vl53l0x_housing"
+APERTURE = "vl53l0x_aperture"
+# The breakout board's size (GY-530 style carrier, 25 × 10.7 mm, about 3 mm deep with the module): drawn only.
+_HOUSING_HALF_M = (0.0015, 0.00535, 0.0125)
+
+
+@dataclass(frozen=True)
+class Vl53l0x:
+    """The VL53L0X's mounting and its data-sheet numbers (ST VL53L0X data sheet, DocID029104)."""
+
+    mount_x_m: float = param(
+        0.333,
+        "m",
+        "assumed: on the beam 10 mm beyond the track's +x end (track.half_length_m = 0.323 m), its aperture at "
+        "the ball's centre height, looking along the beam toward −x",
+        ge=-10.0,
+        le=10.0,
+        why="a position on a bench-top beam at most 10 m long",
+    )
+    timing_budget_s: float = param(
+        0.033,
+        "s",
+        "data sheet, ranging profiles table: 33 ms, the long-range profile's budget (20 ms high speed, 200 ms "
+        "high accuracy); in continuous back-to-back ranging a new range completes every budget",
+        ge=0.020,
+        le=1.0,
+        why="the data sheet's shortest budget is 20 ms (high-speed profile); a range a second cannot follow a "
+        "rolling ball",
+    )
+    sigma_fraction: float = param(
+        0.04,
+        "-",
+        "data sheet, ranging accuracy table (Table 12): 4 % at 120 cm, white target, indoor, 33 ms budget, taken "
+        "as one standard deviation proportional to the distance (3 % with 66 ms: ≈ 4 %/√2, photon statistics)",
+        ge=0.0,
+        le=0.5,
+        why="a range whose standard deviation is half the distance carries no position",
+    )
+    crosstalk_offset_mm: float = param(
+        0.0,
+        "mm",
+        "assumed: no cover glass (0 mm); a cover glass whose crosstalk is not compensated (data sheet, features: "
+        "'embedded optical cross-talk compensation') shortens every range by it; set from a ruler",
+        ge=-100.0,
+        le=100.0,
+        why="a crosstalk that moves ranges by more than 10 cm is a cover glass in front of nothing useful",
+    )
+    wrong_return_probability: float = param(
+        0.02,
+        "-",
+        "assumed: the chance per range that the return off the round ball (a small part of the 25° field of "
+        "view) loses to the background beyond it; fit from a log",
+        ge=0.0,
+        le=1.0,
+        why="a probability",
+    )
+    background_mm: float = param(
+        2000.0,
+        "mm",
+        "assumed: nothing behind the track within range (the room's wall 2 m away), so a wrong return and "
+        "the ball gone read the out-of-range code; a wall within range reads its distance",
+        ge=0.0,
+        le=10000.0,
+        why="a room's wall within 10 m",
+    )
+    max_range_mm: float = param(
+        1200.0,
+        "mm",
+        "data sheet, max ranging capabilities table (Table 11, 33 ms budget): 120 cm minimum for a white "
+        "target (88 %) indoor",
+        gt=0.0,
+        le=2000.0,
+        why="the data sheet's range is at most 2 m",
+    )
+
+    def __post_init__(self) -> None:
+        check_group(self, "vl53l0x")
+
+
+register_group("vl53l0x", Vl53l0x)
+
+
+def vl53l0x_sigma_mm(
+    distance_mm: np.ndarray, sigma_fraction: np.ndarray | float, budget_s: np.ndarray | float
+) -> np.ndarray:
+    """The standard deviation of one range (mm): σ = k·d·√(B₀/B), the data sheet's accuracy k (Table 12, at the
+    budget B₀ = 33 ms) proportional to the distance d, and to 1/√B: a range averages the photons of its budget
+    B, whose count grows with B (Table 12's 66 ms column, 3 %, is 4 %/√2 to the table's rounding)."""
+    return sigma_fraction * distance_mm * np.sqrt(SIGMA_BUDGET_S / budget_s)
+
+
+def vl53l0x_range_mm(
+    distance_mm: np.ndarray,
+    z: np.ndarray,
+    wrong: np.ndarray,
+    present: np.ndarray,
+    *,
+    sigma_fraction: np.ndarray | float,
+    budget_s: np.ndarray | float,
+    crosstalk_mm: np.ndarray | float,
+    background_mm: np.ndarray | float,
+    max_range_mm: np.ndarray | float,
+) -> np.ndarray:
+    """One range as the board reads it (whole mm): the target is the ball's near surface at ``distance_mm`` (its
+    mean over the budget), or the background at ``background_mm`` for a wrong return or when the ball is not
+    there; the range is target − crosstalk + σ(target)·z (``vl53l0x_sigma_mm``, z a standard normal draw),
+    rounded to the millimetre and never below 0; a target beyond ``max_range_mm`` reads ``OUT_OF_RANGE_MM``."""
+    target = np.where(wrong | ~present, background_mm, distance_mm)
+    sigma = vl53l0x_sigma_mm(target, sigma_fraction, budget_s)
+    ranged = np.maximum(np.rint(target - crosstalk_mm + sigma * z), 0.0)
+    return np.where(target > max_range_mm, OUT_OF_RANGE_MM, ranged)
+
+
+class _Sampler:
+    """The VL53L0X over N runs (``twin.parts.ranging.Sampler``): two draws per range, in order, from the run's
+    generator: a uniform (the wrong return) and a standard normal (the noise); with ``ball_sensor.noise_enabled``
+    off (the rig's noise switch) the draws are made and their effects dropped."""
+
+    def __init__(self, params: Sequence[Parameters], rngs: Sequence[np.random.Generator]) -> None:
+        self.rngs = list(rngs)
+        self.use_params(params)
+
+    def use_params(self, params: Sequence[Parameters]) -> None:
+        groups = [p.of(Vl53l0x) for p in params]
+        self.mount_x_m = np.array([g.mount_x_m for g in groups])
+        self.period_s = np.array([g.timing_budget_s for g in groups])
+        self.sigma_fraction = np.array([g.sigma_fraction for g in groups])
+        self.crosstalk_mm = np.array([g.crosstalk_offset_mm for g in groups])
+        self.wrong_probability = np.array([g.wrong_return_probability for g in groups])
+        self.background_mm = np.array([g.background_mm for g in groups])
+        self.max_range_mm = np.array([g.max_range_mm for g in groups])
+        self.radius_m = np.array([p.ball.radius_m for p in params])
+        self.half_length_m = np.array([p.track.half_length_m for p in params])
+        self.noisy = np.array([p.ball_sensor.noise_enabled for p in params])
+
+    def sample(
+        self, rows: np.ndarray, x_mean_m: np.ndarray, x_m: np.ndarray, present: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        order = rows.tolist()
+        u = np.array([self.rngs[i].random() for i in order])
+        z = np.array([self.rngs[i].standard_normal() for i in order])
+        noisy = self.noisy[rows]
+        wrong = noisy & (u < self.wrong_probability[rows]) & present
+        distance_mm = 1000.0 * near_distance_m(self.mount_x_m[rows], x_mean_m, self.radius_m[rows])
+        ranges = vl53l0x_range_mm(
+            distance_mm,
+            np.where(noisy, z, 0.0),
+            wrong,
+            present,
+            sigma_fraction=self.sigma_fraction[rows],
+            budget_s=self.period_s[rows],
+            crosstalk_mm=self.crosstalk_mm[rows],
+            background_mm=self.background_mm[rows],
+            max_range_mm=self.max_range_mm[rows],
+        )
+        return ranges, np.zeros(len(order)), wrong
+
+    def reading(self, rows: np.ndarray, output: np.ndarray) -> np.ndarray:
+        return output  # the range in whole mm is what the board reads over I²C
+
+
+class Vl53l0xBatch(SampledBatch):
+    """N runs of the VL53L0X in step (``twin.parts.ranging.SampledBatch``), each with its own seed and parameters
+    (any of the ``vl53l0x`` group's, the ball's radius, the track's length)."""
+
+    def __init__(
+        self,
+        params: Parameters | Sequence[Parameters],
+        seeds: np.ndarray | Sequence[np.random.Generator],
+        x_m: np.ndarray,
+        t_s: float,
+        present: np.ndarray | bool = True,
+    ) -> None:
+        n = len(x_m)
+        runs, rngs = runs_of(params, seeds, n)
+        super().__init__(
+            _Sampler(runs, rngs), np.asarray(x_m, dtype=float), t_s, np.broadcast_to(present, (n,))
+        )
+
+
+def _one(params: Parameters, rng: np.random.Generator, x_m: float, t_s: float, present: bool) -> SampledBatch:
+    return Vl53l0xBatch(params, [rng], np.array([x_m]), t_s, present)
+
+
+class Vl53l0xChain(SampledChain):
+    """One run of the VL53L0X (``twin.parts.contract.BallSensorChain``): ``reading_v`` the last range in whole
+    mm (``OUT_OF_RANGE_MM`` for none), ``filtered_v`` the same (the sensor's output is digital)."""
+
+    def __init__(
+        self, params: Parameters, seed: int | np.random.Generator | None, *, x_m: float = 0.0
+    ) -> None:
+        super().__init__(params, seed, _one, x_m=x_m)
+
+
+def apply_vl53l0x(spec: mujoco.MjSpec, p: Parameters) -> None:
+    """Adds the sensor's housing (drawn only) and a site at its aperture to the beam at ``mount_x_m``
+    (``twin.parts.ranging.add_housing``)."""
+    add_housing(spec, p, p.of(Vl53l0x).mount_x_m, (HOUSING, APERTURE), _HOUSING_HALF_M, (0.1, 0.1, 0.45, 1.0))
+
+
+def _chain(params: Parameters, seed: int) -> Vl53l0xChain:
+    return Vl53l0xChain(params, seed)
+
+
+# Disturbances often enough that a few of a batch form's runs hold one, and a background within range.
+_NOISY = Parameters().with_overrides(
+    {"vl53l0x.wrong_return_probability": 0.3, "vl53l0x.background_mm": 800.0}
+)
+
+VL53L0X = register(
+    BallSensorPart(
+        name="vl53l0x",
+        source="ST VL53L0X data sheet (DocID029104): ranging profiles (timing budget), Table 11 max range, Table 12 "
+        "ranging accuracy; 8190 mm for no target (ST API); wrong returns off the ball assumed",
+        groups={"vl53l0x": Vl53l0x},
+        equations=(vl53l0x_sigma_mm, vl53l0x_range_mm, near_distance_m, Vl53l0xChain, Vl53l0xBatch),
+        mjcf=MjcfFragment((("geom", HOUSING), ("site", APERTURE)), apply_vl53l0x),
+        batch=BatchForm(
+            form_single(_chain),
+            form_batch(Vl53l0xBatch),
+            form_inputs(
+                _NOISY,
+                ("vl53l0x.timing_budget_s", "vl53l0x.sigma_fraction", "vl53l0x.mount_x_m", "ball.radius_m"),
+            ),
+            "twin.parts.vl53l0x.Vl53l0xBatch",
+        ),
+        chain=_chain,
+    )
+)
