@@ -240,7 +240,7 @@ def test_the_time_of_flight_noise_and_wrong_returns_have_their_parameters_statis
     # wrong returns: a binomial share of 0.1 within 4 standard errors
     assert abs(wrong.mean() - 0.1) < 4.0 * math.sqrt(0.1 * 0.9 / N_SEEDS)
     ball = ranges[~wrong]
-    sigma = 0.04 * d_mm  # Table 12: 4 % of the distance at 33 ms
+    sigma = 0.04 * d_mm  # the part's default accuracy: 4 % of the distance at the 33 ms budget
     n = len(ball)
     assert abs(ball.mean() - d_mm) < 4.0 * sigma / math.sqrt(n)
     spread = math.sqrt(sigma**2 + 1.0 / 12.0)  # whole mm add a rounding's variance

@@ -46,7 +46,7 @@ __all__ = [
 # What the ST API (and the Pololu and Adafruit libraries after it) reports when no target is found: the range
 # register's 8190 mm (pololu/vl53l0x-arduino issue #28: "8190 means out of range").
 OUT_OF_RANGE_MM = 8190.0
-# The timing budget the data sheet's ranging accuracy is given for (Table 12, the 33 ms column).
+# The timing budget the ranging accuracy below is stated for (the data sheet's 33 ms default).
 SIGMA_BUDGET_S = 0.033
 
 HOUSING = "vl53l0x_housing"
@@ -81,8 +81,9 @@ class Vl53l0x:
     sigma_fraction: float = param(
         0.04,
         "-",
-        "data sheet, ranging accuracy table (Table 12): 4 % at 120 cm, white target, indoor, 33 ms budget, taken "
-        "as one standard deviation proportional to the distance (3 % with 66 ms: ≈ 4 %/√2, photon statistics)",
+        "assumed (not confirmed against a copy of ST's DocID029104): its ranging-accuracy table as commonly "
+        "quoted, 4 % at 120 cm for a white target indoors at the 33 ms budget, taken as one standard deviation "
+        "proportional to the distance; fit it from a log (Open Ball & Beam measured 2-3 mm at 3-20 cm)",
         ge=0.0,
         le=0.5,
         why="a range whose standard deviation is half the distance carries no position",
@@ -117,8 +118,8 @@ class Vl53l0x:
     max_range_mm: float = param(
         1200.0,
         "mm",
-        "data sheet, max ranging capabilities table (Table 11, 33 ms budget): 120 cm minimum for a white "
-        "target (88 %) indoor",
+        "assumed (not confirmed against a copy of ST's DocID029104): its maximum range as commonly quoted, "
+        "120 cm for a white target (88 %) indoors at the 33 ms budget (the data sheet's front page: up to 2 m)",
         gt=0.0,
         le=2000.0,
         why="the data sheet's range is at most 2 m",
@@ -134,9 +135,9 @@ register_group("vl53l0x", Vl53l0x)
 def vl53l0x_sigma_mm(
     distance_mm: np.ndarray, sigma_fraction: np.ndarray | float, budget_s: np.ndarray | float
 ) -> np.ndarray:
-    """The standard deviation of one range (mm): σ = k·d·√(B₀/B), the data sheet's accuracy k (Table 12, at the
-    budget B₀ = 33 ms) proportional to the distance d, and to 1/√B: a range averages the photons of its budget
-    B, whose count grows with B (Table 12's 66 ms column, 3 %, is 4 %/√2 to the table's rounding)."""
+    """The standard deviation of one range (mm): σ = k·d·√(B₀/B), an accuracy k at the budget B₀ = 33 ms
+    proportional to the distance d, and to 1/√B: a range averages the photons of its budget B, whose count grows
+    with B (photon statistics)."""
     return sigma_fraction * distance_mm * np.sqrt(SIGMA_BUDGET_S / budget_s)
 
 
@@ -261,8 +262,9 @@ _NOISY = Parameters().with_overrides(
 VL53L0X = register(
     BallSensorPart(
         name="vl53l0x",
-        source="ST VL53L0X data sheet (DocID029104): ranging profiles (timing budget), Table 11 max range, Table 12 "
-        "ranging accuracy; 8190 mm for no target (ST API); wrong returns off the ball assumed",
+        source="ST VL53L0X data sheet (DocID029104): up to 2 m, the timing budget (20 ms minimum, 33 ms "
+        "default); 8190 mm for no target (the ST API, as the Pololu library reports it); its accuracy and range "
+        "figures and the wrong returns off a round ball assumed (fit from a log)",
         groups={"vl53l0x": Vl53l0x},
         equations=(vl53l0x_sigma_mm, vl53l0x_range_mm, near_distance_m, Vl53l0xChain, Vl53l0xBatch),
         mjcf=MjcfFragment((("geom", HOUSING), ("site", APERTURE)), apply_vl53l0x),
