@@ -196,10 +196,26 @@ def _bryson_weights(state_scale: Sequence[float], input_scale_v: float) -> tuple
 def _kalman_current_gain(
     phi: np.ndarray, gamma: np.ndarray, input_noise_v: float, measurement_noise: Sequence[float]
 ) -> np.ndarray:
-    """Steady-state Kalman gain (n×2) in current-estimator form for (x, θ) measured:
-    L = P⁻Hᵀ(HP⁻Hᵀ + R)⁻¹, P⁻ the a-priori covariance, the input disturbance entering through Γ."""
-    h = np.eye(2, phi.shape[0])
-    qn = np.array([[input_noise_v**2]])
+    """Steady-state Kalman gain (n×2) in current-estimator form for (x, θ) measured (``kalman_current_gain``)."""
+    return kalman_current_gain(phi, gamma, np.eye(2, phi.shape[0]), input_noise_v, measurement_noise)
+
+
+def lqr_gain(
+    phi: np.ndarray, gamma: np.ndarray, state_scale: Sequence[float], input_scale: float
+) -> np.ndarray:
+    """Discrete LQR gain K (1×n) with Bryson weights (``state_scale`` per state, ``input_scale``)."""
+    q, r = _bryson_weights(state_scale, input_scale)
+    gain, _, _ = _control().dlqr(phi, gamma, q, r)
+    return np.atleast_2d(gain)
+
+
+def kalman_current_gain(
+    phi: np.ndarray, gamma: np.ndarray, h: np.ndarray, input_noise: float, measurement_noise: Sequence[float]
+) -> np.ndarray:
+    """Steady-state Kalman gain (n×m) in current-estimator form for the measured rows ``h`` (m×n):
+    L = P⁻Hᵀ(HP⁻Hᵀ + R)⁻¹, P⁻ the a-priori covariance, the input disturbance (SD ``input_noise``) entering
+    through Γ, the measurements' SDs ``measurement_noise``."""
+    qn = np.array([[input_noise**2]])
     # Each noise squared as given: numpy squares a float64, Python's ** calls pow (1 value in 1000 differs).
     rn = np.diag([s**2 for s in measurement_noise])
     _, p_prior, _ = _control().dlqe(phi, gamma, h, qn, rn)
@@ -225,9 +241,8 @@ def lqr_design(
 ) -> LqrDesign:
     """LQR with Bryson weights (``state_scale`` per state, ``input_scale_v``) and the Kalman gain for an input
     disturbance of ``input_noise_v`` (SD, V) and measurement noise ``measurement_noise`` (SD of x, θ)."""
-    q, r = _bryson_weights(state_scale, input_scale_v)
-    gain, _, _ = _control().dlqr(phi, gamma, q, r)
-    return LqrDesign(np.atleast_2d(gain), _kalman_current_gain(phi, gamma, input_noise_v, measurement_noise))
+    gain = lqr_gain(phi, gamma, state_scale, input_scale_v)
+    return LqrDesign(gain, _kalman_current_gain(phi, gamma, input_noise_v, measurement_noise))
 
 
 @dataclass(frozen=True)

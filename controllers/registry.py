@@ -10,6 +10,8 @@ The application layer hands this module to the CLI and the live view (``twin.eng
     sf, clp, smc         the thesis's design procedures re-run correctly on the reference model, 50 Hz
     lqr                  LQR with a steady-state Kalman filter on the same model, 50 Hz
     lqi                  the same with integral action on the ball position: it reaches a moved setpoint
+    rig-lqg              LQR and a Kalman filter from the rig's own linearization, for any rig its parts
+                         describe (``controllers.rig_lqg``), in the board's units
 
 "as printed" means a failing printed design fails here too; it is reported, never quietly corrected.
 
@@ -347,6 +349,12 @@ def _lqr_description() -> str:
     )
 
 
+def _rig_lqg(params: Parameters) -> Controller:
+    from controllers.rig_lqg import rig_lqg
+
+    return rig_lqg(params)
+
+
 @dataclass(frozen=True)
 class _Row:
     """An entry as written here (``CatalogueEntry`` lives with the engine, which imports MuJoCo)."""
@@ -436,6 +444,12 @@ _TABLE: tuple[_Row, ...] = (
         "command limits: reaches a moved setpoint; a setpoint step acts at once (no shaping), and a large one "
         "can throw the ball (docs/design.md)",
         setpoint=True,
+    ),
+    _Row(
+        "rig-lqg",
+        _rig_lqg,
+        "LQR and a Kalman filter designed from the rig's own linearization (any rig --rig-file describes: "
+        "it reads and writes the board's units through the parts' conversions)",
     ),
 )
 _ROWS: dict[str, _Row] = {row.name: row for row in _TABLE}

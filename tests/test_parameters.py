@@ -158,6 +158,8 @@ THESIS_DEFAULTS = {
         "stop_angle_rad": math.radians(43.4),
         "pivot_damping_nm_s_per_rad": 0.0,
         "pivot_friction_nm": 0.0,
+        "track_offset_m": 0.0,
+        "cog_along_m": 0.0,
     },
     "track": {
         "contact_height_m": 0.017281,
@@ -288,7 +290,8 @@ def test_every_number_has_bounds_on_both_sides_and_a_reason() -> None:
             continue
         assert md["gt"] is not None or md["ge"] is not None, name
         assert md["lt"] is not None or md["le"] is not None, name
-        assert bool(md.get("integer")) == (name in INTEGER_FIELDS), name
+        if name.split(".")[0] in GROUPS:  # the thesis's table; a part's own group declares its own
+            assert bool(md.get("integer")) == (name in INTEGER_FIELDS), name
 
 
 @pytest.mark.parametrize("name", INTEGER_FIELDS)

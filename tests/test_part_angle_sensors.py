@@ -342,7 +342,9 @@ def test_a_level_beam_on_the_rig_reads_level(overrides: dict[str, object]) -> No
 
 
 @pytest.mark.quick
-@pytest.mark.parametrize(("overrides", "decode", "resolution"), SENSORS, ids=lambda s: str(s)[:40])
+@pytest.mark.parametrize(
+    ("overrides", "decode", "resolution"), SENSORS, ids=[str(s[0]["parts.angle_sensor"]) for s in SENSORS]
+)
 def test_a_swinging_beam_on_the_rig_decodes_to_its_true_angle(
     overrides: dict[str, object], decode: Callable[[float, Parameters], float], resolution: float
 ) -> None:

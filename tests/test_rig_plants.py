@@ -90,3 +90,45 @@ def test_a_lever_rig_held_at_an_angle_starts_closed_there() -> None:
     # the servo's steady error under the beam's and ball's weight is a few mrad at most; a linkage built closed
     # at level and let snap would drop the beam by tens of mrad in the first ticks
     assert np.abs(np.array(thetas) - theta0).max() < 3e-3
+
+
+@pytest.mark.parametrize(
+    ("over", "steps", "ticks", "dx_m", "dth_rad"),
+    [
+        # the thesis's motor on a beam hinged 0.1 m behind its track's centre, its weight 5 cm out: it falls
+        # onto its stop side (0.43 rad in 0.3 s); measured 0.13 mm, 1.5 mrad
+        ({"beam.track_offset_m": 0.1, "beam.cog_along_m": 0.05, "beam.inertia_pivot_kgm2": 0.006}, (0.1, -0.05), 15,
+         1e-3, 5e-3),
+        # the servo rig hinged at one end (0.12 m, weight 0.1 m out): measured 0.06 mm, 0.93 mrad over 0.3 s
+        ({**{k: v for k, v in SERVO_RIG.changed().items() if k.startswith("parts.")}, "beam.track_offset_m": 0.12,
+          "beam.cog_along_m": 0.1, "beam.inertia_pivot_kgm2": 0.006}, (40.0, -20.0), 15, 1e-3, 3e-3),
+    ],
+)  # fmt: skip
+def test_a_beam_hinged_at_one_end_is_the_same_on_both_backends(
+    over: dict[str, object], steps: tuple[float, float], ticks: int, dx_m: float, dth_rad: float
+) -> None:
+    params = Parameters().with_overrides({**over, "ball_sensor.noise_enabled": False})
+    runs = []
+    for plant in ("twin", "reference"):
+        rig = SimRig(params, plant=plant, seed=0)
+        rig.reset(0.05, 0.02)
+        rest = rig.command_v
+        states = []
+        for k in range(ticks):
+            rig.read()
+            rig.write(rest + (steps[0] if k < ticks // 2 else steps[1]))
+            states.append(rig.true_state().copy())
+        runs.append(np.array(states))
+    a, b = runs
+    assert np.abs(a[:, 0] - b[:, 0]).max() < dx_m
+    assert np.abs(a[:, 1] - b[:, 1]).max() < dth_rad
+    assert a[0, 0] == pytest.approx(b[0, 0], abs=1e-4)  # x is along from the track's centre on both
+
+
+@pytest.mark.quick
+def test_ideal_converters_are_refused_on_a_rig_whose_board_is_not_the_thesiss() -> None:
+    from twin.interface import RigError
+
+    with pytest.raises(RigError, match=r"parts.actuator = 'hobby_servo'.*parts.io_board = 'arduino_uno'"):
+        SimRig(SERVO_RIG, ideal_sensors=True)
+    SimRig(Parameters(), ideal_sensors=True)  # the thesis's own converters

@@ -15,9 +15,9 @@ import numpy as np
 from twin import model as mdl
 from twin.parameters import Parameters
 from twin.plant import Plant
-from twin.reference import InputKind
+from twin.reference import InputKind, ReferencePlant
 
-__all__ = ["linearize_mujoco", "LinearizationError"]
+__all__ = ["linearize_mujoco", "linearize_reference", "LinearizationError"]
 
 # The slow and fast modes must be well separated for the reduction to be meaningful.
 MIN_MODE_SEPARATION = 20.0
@@ -142,3 +142,24 @@ def linearize_mujoco(
     a_red = cv @ np.diag(eigvals[slow]) @ np.linalg.inv(cv)
     b_red = cv @ (left[slow] @ b)
     return np.real_if_close(a_red, tol=1e6).real, np.real_if_close(b_red, tol=1e6).real
+
+
+def linearize_reference(
+    params: Parameters, rest_control: float, eps: float = 1e-6
+) -> tuple[np.ndarray, np.ndarray]:
+    """Continuous-time (A, B) of the reference model of the rig ``params`` describes (its ``DriveLaw`` for a
+    rig of other parts) in (x, θ, ẋ, θ̇) and the actuator's control, at the level beam with the ball still at the
+    track's centre and the control at ``rest_control`` (the actuator's control at rest: 0 V for the thesis's
+    motor, a servo's target at the level beam): central differences of ``ReferencePlant.derivative``."""
+    f = ReferencePlant(params).derivative
+    a = np.zeros((4, 4))
+    for i in range(4):
+        step = np.zeros(4)
+        step[i] = eps
+        up = f(float(step[0]), float(step[1]), float(step[2]), float(step[3]), rest_control)
+        down = f(-float(step[0]), -float(step[1]), -float(step[2]), -float(step[3]), rest_control)
+        a[:, i] = (np.array(up) - np.array(down)) / (2 * eps)
+    b = np.array(f(0.0, 0.0, 0.0, 0.0, rest_control + eps)) - np.array(
+        f(0.0, 0.0, 0.0, 0.0, rest_control - eps)
+    )
+    return a, (b / (2 * eps))[:, None]

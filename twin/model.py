@@ -134,6 +134,15 @@ def apply_beam_drive(spec: mujoco.MjSpec, p: Parameters) -> None:
     i_long = p.beam.mass_kg * (_BEAM_BAR_WIDTH_M**2 + _BEAM_BAR_THICKNESS_M**2) / 12.0
     beam.mass = p.beam.mass_kg
     beam.ipos = [0.0, 0.0, p.beam.cog_height_m]
+    if p.beam.hinged_off_centre:
+        # A beam hinged at one end: the body's frame stays at the track's centre (every track, sensor and ball
+        # coordinate is along it from there), the hinge moves to the pivot, d behind it, and the beam's centre of
+        # gravity lies x_g out from the pivot; the world keeps the pivot where the stand holds it.
+        d, x_g = p.beam.track_offset_m, p.beam.cog_along_m
+        i_hinge = p.beam.inertia_pivot_kgm2 - p.beam.mass_kg * (p.beam.cog_height_m**2 + x_g**2)
+        beam.ipos = [x_g - d, 0.0, p.beam.cog_height_m]
+        beam.pos = [beam.pos[0] + d, beam.pos[1], beam.pos[2]]
+        _find(spec, "joint", HINGE).pos = [-d, 0.0, 0.0]
     beam.iquat = [1.0, 0.0, 0.0, 0.0]
     beam.inertia = [i_long, i_hinge, i_hinge]
     beam.explicitinertial = True

@@ -15,7 +15,7 @@ import math
 import os
 import re
 import tomllib
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from types import MappingProxyType
@@ -43,6 +43,9 @@ __all__ = [
     "all_groups",
     "choice",
     "register_group",
+    "register_track_geometry",
+    "TrackGeometry",
+    "two_wires_geometry",
     "READING",
     "check_group",
     "declaration",
@@ -375,19 +378,45 @@ class Beam:
         le=10.0,
         why="10 N·m is 50x the 0.2 N·m the thesis's motor gives at 12 V: a seized bearing",
     )
+    track_offset_m: float = param(
+        0.0,
+        "m",
+        "§3: the thesis's beam turns about its middle, under the track's centre (0). A beam hinged at one end "
+        "(Quanser's BB01, Open Ball & Beam) has its track's centre this far out from the pivot along +x; the "
+        "ball's position x stays measured from the track's centre",
+        ge=-1.0,
+        le=1.0,
+        why="a bench-top beam is under 2 m long: its track's centre lies within 1 m of its pivot",
+    )
+    cog_along_m: float = param(
+        0.0,
+        "m",
+        "§3: the thesis's beam's centre of gravity lies over its pivot (0, h above it). A beam hinged at one end "
+        "has it this far out along +x from the pivot: its weight then loads the drive (M_B·g·x·cos θ)",
+        ge=-1.0,
+        le=1.0,
+        why="a bench-top beam's centre of gravity lies within 1 m of its pivot",
+    )
 
     def __post_init__(self) -> None:
         _check_fields(self, "beam")
-        if self.inertia_pivot_kgm2 <= self.mass_kg * self.cog_height_m**2:
+        if self.inertia_pivot_kgm2 <= self.mass_kg * (self.cog_height_m**2 + self.cog_along_m**2):
             raise ParameterError(
                 f"beam.inertia_pivot_kgm2 = {self.inertia_pivot_kgm2!r} kg·m² is impossible: it must exceed "
-                f"M_B·h² = {self.mass_kg * self.cog_height_m**2:.6g} (parallel-axis theorem)"
+                f"M_B·(h² + x_g²) = {self.mass_kg * (self.cog_height_m**2 + self.cog_along_m**2):.6g} "
+                "(parallel-axis theorem)"
             )
+
+    @property
+    def hinged_off_centre(self) -> bool:
+        """Whether the beam turns elsewhere than under its track's centre and centre of gravity (the thesis's)."""
+        return self.track_offset_m != 0.0 or self.cog_along_m != 0.0
 
 
 @dataclass(frozen=True)
 class Track:
-    """The two wires the ball rolls on."""
+    """The track: the thesis's two wires (h*, d, the wire's radius) and what every track has, its half length
+    and its contacts' friction (another track's own shape is its part's group, ``twin.parts``)."""
 
     contact_height_m: float = param(
         17.281e-3,
@@ -1135,6 +1164,54 @@ def register_group(name: str, cls: type[G]) -> type[G]:
     return cls
 
 
+@dataclass(frozen=True)
+class TrackGeometry:
+    """Where the ball rides on a track, in the beam frame: all the dynamics and the plant read of a track.
+
+    ``rolling_radius_m`` r*: the ball centre above its rolling axis, the line through its contacts (eq 3.1.13:
+    ẋ = −r*·ω); ``axis_height_m`` h*: that axis above the pivot (the ball centre is h* + r* above it, eq
+    3.1.3); ``lateral_limit_m``: the ball centre's sideways offset at which it has left the track;
+    ``end_limit_m``: its |x| beyond which MuJoCo's plant counts it off the track's end (the reference model's
+    test is |x| > ``track.half_length_m``, ``twin.reference.step_boundary``)."""
+
+    rolling_radius_m: float
+    axis_height_m: float
+    lateral_limit_m: float
+    end_limit_m: float
+
+
+def two_wires_geometry(params: Parameters) -> TrackGeometry:
+    """The thesis's two wires (Table 3.1: h*, d): the contacts d apart at h*, the ball centre r* = √(r² − d²/4)
+    above their line; it leaves sideways past a wire (d/2) and off the end once past the wires' ends by its
+    radius (where it has rolled over them). Refused unless d < 2r (the ball would fall between the wires)."""
+    r, d = params.ball.radius_m, params.track.contact_spacing_m
+    if d >= 2 * r:
+        raise ParameterError(
+            f"track.contact_spacing_m = {d!r} m is impossible: the ball (radius {r!r} m) falls between "
+            f"the wires unless d < 2r = {2 * r!r} m"
+        )
+    return TrackGeometry(
+        rolling_radius_m=math.sqrt(r * r - d * d / 4.0),
+        axis_height_m=params.track.contact_height_m,
+        lateral_limit_m=d / 2,
+        end_limit_m=params.track.half_length_m + r,
+    )
+
+
+# Each track's geometry by its part's name (``Parameters.track_geometry``): the thesis's two wires here, the
+# others registered by their part's module (``register_track_geometry``).
+_TRACK_GEOMETRY: dict[str, Callable[[Parameters], TrackGeometry]] = {"two_wires": two_wires_geometry}
+
+
+def register_track_geometry(name: str, geometry: Callable[[Parameters], TrackGeometry]) -> None:
+    """The geometry of the track part ``name``: ``geometry(params)`` (raising ``ParameterError`` naming the field
+    for a geometry the ball cannot ride, which ``Parameters`` then refuses on construction). A name registered
+    with another function is refused."""
+    if _TRACK_GEOMETRY.get(name, geometry) is not geometry:
+        raise ParameterError(f"the track {name!r} has a geometry already")
+    _TRACK_GEOMETRY[name] = geometry
+
+
 def all_groups() -> Mapping[str, type]:
     """Every parameter group by name: the thesis's (``GROUPS``), then the parts' registered ones."""
     return MappingProxyType({**_GROUPS, **_PART_GROUPS})
@@ -1223,12 +1300,9 @@ class Parameters:
             cls = _PART_GROUPS.get(name)
             if cls is None or type(group) is not cls:
                 raise ParameterError(f"part_groups: '{_clip(str(name))}' is not a registered part's group")
-        r, d = self.ball.radius_m, self.track.contact_spacing_m
-        if d >= 2 * r:
-            raise ParameterError(
-                f"track.contact_spacing_m = {d!r} m is impossible: the ball (radius {r!r} m) falls between "
-                f"the wires unless d < 2r = {2 * r!r} m"
-            )
+        geometry = _TRACK_GEOMETRY.get(self.parts.track)
+        if geometry is not None:
+            geometry(self)  # the track's own checks (the two wires: d < 2r), naming its fields
 
     # --- the parts' groups ------------------------------------------------------------------------
     def group(self, name: str) -> Any:
@@ -1253,17 +1327,36 @@ class Parameters:
 
     # --- derived geometry -------------------------------------------------------------------------
     @property
+    def track_geometry(self) -> TrackGeometry:
+        """Where the ball rides on the track ``parts.track`` names (its registered geometry,
+        ``register_track_geometry``; the thesis's two wires: ``two_wires_geometry``)."""
+        geometry = _TRACK_GEOMETRY.get(self.parts.track)
+        if geometry is None:
+            raise ParameterError(
+                f"parts.track = {self.parts.track!r}: no track geometry of that name is registered (there are: "
+                f"{sorted(_TRACK_GEOMETRY)}; a track's module under twin.parts registers its own)"
+            )
+        return geometry(self)
+
+    @property
     def rolling_radius_m(self) -> float:
-        """r* = √(r² − d²/4): height of the ball centre above the wires' contact line.
+        """r*: height of the ball centre above the line through its contacts, about which it rolls (the two
+        wires: √(r² − d²/4); each track's own, ``track_geometry``).
 
         Table 3.1 prints 4.264 mm; its own formula gives 4.676 mm, which the thesis's derived numbers use."""
-        r, d = self.ball.radius_m, self.track.contact_spacing_m
-        return math.sqrt(r * r - d * d / 4.0)
+        return self.track_geometry.rolling_radius_m
+
+    @property
+    def rolling_axis_height_m(self) -> float:
+        """h*: the line through the ball's contacts (its rolling axis) above the pivot, in the beam frame (Table
+        3.1's h* for the two wires: ``track.contact_height_m``)."""
+        return self.track_geometry.axis_height_m
 
     @property
     def ball_centre_height_m(self) -> float:
         """h* + r*: the ball centre above the pivot, in the beam frame (eq 3.1.3)."""
-        return self.track.contact_height_m + self.rolling_radius_m
+        geometry = self.track_geometry
+        return geometry.axis_height_m + geometry.rolling_radius_m
 
     @property
     def rolling_inertia_ratio(self) -> float:

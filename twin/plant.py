@@ -210,6 +210,11 @@ class Plant:
         self.ball_lost_time_s: float | None = None
         mujoco.mj_kinematics(self.model, self.data)
         self._pivot = tuple(float(v) for v in self.data.xpos[self._beam])  # the beam body's origin is P
+        # A beam hinged at one end: P is its hinge's anchor, and x is along from the track's centre, d out from P
+        # (``beam.track_offset_m``; x − 0.0 is x bit for bit, so the thesis's rig subtracts nothing)
+        self._track_offset_m = self.params.beam.track_offset_m
+        if self.params.beam.hinged_off_centre and hold_beam_rad is None:
+            self._pivot = tuple(float(v) for v in self.data.xanchor[m.joint(mdl.HINGE).id])
         self._pivot_0d = tuple(np.array(v) for v in self._pivot)
         self._nstate = mujoco.mj_stateSize(m, FULL_STATE)
         self._warmstart = np.empty((1, m.nv))
@@ -221,8 +226,9 @@ class Plant:
         self._row_theta = 1 + (self._hinge_qpos or 0)
         self._row_thetadot = 1 + m.nq + (self._hinge_dof or 0)
         p = self.params
-        self._along_limit_m = p.track.half_length_m + p.ball.radius_m
-        self._lateral_limit_m = p.track.contact_spacing_m / 2
+        track = p.track_geometry  # the track the rig names (the two wires: past their ends by r, beside one)
+        self._along_limit_m = track.end_limit_m
+        self._lateral_limit_m = track.lateral_limit_m
         self._seat_height_m = p.ball_centre_height_m
         self._all_on_cache: dict[int, np.ndarray] = {}
         # MuJoCo's warning counters (live views into MjData, read once a block) and the beam's furthest
@@ -274,7 +280,12 @@ class Plant:
         d.qpos[q : q + 3] = pivot + offset
         d.qpos[q + 3 : q + 7] = [1.0, 0.0, 0.0, 0.0]
         v = self._ball_dof
-        d.qvel[v : v + 3] = np.array(fo.matvec(rot, [xdot_m_s, 0.0, 0.0])) + np.cross(omega_beam, offset)
+        # the beam turns about its hinge: the ball's velocity is ω × (its position from the pivot), the track's
+        # centre d out from it on a beam hinged at one end
+        lever = offset
+        if p.beam.hinged_off_centre:
+            lever = np.array(fo.matvec(rot, [x_m + p.beam.track_offset_m, 0.0, p.ball_centre_height_m]))
+        d.qvel[v : v + 3] = np.array(fo.matvec(rot, [xdot_m_s, 0.0, 0.0])) + np.cross(omega_beam, lever)
         # Rolling without slipping (eq 3.1.13): spin relative to the beam about the hinge axis = -ẋ/r*.
         d.qvel[v + 3 : v + 6] = omega_beam + (-xdot_m_s / p.rolling_radius_m) * axis
         d.ctrl[:] = 0.0
@@ -304,7 +315,7 @@ class Plant:
         o, w = offset.tolist(), v_rel.tolist()
         axes = [ex.tolist(), ey.tolist(), ez.tolist()]
         return BallKinematics(
-            position_m=np.array(fo.matvec(axes, o)),
+            position_m=np.array(fo.matvec(axes, o)) - np.array([self._track_offset_m, 0.0, 0.0]),
             velocity_m_s=np.array(fo.matvec(axes, w)),
             spin_rad_s=fo.dot((omega_ball - omega_beam).tolist(), axis.tolist()),
         )
@@ -350,7 +361,7 @@ class Plant:
         thetadot = 0.0  # the velocity relative to the beam, as ``state`` takes it: v − ω×offset
         vx, vz = float(d.qvel[v]) + thetadot * oz, float(d.qvel[v + 2]) - thetadot * ox
         c, s = math.cos(theta), math.sin(theta)
-        return np.array([ox * c + oz * s, theta, vx * c + vz * s, thetadot])
+        return np.array([ox * c + oz * s - self._track_offset_m, theta, vx * c + vz * s, thetadot])
 
     def row_states(self, rows: np.ndarray) -> np.ndarray:
         """(x, θ, ẋ, θ̇) for each full-physics state row (time, qpos, qvel), shape (n, 4): what ``state``
@@ -365,7 +376,7 @@ class Plant:
         ox, oz = rows[:, q] - px, rows[:, q + 2] - pz
         vx, vz = rows[:, v] + thetadot * oz, rows[:, v + 2] - thetadot * ox
         c, s = np.cos(theta), np.sin(theta)
-        return np.stack([ox * c + oz * s, theta, vx * c + vz * s, thetadot], axis=1)
+        return np.stack([ox * c + oz * s - self._track_offset_m, theta, vx * c + vz * s, thetadot], axis=1)
 
     # --- stepping ---------------------------------------------------------------------------------
     @property
@@ -453,6 +464,7 @@ class Plant:
         row_theta, q = self._row_theta, self._row_ball
         px, py, pz = self._pivot
         along_limit, lateral_limit = self._along_limit_m, self._lateral_limit_m
+        offset = self._track_offset_m
         seat, tolerance = self._seat_height_m, LOST_HEIGHT_TOLERANCE_M
         lost_state = self.lost_state
         state: tuple[float, ...]
@@ -479,7 +491,7 @@ class Plant:
                 # so the same answer (numpy's cos and sin equal math's); inline, as a call costs as much.
                 dx, dy, dz = row[q] - px, row[q + 1] - py, row[q + 2] - pz
                 if not (
-                    abs(c * dx + s * dz) <= along_limit
+                    abs(c * dx + s * dz - offset) <= along_limit
                     and abs(dy) < lateral_limit
                     and abs(c * dz - s * dx - seat) < tolerance
                 ):
@@ -579,7 +591,7 @@ class Plant:
         px, _, pz = self._pivot
         ox, oz = r[q] - px, r[q + 2] - pz
         vx, vz = r[v] + thetadot * oz, r[v + 2] - thetadot * ox
-        return ox * c + oz * s, r[self._row_theta], vx * c + vz * s, thetadot
+        return ox * c + oz * s - self._track_offset_m, r[self._row_theta], vx * c + vz * s, thetadot
 
     def _row_state(self, row: np.ndarray) -> np.ndarray:
         """(x, θ, ẋ, θ̇) from one row of (time, qpos, qvel): the ball relative to the beam, as ``state``."""
@@ -594,7 +606,7 @@ class Plant:
         # Velocity relative to the rotating beam: v − ω×offset with ω = θ̇ about (0, −1, 0).
         vx, vz = row[v] + thetadot * oz, row[v + 2] - thetadot * ox
         c, s = math.cos(theta), math.sin(theta)
-        return np.array([ox * c + oz * s, theta, vx * c + vz * s, thetadot])
+        return np.array([ox * c + oz * s - self._track_offset_m, theta, vx * c + vz * s, thetadot])
 
     def beam_frame(
         self, theta_rad: np.ndarray, ball_xyz: np.ndarray
@@ -605,7 +617,7 @@ class Plant:
         c, s = np.cos(theta_rad), np.sin(theta_rad)
         px, py, pz = self._pivot_0d  # 0-d arrays: numpy converts a Python float operand on every call
         dx, dz = ball_xyz[..., 0] - px, ball_xyz[..., 2] - pz
-        return dx * c + dz * s, ball_xyz[..., 1] - py, dz * c - dx * s
+        return dx * c + dz * s - self._track_offset_m, ball_xyz[..., 1] - py, dz * c - dx * s
 
     def on_track(self, along: np.ndarray, lateral: np.ndarray, height: np.ndarray) -> np.ndarray:
         """Whether the ball sits on both wires within the track, from its beam-frame coordinates."""
@@ -622,6 +634,7 @@ class Plant:
         in masses, motor and friction, not in where their track lies)."""
         return (
             self._pivot,
+            self._track_offset_m,
             self._along_limit_m,
             self._lateral_limit_m,
             self._seat_height_m,

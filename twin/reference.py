@@ -42,6 +42,11 @@ __all__ = [
     "ReferenceModel",
     "ReferencePlant",
     "discretize_zoh",
+    "drive_stop_boundary",
+    "drive_stop_derivative",
+    "driven_beam_terms",
+    "geared_motor_numbers",
+    "geared_shaft_torque_nm",
     "pivot_friction_nm",
     "rk4_step",
     "step_boundary",
@@ -95,7 +100,7 @@ class EquationCoefficients(Generic[C]):
     @staticmethod
     def from_params(params: Parameters, *, motor_inertia: bool = True) -> EquationCoefficients[float]:
         p = params
-        m, r, rs, hs = p.ball.mass_kg, p.ball.radius_m, p.rolling_radius_m, p.track.contact_height_m
+        m, r, rs, hs = p.ball.mass_kg, p.ball.radius_m, p.rolling_radius_m, p.rolling_axis_height_m
         g = p.physics.gravity_m_s2
         gear2 = p.motor.gear_ratio**2
         j_a = p.motor.rotor_inertia_kgm2 * gear2 if motor_inertia else 0.0
@@ -322,6 +327,7 @@ class DriveKinematics:
     shaft_inertia_kgm2: float = 0.0
     beam_inertia_kgm2: float = 0.0
     theta_limits_rad: tuple[float, float] | None = None
+    numbers: tuple[float, ...] = ()  # what the compiled kernel's row takes of the drive (twin.screen.plant)
 
 
 @dataclass(frozen=True)
@@ -340,12 +346,16 @@ class DriveLaw:
     shaft_inertia_kgm2: float
     beam_inertia_kgm2: float = 0.0
     theta_limits_rad: tuple[float, float] | None = None
+    # the drive's and the actuator's numbers as the compiled kernel's row takes them (twin.screen.plant)
+    drive_numbers: tuple[float, ...] = ()
+    actuator_numbers: tuple[float, ...] = ()
 
 
 # Registered by the parts (twin.parts): a drive's kinematics and extra inertia (shaft, beam), and an actuator's
 # torque law and inertia at its shaft, each from a rig's parameters.
 _SHAFT_MAPS: dict[str, Callable[[Parameters], DriveKinematics]] = {}
 _ACTUATOR_LAWS: dict[str, Callable[[Parameters], tuple[ShaftTorque, float]]] = {}
+_ACTUATOR_NUMBERS: dict[str, Callable[[Parameters], tuple[float, ...]]] = {}
 THESIS_DRIVE = ("pivot", "escap_dc_motor")  # eq 3.1.27 as the thesis writes it: no ``DriveLaw``
 
 
@@ -356,19 +366,72 @@ def _pivot(theta_rad: float) -> tuple[float, float, float]:
 def _geared_motor(params: Parameters) -> tuple[ShaftTorque, float]:
     """The geared DC motor (eq 3.3.1) at its output shaft: its volts within the amplifier's rails, the reflected
     rotor inertia and viscous damping (Table 3.2, reflected by N²)."""
+    rail, k_tau, k_b, b_a = geared_motor_numbers(params)
+
+    def torque(volts: float, phi: float, phidot: float) -> float:
+        return float(geared_shaft_torque_nm(torque_nm, volts, phidot, rail, k_tau, k_b, b_a))
+
+    return torque, params.motor.rotor_inertia_kgm2 * params.motor.gear_ratio**2
+
+
+def geared_motor_numbers(params: Parameters) -> tuple[float, float, float, float]:
+    """``geared_shaft_torque_nm``'s numbers after φ̇ (rail, k_τ, k_b, B_m·N²), as ``_geared_motor`` and the compiled
+    kernel's row (twin.screen.plant) take them."""
     p = params
-    rail, k_tau, k_b = (
+    return (
         p.amplifier.rail_v,
         p.motor.torque_per_volt_nm_per_v,
         p.motor.backemf_at_beam_v_s_per_rad,
+        p.motor.viscous_damping_nm_s_per_rad * p.motor.gear_ratio**2,
     )
-    gear2 = p.motor.gear_ratio**2
-    b_a = p.motor.viscous_damping_nm_s_per_rad * gear2
 
-    def torque(volts: float, phi: float, phidot: float) -> float:
-        return float(torque_nm(min(max(volts, -rail), rail), phidot, k_tau, k_b)) - b_a * phidot
 
-    return torque, p.motor.rotor_inertia_kgm2 * gear2
+def geared_shaft_torque_nm(
+    motor_torque: Any, volts: Any, phidot: Any, rail_v: Any, k_tau: Any, k_b: Any, damping: Any
+) -> Any:
+    """The geared DC motor's torque at its output shaft driving a beam through a drive: eq 3.3.1
+    (``motor_torque``: ``twin.dcmotor.torque_nm``, or its compiled form in the kernel) at the volts within the
+    amplifier's rails, less the reflected viscous damping B_m·N²·φ̇."""
+    return motor_torque(min(max(volts, -rail_v), rail_v), phidot, k_tau, k_b) - damping * phidot
+
+
+def driven_beam_terms(
+    alpha_thdd: Any, shaft_inertia: Any, dphi: Any, ddphi: Any, thd: Any, shaft_torque_nm: Any
+) -> tuple[Any, Any]:
+    """A driven beam's α₂ and torque in eq 3.1.27 (``DriveLaw``): α₂ + J_s·φ′² and φ′·τ_s − J_s·φ′·φ″·θ̇²
+    (``alpha_thdd``: α₂ with the drive's own inertia on the beam J_b added). Arithmetic only: the reference
+    plant and the compiled kernel (twin.screen) alike."""
+    return (
+        alpha_thdd + shaft_inertia * dphi * dphi,
+        dphi * shaft_torque_nm - shaft_inertia * dphi * ddphi * thd * thd,
+    )
+
+
+def drive_stop_derivative(
+    k1: Any, g: Any, x: Any, th: Any, xd: Any, thd: Any, s: Any, xdd: Any, thdd: Any, lo: Any, hi: Any
+) -> tuple[Any, Any, Any, Any]:
+    """The derivative (ẋ, θ̇, ẍ, θ̈) of a driven beam at its drive's stop (θ ∉ (lo, hi)) and pushed into it: the
+    stop holds the beam, the ball rolls on a still beam (eq 3.1.26 with θ̈ = 0), as MuJoCo's joint limit holds
+    it, not a step's spurious θ̈; elsewhere the equations' own. Arithmetic only (``s`` = sin θ)."""
+    if (th >= hi and thdd > 0.0) or (th <= lo and thdd < 0.0):
+        return xd, 0.0, (x * thd * thd - g * s) / (1.0 + k1), 0.0
+    return xd, thd, xdd, thdd
+
+
+def drive_stop_boundary(
+    th: float, xd: float, thd: float, before_rad_s: float, lo: float, hi: float, coupling: float
+) -> tuple[float, float, float]:
+    """After ``step_boundary`` (θ̇ was ``before_rad_s`` ahead of it): the drive's own stops (a horn at its
+    travel's ends, θ within [lo, hi]) and the ball's share of a stop's impulse: the stop acts on the beam
+    alone, so across it eq 3.1.26 gives (1 + k₁)·Δẋ = (k₂ + c)·Δθ̇ (``coupling`` = (k₂ + c)/(1 + k₁)). (θ, ẋ, θ̇);
+    the reference plant and the compiled kernel alike."""
+    if th > hi:
+        th, thd = hi, min(thd, 0.0)
+    elif th < lo:
+        th, thd = lo, max(thd, 0.0)
+    if thd != before_rad_s:
+        xd += coupling * (thd - before_rad_s)
+    return th, xd, thd
 
 
 def register_shaft_map(drive: str, factory: Callable[[Parameters], DriveKinematics]) -> None:
@@ -377,18 +440,25 @@ def register_shaft_map(drive: str, factory: Callable[[Parameters], DriveKinemati
     _SHAFT_MAPS[drive] = factory
 
 
-def register_actuator_law(actuator: str, factory: Callable[[Parameters], tuple[ShaftTorque, float]]) -> None:
+def register_actuator_law(
+    actuator: str,
+    factory: Callable[[Parameters], tuple[ShaftTorque, float]],
+    numbers: Callable[[Parameters], tuple[float, ...]] | None = None,
+) -> None:
     """An actuator's torque law and inertia at its shaft for the reference model (``twin.parts`` registers its
     actuators' own)."""
     _ACTUATOR_LAWS[actuator] = factory
+    if numbers is not None:  # its law's numbers, for the compiled kernel's row
+        _ACTUATOR_NUMBERS[actuator] = numbers
 
 
 def drive_law(params: Parameters) -> DriveLaw | None:
     """The reference model's law for the drive and actuator ``params.parts`` names: None for the thesis's (eq
-    3.1.27 as written), else the registered kinematics and torque law (``ValueError`` naming the part if none is
-    registered: its module under twin.parts was not imported, or it has no reference form)."""
+    3.1.27 as written, the beam turned under its track's centre), else the registered kinematics and torque law
+    (``ValueError`` naming the part if none is registered: its module under twin.parts was not imported, or it
+    has no reference form)."""
     names = (params.parts.beam_drive, params.parts.actuator)
-    if names == THESIS_DRIVE:
+    if names == THESIS_DRIVE and not params.beam.hinged_off_centre:
         return None
     if names[0] != "pivot" and names[0] not in _SHAFT_MAPS:
         raise ValueError(f"parts.beam_drive = {names[0]!r}: the reference model has no kinematics for it")
@@ -396,8 +466,15 @@ def drive_law(params: Parameters) -> DriveLaw | None:
         raise ValueError(f"parts.actuator = {names[1]!r}: the reference model has no torque law for it")
     kin = DriveKinematics(_pivot) if names[0] == "pivot" else _SHAFT_MAPS[names[0]](params)
     torque, inertia = (_geared_motor if names[1] == "escap_dc_motor" else _ACTUATOR_LAWS[names[1]])(params)
+    numbers = _ACTUATOR_NUMBERS.get(names[1])
     return DriveLaw(
-        kin.shaft, torque, inertia + kin.shaft_inertia_kgm2, kin.beam_inertia_kgm2, kin.theta_limits_rad
+        kin.shaft,
+        torque,
+        inertia + kin.shaft_inertia_kgm2,
+        kin.beam_inertia_kgm2,
+        kin.theta_limits_rad,
+        kin.numbers,
+        numbers(params) if numbers is not None else (),
     )
 
 
@@ -453,6 +530,22 @@ class ReferencePlant:
         if not isinstance(motor_volts, (int, float)) or not math.isfinite(motor_volts):
             raise ValueError(f"motor_volts = {motor_volts!r} is not finite")
         return self.advance(np.full(n_steps, float(motor_volts)))
+
+    def derivative(
+        self, x: float, th: float, xd: float, thd: float, ctrl: float
+    ) -> tuple[float, float, float, float]:
+        """(ẋ, θ̇, ẍ, θ̈) of the state with the actuator's control ``ctrl`` held (the motor's volts within the
+        amplifier's rails on the thesis's rig; a driven beam's ``DriveLaw``): what ``advance`` integrates, for a
+        linearization (``twin.linearize.linearize_reference``)."""
+        if self._law is None:
+            p = self.params
+            volts = min(max(ctrl, -p.amplifier.rail_v), p.amplifier.rail_v)
+            torque = float(
+                torque_nm(volts, thd, p.motor.torque_per_volt_nm_per_v, p.motor.backemf_at_beam_v_s_per_rad)
+            )
+            xdd, thdd = self._q.accelerations(x, th, xd, thd, torque)
+            return xd, thd, xdd, thdd
+        return self._driven_derivative(self._law)(x, th, xd, thd, ctrl)
 
     def advance(self, motor_volts: np.ndarray) -> PhysicsBlock:
         p = self.params
@@ -510,13 +603,7 @@ class ReferencePlant:
         p, q = self.params, self._q
         before = thd
         th, thd, lost = step_boundary(x, th, thd, p.beam.stop_angle_rad, p.track.half_length_m)
-        lo, hi = limits
-        if th > hi:
-            th, thd = hi, min(thd, 0.0)
-        elif th < lo:
-            th, thd = lo, max(thd, 0.0)
-        if thd != before:
-            xd += (q.k2 + q.c) / (1.0 + q.k1) * (thd - before)
+        th, xd, thd = drive_stop_boundary(th, xd, thd, before, *limits, (q.k2 + q.c) / (1.0 + q.k1))
         return th, xd, thd, lost
 
     def _driven_derivative(self, law: DriveLaw) -> Callable[..., tuple[float, float, float, float]]:
@@ -526,19 +613,46 @@ class ReferencePlant:
         alpha, j_s = q.alpha_thdd + law.beam_inertia_kgm2, law.shaft_inertia_kgm2
         shaft, shaft_torque = law.shaft, law.torque
         lo, hi = law.theta_limits_rad or (-math.inf, math.inf)
+        if self.params.beam.hinged_off_centre:
+            return self._hinged_off_centre_derivative(law)
+
+        def f(x: float, th: float, xd: float, thd: float, ctrl: float) -> tuple[float, float, float, float]:
+            # the compiled kernel's driven derivative (twin.screen.plant) is these calls in this order
+            phi, dphi, ddphi = shaft(th)
+            a2, torque = driven_beam_terms(alpha, j_s, dphi, ddphi, thd, shaft_torque(ctrl, phi, dphi * thd))
+            s, co = math.sin(th), math.cos(th)
+            xdd, thdd = ball_beam_accelerations(
+                q.k1, q.k2, q.c, q.g, q.alpha_xdd, a2, q.alpha_thdd_x2,
+                b1, b2, b3, b4, q.beta_thetadot, x, xd, thd, s, co, pivot_friction_nm(q.coulomb_nm, thd), torque,
+            )  # fmt: skip
+            return drive_stop_derivative(q.k1, q.g, x, th, xd, thd, s, xdd, thdd, lo, hi)
+
+        return f
+
+    def _hinged_off_centre_derivative(
+        self, law: DriveLaw
+    ) -> Callable[..., tuple[float, float, float, float]]:
+        """``_driven_derivative`` of a beam hinged elsewhere than under its track's centre: the equations hold in
+        the ball's distance from the pivot, x + d (``beam.track_offset_m``), and the beam's weight, x_g out along
+        it (``beam.cog_along_m``), loads the drive with −M_B·g·x_g·cos θ."""
+        q = self._q
+        b1, b2, b3, b4 = q.beta
+        alpha, j_s = q.alpha_thdd + law.beam_inertia_kgm2, law.shaft_inertia_kgm2
+        shaft, shaft_torque = law.shaft, law.torque
+        lo, hi = law.theta_limits_rad or (-math.inf, math.inf)
+        d = self.params.beam.track_offset_m
+        weight_nm = self.params.beam.mass_kg * q.g * self.params.beam.cog_along_m
 
         def f(x: float, th: float, xd: float, thd: float, ctrl: float) -> tuple[float, float, float, float]:
             phi, dphi, ddphi = shaft(th)
-            torque = dphi * shaft_torque(ctrl, phi, dphi * thd) - j_s * dphi * ddphi * thd * thd
+            a2, torque = driven_beam_terms(alpha, j_s, dphi, ddphi, thd, shaft_torque(ctrl, phi, dphi * thd))
             s, co = math.sin(th), math.cos(th)
+            xp = x + d
             xdd, thdd = ball_beam_accelerations(
-                q.k1, q.k2, q.c, q.g, q.alpha_xdd, alpha + j_s * dphi * dphi, q.alpha_thdd_x2,
-                b1, b2, b3, b4, q.beta_thetadot, x, xd, thd, s, co, pivot_friction_nm(q.coulomb_nm, thd), torque,
+                q.k1, q.k2, q.c, q.g, q.alpha_xdd, a2, q.alpha_thdd_x2,
+                b1, b2, b3, b4, q.beta_thetadot, xp, xd, thd, s, co, pivot_friction_nm(q.coulomb_nm, thd),
+                torque - weight_nm * co,
             )  # fmt: skip
-            if (th >= hi and thdd > 0.0) or (th <= lo and thdd < 0.0):
-                # at the drive's stop and pushed into it: the stop holds the beam, the ball rolls on a still
-                # beam (eq 3.1.26 with θ̈ = 0), as MuJoCo's joint limit holds it; not a step's spurious θ̈
-                return xd, 0.0, (x * thd * thd - q.g * s) / (1.0 + q.k1), 0.0
-            return xd, thd, xdd, thdd
+            return drive_stop_derivative(q.k1, q.g, xp, th, xd, thd, s, xdd, thdd, lo, hi)
 
         return f

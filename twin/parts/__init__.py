@@ -43,7 +43,11 @@ from twin.parts import (  # noqa: F401
     linkage,
     no_angle,
     potentiometer,
+    rod_strip,
     servo,
+    stepper,
+    tube,
+    v_groove,
     vl53l0x,
 )
 

@@ -37,7 +37,7 @@ import numpy as np
 
 from twin.interface import CommandRange
 from twin.parameters import Parameters, check_group, param, register_group
-from twin.parts.contract import BatchForm, IoBoardPart, MjcfFragment, register
+from twin.parts.contract import BatchForm, BatchWrite, IoBoardPart, MjcfFragment, register
 
 __all__ = [
     "ADC_CODES",
@@ -49,6 +49,9 @@ __all__ = [
     "servo_limits_us",
     "servo_pulse_us",
     "servo_range",
+    "board_output_range",
+    "register_step_dir_actuator",
+    "step_target_steps",
 ]
 
 # ATmega328P data sheet, "Analog-to-Digital Converter": a 10-bit converter, 1024 codes.
@@ -206,10 +209,69 @@ def _adc(params: Parameters) -> Callable[[float], float]:
 
 
 def _dac(params: Parameters) -> Callable[[float], float]:
+    step_dir = _STEP_DIR_ACTUATORS.get(params.parts.actuator)
+    if step_dir is not None:  # a STEP/DIR driver's actuator: the sketch's moveTo target (microsteps)
+        limit = step_dir(params).high
+
+        def move_to(command_steps: float) -> float:
+            return float(step_target_steps(command_steps, limit))
+
+        return move_to
     group = params.of(Arduino)
 
     def write(command_us: float) -> float:
         return float(servo_pulse_us(command_us, group))
+
+    return write
+
+
+def _batch_adc(params: Sequence[Parameters]) -> BatchWrite:
+    """``analogRead`` of N boards (``analog_read_counts`` on arrays, each run's reference): ``_adc``'s bits."""
+    references = np.array([p.of(Arduino).adc_reference_v for p in params])
+
+    def read(runs: np.ndarray, volts: np.ndarray) -> np.ndarray:
+        v = np.asarray(volts, dtype=float)
+        if not np.isfinite(v).all():
+            raise ValueError(f"volts = {v[~np.isfinite(v)][0]!r}: an analog pin's volts must be finite")
+        return np.asarray(analog_read_counts(v, references[runs]))
+
+    return read
+
+
+def _batch_dac(params: Sequence[Parameters]) -> BatchWrite:
+    """``writeMicroseconds`` of N boards (``servo_pulse_us`` on arrays, each run's limits and clock), or for a
+    STEP/DIR actuator's rig the ``moveTo`` target (``step_target_steps`` on arrays): ``_dac``'s bits."""
+    actuators = {p.parts.actuator for p in params}
+    if len(actuators) > 1:  # runs of other rigs (a batch runs one rig's): each run its own board's write
+        each = [_dac(p) for p in params]
+
+        def write_each(runs: np.ndarray, command: np.ndarray) -> np.ndarray:
+            return np.array(
+                [each[i](c) for i, c in zip(runs.tolist(), np.asarray(command).tolist(), strict=True)]
+            )
+
+        return write_each
+    step_dir = _STEP_DIR_ACTUATORS.get(params[0].parts.actuator)
+    if step_dir is not None:
+        travel = np.array([step_dir(p).high for p in params])
+
+        def move_to(runs: np.ndarray, command_steps: np.ndarray) -> np.ndarray:
+            c = np.asarray(command_steps, dtype=float)
+            if np.isnan(c).any():
+                raise ValueError("command_steps = nan: moveTo takes a number of microsteps")
+            # + 0.0: a C long has no −0 (math.trunc's int), np.trunc(−0.5) is −0.0
+            return np.trunc(np.minimum(np.maximum(c, -travel[runs]), travel[runs])) + 0.0
+
+        return move_to
+    groups = [p.of(Arduino) for p in params]
+    limits = np.array([servo_limits_us(g) for g in groups], dtype=float)
+    cycles = np.array([g.clock_hz // 1_000_000 for g in groups], dtype=np.int64)
+
+    def write(runs: np.ndarray, command_us: np.ndarray) -> np.ndarray:
+        c = np.asarray(command_us, dtype=float)
+        if np.isnan(c).any():
+            raise ValueError("command_us = nan: writeMicroseconds takes a number of microseconds")
+        return _pulses_us(c, limits[runs, 0], limits[runs, 1], cycles[runs])
 
     return write
 
@@ -225,6 +287,33 @@ def servo_range(params: Parameters) -> CommandRange:
         "arduino.servo_min_us … arduino.servo_max_us",
         "the servo pulse's range",
     )
+
+
+# --- STEP/DIR output: the board drives a stepper's driver instead of a servo (``twin.parts.stepper``) ----------
+# The actuators whose board output is a STEP/DIR driver's target, each with its output range (registered by the
+# actuator's module): the sketch's moveTo(long) target in microsteps, not a servo pulse.
+_STEP_DIR_ACTUATORS: dict[str, Callable[[Parameters], CommandRange]] = {}
+
+
+def register_step_dir_actuator(name: str, output_range: Callable[[Parameters], CommandRange]) -> None:
+    """The actuator ``name`` takes the board's output as a STEP/DIR target (microsteps, within
+    ``output_range(params)``): a rig with it gets ``step_target_steps`` in place of the servo pulse."""
+    _STEP_DIR_ACTUATORS[name] = output_range
+
+
+def step_target_steps(command_steps: float, limit_steps: float) -> float:
+    """The target the sketch hands AccelStepper's ``moveTo(long)``: the command clamped to ±``limit_steps`` (the
+    sketch's travel) and converted to a C ``long`` (truncated toward zero), as a float."""
+    if math.isnan(float(command_steps)):
+        raise ValueError("command_steps = nan: moveTo takes a number of microsteps")
+    return float(math.trunc(min(max(float(command_steps), -limit_steps), limit_steps)))
+
+
+def board_output_range(params: Parameters) -> CommandRange:
+    """The board's output range (``IoBoardPart.output_range``): the STEP/DIR target's for a stepper's rig
+    (``register_step_dir_actuator``), else the servo pulse's (``servo_range``)."""
+    step_dir = _STEP_DIR_ACTUATORS.get(params.parts.actuator)
+    return servo_range(params) if step_dir is None else step_dir(params)
 
 
 # --- the batch form: analogRead and the servo pulse over N boards at once ------------------------------------
@@ -267,6 +356,14 @@ _SOURCE = (
     "src/avr/Servo.cpp (writeMicroseconds: 544…2400 µs clamp, timer 1 at prescale 8, 2 µs trim); Wire 100 kHz"
 )
 
+
+def _volts_of(params: Parameters) -> Callable[[float], float]:
+    """The software's conversion of ``analogRead``'s counts to volts: (counts + ½)·V_ref/1024, the middle of the
+    code's step."""
+    reference = params.of(Arduino).adc_reference_v
+    return lambda counts: (counts + 0.5) * reference / ADC_CODES
+
+
 ARDUINO_UNO = register(
     IoBoardPart(
         name="arduino_uno",
@@ -277,7 +374,10 @@ ARDUINO_UNO = register(
         batch=_BATCH,
         dac_writer=_dac,
         adc=_adc,
-        output_range=servo_range,
+        output_range=board_output_range,
+        batch_dac=_batch_dac,
+        batch_adc=_batch_adc,
+        volts_of=_volts_of,
     )
 )
 
@@ -291,6 +391,9 @@ ARDUINO_NANO = register(
         batch=_BATCH,
         dac_writer=_dac,
         adc=_adc,
-        output_range=servo_range,
+        output_range=board_output_range,
+        batch_dac=_batch_dac,
+        batch_adc=_batch_adc,
+        volts_of=_volts_of,
     )
 )

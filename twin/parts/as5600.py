@@ -39,7 +39,7 @@ microcontroller's pin every physics step) is the noiseless, unfiltered output at
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import mujoco
@@ -47,7 +47,14 @@ import numpy as np
 
 from twin import model as mdl
 from twin.parameters import Parameters, check_group, flag, param, register_group
-from twin.parts.contract import AngleSensorPart, BatchForm, MjcfFragment, register
+from twin.parts.contract import (
+    AngleSensorPart,
+    BatchForm,
+    MjcfFragment,
+    board_batch_adc,
+    board_volts_of,
+    register,
+)
 from twin.parts.potentiometer import RESET_TOLERANCE_S, board_adc
 from twin.physics import PhysicsBlock
 
@@ -56,6 +63,7 @@ __all__ = [
     "AS5600_PART",
     "COUNTS",
     "HOUSING",
+    "AS5600Batch",
     "AS5600Chain",
     "as5600_counts",
     "as5600_filter",
@@ -260,6 +268,69 @@ class AS5600Chain:
         return self.last_reading_v
 
 
+class AS5600Batch:
+    """N runs' AS5600s read in step (``twin.parts.contract.AngleSensorBatch``): each run a fresh ``AS5600Chain``
+    bit for bit: the slow filter, the noise (each run's generator, its ``noise_seed``) and the hysteresis on arrays
+    over the runs, each analog run's OUT pin through its board's ADC (``board_batch_adc``)."""
+
+    def __init__(self, params: Sequence[Parameters]) -> None:
+        self.sensors = [p.of(AS5600) for p in params]
+        n = len(self.sensors)
+        self.phase_rad = np.array([s.magnet_angle_at_level_rad for s in self.sensors])
+        self.settling_s = np.array([s.settling_time_s for s in self.sensors])
+        self.sigma_counts = np.array([s.noise_rms_rad * COUNTS / (2.0 * math.pi) for s in self.sensors])
+        self.hysteresis_lsb = np.array([float(s.hysteresis_lsb) for s in self.sensors])
+        self.analog = np.array([s.analog_output for s in self.sensors], dtype=bool)
+        self.adc = board_batch_adc(params) if self.analog.any() else None
+        self.filtered = np.zeros(n)  # counts, unwrapped
+        self.count = np.zeros(n)  # the output count 0 … 4095
+        self.started = np.zeros(n, dtype=bool)  # a run's filter has its first angle
+        self.has_count = np.zeros(n, dtype=bool)  # a run has put out a count (the hysteresis' previous)
+        self.rngs = [np.random.default_rng(s.noise_seed) for s in self.sensors]
+        self._end_s: float | None = None  # the last block's end (the runs are in step)
+
+    def read(self, runs: np.ndarray, times_s: np.ndarray, theta_rad: np.ndarray) -> np.ndarray:
+        """``AS5600Chain.read_block_v`` for runs ``runs`` (the module docstring's chain)."""
+        t0 = float(times_s[0])
+        if self._end_s is not None and t0 < self._end_s - RESET_TOLERANCE_S:  # the rig reset: every run anew
+            self.started[:] = False
+            self.has_count[:] = False
+            self.rngs = [np.random.default_rng(s.noise_seed) for s in self.sensors]
+        x = (self.phase_rad[runs][:, None] + np.asarray(theta_rad, dtype=float)) * (COUNTS / (2.0 * math.pi))
+        settling = self.settling_s[runs]
+        first = ~self.started[runs]
+        y = np.where(first, x[:, 0], self.filtered[runs])  # a first block: settled on the held rig
+        on = np.flatnonzero(~first)
+        if on.size and self._end_s is not None and t0 > self._end_s + RESET_TOLERANCE_S:
+            # steps the rig ran unobserved: the filter ran on toward the block's first angle
+            gap = slow_filter_alpha(np.array([[t0 - self._end_s]]), settling[on])
+            y[on] = as5600_filter(y[on], gap, np.column_stack([y[on], x[on, 0]]))
+        self._end_s = float(times_s[-1])
+        alpha = slow_filter_alpha(np.diff(times_s)[None, :], settling)
+        y = as5600_filter(y, alpha, x)
+        self.filtered[runs] = y
+        self.started[runs] = True
+        draws = np.array([self.rngs[i].standard_normal(1)[0] for i in runs.tolist()])
+        noisy = y + self.sigma_counts[runs] * draws
+        count = _first_count(noisy)
+        held = np.flatnonzero(self.has_count[runs])
+        if held.size:
+            count[held] = as5600_hysteresis(
+                noisy[held], self.count[runs[held]], self.hysteresis_lsb[runs[held]]
+            )
+        self.count[runs] = count
+        self.has_count[runs] = True
+        out = count.astype(float)
+        analog = np.flatnonzero(self.analog[runs])
+        if analog.size:
+            assert self.adc is not None
+            volts = np.array(
+                [float(as5600_out_v(float(count[j]), self.sensors[int(runs[j])])) for j in analog.tolist()]
+            )
+            out[analog] = self.adc(runs[analog], volts)
+        return out
+
+
 # --- the MJCF fragment: the sensor's board at the pivot, drawn only ------------------------------------------
 def apply_board(spec: mujoco.MjSpec, params: Parameters) -> None:
     """Add the AS5600's breakout board on the pivot's axis (a visual box: no contact, geom group 2, no mass)."""
@@ -365,6 +436,24 @@ def _batch(params: Sequence[Parameters], rows: np.ndarray) -> np.ndarray:
     return np.column_stack([*out, level_out])
 
 
+def as5600_angle_of(params: Parameters) -> Callable[[float], float]:
+    """The software's conversion: a count (I²C RAW ANGLE; or the OUT pin's volts through the board's reading,
+    ``as5600_out_v`` inverted, ZPOS added back) → θ = count·2π/4096 − the magnet's angle at level, within ±π."""
+    sensor = params.of(AS5600)
+    volts_of = board_volts_of(params) if sensor.analog_output else None
+
+    def theta_rad(reading: float) -> float:
+        count = reading
+        if volts_of is not None:
+            fraction = (volts_of(reading) / sensor.supply_v - _OUT_LOW) / _OUT_SPAN
+            count = fraction * COUNTS + sensor.zpos_counts
+        return math.remainder(
+            count * 2.0 * math.pi / COUNTS - sensor.magnet_angle_at_level_rad, 2.0 * math.pi
+        )
+
+    return theta_rad
+
+
 AS5600_PART = register(
     AngleSensorPart(
         name="as5600",
@@ -382,5 +471,7 @@ AS5600_PART = register(
         mjcf=MjcfFragment((), apply_board),
         batch=BatchForm(_single, _batch, _inputs, "twin.parts.as5600.as5600_hysteresis"),
         chain=AS5600Chain,
+        batch_read=AS5600Batch,
+        angle_of=as5600_angle_of,
     )
 )

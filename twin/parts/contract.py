@@ -13,8 +13,12 @@ Every part declares (``Part``):
 
 A part that a simulated rig instantiates for each run adds its runtime: a ball or angle sensor its chain
 (``BallSensorPart.chain``, ``AngleSensorPart.chain``), an I/O board its DAC (``IoBoardPart.dac_writer``), an
-actuator what it makes of the DAC's volts (``ActuatorPart.drive``). ``RigParts`` is a rig: one part per role,
-``replace`` swaps one. A new part is one module: its parameter group, its ``Part`` and one ``register`` call.
+actuator what it makes of the DAC's volts (``ActuatorPart.drive``). Its batch runtime is the same for the N runs
+of the batch engine (``twin.rigs.batch.BatchRig``) at once, each run bit for bit its one-run runtime:
+``BallSensorPart.batch_chain``, ``AngleSensorPart.batch_read``, ``IoBoardPart.batch_dac``/``batch_adc``,
+``ActuatorPart.batch_drive`` (optional: a part without one runs one run at a time, and the batch engine refuses
+it naming the part). ``RigParts`` is a rig: one part per role, ``replace`` swaps one. A new part is one module:
+its parameter group, its ``Part`` and one ``register`` call.
 """
 
 from __future__ import annotations
@@ -36,17 +40,23 @@ from twin.physics import PhysicsBlock
 __all__ = [
     "ROLES",
     "ActuatorPart",
+    "AngleSensorBatch",
     "AngleSensorChain",
     "AngleSensorPart",
+    "BallSensorBatch",
     "BallSensorChain",
     "BallSensorPart",
     "BatchForm",
+    "BatchWrite",
     "IoBoardPart",
     "MjcfFragment",
     "Part",
     "PartError",
     "RigParts",
     "Role",
+    "StepLaw",
+    "board_batch_adc",
+    "missing_batch_runtime",
     "part_named",
     "register",
     "registered",
@@ -185,20 +195,67 @@ class AngleSensorChain(Protocol):
     def level_v(self, theta_rad: float) -> float: ...
 
 
+class BallSensorBatch(Protocol):
+    """What the batch engine asks of a ball sensor's chains over N runs in step (``twin.sensors.BallChainBatch``,
+    ``twin.parts.ranging.SampledBatch``): run i's readings are its ``BallSensorChain``'s bit for bit, each run
+    started as ``SimRig.reset`` starts the chain (its seed, the ball at rest at its start)."""
+
+    def advance(
+        self, runs: np.ndarray, times_s: np.ndarray, x_m: np.ndarray, on_track: np.ndarray
+    ) -> np.ndarray:
+        """The runs ``runs`` (indices into the batch) over the shared ``times_s`` (K,), their positions and
+        on-track flags one row each (len(runs), K): the board's readings (len(runs),) at the block's end."""
+        ...
+
+
+class AngleSensorBatch(Protocol):
+    """What the batch engine asks of an angle sensor over N runs in step: run i's readings are its
+    ``AngleSensorChain.read_block_v``'s bit for bit (a fresh chain per run, as ``SimRig`` builds one)."""
+
+    def read(self, runs: np.ndarray, times_s: np.ndarray, theta_rad: np.ndarray) -> np.ndarray:
+        """The board's readings (len(runs),) of the runs ``runs`` (indices into the batch) for a block: the
+        shared ``times_s`` (K,), the beam's angle one row per run (len(runs), K)."""
+        ...
+
+
+# A batch's per-tick conversion: (runs, values) → values, runs the indices into the batch whose values these are
+# (each run's own constants and state: a servo's dead band).
+BatchWrite = Callable[[np.ndarray, np.ndarray], np.ndarray]
+# An actuator's law stepped with the physics (``ActuatorPart.step_law``): (the control its ``drive`` made of the
+# board's output, the drive joint's angle rad, its speed rad/s) → the torque (N·m) on that joint over the next
+# physics step; it holds its own state (a stepper's ramp), which the call advances by one step.
+StepLaw = Callable[[float, float, float], float]
+# A ball sensor's chains of N runs: (each run's parameters, seeds, the ball's starts x0_m, the chains' start t0_s).
+BallBatchFactory = Callable[[Sequence[Parameters], np.ndarray, np.ndarray, float], BallSensorBatch]
+
+
 @dataclass(frozen=True, kw_only=True)
 class BallSensorPart(Part):
-    """A ball sensor: ``chain(params, seed)`` is one run's chain (its noise seeded)."""
+    """A ball sensor: ``chain(params, seed)`` is one run's chain (its noise seeded). ``batch_chain(params, seeds,
+    x0_m, t0_s)``: the chains of N runs (one parameter set and seed each, the ball at rest at x0_m[i] at the
+    chain's start t0_s) in step, each run its ``chain`` reset there with its seed (``BallSensorBatch``)."""
 
     role: Role = "ball_sensor"
     chain: Callable[[Parameters, int], BallSensorChain]
+    batch_chain: BallBatchFactory | None = None
+    # The software's conversion (what a sketch or the rig's software computes): a reading in the board's unit →
+    # the ball's x (m, from the track's centre), the inverse of the sensor's nominal curve; NaN for a reading that
+    # carries no position (a lost echo). None: the part gives none (a controller that needs it is refused).
+    position_of: Callable[[Parameters], Callable[[float], float]] | None = None
 
 
 @dataclass(frozen=True, kw_only=True)
 class AngleSensorPart(Part):
-    """An angle sensor: ``chain(params)`` is one run's chain."""
+    """An angle sensor: ``chain(params)`` is one run's chain. ``batch_read(params)``: N runs' fresh chains (one
+    parameter set each) read in step (``AngleSensorBatch``)."""
 
     role: Role = "angle_sensor"
     chain: Callable[[Parameters], AngleSensorChain]
+    batch_read: Callable[[Sequence[Parameters]], AngleSensorBatch] | None = None
+    # The software's conversion: a reading → the beam's angle θ (rad), as ``BallSensorPart.position_of``;
+    # ``measures_angle`` False for a rig without an angle sensor (its reading carries nothing).
+    angle_of: Callable[[Parameters], Callable[[float], float]] | None = None
+    measures_angle: bool = True
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -207,12 +264,19 @@ class IoBoardPart(Part):
     volts on the PCI-1712, a servo pulse's width in µs on an Arduino); ``adc(params)`` what it reads for an
     analog input's volts at its pin (the ADC's volts on the PCI-1712, ``analogRead``'s counts on an Arduino),
     for the analog sensors' chains; ``output_range(params)`` what its output can be (the guard refuses a
-    controller's command outside it; default the DAC's, ``dac_range``)."""
+    controller's command outside it; default the DAC's, ``dac_range``). ``batch_dac(params)`` and
+    ``batch_adc(params)``: ``dac_writer`` and ``adc`` of N runs (one parameter set each) as one ``BatchWrite``,
+    each run's values its own converter's bit for bit."""
 
     role: Role = "io_board"
     dac_writer: Callable[[Parameters], Callable[[float], float]]
     adc: Callable[[Parameters], Callable[[float], float]]
+    # The software's conversion of an analog reading back to the pin's volts (the inverse of ``adc``, at the
+    # middle of its step): what an analog sensor's software conversion starts from. None: not given.
+    volts_of: Callable[[Parameters], Callable[[float], float]] | None = None
     output_range: Callable[[Parameters], CommandRange] = dac_range
+    batch_dac: Callable[[Sequence[Parameters]], BatchWrite] | None = None
+    batch_adc: Callable[[Sequence[Parameters]], BatchWrite] | None = None
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -221,11 +285,79 @@ class ActuatorPart(Part):
     servo's target angle) for the board's output, a fresh write path per run (it may hold state);
     ``rest_command(params)`` is the board's command that leaves the beam at rest where it is held (the
     amplifier's zero command, 2.5 V, by default: ``zero_command``), what the rig writes before the
-    controller's first command."""
+    controller's first command. ``batch_drive(params)``: N runs' fresh write paths (one parameter set each) as
+    one ``BatchWrite``, each run's state its own (a servo's dead band), bit for bit its ``drive``."""
 
     role: Role = "actuator"
     drive: Callable[[Parameters], Callable[[float], float]]
     rest_command: Callable[[Parameters], float] = zero_command
+    batch_drive: Callable[[Sequence[Parameters]], BatchWrite] | None = None
+    # The software's conversions between the board's command and the actuator's control (the motor's volts, a
+    # servo's target angle): ``command_of`` the command that asks for a control, ``control_of`` the control a
+    # command gives, nominally (no dead band, no quantization). None: the part gives none.
+    command_of: Callable[[Parameters], Callable[[float], float]] | None = None
+    control_of: Callable[[Parameters], Callable[[float], float]] | None = None
+    # A torque computed once per physics step from the drive joint's state (``StepLaw``; a fresh one per run),
+    # for an actuator MuJoCo has no element for (a stepper's sine law and ramp): the simulated rig steps it
+    # (``twin.rigs.sim.SimRig``) with its MuJoCo actuator a plain torque motor; the batch engine refuses it.
+    step_law: Callable[[Parameters], StepLaw] | None = None
+
+
+# The batch runtime field each role's part needs in the batch engine (``missing_batch_runtime``).
+BATCH_RUNTIME: Mapping[Role, str] = {
+    "actuator": "batch_drive",
+    "ball_sensor": "batch_chain",
+    "angle_sensor": "batch_read",
+    "io_board": "batch_dac",
+}
+
+
+def missing_batch_runtime(parts: RigParts) -> list[str]:
+    """The parts of a rig the batch engine cannot run (no batch runtime), each as "parts.<role> = 'name' (no
+    <Type>.<field>)"; empty if it can run them all."""
+    return [
+        f"parts.{role} = {getattr(parts, role).name!r} (no {type(getattr(parts, role)).__name__}.{field})"
+        for role, field in BATCH_RUNTIME.items()
+        if getattr(getattr(parts, role), field, None) is None
+    ]
+
+
+def board_volts_of(params: Parameters) -> Callable[[float], float]:
+    """The software's conversion of the board's analog reading back to volts (``IoBoardPart.volts_of`` of the
+    board ``params.parts.io_board`` names); ``PartError`` naming the board if it gives none."""
+    board = part_named("io_board", params.parts.io_board)
+    if not isinstance(board, IoBoardPart) or board.volts_of is None:
+        raise PartError(
+            f"parts.io_board = {params.parts.io_board!r} gives no conversion of its readings to volts"
+        )
+    return board.volts_of(params)
+
+
+def board_batch_adc(params: Sequence[Parameters]) -> BatchWrite:
+    """The ADC of the board each run's ``parts.io_board`` names, over N runs (``IoBoardPart.batch_adc``), for an
+    analog sensor's batch: one board's batch for all when they name one board, else each run through its own
+    board's ``adc`` (the same bits). ``PartError`` naming the board if it has no ``batch_adc``."""
+    names = {p.parts.io_board for p in params}
+    boards = {name: part_named("io_board", name) for name in sorted(names)}
+    for name, board in boards.items():
+        if not isinstance(board, IoBoardPart) or board.batch_adc is None:
+            raise PartError(
+                f"parts.io_board = {name!r} has no batch ADC (IoBoardPart.batch_adc): run it one run at a time"
+            )
+    if len(boards) == 1:
+        (board,) = boards.values()
+        assert isinstance(board, IoBoardPart) and board.batch_adc is not None
+        return board.batch_adc(params)
+    adcs = []
+    for p in params:
+        board = boards[p.parts.io_board]
+        assert isinstance(board, IoBoardPart)
+        adcs.append(board.adc(p))
+
+    def read(runs: np.ndarray, volts: np.ndarray) -> np.ndarray:
+        return np.array([adcs[i](v) for i, v in zip(runs.tolist(), np.asarray(volts).tolist(), strict=True)])
+
+    return read
 
 
 # The part type each role needs (its runtime), for ``RigParts`` and ``register``.

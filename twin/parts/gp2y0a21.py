@@ -13,6 +13,7 @@ part's ``adc``: the PCI-1712's volts, an Arduino's ``analogRead`` counts).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
@@ -20,7 +21,15 @@ import mujoco
 import numpy as np
 
 from twin.parameters import Parameters, check_group, param, register_group
-from twin.parts.contract import BallSensorPart, BatchForm, IoBoardPart, MjcfFragment, part_named, register
+from twin.parts.contract import (
+    BallSensorPart,
+    BatchForm,
+    IoBoardPart,
+    MjcfFragment,
+    board_volts_of,
+    part_named,
+    register,
+)
 from twin.parts.ranging import (
     SampledBatch,
     SampledChain,
@@ -235,6 +244,22 @@ def _chain(params: Parameters, seed: int) -> Gp2y0a21Chain:
     return Gp2y0a21Chain(params, seed)
 
 
+def gp2y0a21_position_of(params: Parameters) -> Callable[[float], float]:
+    """The software's conversion: the board's reading → volts (its ``volts_of``) → d = a/(V − c) − b, the far
+    branch of ``gp2y0a21_volts`` (a sketch cannot tell the fold's near branch from it) → x = mount − r − d; NaN
+    at or below the curve's asymptote c."""
+    s, r = params.of(Gp2y0a21), params.ball.radius_m
+    volts_of = board_volts_of(params)
+
+    def x_m(reading: float) -> float:
+        v = volts_of(reading)
+        if v <= s.curve_c_v:
+            return math.nan
+        return s.mount_x_m - r - (s.curve_a_v_m / (v - s.curve_c_v) - s.curve_b_m)
+
+    return x_m
+
+
 GP2Y0A21 = register(
     BallSensorPart(
         name="gp2y0a21",
@@ -253,5 +278,7 @@ GP2Y0A21 = register(
             "twin.parts.gp2y0a21.Gp2y0a21Batch",
         ),
         chain=_chain,
+        batch_chain=Gp2y0a21Batch,
+        position_of=gp2y0a21_position_of,
     )
 )

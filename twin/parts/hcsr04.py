@@ -12,7 +12,8 @@ spurious echo); with no ball on the track, or a ball beyond range, there is no e
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import math
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import mujoco
@@ -278,6 +279,21 @@ _NOISY = Parameters().with_overrides(
     {"hcsr04.lost_echo_probability": 0.2, "hcsr04.spurious_echo_probability": 0.2, "hcsr04.cycle_s": 0.045}
 )
 
+
+def hcsr04_position_of(params: Parameters) -> Callable[[float], float]:
+    """The software's conversion: an echo (µs) → d = echo·c(T)/2 → x = mount − r − d (``hcsr04_echo_us``'s nominal
+    law inverted, at the part's temperature); NaN for ``pulseIn``'s 0 (no echo)."""
+    s, r = params.of(Hcsr04), params.ball.radius_m
+    c = float(speed_of_sound_m_s(s.temperature_c))
+
+    def x_m(echo_us: float) -> float:
+        if echo_us <= 0.0:
+            return math.nan
+        return s.mount_x_m - r - echo_us * 1e-6 * c / 2.0
+
+    return x_m
+
+
 HCSR04 = register(
     BallSensorPart(
         name="hcsr04",
@@ -295,5 +311,7 @@ HCSR04 = register(
             "twin.parts.hcsr04.Hcsr04Batch",
         ),
         chain=_chain,
+        batch_chain=Hcsr04Batch,
+        position_of=hcsr04_position_of,
     )
 )

@@ -40,6 +40,15 @@ import mujoco
 import numpy as np
 
 from twin import model as mdl
+from twin.drive_equations import (
+    lever_horn_closure_rad,
+    lever_horn_rad,
+    lever_ratio,
+    lever_ratio_slope,
+    lever_shaft_angles,
+    lever_shaft_derivatives,
+    lever_theta_rad,
+)
 from twin.parameters import GROUPS, ParameterError, Parameters, check_group, param, register_group
 from twin.parts.contract import BatchForm, MjcfFragment, Part, register
 from twin.reference import DriveKinematics, register_shaft_map
@@ -53,9 +62,14 @@ __all__ = [
     "Linkage",
     "apply_end_lever",
     "lever_closure_refusal",
+    "lever_horn_closure_rad",
     "lever_horn_rad",
     "lever_joint_angles",
+    "lever_kernel_numbers",
     "lever_ratio",
+    "lever_ratio_slope",
+    "lever_shaft_angles",
+    "lever_shaft_derivatives",
     "lever_theta_rad",
 ]
 
@@ -204,64 +218,6 @@ _GEOMETRY_FIELDS = (
 
 
 # --- the equations: pure functions of the geometry's numbers (floats, or arrays: each run its own) --------------
-def lever_theta_rad(
-    phi_rad: Any, beam_arm_m: Any, rod_m: Any, crank_m: Any, shaft_x_m: Any, shaft_z_m: Any
-) -> Any:
-    """The beam's angle θ for the horn's angle φ: the exact closure of the four-bar P–A–C–S (module docstring),
-    θ = ∠C + arccos((L² + d² − r²)/(2·L·d)), C = S + c·(cos φ, sin φ), d = |C|; the branch with the rod not
-    crossed (the attachment counter-clockwise of the pin, seen from the pivot). NaN where the linkage cannot
-    close (d outside [|L − r|, L + r])."""
-    pin_x = shaft_x_m + crank_m * np.cos(phi_rad)
-    pin_z = shaft_z_m + crank_m * np.sin(phi_rad)
-    d = np.hypot(pin_x, pin_z)
-    cos_apex = (beam_arm_m * beam_arm_m + d * d - rod_m * rod_m) / (2.0 * beam_arm_m * d)
-    with np.errstate(invalid="ignore"):
-        return np.arctan2(pin_z, pin_x) + np.arccos(cos_apex)
-
-
-def lever_horn_rad(
-    theta_rad: Any,
-    beam_arm_m: Any,
-    rod_m: Any,
-    crank_m: Any,
-    shaft_x_m: Any,
-    shaft_z_m: Any,
-    sense: Any = 1.0,
-    near_rad: Any = 0.0,
-) -> Any:
-    """The horn's angle φ that holds the beam at θ (the inverse of ``lever_theta_rad``): the closure solved about
-    the shaft, φ = ∠(A − S) − sense·arccos((c² + e² − r²)/(2·c·e)), A = L·(cos θ, sin θ), e = |A − S|. The two
-    solutions mirror each other about the line S→A; ``sense`` = sign(dθ/dφ) picks the one of the linkage's
-    working range (+1: the horn lifts the beam as φ grows, a servo on the pivot's side of the attachment; −1: it
-    lowers it, a horn reaching back toward the pivot). The angle is given within ±π of ``near_rad`` (the horn's
-    neutral). NaN where the rod cannot reach."""
-    dx = beam_arm_m * np.cos(theta_rad) - shaft_x_m
-    dz = beam_arm_m * np.sin(theta_rad) - shaft_z_m
-    e = np.hypot(dx, dz)
-    cos_shaft = (crank_m * crank_m + e * e - rod_m * rod_m) / (2.0 * crank_m * e)
-    with np.errstate(invalid="ignore"):
-        phi = np.arctan2(dz, dx) - sense * np.arccos(cos_shaft)
-    return near_rad + np.mod(phi - near_rad + np.pi, 2.0 * np.pi) - np.pi
-
-
-def lever_ratio(
-    phi_rad: Any, beam_arm_m: Any, rod_m: Any, crank_m: Any, shaft_x_m: Any, shaft_z_m: Any
-) -> Any:
-    """dθ/dφ at the horn angle φ: the closure |A − C|² = r² differentiated, (A − C)·(A′·dθ − C′·dφ) = 0, so
-    dθ/dφ = ((A − C)·C′)/((A − C)·A′), A′ = L·(−sin θ, cos θ), C′ = c·(−sin φ, cos φ): the pin's and the
-    attachment's velocities along the rod are equal (a rigid rod). Zero where the rod lines up with the horn,
-    infinite where it lies along the beam's radius."""
-    theta = lever_theta_rad(phi_rad, beam_arm_m, rod_m, crank_m, shaft_x_m, shaft_z_m)
-    cos_phi, sin_phi = np.cos(phi_rad), np.sin(phi_rad)
-    cos_th, sin_th = np.cos(theta), np.sin(theta)
-    rod_x = beam_arm_m * cos_th - (shaft_x_m + crank_m * cos_phi)
-    rod_z = beam_arm_m * sin_th - (shaft_z_m + crank_m * sin_phi)
-    pin_along = crank_m * (rod_z * cos_phi - rod_x * sin_phi)
-    beam_along = beam_arm_m * (rod_z * cos_th - rod_x * sin_th)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return pin_along / beam_along
-
-
 def lever_closure_refusal(
     beam_arm_m: float,
     rod_m: float,
@@ -372,7 +328,9 @@ def apply_end_lever(spec: mujoco.MjSpec, p: Parameters) -> None:
     link = p.of(Linkage)
     phi_level, psi_level = _level_pose(link)
     beam = spec.body(mdl.BEAM_BODY)
-    pivot = [float(v) for v in beam.pos]
+    # the pivot, d behind the beam body's frame (the track's centre) on a beam hinged at one end
+    offset = p.beam.track_offset_m
+    pivot = [float(beam.pos[0]) - offset, float(beam.pos[1]), float(beam.pos[2])]
 
     horn = spec.worldbody.add_body(
         name=HORN_BODY,
@@ -406,7 +364,7 @@ def apply_end_lever(spec: mujoco.MjSpec, p: Parameters) -> None:
     rod.explicitinertial = True
     _visual(rod.add_geom(name=ROD_BODY, fromto=[0.0, 0.0, 0.0, link.rod_m, 0.0, 0.0]), 0.0015)
     rod.add_site(name=ROD_TIP_SITE, pos=[link.rod_m, 0.0, 0.0], size=[0.002, 0.0, 0.0])
-    beam.add_site(name=ROD_END_SITE, pos=[link.beam_arm_m, _PLANE_Y_M, 0.0], size=[0.002, 0.0, 0.0])
+    beam.add_site(name=ROD_END_SITE, pos=[link.beam_arm_m - offset, _PLANE_Y_M, 0.0], size=[0.002, 0.0, 0.0])
 
     connect = spec.add_equality(
         name=ROD_EQUALITY,
@@ -488,26 +446,38 @@ def _pose(params: Parameters, theta_rad: float) -> dict[str, float]:
 
 def lever_shaft_map(params: Parameters) -> DriveKinematics:
     """The lever for the reference model (``twin.reference.DriveKinematics``): θ → (the servo's angle φ − neutral,
-    φ′ = 1/(dθ/dφ), φ″ = −(dθ/dφ)′/(dθ/dφ)³, the last by a central difference of ``lever_ratio``); the horn (a
-    bar, m·c²/3 about the shaft) and half the push-rod at its pin turn with the shaft, the other half rides on
-    the beam at the attachment (a two-point model of the rod: MuJoCo's rod also turns about its own centre,
-    m·ℓ²/12·ψ̇², which this leaves out); the beam's travel is where the horn meets its stops."""
+    φ′ = 1/(dθ/dφ), φ″ = −(dθ/dφ)′/(dθ/dφ)³, in closed form: ``lever_shaft_angles``); the horn (a bar, m·c²/3
+    about the shaft) and half the push-rod at its pin turn with the shaft, the other half rides on the beam at
+    the attachment (a two-point model of the rod: MuJoCo's rod also turns about its own centre, m·ℓ²/12·ψ̇²,
+    which this leaves out); the beam's travel is where the horn meets its stops."""
     link = params.of(Linkage)
-    h = 1e-6
+    numbers = lever_kernel_numbers(link)
 
     def shaft(theta_rad: float) -> tuple[float, float, float]:
-        phi = float(link.horn_rad(theta_rad))
-        ratio = float(link.ratio(phi))
-        slope = (float(link.ratio(phi + h)) - float(link.ratio(phi - h))) / (2.0 * h)
-        return phi - link.horn_neutral_rad, 1.0 / ratio, -slope / ratio**3
+        # NaN where the rod cannot reach, without a warning, as lever_horn_rad
+        with np.errstate(invalid="ignore", divide="ignore"):
+            phi, dphi, ddphi = lever_shaft_angles(theta_rad, *numbers)
+        return float(phi), float(dphi), float(ddphi)
 
     shaft_inertia = link.horn_mass_kg * link.crank_m**2 / 3.0 + link.rod_mass_kg / 2.0 * link.crank_m**2
     ends = sorted(
         float(link.theta_rad(link.horn_neutral_rad + side * link.horn_travel_rad)) for side in (-1.0, 1.0)
     )
     return DriveKinematics(
-        shaft, shaft_inertia, link.rod_mass_kg / 2.0 * link.beam_arm_m**2, (ends[0], ends[1])
+        shaft,
+        shaft_inertia,
+        link.rod_mass_kg / 2.0 * link.beam_arm_m**2,
+        (ends[0], ends[1]),
+        lever_kernel_numbers(link),
     )
+
+
+def lever_kernel_numbers(link: Linkage) -> tuple[float, float, float, float, float, float, float]:
+    """``lever_shaft_angles``'s numbers after θ: (L, r, c, S_x, S_z, sense, neutral), as the reference model
+    and the compiled kernel's row (twin.screen.plant) pass them."""
+    return (
+        link.beam_arm_m, link.rod_m, link.crank_m, link.shaft_x_m, link.shaft_z_m, link.sense, link.horn_neutral_rad,
+    )  # fmt: skip
 
 
 register_group("linkage", Linkage)

@@ -15,7 +15,7 @@ from twin.parameters import Parameters, check_group, param, register_group
 from twin.parts.contract import AngleSensorPart, BatchForm, MjcfFragment, register
 from twin.physics import PhysicsBlock
 
-__all__ = ["NO_ANGLE", "NoAngle", "NoAngleChain", "grounded_reading"]
+__all__ = ["NO_ANGLE", "NoAngle", "NoAngleBatch", "NoAngleChain", "grounded_reading"]
 
 
 @dataclass(frozen=True)
@@ -60,6 +60,16 @@ class NoAngleChain:
         return self.last_reading_v
 
 
+class NoAngleBatch:
+    """N runs' grounded inputs (``twin.parts.contract.AngleSensorBatch``): every reading 0.0."""
+
+    def __init__(self, params: Sequence[Parameters]) -> None:
+        self.n = len(params)
+
+    def read(self, runs: np.ndarray, times_s: np.ndarray, theta_rad: np.ndarray) -> np.ndarray:
+        return np.asarray(grounded_reading(theta_rad[:, -1]), dtype=float)
+
+
 def _inputs(rng: np.random.Generator, n: int) -> tuple[list[Parameters], np.ndarray]:
     return [Parameters()] * n, rng.uniform(-0.8, 0.8, (n, 1))
 
@@ -86,5 +96,7 @@ NO_ANGLE = register(
         mjcf=MjcfFragment(),
         batch=BatchForm(_single, _batch, _inputs, "twin.parts.no_angle.grounded_reading"),
         chain=NoAngleChain,
+        batch_read=NoAngleBatch,
+        measures_angle=False,
     )
 )

@@ -34,13 +34,23 @@ import numpy as np
 
 from twin import model as mdl
 from twin.parameters import Parameters, check_group, param, register_group
-from twin.parts.contract import AngleSensorPart, BatchForm, IoBoardPart, MjcfFragment, part_named, register
+from twin.parts.contract import (
+    AngleSensorPart,
+    BatchForm,
+    IoBoardPart,
+    MjcfFragment,
+    board_batch_adc,
+    board_volts_of,
+    part_named,
+    register,
+)
 from twin.physics import PhysicsBlock
 
 __all__ = [
     "HOUSING",
     "POTENTIOMETER",
     "Potentiometer",
+    "PotentiometerBatch",
     "PotentiometerChain",
     "board_adc",
     "pot_wiper_v",
@@ -190,6 +200,43 @@ class PotentiometerChain:
         return self.last_reading_v
 
 
+class PotentiometerBatch:
+    """N runs' potentiometers read in step (``twin.parts.contract.AngleSensorBatch``): each run a fresh
+    ``PotentiometerChain`` bit for bit: the wiper on arrays (``_wiper_v``, each run's pot), one noise draw a
+    reading from each run's generator (its ``noise_seed``), each run's board's ADC (``board_batch_adc``)."""
+
+    def __init__(self, params: Sequence[Parameters]) -> None:
+        pots = [p.of(Potentiometer) for p in params]
+
+        def column(name: str) -> np.ndarray:
+            return np.array([getattr(pot, name) for pot in pots], dtype=float)
+
+        self.zero_rad, self.travel_rad = column("zero_angle_rad"), column("electrical_travel_rad")
+        self.linearity, self.supply_v = column("linearity_error"), column("supply_v")
+        self.noise_rms_v = column("noise_rms_v")
+        self.seeds = [pot.noise_seed for pot in pots]
+        self.rngs = [np.random.default_rng(seed) for seed in self.seeds]
+        self.adc = board_batch_adc(params)
+        self._end_s: float | None = None  # the last block's end (the runs are in step)
+
+    def read(self, runs: np.ndarray, times_s: np.ndarray, theta_rad: np.ndarray) -> np.ndarray:
+        """``PotentiometerChain.read_block_v`` for runs ``runs``: the wiper at the block's end, its noise, the ADC."""
+        if self._end_s is not None and float(times_s[0]) < self._end_s - RESET_TOLERANCE_S:  # as ``_new_run``
+            self.rngs = [np.random.default_rng(seed) for seed in self.seeds]
+        self._end_s = float(times_s[-1])
+        supply = self.supply_v[runs]
+        level = _wiper_v(
+            np.asarray(theta_rad)[:, -1],
+            self.zero_rad[runs],
+            self.travel_rad[runs],
+            self.linearity[runs],
+            supply,
+        )
+        draws = np.array([self.rngs[i].standard_normal() for i in runs.tolist()])
+        pin = np.clip(level + self.noise_rms_v[runs] * draws, 0.0, supply)  # ``_noisy_pin_v``'s operations
+        return np.asarray(self.adc(runs, pin), dtype=float)
+
+
 # --- the MJCF fragment: the pot's body at the pivot, drawn only --------------------------------------------
 def apply_housing(spec: mujoco.MjSpec, params: Parameters) -> None:
     """Add the pot's body on the pivot's axis (a visual box: no contact, geom group 2, no mass)."""
@@ -259,6 +306,16 @@ def _batch(params: Sequence[Parameters], rows: np.ndarray) -> np.ndarray:
     return np.column_stack([readings, level])
 
 
+def pot_angle_of(params: Parameters) -> Callable[[float], float]:
+    """The software's conversion: the board's reading → volts → θ = θ_zero + (V/V_ref − ½)·travel (the wiper's
+    nominal line, its linearity error unknown to a sketch)."""
+    pot = params.of(Potentiometer)
+    volts_of = board_volts_of(params)
+    return lambda reading: (
+        pot.zero_angle_rad + (volts_of(reading) / pot.supply_v - 0.5) * pot.electrical_travel_rad
+    )
+
+
 POTENTIOMETER = register(
     AngleSensorPart(
         name="potentiometer",
@@ -269,5 +326,7 @@ POTENTIOMETER = register(
         mjcf=MjcfFragment((), apply_housing),
         batch=BatchForm(_single, _batch, _inputs, "twin.parts.potentiometer.pot_wiper_v"),
         chain=PotentiometerChain,
+        batch_read=PotentiometerBatch,
+        angle_of=pot_angle_of,
     )
 )

@@ -35,14 +35,14 @@ import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from types import MappingProxyType
-from typing import Any
 
 import mujoco
 import numpy as np
 
 from twin import model as mdl
+from twin.drive_equations import servo_angle_rad, servo_pulse_us, servo_torque_nm
 from twin.parameters import ParameterError, Parameters, check_group, param, register_group
-from twin.parts.contract import ActuatorPart, BatchForm, MjcfFragment, register
+from twin.parts.contract import ActuatorPart, BatchForm, BatchWrite, MjcfFragment, register
 from twin.reference import ShaftTorque, register_actuator_law
 
 __all__ = [
@@ -52,10 +52,12 @@ __all__ = [
     "Servo",
     "apply_hobby_servo",
     "servo_angle_rad",
+    "servo_batch_drive",
     "servo_drive",
     "servo_pulse_us",
     "servo_rest_pulse_us",
     "servo_torque_nm",
+    "servo_torque_numbers",
 ]
 
 KGF_CM_NM = 9.80665e-2  # 1 kgf·cm = 9.80665 N × 0.01 m (the data sheets' torque unit)
@@ -209,43 +211,6 @@ MG996R: Mapping[str, float] = MappingProxyType(
 
 
 # --- the equations: pure functions of numbers (floats, or arrays: each run its own servo) ------------------------
-def servo_angle_rad(
-    pulse_us: Any, pulse_min_us: Any, pulse_max_us: Any, angle_at_min_rad: Any, angle_at_max_rad: Any
-) -> Any:
-    """The servo's target angle for a pulse width: linear from (pulse_min, angle_at_min) to (pulse_max,
-    angle_at_max), the pulse held within [pulse_min, pulse_max] (the travel's ends)."""
-    held = np.minimum(np.maximum(pulse_us, pulse_min_us), pulse_max_us)
-    return angle_at_min_rad + (held - pulse_min_us) * (angle_at_max_rad - angle_at_min_rad) / (
-        pulse_max_us - pulse_min_us
-    )
-
-
-def servo_torque_nm(
-    target_rad: Any,
-    angle_rad: Any,
-    speed_rad_s: Any,
-    kp_nm_per_rad: Any,
-    stall_nm: Any,
-    damping_nm_s_per_rad: Any,
-) -> Any:
-    """The torque at the horn: the position loop's drive clip(k_p·(target − angle), ±τ_s) less the motor's
-    back-EMF damping b·ω. Saturated, it is the DC motor's line τ_s·(1 − ω/ω₀) (b = τ_s/ω₀): τ_s at stall, 0 at
-    the no-load speed, τ_s/2 at half of it."""
-    drive = np.minimum(np.maximum(kp_nm_per_rad * (target_rad - angle_rad), -stall_nm), stall_nm)
-    return drive - damping_nm_s_per_rad * speed_rad_s
-
-
-def servo_pulse_us(
-    angle_rad: Any, pulse_min_us: Any, pulse_max_us: Any, angle_at_min_rad: Any, angle_at_max_rad: Any
-) -> Any:
-    """The pulse width whose target is ``angle_rad`` (the inverse of ``servo_angle_rad``), held within the
-    travel's pulses."""
-    pulse = pulse_min_us + (angle_rad - angle_at_min_rad) * (pulse_max_us - pulse_min_us) / (
-        angle_at_max_rad - angle_at_min_rad
-    )
-    return np.minimum(np.maximum(pulse, pulse_min_us), pulse_max_us)
-
-
 def servo_rest_pulse_us(params: Parameters) -> float:
     """The pulse that holds the beam level (the rig's command before the controller's first): the one whose
     target is the drive's input joint's value in the model's reference pose, which every drive builds with the
@@ -273,6 +238,33 @@ def servo_drive(params: Parameters) -> Callable[[float], float]:
             accepted = float(pulse_us)
         return float(
             servo_angle_rad(accepted, s.pulse_min_us, s.pulse_max_us, s.angle_at_min_rad, s.angle_at_max_rad)
+        )
+
+    return target_rad
+
+
+def servo_batch_drive(params: Sequence[Parameters]) -> BatchWrite:
+    """``servo_drive`` of N runs (``twin.parts.contract.ActuatorPart.batch_drive``): each run's last accepted
+    pulse (its dead band's state, none at first) and pulse map, on arrays; run i's targets are its own
+    ``servo_drive``'s bit for bit."""
+    servos = [p.of(Servo) for p in params]
+
+    def column(name: str) -> np.ndarray:
+        return np.array([getattr(s, name) for s in servos], dtype=float)
+
+    deadband = column("deadband_us")
+    pulse_min, pulse_max = column("pulse_min_us"), column("pulse_max_us")
+    angle_min, angle_max = column("angle_at_min_rad"), column("angle_at_max_rad")
+    accepted = np.full(len(servos), np.nan)  # no pulse accepted yet
+
+    def target_rad(runs: np.ndarray, pulse_us: np.ndarray) -> np.ndarray:
+        pulse = np.asarray(pulse_us, dtype=float)
+        last = accepted[runs]
+        accepted[runs] = np.where(np.isnan(last) | (np.abs(pulse - last) > deadband[runs]), pulse, last)
+        return np.asarray(
+            servo_angle_rad(
+                accepted[runs], pulse_min[runs], pulse_max[runs], angle_min[runs], angle_max[runs]
+            )
         )
 
     return target_rad
@@ -366,7 +358,7 @@ def _reference_law(params: Parameters) -> tuple[ShaftTorque, float]:
     """The servo for the reference model (``twin.reference.DriveLaw``): its torque law at the shaft and its
     reflected inertia (the armature)."""
     s = params.of(Servo)
-    kp, stall, damping = s.kp_nm_per_rad, s.stall_torque_at_supply_nm, s.damping_nm_s_per_rad
+    kp, stall, damping = servo_torque_numbers(s)
 
     def torque(target_rad: float, angle_rad: float, speed_rad_s: float) -> float:
         return float(servo_torque_nm(target_rad, angle_rad, speed_rad_s, kp, stall, damping))
@@ -374,8 +366,31 @@ def _reference_law(params: Parameters) -> tuple[ShaftTorque, float]:
     return torque, s.armature_kgm2
 
 
+def servo_torque_numbers(servo: Servo) -> tuple[float, float, float]:
+    """``servo_torque_nm``'s numbers after the speed (k_p, τ_s at the supply, b), as the reference model and the
+    compiled kernel's row (twin.screen.plant) pass them."""
+    return servo.kp_nm_per_rad, servo.stall_torque_at_supply_nm, servo.damping_nm_s_per_rad
+
+
 register_group("servo", Servo)
-register_actuator_law("hobby_servo", _reference_law)
+register_actuator_law("hobby_servo", _reference_law, lambda params: servo_torque_numbers(params.of(Servo)))
+
+
+def servo_command_of(params: Parameters) -> Callable[[float], float]:
+    """The software's conversion: a target angle → its pulse (``servo_pulse_us``)."""
+    s = params.of(Servo)
+    return lambda target_rad: float(
+        servo_pulse_us(target_rad, s.pulse_min_us, s.pulse_max_us, s.angle_at_min_rad, s.angle_at_max_rad)
+    )
+
+
+def servo_control_of(params: Parameters) -> Callable[[float], float]:
+    """The target a pulse asks for, nominally (``servo_angle_rad``, no dead band)."""
+    s = params.of(Servo)
+    return lambda pulse_us: float(
+        servo_angle_rad(pulse_us, s.pulse_min_us, s.pulse_max_us, s.angle_at_min_rad, s.angle_at_max_rad)
+    )
+
 
 HOBBY_SERVO = register(
     ActuatorPart(
@@ -388,5 +403,8 @@ HOBBY_SERVO = register(
         batch=BatchForm(_single, _batch, _inputs, "twin.parts.servo.servo_torque_nm"),
         drive=servo_drive,
         rest_command=servo_rest_pulse_us,
+        batch_drive=servo_batch_drive,
+        command_of=servo_command_of,
+        control_of=servo_control_of,
     )
 )

@@ -17,6 +17,13 @@ from typing import Any
 import numpy as np
 
 from twin import model as mdl
+from twin.converters import (
+    ball_position_m,
+    beam_angle_rad,
+    dac_command_v,
+    finite_input,
+    motor_volts_from_command,
+)
 from twin.daq import (
     TickSchedule,
     adc_quantize_v,
@@ -28,12 +35,13 @@ from twin.daq import (
 )
 from twin.dcmotor import beam_torque_nm, torque_nm, volts_for_torque_v
 from twin.output_stage import amplifier_of, amplifier_volts, motor_volts, motor_volts_of
-from twin.parameters import GROUPS, Ball, Parameters
+from twin.parameters import GROUPS, Ball, Daq, Parameters
 from twin.parts.contract import (
     ActuatorPart,
     AngleSensorPart,
     BallSensorPart,
     BatchForm,
+    BatchWrite,
     IoBoardPart,
     MjcfFragment,
     Part,
@@ -81,6 +89,35 @@ def _getter(prop: Any) -> Callable[..., Any]:
     """A derived value's home (a property of a parameter group): its getter."""
     assert isinstance(prop, property) and prop.fget is not None
     return prop.fget
+
+
+def _wire_position_of(params: Parameters) -> Callable[[float], float]:
+    """The rig software's eq 6.3.1 (``twin.converters.ball_position_m``)."""
+    sw = params.software
+    return lambda volts: float(ball_position_m(volts, sw))
+
+
+def _encoder_angle_of(params: Parameters) -> Callable[[float], float]:
+    """The rig software's eq 6.2.10 (``twin.converters.beam_angle_rad``)."""
+    sw = params.software
+    return lambda volts: float(beam_angle_rad(volts, sw))
+
+
+def _motor_command_of(params: Parameters) -> Callable[[float], float]:
+    """The software's command for motor volts (§6.4, ``twin.converters.dac_command_v``)."""
+    sw = params.software
+    return lambda volts: float(dac_command_v(volts, sw))
+
+
+def _motor_control_of(params: Parameters) -> Callable[[float], float]:
+    """The motor volts a command gives, as the software reckons them (``twin.converters.motor_volts_from_command``)."""
+    sw = params.software
+    return lambda command: float(motor_volts_from_command(command, sw))
+
+
+def _card_volts_of(params: Parameters) -> Callable[[float], float]:
+    """The PCI-1712 reads volts: its reading is the volts."""
+    return float
 
 
 # --- the plant's parts: the fast engine's kernel over N runs, each with its own part -------------------
@@ -219,6 +256,18 @@ def _motor_batch(params: Sequence[Parameters], rows: np.ndarray) -> np.ndarray:
     return np.column_stack([volts, torque_nm(np.clip(volts, -rails, rails), rows[:, 1], k_tau, k_b)])
 
 
+def _motor_batch_drive(params: Sequence[Parameters]) -> BatchWrite:
+    """The amplifier of N runs (``amplifier_volts`` on the DAC's volts, each run's gain; the batch shares the
+    rest of the amplifier: ``twin.rigs.batch.PER_RUN_IO``): ``motor_volts`` after the card's ``batch_dac``."""
+    amplifier = params[0].amplifier
+    gains = np.array([p.amplifier.gain_v_per_v for p in params])
+
+    def drive(runs: np.ndarray, dac_v: np.ndarray) -> np.ndarray:
+        return np.asarray(amplifier_volts(dac_v, amplifier, gains[runs]))
+
+    return drive
+
+
 MOTOR = register(
     ActuatorPart(
         name="escap_dc_motor",
@@ -231,6 +280,9 @@ MOTOR = register(
         ),
         batch=BatchForm(_motor_single, _motor_batch, _motor_inputs, "twin.output_stage.motor_volts"),
         drive=amplifier_of,
+        command_of=_motor_command_of,
+        control_of=_motor_control_of,
+        batch_drive=_motor_batch_drive,
     )
 )
 
@@ -300,6 +352,8 @@ BALL_SENSOR = register(
         mjcf=MjcfFragment(),
         batch=BatchForm(_ball_single, _ball_batch, _ball_inputs, "twin.sensors.BallChainBatch"),
         chain=_ball_chain,
+        position_of=_wire_position_of,
+        batch_chain=BallChainBatch,
     )
 )
 
@@ -340,6 +394,19 @@ def _angle_batch(params: Sequence[Parameters], rows: np.ndarray) -> np.ndarray:
     return angle_block_means_v(_angle_times(), theta, params[0], zero)[:, None]
 
 
+class _EncoderBatch:
+    """N runs' encoders, counters and block means (``AngleSensorBatch``): ``angle_block_means_v`` with each run's
+    zeroing error (the batch shares the rest of the angle sensor's and the card's parameters:
+    ``twin.rigs.batch.batch_key``)."""
+
+    def __init__(self, params: Sequence[Parameters]) -> None:
+        self.params = params[0]
+        self.zeroing_error_rad = np.array([p.angle_sensor.zeroing_error_rad for p in params])
+
+    def read(self, runs: np.ndarray, times_s: np.ndarray, theta_rad: np.ndarray) -> np.ndarray:
+        return angle_block_means_v(times_s, theta_rad, self.params, self.zeroing_error_rad[runs])
+
+
 ANGLE_SENSOR = register(
     AngleSensorPart(
         name="encoder_counter",
@@ -349,6 +416,8 @@ ANGLE_SENSOR = register(
         mjcf=MjcfFragment(),
         batch=BatchForm(_angle_single, _angle_batch, _angle_inputs, "twin.sensors.angle_block_means_v"),
         chain=AngleChain,
+        angle_of=_encoder_angle_of,
+        batch_read=_EncoderBatch,
     )
 )
 
@@ -378,6 +447,39 @@ def _card_adc(params: Parameters) -> Callable[[float], float]:
     return adc_quantizer(params.daq)
 
 
+def _same_daq(params: Sequence[Parameters]) -> Daq | None:
+    """The card's parameters if every run has the same (a batch's group), else None."""
+    daq = params[0].daq
+    return daq if all(p.daq == daq for p in params) else None
+
+
+def _card_batch_dac(params: Sequence[Parameters]) -> BatchWrite:
+    """The DAC of N runs (``dac_quantize_v`` on the commands, finite as ``motor_volts`` asks), each run's card."""
+    daq = _same_daq(params)
+    each = [dac_quantizer(p.daq) for p in params]
+
+    def write(runs: np.ndarray, command_v: np.ndarray) -> np.ndarray:
+        c = finite_input(command_v, "command_v")
+        if daq is not None:
+            return np.asarray(dac_quantize_v(c, daq))
+        return np.array([each[i](v) for i, v in zip(runs.tolist(), np.asarray(c).tolist(), strict=True)])
+
+    return write
+
+
+def _card_batch_adc(params: Sequence[Parameters]) -> BatchWrite:
+    """The ADC of N runs (``adc_quantize_v`` on the volts), each run's card."""
+    daq = _same_daq(params)
+    each = [adc_quantizer(p.daq) for p in params]
+
+    def read(runs: np.ndarray, volts: np.ndarray) -> np.ndarray:
+        if daq is not None:
+            return np.asarray(adc_quantize_v(volts, daq))
+        return np.array([each[i](v) for i, v in zip(runs.tolist(), np.asarray(volts).tolist(), strict=True)])
+
+    return read
+
+
 IO_BOARD = register(
     IoBoardPart(
         name="pci1712",
@@ -395,7 +497,10 @@ IO_BOARD = register(
         mjcf=MjcfFragment(),
         batch=BatchForm(_card_single, _card_batch, _card_inputs, "twin.daq.adc_quantize_v"),
         dac_writer=_card_dac,
+        volts_of=_card_volts_of,
         adc=_card_adc,
+        batch_dac=_card_batch_dac,
+        batch_adc=_card_batch_adc,
     )
 )
 

@@ -12,7 +12,8 @@ in whole millimetres (what ``VL53L0X_GetRangingMeasurementData`` returns in ``Ra
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import math
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import mujoco
@@ -259,6 +260,20 @@ _NOISY = Parameters().with_overrides(
     {"vl53l0x.wrong_return_probability": 0.3, "vl53l0x.background_mm": 800.0}
 )
 
+
+def vl53l0x_position_of(params: Parameters) -> Callable[[float], float]:
+    """The software's conversion: a range (mm) → x = mount − r − (range + crosstalk)/1000 (the inverse of the
+    range's nominal law, ``vl53l0x_range_mm`` without noise); NaN for the out-of-range code."""
+    s, r = params.of(Vl53l0x), params.ball.radius_m
+
+    def x_m(reading_mm: float) -> float:
+        if reading_mm >= OUT_OF_RANGE_MM:
+            return math.nan
+        return s.mount_x_m - r - (reading_mm + s.crosstalk_offset_mm) / 1000.0
+
+    return x_m
+
+
 VL53L0X = register(
     BallSensorPart(
         name="vl53l0x",
@@ -278,5 +293,7 @@ VL53L0X = register(
             "twin.parts.vl53l0x.Vl53l0xBatch",
         ),
         chain=_chain,
+        batch_chain=Vl53l0xBatch,
+        position_of=vl53l0x_position_of,
     )
 )

@@ -19,7 +19,7 @@ onto it here, in ``engine_policy``, and nowhere else.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Literal, TypeAlias
 
@@ -41,6 +41,7 @@ __all__ = [
     "label_backend",
     "plant_choices",
     "register",
+    "stand_in_refusal",
     "unregister",
 ]
 
@@ -67,6 +68,8 @@ class Backend:
     label: str  # what a run record's "engine" says of a run it decided as the plant asked for
     ideal_converters: bool = False  # the commands run it with ideal converters (no I/O chain of its own)
     stand_in: str | None = None  # the screening backend that stands in for it (--engine screen or fast)
+    # why its batch cannot run a rig (the part it has no form for, by its field), None if it can; None: any rig
+    refusal: Callable[[Parameters], str | None] | None = None
 
 
 def _twin_single(params: Parameters) -> PhysicsBackend:
@@ -95,6 +98,23 @@ def _reference_batch(
     from twin.screen.plant import ReferenceBatchPhysics  # numba is imported when the fast engine is asked for
 
     return ReferenceBatchPhysics(params, x0, theta0, nthread)
+
+
+def _reference_refusal(params: Parameters) -> str | None:
+    from twin.screen.plant import kernel_refusal
+
+    return kernel_refusal(params)
+
+
+def stand_in_refusal(plant: str, params: Parameters | None) -> str | None:
+    """Why ``plant``'s stand-in (the fast engine) cannot run the rig ``params`` names (a part it has no form
+    for, by its field: ``twin.screen.plant.kernel_refusal``), None if it can, if the plant has none, or if no
+    rig is given."""
+    stand_in = backend(plant).stand_in
+    if params is None or stand_in is None:
+        return None
+    refusal = backend(stand_in).refusal
+    return None if refusal is None else refusal(params)
 
 
 # The fast engine's label in run records: the reference plant's runs standing in for the twin's.
@@ -187,19 +207,25 @@ class ScreeningPolicy:
         return self.label(self.decider)
 
 
-def engine_policy(engine: str, plant: str = DEFAULT_PLANT, *, strict: bool = True) -> ScreeningPolicy:
+def engine_policy(
+    engine: str, plant: str = DEFAULT_PLANT, *, strict: bool = True, params: Parameters | None = None
+) -> ScreeningPolicy:
     """``--engine``'s word as a policy for ``plant``: 'mujoco' the plant alone, 'screen' its stand-in
-    confirmed by it, 'fast' its stand-in alone. A plant with no stand-in: ``BackendError`` (``strict``), or
-    the plant alone whatever the word (a job's settings, which say the engine asked for)."""
+    confirmed by it, 'fast' its stand-in alone. A plant with no stand-in, or a rig (``params``) its stand-in
+    refuses (``stand_in_refusal``: a part the fast engine has no form for): ``BackendError`` naming why
+    (``strict``), or the plant alone whatever the word (a job's settings, which say the engine asked for)."""
     if engine not in ENGINES:
         raise BackendError(f"engine = {engine!r}: expected one of {', '.join(repr(e) for e in ENGINES)}")
     row = backend(plant)
-    if engine == "mujoco" or (row.stand_in is None and not strict):
+    refusal = None if engine == "mujoco" else stand_in_refusal(plant, params)
+    if engine == "mujoco" or ((row.stand_in is None or refusal is not None) and not strict):
         return ScreeningPolicy(None, row.name)
     if row.stand_in is None:
         raise BackendError(
             f"--engine {engine}: the fast engine stands in for the MuJoCo twin; not with --plant {row.name}"
         )
+    if refusal is not None:
+        raise BackendError(f"--engine {engine}: {refusal}; run this rig with --engine mujoco")
     return ScreeningPolicy(row.stand_in, row.name, confirms=engine == "screen")
 
 
@@ -213,6 +239,7 @@ register(
         summary="the analytic reference model (always with ideal sensors)",
         label="reference",
         ideal_converters=True,
+        refusal=_reference_refusal,
     )
 )
 register(

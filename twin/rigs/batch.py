@@ -4,9 +4,11 @@
                       MuJoCo's batch (``twin.plant_batch``: one ``mujoco.batch.Batch`` call per tick for every
                       run still going, each run the trajectory ``twin.plant.Plant`` steps alone), or the
                       reference plant's compiled kernel (``twin.screen.plant``, the fast engine)
-    sensors, DAQ,     numpy over a leading batch axis with the functions a run alone uses
-    output stage      (``twin.plant.Plant.track_coordinates``, ``twin.sensors.angle_block_means_v``,
-                      ``BallChainBatch``, ``twin.output_stage.motor_volts``)
+    sensors, board,   the rig's parts' batch runtimes (``twin.parts.contract``: ``BallSensorPart.batch_chain``,
+    actuator          ``AngleSensorPart.batch_read``, ``IoBoardPart.batch_dac``, ``ActuatorPart.batch_drive``),
+                      numpy over a leading batch axis, each run its ``SimRig``'s chains and write path bit for
+                      bit (the thesis's: ``BallChainBatch``, ``angle_block_means_v``, ``dac_quantize_v`` and
+                      ``amplifier_volts``: ``twin.output_stage.motor_volts``)
     controllers       a ``BatchController`` from the catalogue's optional ``make_batch`` (numpy over the
                       batch), otherwise one scalar ``Controller`` per run called in a loop
 
@@ -42,15 +44,15 @@ from twin.engine import (
 from twin.guard import Guard, install_interrupt_handler, safe_name
 from twin.interface import CommandRange, Controller, DaqSample, RigError
 from twin.log import THESIS_FIELDS, TRUTH_FIELDS, RunLog
-from twin.output_stage import ideal_motor_volts, motor_volts
-from twin.parameters import Daq, Parameters, PartNames
+from twin.output_stage import ideal_motor_volts
+from twin.parameters import Parameters
+from twin.parts import rig_parts
+from twin.parts.contract import AngleSensorBatch, BallSensorBatch, BatchWrite, missing_batch_runtime
 from twin.physics import BatchBlock, BatchPhysics
 from twin.rigs.backends import DEFAULT_PLANT, backend
-from twin.rigs.sim import run_closed_loop, tick_schedule
-from twin.sensors import BallChainBatch, IdealSensors, angle_block_means_v
+from twin.rigs.sim import refuse_ideal_converters, run_closed_loop, tick_schedule
+from twin.sensors import IdealSensors
 from twin.verdict import Criteria, Trace
-
-THESIS_PART_NAMES = PartNames()  # the parts whose batch forms the batch rig runs
 
 __all__ = [
     "BatchCatalogue",
@@ -116,10 +118,13 @@ class ScalarControllers:
     """One scalar ``Controller`` per run, called in a loop: any controller runs in a batch this way."""
 
     def __init__(
-        self, controllers: Sequence[Controller], timeout_s: float | None = None, daq: Daq | None = None
+        self,
+        controllers: Sequence[Controller],
+        timeout_s: float | None = None,
+        limits: CommandRange | None = None,
     ) -> None:
-        """``timeout_s``: each call's watchdog budget (``twin.guard.Guard.for_period``); ``daq``: the card
-        whose DAC range a command must be in."""
+        """``timeout_s``: each call's watchdog budget (``twin.guard.Guard.for_period``); ``limits``: the range a
+        command must be in (the board's output, ``IoBoardPart.output_range``, as ``SimRig.command_range``)."""
         install_interrupt_handler()  # before any user code runs: its KeyboardInterrupt is not the Ctrl-C
         self.controllers = list(controllers)
         self.name = safe_name(self.controllers[0])
@@ -127,7 +132,7 @@ class ScalarControllers:
         for c in self.controllers[1:]:
             check_period_s(c)
         self.guard = Guard.for_period(self.period_s, timeout_s)
-        self.limits = None if daq is None else CommandRange(daq.dac_min_v, daq.dac_max_v)
+        self.limits = limits
         self.tick = 1  # the blocks read, as ``SimRig.ticks``: the start's block is the first
         self.telemetry = BatchTelemetry(np.empty((0, 4)), np.empty(0), np.empty(0))
 
@@ -306,7 +311,9 @@ def _group_controller(
     scalar = [c for c in made if isinstance(c, Controller)]
     if len(scalar) != len(made):
         raise TypeError(f"{name}: the catalogue made something that is not a Controller")
-    return ScalarControllers(scalar, controller_timeout_s, group_params[0].daq)
+    p = group_params[0]
+    # the board's output range, as SimRig.command_range (the guard refuses a command outside it)
+    return ScalarControllers(scalar, controller_timeout_s, rig_parts(p).io_board.output_range(p))
 
 
 def _group_progress(progress: Callable[[float], None], before: int, size: int) -> Callable[[int, int], None]:
@@ -325,7 +332,7 @@ PER_RUN_IO = {
 
 def batch_key(p: Parameters) -> tuple:
     """What the numpy stages of a batch share: runs that differ only in their physics and in ``PER_RUN_IO``
-    batch together."""
+    batch together (and only runs of the same parts: a part's batch runtime takes each run's own group)."""
 
     def shared(section: str) -> tuple:
         part = getattr(p, section)
@@ -334,6 +341,7 @@ def batch_key(p: Parameters) -> tuple:
         )
 
     return (
+        p.parts,
         p.daq,
         p.start,
         shared("amplifier"),
@@ -381,12 +389,18 @@ class BatchRig:
         """``physics``: the runs' physics, started from (x0, theta0) with ``params`` (a backend's
         ``BatchFactory``, ``twin.rigs.backends``)."""
         p = self.p = params[0]
-        odd = [role for role, name in vars(p.parts).items() if name != getattr(THESIS_PART_NAMES, role)]
-        if odd:  # its chains and output stage are the thesis parts' batch forms: never another rig's silently
+        parts = rig_parts(p)  # the group's (batch_key: every run names the same parts)
+        missing = [] if ideal_sensors else missing_batch_runtime(parts)
+        if missing:  # the chains and write path are the parts' batch runtimes: never another rig's silently
             raise RigError(
-                f"the batch engine runs the thesis's parts only: this rig has "
-                f"{', '.join(f'parts.{r} = {getattr(p.parts, r)!r}' for r in odd)} (run it one run at a time)"
+                f"the batch engine has no batch runtime for {'; '.join(missing)} (run the rig one run at a time)"
             )
+        if parts.actuator.step_law is not None:  # its torque is computed in Python between MuJoCo's steps
+            raise RigError(
+                f"parts.actuator = {parts.actuator.name!r} computes its torque each physics step "
+                "(ActuatorPart.step_law), which the batch engine's rollout cannot run: run the rig one run at a time"
+            )
+        refuse_ideal_converters(p, ideal_sensors)
         self.n = n = len(params)
         self.ideal = ideal_sensors
         self.record = record
@@ -399,12 +413,24 @@ class BatchRig:
         # SimRig.reset
         self.held = np.stack([x0, theta0, np.zeros(n), np.zeros(n)], axis=1)
         chain_start = self.schedule.chain_start_step
-        self.ball = None if ideal_sensors else BallChainBatch(params, seeds, x0, chain_start * dt)
+        # the parts' batch runtimes (SimRig.__init__ and reset: the chains from the parts, a fresh write path)
+        self.ball: BallSensorBatch | None = None
+        self.angle: AngleSensorBatch | None = None
+        self.dac: BatchWrite | None = None
+        self.drive: BatchWrite | None = None
+        if not ideal_sensors:
+            assert parts.ball_sensor.batch_chain is not None and parts.angle_sensor.batch_read is not None
+            assert parts.io_board.batch_dac is not None and parts.actuator.batch_drive is not None
+            self.ball = parts.ball_sensor.batch_chain(params, seeds, x0, chain_start * dt)
+            self.angle = parts.angle_sensor.batch_read(params)
+            self.dac = parts.io_board.batch_dac(params)
+            self.drive = parts.actuator.batch_drive(params)
         self.ideal_sensors = IdealSensors(p)
-        # Each run's own (the group shares the rest of its I/O parameters: batch_key).
+        # Each run's own, for the ideal converters (the group shares the rest of its I/O parameters: batch_key).
         self.gain_v_per_v = np.array([q.amplifier.gain_v_per_v for q in params])
         self.zeroing_error_rad = np.array([q.angle_sensor.zeroing_error_rad for q in params])
-        self.command_v = np.full(n, p.amplifier.zero_command_v)
+        # SimRig.reset: the actuator's rest command, through the write path (a servo's dead band accepts it)
+        self.command_v = np.array([float(parts.actuator.rest_command(q)) for q in params])
         self.applied_v = self._motor_volts_for(self.command_v, np.arange(n))
         self.pending_v = self.applied_v.copy()
         self.live = np.arange(n)  # the runs still going
@@ -422,11 +448,12 @@ class BatchRig:
 
     # --- the rig, over the live runs --------------------------------------------------------------------
     def _motor_volts_for(self, command_v: np.ndarray, rows: np.ndarray) -> np.ndarray:
-        """The motor volts of runs ``rows`` for their commands."""
-        gain = self.gain_v_per_v[rows]
+        """The actuator's control of runs ``rows`` for their commands (SimRig._motor_volts_for): the board's DAC,
+        then the actuator (``RigParts.motor_volts_of``); the ideal converters' exact DAC and amplifier."""
         if self.ideal:
-            return np.asarray(ideal_motor_volts(command_v, self.p, gain))
-        return np.asarray(motor_volts(command_v, self.p, gain))
+            return np.asarray(ideal_motor_volts(command_v, self.p, self.gain_v_per_v[rows]))
+        assert self.dac is not None and self.drive is not None
+        return np.asarray(self.drive(rows, self.dac(rows, command_v)), dtype=float)
 
     def write(self, command_v: np.ndarray) -> None:
         live = self.live
@@ -505,12 +532,12 @@ class BatchRig:
         block_theta = np.concatenate(thetas, axis=1)
         block_on = np.concatenate(ons, axis=1)
         self.block_theta, self.block_on = block_theta, block_on
-        if self.ball is None:
+        if self.ball is None or self.angle is None:
             ball_v, angle_v = self.ideal_sensors.read_v(
                 block_x[:, -1], block_theta[:, -1], self.zeroing_error_rad[live]
             )
-        else:
-            angle_v = angle_block_means_v(block_t, block_theta, p, self.zeroing_error_rad[live])
+        else:  # SimRig._read: the angle chain, then the ball chain
+            angle_v = self.angle.read(live, block_t, block_theta)
             ball_v = self.ball.advance(live, block_t, block_x, block_on)
         return BatchSamples(time_s=block_time_s(t_start, p.daq), ball_v=ball_v, angle_v=angle_v)
 

@@ -31,14 +31,16 @@ from twin.daq import TickSchedule, block_span_s
 from twin.engine import ENDED_TICKS, ClosedLoop, Pacer, RunResult, Scenario, StateLaw, update_ticks
 from twin.firmware import Firmware, FirmwareBoard
 from twin.interface import CommandRange, Controller, DaqSample, Rig, RigError, Setpoint
+from twin.model import drive_joint
 from twin.output_stage import (
     CommandClampedWarning,
     amplifier_volts,
     clamped_command_text,
     ideal_motor_volts,
 )
-from twin.parameters import Parameters
+from twin.parameters import Parameters, PartNames
 from twin.parts import AngleSensorChain, BallSensorChain, RigParts, rig_parts
+from twin.parts.contract import StepLaw
 from twin.physics import PhysicsBackend, PhysicsBlock, check_on_track, whole_steps
 from twin.plant import Plant
 from twin.rigs.backends import DEFAULT_PLANT, backend
@@ -57,6 +59,29 @@ def tick_schedule(params: Parameters) -> TickSchedule:
         raise RigError(f"daq.period_s = {params.daq.period_s!r} s is shorter than one physics step")
     latency = whole_steps(params.daq.output_latency_s, dt, "daq.output_latency_s")
     return TickSchedule(steps_per_tick, latency, whole_steps(params.start.free_run_s, dt, "start.free_run_s"))
+
+
+# The parts whose converters the ideal ones (``twin.sensors.IdealSensors``, ``ideal_motor_volts``) stand in for:
+# the thesis's sensors, card and amplifier, in its volts.
+IDEAL_CONVERTER_ROLES = ("actuator", "ball_sensor", "angle_sensor", "io_board")
+
+
+def refuse_ideal_converters(params: Parameters, ideal_sensors: bool) -> None:
+    """``RigError`` for ideal converters on a rig whose sensors, board or actuator are not the thesis's: the ideal
+    converters are the thesis software's volts, which another board neither reads nor writes."""
+    if not ideal_sensors:
+        return
+    thesis = PartNames()
+    other = [
+        f"parts.{r} = {getattr(params.parts, r)!r}"
+        for r in IDEAL_CONVERTER_ROLES
+        if getattr(params.parts, r) != getattr(thesis, r)
+    ]
+    if other:
+        raise RigError(
+            f"ideal sensors are the thesis's converters in its volts; this rig has {', '.join(other)}: run it with "
+            "its own sensor chains (no --ideal-sensors)"
+        )
 
 
 class SimRig(Rig):
@@ -94,6 +119,7 @@ class SimRig(Rig):
         self._chains = not self.ideal_sensors  # the sensor chains read each block (else ideal converters)
         # the rig's parts (twin.parts; today's by default): its output stage and sensor chains come from them
         self.parts = parts or rig_parts(p)
+        refuse_ideal_converters(p, self.ideal_sensors)
         self._motor_volts = self.parts.motor_volts_of(p)
         self._limits = self.parts.io_board.output_range(
             p
@@ -103,6 +129,15 @@ class SimRig(Rig):
         self._ball: BallSensorChain = self.parts.ball_sensor.chain(p, seed)
         self._ideal = IdealSensors(p)
         self.last_block: PhysicsBlock | None = None
+        # An actuator stepped with the physics (ActuatorPart.step_law) on the MuJoCo plant: its law reads the drive
+        # joint's own angle and speed from MjData (the rotor's: on a lever the horn's, not the beam's through the
+        # linkage's soft closure; and still the rotor's once a lost ball freezes the law's state floats). The
+        # reference plant runs the part's stateless law (twin.reference) on the tick's control instead.
+        self.step_law: StepLaw | None = None
+        self._rotor_at: tuple[int, int] | None = None
+        if self.parts.actuator.step_law is not None and isinstance(self.physics, Plant):
+            joint = self.physics.model.joint(drive_joint(p))
+            self._rotor_at = (int(joint.qposadr[0]), int(joint.dofadr[0]))
         self.reset()
 
     # --- the Rig interface ----------------------------------------------------------------------------
@@ -136,6 +171,7 @@ class SimRig(Rig):
         """One tick in which the motor volts are recomputed every ``law_period_s`` from the plant's true
         state: ``law_volts(state) -> terminal volts`` (clamped to the amplifier's rails, no DAC). This is
         the chapter 4 designs' path (all four states measured): simulation only, never a ``Controller``."""
+        self._refuse_step_law("a law on the state")
         return self._read((law_volts, whole_steps(law_period_s, self.params.physics.timestep_s, "period_s")))
 
     def read_with_firmware(self, firmware: FirmwareBoard) -> DaqSample:
@@ -146,6 +182,7 @@ class SimRig(Rig):
         begins: its first period reads the held rig, as the software's Start does). The block returned is
         what the PCI-1712 would read beside it (for the log). Simulation only; ``daq.output_latency_s`` does not
         apply (the firmware's own timing is its latency)."""
+        self._refuse_step_law("firmware")
         schedule = self._schedule
         if self._ticks == 0:
             firmware.boot(self._step_time(schedule.next_start_step))
@@ -193,6 +230,9 @@ class SimRig(Rig):
         self.command_v = self.parts.actuator.rest_command(self.params)
         self._pending_motor_v = self._applied_motor_v = self._motor_volts_for(self.command_v)
         self.last_block = None
+        if self._rotor_at is not None:  # a fresh law each run: its state (a stepper's ramp) starts anew
+            assert self.parts.actuator.step_law is not None
+            self.step_law = self.parts.actuator.step_law(self.params)
 
     def true_state(self) -> np.ndarray:
         """The true (x_m, θ_rad, ẋ_m_s, θ̇_rad_s): for validation and logs, never for a controller."""
@@ -298,6 +338,36 @@ class SimRig(Rig):
             self._applied_motor_v = self._pending_motor_v
         return volts
 
+    def _refuse_step_law(self, what: str) -> None:
+        if self._rotor_at is not None:
+            raise RigError(
+                f"parts.actuator = {self.parts.actuator.name!r} computes its torque each physics step "
+                f"(ActuatorPart.step_law): {what} cannot drive it; write its commands with write()"
+            )
+
+    def _advance(self, n: int) -> PhysicsBlock:
+        """``n`` physics steps at the control the board's commands give (the output latency switching within
+        them): the physics' own ``advance``, or with the actuator's per-step law (``_advance_step_law``)."""
+        if self._rotor_at is None:
+            return self.physics.advance(self._step_volts(n))
+        return self._advance_step_law(self._step_volts(n))
+
+    def _advance_step_law(self, controls: np.ndarray) -> PhysicsBlock:
+        """One physics step per control (the drive's output for the board's command at that step): before each,
+        the actuator's ``step_law`` turns the control and the drive joint's angle and speed into the motor's
+        torque (``Plant.advance_with_law``, every step)."""
+        assert isinstance(self.physics, Plant) and self._rotor_at is not None and self.step_law is not None
+        law, (qpos_at, dof_at) = self.step_law, self._rotor_at
+        data = self.physics.data
+        qpos, qvel = data.qpos, data.qvel
+        next_control = iter(controls.tolist()).__next__
+
+        def torque(x_m: float, theta_rad: float, xdot_m_s: float, thetadot_rad_s: float) -> float:
+            return law(next_control(), qpos.item(qpos_at), qvel.item(dof_at))
+
+        block, _ = self.physics.advance_with_law(len(controls), torque, 1)
+        return block
+
     def _advance_with_law(self, n: int, law, law_steps: int) -> PhysicsBlock:
         rail = self.params.amplifier.rail_v
         # A law that also takes the state as four Python floats (``of_floats``, as twin.engine's does) gets
@@ -335,7 +405,11 @@ class SimRig(Rig):
         if law is None and self._chains and schedule.next_is_plain():
             # The common tick: one control period of physics at the volts the motor has, the full chains.
             t_start = self.physics.time_s
-            block = self.last_block = self.physics.advance_held(self._applied_motor_v, self._steps_per_tick)
+            if self._rotor_at is None:
+                block = self.physics.advance_held(self._applied_motor_v, self._steps_per_tick)
+            else:
+                block = self._advance_step_law(np.full(self._steps_per_tick, self._applied_motor_v))
+            self.last_block = block
             schedule.plain_block()
             self._ticks += 1
             angle_v = self._angle.read_block_v(block)
@@ -343,7 +417,7 @@ class SimRig(Rig):
         plan = schedule.next_block()
         t_start = self._step_time(plan.start_step) if plan.start_step < 0 else self.physics.time_s
         if plan.free_steps:  # released before this block begins: run free up to it, unobserved
-            pre = self.physics.advance(self._step_volts(plan.free_steps))
+            pre = self._advance(plan.free_steps)
             t_start = self.physics.time_s
             if not self.ideal_sensors:
                 self._ball.advance(pre.time_s, pre.x_m, pre.on_track)
@@ -352,7 +426,7 @@ class SimRig(Rig):
             pieces.append(self._held_block(t_start, self._step_time(plan.held_end_step)))
         if plan.observed_steps:
             if law is None:
-                pieces.append(self.physics.advance(self._step_volts(plan.observed_steps)))
+                pieces.append(self._advance(plan.observed_steps))
             else:
                 pieces.append(self._advance_with_law(plan.observed_steps, *law))
         block = _join(pieces)

@@ -8,6 +8,15 @@ The equations and the step are compiled from their homes, not written again: ``t
 volts held over a step through the amplifier's rails, a lost run's state frozen, as the reference plant does.
 ``tests/test_screen.py`` holds the kernel to the reference plant over random states and volts.
 
+A beam driven otherwise (``twin.reference.DriveLaw``: the end lever's exact closure or the pivot, turned by a
+hobby servo or the geared motor) is a row of another kind: the kernel branches once per run, and its driven
+derivative and boundary call ``ReferencePlant``'s functions in ``ReferencePlant``'s order
+(``twin.drive_equations``: ``lever_horn_closure_rad``, ``lever_ratio_slope``, ``lever_shaft_derivatives``;
+``twin.drive_equations.servo_torque_nm``; ``twin.reference``: ``geared_shaft_torque_nm``, ``driven_beam_terms``,
+``drive_stop_derivative``, ``drive_stop_boundary``). ``tests/test_screen_driven.py`` holds it to the reference
+plant on those rigs, each run its own servo and linkage. A part without such a form is refused by its field
+(``kernel_refusal``).
+
 Why numba: it compiles the core's own Python functions (one home per equation) with no build step and no
 compiler on the user's machine; a C kernel would be a second copy of the equations.
 """
@@ -17,33 +26,87 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numba
 import numpy as np
 
 from twin.dcmotor import torque_nm
+from twin.drive_equations import (
+    lever_horn_closure_rad,
+    lever_ratio_slope,
+    lever_shaft_derivatives,
+    servo_torque_nm,
+)
 from twin.jit import njit_cached
 from twin.parameters import Parameters
 from twin.physics import BatchBlock, BatchClock, check_initial_state
 from twin.reference import (
+    DriveLaw,
     EquationCoefficients,
     ball_beam_accelerations,
+    drive_law,
+    drive_stop_boundary,
+    drive_stop_derivative,
+    driven_beam_terms,
+    geared_motor_numbers,
+    geared_shaft_torque_nm,
     pivot_friction_nm,
     rk4_step,
     step_boundary,
 )
 
-__all__ = ["PlantRows", "ReferenceBatchPhysics", "advance_plant", "derivatives", "plant_rows"]
+__all__ = [
+    "KERNEL_PARTS",
+    "PlantRows",
+    "ReferenceBatchPhysics",
+    "advance_plant",
+    "derivatives",
+    "kernel_refusal",
+    "plant_rows",
+]
 
 _accelerations = numba.njit(inline="always")(ball_beam_accelerations)
 _torque = numba.njit(inline="always")(torque_nm)
 _friction = numba.njit(inline="always")(pivot_friction_nm)
 _rk4 = numba.njit(inline="always")(rk4_step)
 _boundary = numba.njit(inline="always")(step_boundary)
+_horn = numba.njit(inline="always")(lever_horn_closure_rad)
+_ratio_slope = numba.njit(inline="always")(lever_ratio_slope)
+_shaft_derivatives = numba.njit(inline="always")(lever_shaft_derivatives)
+_servo = numba.njit(inline="always")(servo_torque_nm)
+_geared = numba.njit(inline="always")(geared_shaft_torque_nm)
+_beam_terms = numba.njit(inline="always")(driven_beam_terms)
+_stop_derivative = numba.njit(inline="always")(drive_stop_derivative)
+_drive_stops = numba.njit(inline="always")(drive_stop_boundary)
 
-# A run's row of constants: the 13 of EquationCoefficients.as_row, then the motor's and the rig's.
+# A run's row of constants: the 13 of EquationCoefficients.as_row, then the motor's and the rig's (the thesis's
+# eq 3.1.27 as written reads these only) ...
 K_TAU, K_B, RAIL, STOP, HALF = 13, 14, 15, 16, 17
-ROW = 18
+# ... then, for a beam driven otherwise (``twin.reference.DriveLaw``): whether it is (KIND), the drive's and the
+# actuator's kinds, the inertia turning with the shaft, the drive's stops, the ball's share of a stop's impulse,
+# the drive's numbers (``lever_kernel_numbers``) and the actuator's (``servo_torque_numbers``,
+# ``geared_motor_numbers``). A driven row's α₂ (column 5) has the drive's inertia on the beam added and no
+# reflected rotor (the law brings it), its RAIL is infinite (the actuator's law bounds its ctrl), as
+# ``ReferencePlant``'s.
+KIND, DRIVE, ACTUATOR, SHAFT_INERTIA, LO, HI, COUPLING = 18, 19, 20, 21, 22, 23, 24
+DRIVE_NUMBERS, ACTUATOR_NUMBERS = 25, 32  # 7 and 4 columns
+ROW = 36
+THESIS, DRIVEN = 0.0, 1.0  # KIND
+PIVOT, END_LEVER = 0.0, 1.0  # DRIVE
+GEARED_MOTOR, HOBBY_SERVO = 0.0, 1.0  # ACTUATOR
+
+# The parts the kernel has a form for, by role: the plant's roles only (sensors and boards are the batch engine's
+# chains). Another part in one of these roles (a stepper, another track or ball) is refused (``kernel_refusal``):
+# its equations are not compiled here, and the screening falls back to MuJoCo.
+KERNEL_PARTS: dict[str, tuple[str, ...]] = {
+    "ball": ("steel_ball",),
+    "track": ("two_wires", "v_groove", "rod_and_strip", "tube"),  # they enter through r* and h* alone
+    "beam_drive": ("pivot", "end_lever"),
+    "actuator": ("escap_dc_motor", "hobby_servo"),
+}
+_DRIVE_KINDS = {"pivot": PIVOT, "end_lever": END_LEVER}
+_ACTUATOR_KINDS = {"escap_dc_motor": GEARED_MOTOR, "hobby_servo": HOBBY_SERVO}
 
 
 @dataclass(frozen=True)
@@ -54,21 +117,67 @@ class PlantRows:
     timestep_s: float
 
 
+def kernel_refusal(params: Parameters) -> str | None:
+    """Why the kernel cannot run the rig ``params.parts`` names (the first part it has no form for, by its field),
+    or None if it can."""
+    for role, known in KERNEL_PARTS.items():
+        name = getattr(params.parts, role)
+        if name not in known:
+            return (
+                f"parts.{role} = {name!r}: the fast engine's compiled plant has no form for this part (it has "
+                f"{', '.join(repr(k) for k in known)})"
+            )
+    beam = params.beam
+    if getattr(beam, "hinged_off_centre", False):  # the reference model's _hinged_off_centre_derivative
+        return (
+            f"beam.track_offset_m = {beam.track_offset_m!r}, beam.cog_along_m = {beam.cog_along_m!r}: the fast "
+            "engine's compiled plant has no form for a beam hinged off its track's centre"
+        )
+    return None
+
+
 def plant_rows(params: Sequence[Parameters], *, motor_inertia: bool = True) -> PlantRows:
-    """The kernel's constants of each run's parameters (one time step for all: refused otherwise)."""
+    """The kernel's constants of each run's parameters (one time step for all: refused otherwise; a rig with a
+    part the kernel has no form for: ``ValueError`` naming it, ``kernel_refusal``). ``motor_inertia``: the
+    thesis's eq 3.1.27 with the reflected rotor (a driven beam's law always brings its actuator's)."""
     steps = {p.physics.timestep_s for p in params}
     if len(steps) != 1:
         raise ValueError(f"the runs have different physics.timestep_s: {sorted(steps)}")
-    rows = np.empty((len(params), ROW))
+    rows = np.zeros((len(params), ROW))
     for i, p in enumerate(params):
-        q = EquationCoefficients.from_params(p, motor_inertia=motor_inertia)
+        refusal = kernel_refusal(p)
+        if refusal is not None:
+            raise ValueError(f"run {i}: {refusal}")
+        law = drive_law(p)
+        q = EquationCoefficients.from_params(p, motor_inertia=motor_inertia and law is None)
         rows[i, :13] = q.as_row()
         rows[i, K_TAU] = p.motor.torque_per_volt_nm_per_v
         rows[i, K_B] = p.motor.backemf_at_beam_v_s_per_rad
         rows[i, RAIL] = p.amplifier.rail_v
         rows[i, STOP] = p.beam.stop_angle_rad
         rows[i, HALF] = p.track.half_length_m
+        if law is not None:
+            _driven_row(rows[i], p, q, law)
     return PlantRows(rows, steps.pop())
+
+
+def _driven_row(row: np.ndarray, p: Parameters, q: EquationCoefficients[float], law: DriveLaw) -> None:
+    """A driven beam's columns, the numbers ``ReferencePlant`` takes from its ``DriveLaw``."""
+    shaft_inertia_kgm2, limits = law.shaft_inertia_kgm2, law.theta_limits_rad
+    row[KIND] = DRIVEN
+    row[5] = q.alpha_thdd + law.beam_inertia_kgm2
+    row[RAIL] = math.inf
+    row[DRIVE] = _DRIVE_KINDS[p.parts.beam_drive]
+    row[ACTUATOR] = _ACTUATOR_KINDS[p.parts.actuator]
+    row[SHAFT_INERTIA] = shaft_inertia_kgm2
+    row[LO], row[HI] = limits or (-math.inf, math.inf)
+    row[COUPLING] = (q.k2 + q.c) / (1.0 + q.k1)
+    if row[DRIVE] == END_LEVER:
+        row[DRIVE_NUMBERS : DRIVE_NUMBERS + 7] = law.drive_numbers
+    if row[ACTUATOR] == HOBBY_SERVO:
+        row[ACTUATOR_NUMBERS : ACTUATOR_NUMBERS + 3] = law.actuator_numbers
+    else:
+        row[ACTUATOR_NUMBERS : ACTUATOR_NUMBERS + 4] = geared_motor_numbers(p)
 
 
 @numba.njit(inline="always")
@@ -93,11 +202,79 @@ def _f_held(
     return _f(r, x, th, xd, thd, v)
 
 
+@numba.njit(inline="always")
+def _lever(
+    th: float, arm: float, rod: float, crank: float, sx: float, sz: float, sense: float, neutral: float
+) -> tuple[float, float, float]:
+    """``twin.drive_equations.lever_shaft_angles``: the same functions called in the same order."""
+    phi = _horn(th, arm, rod, crank, sx, sz, sense, neutral)
+    ratio, slope = _ratio_slope(th, phi, arm, crank, sx, sz)
+    dphi, ddphi = _shaft_derivatives(ratio, slope)
+    return phi - neutral, dphi, ddphi
+
+
+@numba.njit  # not inlined at numba's IR: four inlined copies per RK4 step took 10 s more to compile, cold
+def _f_driven(
+    r: np.ndarray, x: float, th: float, xd: float, thd: float, ctrl: float
+) -> tuple[float, float, float, float]:
+    """``ReferencePlant._driven_derivative``'s derivative: the same functions called in the same order."""
+    if r[DRIVE] == END_LEVER:
+        phi, dphi, ddphi = _lever(
+            th, r[DRIVE_NUMBERS], r[DRIVE_NUMBERS + 1], r[DRIVE_NUMBERS + 2], r[DRIVE_NUMBERS + 3],
+            r[DRIVE_NUMBERS + 4], r[DRIVE_NUMBERS + 5], r[DRIVE_NUMBERS + 6],
+        )  # fmt: skip
+    else:  # at the pivot: φ = θ
+        phi, dphi, ddphi = th, 1.0, 0.0
+    a = ACTUATOR_NUMBERS
+    if r[ACTUATOR] == HOBBY_SERVO:
+        tau = _servo(ctrl, phi, dphi * thd, r[a], r[a + 1], r[a + 2])
+    else:
+        tau = _geared(_torque, ctrl, dphi * thd, r[a], r[a + 1], r[a + 2], r[a + 3])
+    a2, torque = _beam_terms(r[5], r[SHAFT_INERTIA], dphi, ddphi, thd, tau)
+    s, co = math.sin(th), math.cos(th)
+    xdd, thdd = _accelerations(
+        r[0], r[1], r[2], r[3], r[4], a2, r[6], r[7], r[8], r[9], r[10], r[11],
+        x, xd, thd, s, co, _friction(r[12], thd), torque,
+    )  # fmt: skip
+    return _stop_derivative(r[0], r[3], x, th, xd, thd, s, xdd, thdd, r[LO], r[HI])
+
+
+@numba.njit(inline="always")
+def _f_driven_held(
+    x: float, th: float, xd: float, thd: float, held: tuple[np.ndarray, float]
+) -> tuple[float, float, float, float]:
+    r, v = held
+    return _f_driven(r, x, th, xd, thd, v)
+
+
+@numba.njit(inline="always")
+def _thesis_boundary(
+    r: np.ndarray, x: float, th: float, xd: float, thd: float
+) -> tuple[float, float, float, bool]:
+    th, thd, lost = _boundary(x, th, thd, r[STOP], r[HALF])
+    return th, xd, thd, lost
+
+
+@numba.njit(inline="always")
+def _driven_boundary(
+    r: np.ndarray, x: float, th: float, xd: float, thd: float
+) -> tuple[float, float, float, bool]:
+    """``ReferencePlant._driven_boundary``: the beam's stops, then the drive's with the ball's share."""
+    before = thd
+    th, thd, lost = _boundary(x, th, thd, r[STOP], r[HALF])
+    th, xd, thd = _drive_stops(th, xd, thd, before, r[LO], r[HI], r[COUPLING])
+    return th, xd, thd, lost
+
+
 @njit_cached
 def _derivatives(rows: np.ndarray, states: np.ndarray, volts: np.ndarray) -> np.ndarray:
     out = np.empty_like(states)
     for i in range(states.shape[0]):
-        d = _f(rows[i], states[i, 0], states[i, 1], states[i, 2], states[i, 3], volts[i])
+        r = rows[i]
+        if r[KIND] == THESIS:
+            d = _f(r, states[i, 0], states[i, 1], states[i, 2], states[i, 3], volts[i])
+        else:
+            d = _f_driven(r, states[i, 0], states[i, 1], states[i, 2], states[i, 3], volts[i])
         out[i, 0], out[i, 1], out[i, 2], out[i, 3] = d
     return out
 
@@ -118,25 +295,50 @@ def _advance(
     xs: np.ndarray,
     thetas: np.ndarray,
 ) -> None:
-    n, m = volts.shape
+    for i in range(volts.shape[0]):
+        # the kind is a run's constant: one branch per run, each kind's step loop compiled on its own
+        if rows[i, KIND] == THESIS:
+            _advance_run(
+                _f_held, _thesis_boundary, rows[i], h, i, states, lost_step, volts, step0, xs, thetas
+            )
+        else:
+            _advance_run(
+                _f_driven_held, _driven_boundary, rows[i], h, i, states, lost_step, volts, step0, xs, thetas
+            )
+
+
+@numba.njit(inline="always")
+def _advance_run(
+    f: Any,
+    boundary: Any,
+    r: np.ndarray,
+    h: float,
+    i: int,
+    states: np.ndarray,
+    lost_step: np.ndarray,
+    volts: np.ndarray,
+    step0: int,
+    xs: np.ndarray,
+    thetas: np.ndarray,
+) -> None:
+    """Run i over its volts: RK4 of ``f`` with each step's volts held through the rails, then ``boundary``."""
+    m = volts.shape[1]
     record = xs.shape[1] == m + 1
-    for i in range(n):
-        r = rows[i]
-        x, th, xd, thd = states[i, 0], states[i, 1], states[i, 2], states[i, 3]
-        if record:
-            xs[i, 0], thetas[i, 0] = x, th
-        for k in range(m):
-            if lost_step[i] < 0:
-                v = min(max(volts[i, k], -r[RAIL]), r[RAIL])
-                x, th, xd, thd = _rk4(_f_held, x, th, xd, thd, (r, v), h)
-                th, thd, lost = _boundary(x, th, thd, r[STOP], r[HALF])
-                if lost:
-                    lost_step[i] = step0 + k + 1
-            elif not record:
-                break
-            if record:  # a lost run's state stays where it was
-                xs[i, k + 1], thetas[i, k + 1] = x, th
-        states[i, 0], states[i, 1], states[i, 2], states[i, 3] = x, th, xd, thd
+    x, th, xd, thd = states[i, 0], states[i, 1], states[i, 2], states[i, 3]
+    if record:
+        xs[i, 0], thetas[i, 0] = x, th
+    for k in range(m):
+        if lost_step[i] < 0:
+            v = min(max(volts[i, k], -r[RAIL]), r[RAIL])
+            x, th, xd, thd = _rk4(f, x, th, xd, thd, (r, v), h)
+            th, xd, thd, lost = boundary(r, x, th, xd, thd)
+            if lost:
+                lost_step[i] = step0 + k + 1
+        elif not record:
+            break
+        if record:  # a lost run's state stays where it was
+            xs[i, k + 1], thetas[i, k + 1] = x, th
+    states[i, 0], states[i, 1], states[i, 2], states[i, 3] = x, th, xd, thd
 
 
 _NO_RECORD = np.empty((0, 0))

@@ -6,6 +6,7 @@ import argparse
 import json
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from twin.app.commands.common import (
     ParamsOptions,
@@ -16,6 +17,9 @@ from twin.app.commands.common import (
     options_from,
 )
 from twin.outputs import check_outputs, writing
+
+if TYPE_CHECKING:
+    from twin.parameters import Parameters
 
 PARAMS_OUT_SUFFIXES = (".toml",)
 
@@ -31,6 +35,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
             "thesis:table_6_3 (Table 6.3), thesis:eq_6_2_4 (eq 6.2.4's three points)"
         ),
     )
+    parser.add_argument(
+        "--sensor",
+        metavar="PART",
+        choices=("vl53l0x", "hcsr04", "gp2y0a21", "potentiometer", "as5600"),
+        help=(
+            "fit this part's static curve instead (vl53l0x, hcsr04, gp2y0a21, potentiometer, as5600): TABLE is then "
+            "a ruler table, columns distance_mm|distance_cm|distance_m|angle_deg|angle_rad, reading_<mm|us|counts|v> "
+            "and optional sd_<unit>, n (rows of one true value are pooled); --out writes a rig-description table"
+        ),
+    )
     parser.add_argument("--out", metavar="FILE.toml", help="write the fitted parameters as a parameter file")
     parser.add_argument("--overwrite", action="store_true", help="replace an existing --out file")
     parser.add_argument("--json", action="store_true", help="print JSON")
@@ -42,6 +56,7 @@ class Options:
     """``calibrate-static``'s options."""
 
     table: str
+    sensor: str | None
     out: str | None
     overwrite: bool
     json: bool
@@ -64,11 +79,27 @@ def handle(o: Options) -> int:
         overwrite=o.overwrite,
         inputs=inputs(params=o.parameters.params, rig_file=o.parameters.rig_file, table=o.table),
     )
+    if o.sensor is not None:
+        return _sensor(o, params, paths)
     result = calibrate(load_table(table_path(o.table)), params)
     print(json.dumps(result.to_json(), indent=2) if o.json else "\n".join(render_lines(result)))
     if o.out is not None and "--out" in paths:
         with writing("--out", o.out), atomic_output(paths["--out"], overwrite=o.overwrite) as fh:
             fh.write(render_toml(result).encode("utf-8"))
+    return 0
+
+
+def _sensor(o: Options, params: Parameters, paths: dict[str, Path]) -> int:
+    """``--sensor PART``: the part's static curve from a ruler table (``calib.sensor_static``); exit 0 whether
+    or not the part's model holds the table (the verdict is printed)."""
+    from calib.sensor_static import fit_static, load_ruler_table, render_lines, write_static_fit
+
+    assert o.sensor is not None
+    fit = fit_static(o.sensor, load_ruler_table(Path(o.table)), params)
+    print(json.dumps(fit.to_json(), indent=2) if o.json else "\n".join(render_lines(fit)))
+    if o.out is not None and "--out" in paths:
+        with writing("--out", o.out):
+            write_static_fit(fit, paths["--out"], overwrite=o.overwrite)
     return 0
 
 

@@ -23,7 +23,15 @@ from typing import TYPE_CHECKING, Any, TypeVar, get_type_hints
 from twin.app.hosts import HOSTS, host_of
 from twin.app.options import MAX_JOB_RUN_S, MAX_RUN_S, count, finite_float, seed
 from twin.outputs import writing
-from twin.rigs.backends import DEFAULT_PLANT, ENGINES, backend, engine_policy, plant_choices, plant_help
+from twin.rigs.backends import (
+    DEFAULT_PLANT,
+    ENGINES,
+    backend,
+    engine_policy,
+    plant_choices,
+    plant_help,
+    stand_in_refusal,
+)
 
 if TYPE_CHECKING:
     from _typeshed import DataclassInstance
@@ -196,18 +204,26 @@ def add_engine_options(
 
 
 def resolve_engine(
-    engine: str | None, plant: str, default: str, *, plain: bool = False, served: bool = False
+    engine: str | None,
+    plant: str,
+    default: str,
+    *,
+    plain: bool = False,
+    served: bool = False,
+    params: Parameters | None = None,
 ) -> str:
     """The engine asked for, or the command's default where the job allows it (refused where it does not):
-    MuJoCo alone for a ``plain`` job (``sweep --refine``), a ``served`` one, or a plant no screening backend
-    stands in for."""
+    MuJoCo alone for a ``plain`` job (``sweep --refine``), a ``served`` one, a plant no screening backend
+    stands in for, or a rig (``params``) with a part the fast engine has no form for (asked for explicitly:
+    refused naming the part)."""
     if engine is None:
-        alone = backend(plant).stand_in is None  # no screening backend stands in for the plant
+        # no screening backend stands in for the plant, or it cannot run this rig's parts
+        alone = backend(plant).stand_in is None or stand_in_refusal(plant, params) is not None
         return "mujoco" if plain or served or alone else default
     from twin.parameters import ParameterError
 
     try:
-        policy = engine_policy(engine, plant)
+        policy = engine_policy(engine, plant, params=params)
     except ValueError as exc:
         raise ParameterError(str(exc)) from None
     if policy.screen is not None and served:

@@ -203,7 +203,7 @@ def handle(o: Options) -> int:
         seed=o.seed,
         population=o.population or 0,
         keep_going=o.keep_going,
-        engine=resolve_engine(o.engine, PLANT, "screen"),
+        engine=resolve_engine(o.engine, PLANT, "screen", params=base),
     )
     result = falsify(
         settings,

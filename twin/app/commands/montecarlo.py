@@ -133,7 +133,7 @@ def handle(o: Options) -> int:
     except ValueError as exc:
         raise ParameterError(f"--x0/--theta0: {exc}") from None
     job.check(base, OUTPUT_FILES)
-    engine = resolve_engine(o.engine, o.plant, "mujoco", served=job.is_served)
+    engine = resolve_engine(o.engine, o.plant, "mujoco", served=job.is_served, params=base)
     if engine == "mujoco":
         refuse_unused(
             [("--audit", o.audit)],

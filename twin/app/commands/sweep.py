@@ -197,7 +197,9 @@ def handle(o: Options) -> int:
     params, spread = job.params_and_spread() if robust else (job.params(), None)
     x0 = parse_range("--x0", o.x0) if o.x0 else DEFAULT_X0
     theta0 = parse_range("--theta0", o.theta0) if o.theta0 else DEFAULT_THETA0
-    engine = resolve_engine(o.engine, o.plant, "screen", plain=bool(o.refine), served=job.is_served)
+    engine = resolve_engine(
+        o.engine, o.plant, "screen", plain=bool(o.refine), served=job.is_served, params=params
+    )
     settings = SweepSettings(
         controller=job.name,
         x0=x0,

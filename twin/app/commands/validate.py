@@ -122,7 +122,7 @@ def handle(o: Options) -> int:
     except ParameterError as exc:
         raise ParameterError(f"{o.criteria or 'the default criteria'}: {exc}") from None
     job.check(params, OUTPUT_FILES)
-    settings_engine = resolve_engine(o.engine, PLANT, "screen", served=job.is_served)
+    settings_engine = resolve_engine(o.engine, PLANT, "screen", served=job.is_served, params=params)
     band = resolve_band(o.band, settings_engine, PLANT)
     with job.serving(params) as served:
         report = validate(
