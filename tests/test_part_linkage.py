@@ -156,3 +156,20 @@ def test_a_servo_beyond_the_attachment_with_its_horn_reaching_back_works_the_oth
     mujoco.mj_forward(model, data)
     assert np.linalg.norm(data.site("rod_tip").xpos - data.site(ROD_END_SITE).xpos) < 1e-12
     assert shaft < 0.0  # the beam up means the horn turned back (the servo's angle negative)
+
+
+@pytest.mark.quick
+def test_the_closures_slope_is_the_derivative_of_its_ratio() -> None:
+    """``twin.drive_equations.lever_ratio_slope`` (the closed form the kernel and the reference model share):
+    its dρ/dφ against a central difference of its ρ, at the default geometry's level and ±30°."""
+    from twin.drive_equations import lever_ratio, lever_ratio_slope, lever_theta_rad
+
+    geometry = (0.15, 0.1, 0.025, 0.125, -0.1)  # L, r, c, S_x, S_z
+    length, _, crank, shaft_x, shaft_z = geometry
+    for phi in (-0.5, 0.0, 0.5):
+        theta = float(lever_theta_rad(phi, *geometry))
+        ratio, slope = lever_ratio_slope(theta, phi, length, crank, shaft_x, shaft_z)
+        h = 1e-6
+        numeric = (lever_ratio(phi + h, *geometry) - lever_ratio(phi - h, *geometry)) / (2 * h)
+        assert ratio == pytest.approx(lever_ratio(phi, *geometry), rel=1e-12)
+        assert slope == pytest.approx(numeric, rel=1e-6, abs=1e-9)

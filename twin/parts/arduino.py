@@ -364,36 +364,27 @@ def _volts_of(params: Parameters) -> Callable[[float], float]:
     return lambda counts: (counts + 0.5) * reference / ADC_CODES
 
 
-ARDUINO_UNO = register(
-    IoBoardPart(
-        name="arduino_uno",
-        source=f"Arduino Uno R3: ATmega328P at 16 MHz, 5 V. {_SOURCE}",
-        groups={"arduino": Arduino},
-        equations=_EQUATIONS,
-        mjcf=MjcfFragment(),
-        batch=_BATCH,
-        dac_writer=_dac,
-        adc=_adc,
-        output_range=board_output_range,
-        batch_dac=_batch_dac,
-        batch_adc=_batch_adc,
-        volts_of=_volts_of,
+def _board(name: str, source: str) -> IoBoardPart:
+    """An ATmega328P board at 16 MHz and 5 V: the Uno and the Nano are one front end under two names."""
+    return register(
+        IoBoardPart(
+            name=name,
+            source=f"{source} {_SOURCE}",
+            groups={"arduino": Arduino},
+            equations=_EQUATIONS,
+            mjcf=MjcfFragment(),
+            batch=_BATCH,
+            dac_writer=_dac,
+            adc=_adc,
+            output_range=board_output_range,
+            batch_dac=_batch_dac,
+            batch_adc=_batch_adc,
+            volts_of=_volts_of,
+        )
     )
-)
 
-ARDUINO_NANO = register(
-    IoBoardPart(
-        name="arduino_nano",
-        source=f"Arduino Nano 3.x: the Uno's ATmega328P at 16 MHz, 5 V, on a smaller board. {_SOURCE}",
-        groups={"arduino": Arduino},
-        equations=_EQUATIONS,
-        mjcf=MjcfFragment(),
-        batch=_BATCH,
-        dac_writer=_dac,
-        adc=_adc,
-        output_range=board_output_range,
-        batch_dac=_batch_dac,
-        batch_adc=_batch_adc,
-        volts_of=_volts_of,
-    )
+
+ARDUINO_UNO = _board("arduino_uno", "Arduino Uno R3: ATmega328P at 16 MHz, 5 V.")
+ARDUINO_NANO = _board(
+    "arduino_nano", "Arduino Nano 3.x: the Uno's ATmega328P at 16 MHz, 5 V, on a smaller board."
 )

@@ -481,6 +481,6 @@ def vary(
         values = {}
         for name, factor in zip(names, row, strict=True):
             group, _, attr = name.partition(".")
-            values[name] = getattr(getattr(base, group), attr) * factor
+            values[name] = getattr(base.group(group), attr) * factor  # the table's groups and the parts' own
         out.append(base.with_overrides(values, origin="vary"))
     return out

@@ -31,14 +31,14 @@ from twin.parts.contract import (
     register,
 )
 from twin.parts.ranging import (
-    SampledBatch,
     SampledChain,
+    Sampler,
+    SensorBatch,
     add_housing,
     form_batch,
     form_inputs,
     form_single,
     near_distance_m,
-    runs_of,
 )
 
 __all__ = [
@@ -201,27 +201,13 @@ def _board(params: Parameters) -> IoBoardPart:
     return board
 
 
-class Gp2y0a21Batch(SampledBatch):
+class Gp2y0a21Batch(SensorBatch):
     """N runs of the GP2Y0A21YK0F in step (``twin.parts.ranging.SampledBatch``), each with its own seed and
     parameters (any of the ``gp2y0a21`` group's, the ball's radius, the track's length, the board)."""
 
-    def __init__(
-        self,
-        params: Parameters | Sequence[Parameters],
-        seeds: np.ndarray | Sequence[np.random.Generator],
-        x_m: np.ndarray,
-        t_s: float,
-        present: np.ndarray | bool = True,
-    ) -> None:
-        n = len(x_m)
-        runs, rngs = runs_of(params, seeds, n)
-        super().__init__(
-            _Sampler(runs, rngs), np.asarray(x_m, dtype=float), t_s, np.broadcast_to(present, (n,))
-        )
-
-
-def _one(params: Parameters, rng: np.random.Generator, x_m: float, t_s: float, present: bool) -> SampledBatch:
-    return Gp2y0a21Batch(params, [rng], np.array([x_m]), t_s, present)
+    @classmethod
+    def make_sampler(cls, runs: list[Parameters], rngs: list[np.random.Generator]) -> Sampler:
+        return _Sampler(runs, rngs)
 
 
 class Gp2y0a21Chain(SampledChain):
@@ -231,7 +217,7 @@ class Gp2y0a21Chain(SampledChain):
     def __init__(
         self, params: Parameters, seed: int | np.random.Generator | None, *, x_m: float = 0.0
     ) -> None:
-        super().__init__(params, seed, _one, x_m=x_m)
+        super().__init__(params, seed, Gp2y0a21Batch.one, x_m=x_m)
 
 
 def apply_gp2y0a21(spec: mujoco.MjSpec, p: Parameters) -> None:

@@ -25,6 +25,7 @@ import numpy as np
 
 from twin import model as mdl
 from twin.parameters import Parameters
+from twin.parts.contract import vary
 from twin.physics import PhysicsBlock
 
 __all__ = [
@@ -38,7 +39,6 @@ __all__ = [
     "make_rng",
     "near_distance_m",
     "runs_of",
-    "vary_group",
 ]
 
 # The chain's clock and a block's first time may differ by rounding (the rig's times are sums of steps).
@@ -181,6 +181,36 @@ def _finite_increasing(times_s: np.ndarray, x_m: np.ndarray) -> tuple[np.ndarray
     return t, x
 
 
+class SensorBatch(SampledBatch):
+    """A ranging sensor's batch of N runs built from their parameters and seeds (each run its own, or one set for
+    all): a sensor's module gives its ``Sampler`` (``make_sampler``, from the runs' parameters and generators)
+    and nothing else. ``one`` is its one-run batch, what its ``SampledChain`` is made of."""
+
+    @classmethod
+    def make_sampler(cls, runs: list[Parameters], rngs: list[np.random.Generator]) -> Sampler:
+        raise NotImplementedError(f"{cls.__name__} names no sampler")
+
+    def __init__(
+        self,
+        params: Parameters | Sequence[Parameters],
+        seeds: np.ndarray | Sequence[np.random.Generator],
+        x_m: np.ndarray,
+        t_s: float,
+        present: np.ndarray | bool = True,
+    ) -> None:
+        n = len(x_m)
+        runs, rngs = runs_of(params, seeds, n)
+        super().__init__(
+            self.make_sampler(runs, rngs), np.asarray(x_m, dtype=float), t_s, np.broadcast_to(present, (n,))
+        )
+
+    @classmethod
+    def one(
+        cls, params: Parameters, rng: np.random.Generator, x_m: float, t_s: float, present: bool
+    ) -> SampledBatch:
+        return cls(params, [rng], np.array([x_m]), t_s, present)
+
+
 class SampledChain:
     """One run of a ranging sensor (``twin.parts.contract.BallSensorChain``): the batch of one run
     (``SampledBatch``), built by ``make_batch(params, rng, x_m, t_s, present)``. ``reading_v``: the board's last
@@ -281,22 +311,6 @@ _FORM_BLOCKS = 12  # 240 ms: several samples of each sensor, a stale read or mor
 _FORM_STEPS = 20  # physics steps per block (a 20 ms period at 1 ms)
 
 
-def vary_group(
-    base: Parameters, names: Sequence[str], rng: np.random.Generator, n: int, spread: float = 0.05
-) -> list[Parameters]:
-    """``twin.parts.vary`` for any group, a part's own too (read with ``Parameters.group``): n sets around
-    ``base``, each of ``names`` (dotted) scaled by its own factor drawn uniformly within ±``spread``."""
-    factors = rng.uniform(1.0 - spread, 1.0 + spread, size=(n, len(names)))
-    out = []
-    for row in factors.tolist():
-        values = {}
-        for name, factor in zip(names, row, strict=True):
-            group, _, attr = name.partition(".")
-            values[name] = getattr(base.group(group), attr) * factor
-        out.append(base.with_overrides(values, origin="vary"))
-    return out
-
-
 def _form_track(params: Parameters, row: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A ball rolling at constant speed from the row's start: the times, positions and on-track flags."""
     times = np.arange(_FORM_BLOCKS * _FORM_STEPS + 1) * params.physics.timestep_s
@@ -352,7 +366,7 @@ def form_inputs(
     on the track and a speed that takes some past the +x end (off the track) or close to the sensor."""
 
     def inputs(rng: np.random.Generator, n: int) -> tuple[list[Parameters], np.ndarray]:
-        params = vary_group(base, names, rng, n)
+        params = vary(base, names, rng, n)
         seeds = rng.integers(0, 2**31, n).astype(float)
         return params, np.column_stack([seeds, rng.uniform(-0.3, 0.3, n), rng.uniform(-1.0, 1.0, n)])
 

@@ -42,7 +42,7 @@ import numpy as np
 from twin import model as mdl
 from twin.drive_equations import servo_angle_rad, servo_pulse_us, servo_torque_nm
 from twin.parameters import ParameterError, Parameters, check_group, param, register_group
-from twin.parts.contract import ActuatorPart, BatchForm, BatchWrite, MjcfFragment, register
+from twin.parts.contract import ActuatorPart, BatchForm, BatchWrite, MjcfFragment, register, vary
 from twin.reference import ShaftTorque, register_actuator_law
 
 __all__ = [
@@ -302,15 +302,7 @@ _VARIED = (
 
 
 def _inputs(rng: np.random.Generator, n: int) -> tuple[list[Parameters], np.ndarray]:
-    base = Servo()
-    factors = rng.uniform(0.95, 1.05, (n, len(_VARIED)))
-    params = [
-        Parameters().with_overrides(
-            {name: getattr(base, name.partition(".")[2]) * f for name, f in zip(_VARIED, row, strict=True)},
-            origin="batch form",
-        )
-        for row in factors.tolist()
-    ]
+    params = vary(Parameters(), _VARIED, rng, n)  # each run its own values, ±5 %
     # pulses past both ends of the travel, angles and speeds of a fast swing both ways
     rows = np.column_stack(
         [rng.uniform(800.0, 2200.0, n), rng.uniform(-1.6, 1.6, n), rng.uniform(-12.0, 12.0, n)]

@@ -70,7 +70,7 @@ from twin import model as mdl
 from twin.interface import CommandRange
 from twin.parameters import ParameterError, Parameters, check_group, param, register_group
 from twin.parts.arduino import register_step_dir_actuator
-from twin.parts.contract import ActuatorPart, BatchForm, BatchWrite, MjcfFragment, register
+from twin.parts.contract import ActuatorPart, BatchForm, BatchWrite, MjcfFragment, register, vary
 from twin.reference import ShaftTorque, register_actuator_law
 
 __all__ = [
@@ -477,15 +477,7 @@ _VARIED = (
 
 
 def _inputs(rng: np.random.Generator, n: int) -> tuple[list[Parameters], np.ndarray]:
-    base = Stepper()
-    factors = rng.uniform(0.95, 1.05, (n, len(_VARIED)))
-    params = [
-        Parameters().with_overrides(
-            {name: getattr(base, name.partition(".")[2]) * f for name, f in zip(_VARIED, row, strict=True)},
-            origin="batch form",
-        )
-        for row in factors.tolist()
-    ]
+    params = vary(Parameters(), _VARIED, rng, n)  # each run its own values, ±5 %
     # targets and positions over a turn, angles over a few cycles, speeds past the corner both ways
     rows = np.column_stack(
         [

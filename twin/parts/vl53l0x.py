@@ -22,14 +22,14 @@ import numpy as np
 from twin.parameters import Parameters, check_group, param, register_group
 from twin.parts.contract import BallSensorPart, BatchForm, MjcfFragment, register
 from twin.parts.ranging import (
-    SampledBatch,
     SampledChain,
+    Sampler,
+    SensorBatch,
     add_housing,
     form_batch,
     form_inputs,
     form_single,
     near_distance_m,
-    runs_of,
 )
 
 __all__ = [
@@ -212,27 +212,13 @@ class _Sampler:
         return output  # the range in whole mm is what the board reads over I²C
 
 
-class Vl53l0xBatch(SampledBatch):
+class Vl53l0xBatch(SensorBatch):
     """N runs of the VL53L0X in step (``twin.parts.ranging.SampledBatch``), each with its own seed and parameters
     (any of the ``vl53l0x`` group's, the ball's radius, the track's length)."""
 
-    def __init__(
-        self,
-        params: Parameters | Sequence[Parameters],
-        seeds: np.ndarray | Sequence[np.random.Generator],
-        x_m: np.ndarray,
-        t_s: float,
-        present: np.ndarray | bool = True,
-    ) -> None:
-        n = len(x_m)
-        runs, rngs = runs_of(params, seeds, n)
-        super().__init__(
-            _Sampler(runs, rngs), np.asarray(x_m, dtype=float), t_s, np.broadcast_to(present, (n,))
-        )
-
-
-def _one(params: Parameters, rng: np.random.Generator, x_m: float, t_s: float, present: bool) -> SampledBatch:
-    return Vl53l0xBatch(params, [rng], np.array([x_m]), t_s, present)
+    @classmethod
+    def make_sampler(cls, runs: list[Parameters], rngs: list[np.random.Generator]) -> Sampler:
+        return _Sampler(runs, rngs)
 
 
 class Vl53l0xChain(SampledChain):
@@ -242,7 +228,7 @@ class Vl53l0xChain(SampledChain):
     def __init__(
         self, params: Parameters, seed: int | np.random.Generator | None, *, x_m: float = 0.0
     ) -> None:
-        super().__init__(params, seed, _one, x_m=x_m)
+        super().__init__(params, seed, Vl53l0xBatch.one, x_m=x_m)
 
 
 def apply_vl53l0x(spec: mujoco.MjSpec, p: Parameters) -> None:
