@@ -132,3 +132,22 @@ def test_ideal_converters_are_refused_on_a_rig_whose_board_is_not_the_thesiss() 
     with pytest.raises(RigError, match=r"parts.actuator = 'hobby_servo'.*parts.io_board = 'arduino_uno'"):
         SimRig(SERVO_RIG, ideal_sensors=True)
     SimRig(Parameters(), ideal_sensors=True)  # the thesis's own converters
+
+
+@pytest.mark.quick
+def test_a_start_beyond_the_levers_reach_is_refused_naming_it() -> None:
+    """Open Ball & Beam's linkage lifts its beam −7.6° … +3.9° over its pulses (its measured curve): a start at
+    0.1 rad would need a horn past its dead point. Refused on both backends, naming the drive and its reach."""
+    from twin.parts.description import preset
+    from twin.physics import beam_travel_rad
+
+    params = preset("open-ball-and-beam")
+    low, high = beam_travel_rad(params)
+    assert (
+        -0.14 < low < -0.12 and 0.06 < high < 0.07
+    )  # the horn's stops, short of the dead point near 2000 µs
+    for plant in ("twin", "reference"):
+        rig = SimRig(params, plant=plant)
+        with pytest.raises(ValueError, match=r"beyond what parts.beam_drive = 'end_lever' reaches"):
+            rig.reset(0.0, 0.1)
+        rig.reset(0.0, 0.9 * high)  # within it: a start

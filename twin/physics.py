@@ -161,10 +161,31 @@ SingleFactory = Callable[[Parameters], PhysicsBackend]
 BatchFactory = Callable[[Sequence[Parameters], np.ndarray, np.ndarray, int], BatchPhysics]
 
 
+# A beam drive whose linkage reaches less than the beam's stops (a lever's horn at its travel's ends): the beam's
+# travel (θ_low, θ_high) it allows, by the drive's name (``twin.parts.linkage`` registers the end lever's).
+_DRIVE_REACH: dict[str, Callable[[Parameters], tuple[float, float]]] = {}
+
+
+def register_drive_reach(drive: str, reach: Callable[[Parameters], tuple[float, float]]) -> None:
+    """The beam's travel the drive ``drive`` allows, ``reach(params)`` (its module calls this once)."""
+    _DRIVE_REACH[drive] = reach
+
+
+def beam_travel_rad(params: Parameters) -> tuple[float, float]:
+    """How far the beam can turn: its stops (±``beam.stop_angle_rad``), narrowed to its drive's reach."""
+    stop = params.beam.stop_angle_rad
+    reach = _DRIVE_REACH.get(params.parts.beam_drive)
+    if reach is None:
+        return -stop, stop
+    low, high = reach(params)
+    return max(-stop, low), min(stop, high)
+
+
 def check_initial_state(
     params: Parameters, x_m: float, theta_rad: float, xdot_m_s: float, thetadot_rad_s: float
 ) -> None:
-    """Refuse an initial state that is not finite, off the track or beyond the stops (ValueError naming it)."""
+    """Refuse an initial state that is not finite, off the track or beyond the beam's travel (its stops, or its
+    drive's reach: ValueError naming it)."""
     for name, value in (
         ("x_m", x_m),
         ("theta_rad", theta_rad),
@@ -177,6 +198,12 @@ def check_initial_state(
     if abs(theta_rad) > params.beam.stop_angle_rad:
         raise ValueError(
             f"initial theta_rad = {theta_rad!r} is beyond the stops (|θ| ≤ {params.beam.stop_angle_rad:.4f} rad)"
+        )
+    low, high = beam_travel_rad(params)
+    if not low <= theta_rad <= high:
+        raise ValueError(
+            f"initial theta_rad = {theta_rad!r} is beyond what parts.beam_drive = {params.parts.beam_drive!r} "
+            f"reaches ({low:.4f} … {high:.4f} rad)"
         )
 
 

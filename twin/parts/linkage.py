@@ -51,6 +51,7 @@ from twin.drive_equations import (
 )
 from twin.parameters import GROUPS, ParameterError, Parameters, check_group, param, register_group
 from twin.parts.contract import BatchForm, MjcfFragment, Part, register
+from twin.physics import register_drive_reach
 from twin.reference import DriveKinematics, register_shaft_map
 
 __all__ = [
@@ -444,6 +445,15 @@ def _pose(params: Parameters, theta_rad: float) -> dict[str, float]:
     return {SERVO_SHAFT: shaft, ROD_PIN: pin}
 
 
+def lever_reach_rad(params: Parameters) -> tuple[float, float]:
+    """The beam's travel the lever allows: its angles with the horn at its travel's two ends (its stops)."""
+    link = params.of(Linkage)
+    low, high = sorted(
+        float(link.theta_rad(link.horn_neutral_rad + side * link.horn_travel_rad)) for side in (-1.0, 1.0)
+    )
+    return low, high
+
+
 def lever_shaft_map(params: Parameters) -> DriveKinematics:
     """The lever for the reference model (``twin.reference.DriveKinematics``): θ → (the servo's angle φ − neutral,
     φ′ = 1/(dθ/dφ), φ″ = −(dθ/dφ)′/(dθ/dφ)³, in closed form: ``lever_shaft_angles``); the horn (a bar, m·c²/3
@@ -460,9 +470,7 @@ def lever_shaft_map(params: Parameters) -> DriveKinematics:
         return float(phi), float(dphi), float(ddphi)
 
     shaft_inertia = link.horn_mass_kg * link.crank_m**2 / 3.0 + link.rod_mass_kg / 2.0 * link.crank_m**2
-    ends = sorted(
-        float(link.theta_rad(link.horn_neutral_rad + side * link.horn_travel_rad)) for side in (-1.0, 1.0)
-    )
+    ends = lever_reach_rad(params)
     return DriveKinematics(
         shaft,
         shaft_inertia,
@@ -483,6 +491,7 @@ def lever_kernel_numbers(link: Linkage) -> tuple[float, float, float, float, flo
 register_group("linkage", Linkage)
 mdl.register_drive_joint("end_lever", SERVO_SHAFT)
 mdl.register_drive_pose("end_lever", _pose)
+register_drive_reach("end_lever", lever_reach_rad)
 register_shaft_map("end_lever", lever_shaft_map)
 
 END_LEVER = register(

@@ -25,6 +25,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from twin.parameters import Parameters
+from twin.physics import beam_travel_rad
 from twin.viewer.common import DRIFT, FLICK, SETPOINT, SPEED, THETA0, X0, Slider, _show
 
 
@@ -111,7 +112,8 @@ def _start(live: Commands, x0: Any, theta0: Any) -> None:
     """A new start: each coordinate on its slider, narrowed to the track and the stops."""
     p = live.params
     x = _on_slider("x0", x0, X0, p.track.half_length_m)
-    th = _on_slider("θ0", theta0, THETA0, p.beam.stop_angle_rad)
+    low, high = beam_travel_rad(p)  # the stops, or a lever's reach
+    th = _on_slider("θ0", theta0, THETA0, min(-low, high))
     live.set_initial_state(x, th)
 
 

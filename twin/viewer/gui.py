@@ -15,6 +15,7 @@ import viser
 import viser.uplot
 
 from twin.parameters import Parameters
+from twin.physics import beam_travel_rad
 from twin.viewer.common import DRIFT, FLICK, SETPOINT, SPEED, THETA0, X0, _markdown_text, _show
 from twin.viewer.scene import CAMERAS, on_camera
 from twin.viewer.security import download_bytes_queued, send_uplot_data
@@ -165,7 +166,8 @@ class Panels:
         gui, live, p = self.server.gui, self.live, self.live.params
         # The sliders stay inside the track and the beam's stops.
         x_max = min(X0.high, p.track.half_length_m)
-        th_max = min(THETA0.high, p.beam.stop_angle_rad)
+        low, high = beam_travel_rad(p)  # the stops, or a lever's reach
+        th_max = min(THETA0.high, -low, high)
         with gui.add_folder("Initial state (applies on Reset)"):
             x0 = gui.add_slider(
                 "x0 (m)",

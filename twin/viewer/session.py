@@ -26,7 +26,7 @@ from twin import log as log_io
 from twin.engine import Catalogue, ClosedLoop, ControllerError
 from twin.interface import DaqSample, Setpoint
 from twin.parameters import Parameters
-from twin.physics import check_initial_state
+from twin.physics import beam_travel_rad, check_initial_state
 from twin.rigs.sim import make_rig
 from twin.verdict import Criteria, Verdict
 from twin.viewer.actions import HANDLERS, Refused
@@ -138,7 +138,8 @@ class LiveTwin:
         self.ideal_sensors = ideal_sensors
         # The default start, inside a track or stops that a parameter file narrowed.
         self.x0_m = min(0.15, 0.5 * params.track.half_length_m)
-        self.theta0_rad = min(0.1, 0.5 * params.beam.stop_angle_rad)
+        low, high = beam_travel_rad(params)  # the stops, or a lever's reach
+        self.theta0_rad = min(0.1, 0.5 * min(-low, high))
         if initial is not None:  # a replayed run's start (ballbeam view --replay), checked as the rig's
             try:
                 check_initial_state(params, initial[0], initial[1], 0.0, 0.0)
