@@ -51,11 +51,12 @@ from twin.parts.contract import (
     AngleSensorPart,
     BatchForm,
     MjcfFragment,
+    board_adc,
     board_batch_adc,
     board_volts_of,
     register,
 )
-from twin.parts.potentiometer import RESET_TOLERANCE_S, board_adc
+from twin.parts.potentiometer import RESET_TOLERANCE_S
 from twin.physics import PhysicsBlock
 
 __all__ = [

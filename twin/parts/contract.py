@@ -322,6 +322,14 @@ def missing_batch_runtime(parts: RigParts) -> list[str]:
     ]
 
 
+def board_adc(params: Parameters) -> Callable[[float], float]:
+    """The ADC of the board ``params.parts.io_board`` names (``IoBoardPart.adc``): volts at its pin in, its
+    reading out (an analog sensor's chain reads through it)."""
+    board = part_named("io_board", params.parts.io_board)
+    assert isinstance(board, IoBoardPart)  # the registry holds an io_board's part type (ROLE_TYPES)
+    return board.adc(params)
+
+
 def board_volts_of(params: Parameters) -> Callable[[float], float]:
     """The software's conversion of the board's analog reading back to volts (``IoBoardPart.volts_of`` of the
     board ``params.parts.io_board`` names); ``PartError`` naming the board if it gives none."""

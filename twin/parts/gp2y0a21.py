@@ -24,10 +24,9 @@ from twin.parameters import Parameters, check_group, param, register_group
 from twin.parts.contract import (
     BallSensorPart,
     BatchForm,
-    IoBoardPart,
     MjcfFragment,
+    board_adc,
     board_volts_of,
-    part_named,
     register,
 )
 from twin.parts.ranging import (
@@ -176,7 +175,7 @@ class _Sampler:
         self.radius_m = np.array([p.ball.radius_m for p in params])
         self.half_length_m = np.array([p.track.half_length_m for p in params])
         self.noisy = np.array([p.ball_sensor.noise_enabled for p in params])
-        self.adc: list[Callable[[float], float]] = [_board(p).adc(p) for p in params]
+        self.adc: list[Callable[[float], float]] = [board_adc(p) for p in params]
 
     def sample(
         self, rows: np.ndarray, x_mean_m: np.ndarray, x_m: np.ndarray, present: np.ndarray
@@ -193,12 +192,6 @@ class _Sampler:
 
     def reading(self, rows: np.ndarray, output: np.ndarray) -> np.ndarray:
         return np.array([self.adc[i](v) for i, v in zip(rows.tolist(), output.tolist(), strict=True)])
-
-
-def _board(params: Parameters) -> IoBoardPart:
-    board = part_named("io_board", params.parts.io_board)
-    assert isinstance(board, IoBoardPart)  # the registry holds an io_board's part type (contract.ROLE_TYPES)
-    return board
 
 
 class Gp2y0a21Batch(SensorBatch):

@@ -37,11 +37,10 @@ from twin.parameters import Parameters, check_group, param, register_group
 from twin.parts.contract import (
     AngleSensorPart,
     BatchForm,
-    IoBoardPart,
     MjcfFragment,
+    board_adc,
     board_batch_adc,
     board_volts_of,
-    part_named,
     register,
 )
 from twin.physics import PhysicsBlock
@@ -52,7 +51,6 @@ __all__ = [
     "Potentiometer",
     "PotentiometerBatch",
     "PotentiometerChain",
-    "board_adc",
     "pot_wiper_v",
 ]
 
@@ -154,15 +152,6 @@ def _wiper_v(
     """``pot_wiper_v`` with each constant a number or an array (one per run: the batch form's)."""
     u = np.clip(0.5 + (theta_rad - zero_rad) / travel_rad, 0.0, 1.0)
     return supply_v * np.clip(u + linearity * np.sin(2.0 * np.pi * u), 0.0, 1.0)
-
-
-def board_adc(params: Parameters) -> Callable[[float], float]:
-    """The ADC of the board ``params.parts.io_board`` names (``IoBoardPart.adc``): volts at its pin in, its
-    reading out."""
-    board = part_named("io_board", params.parts.io_board)
-    # the registry holds io_boards as IoBoardParts only (contract._check_role)
-    assert isinstance(board, IoBoardPart)
-    return board.adc(params)
 
 
 def _noisy_pin_v(level_v: float | np.ndarray, noise: float | np.ndarray, pot: Potentiometer) -> np.ndarray:
