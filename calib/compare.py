@@ -611,7 +611,7 @@ def closed_loop_prediction(
     from twin.verdict import evaluate_measured
 
     x0, theta0, row = first_block_state(log, params)
-    period = params.daq.period_s
+    period = params.period_s
     n_log = log.k - row  # rows from the first block on: the held block, then one per update
     duration = params.start.free_run_s + (n_log - 2) * period
     ticks = update_ticks(duration, params)

@@ -17,6 +17,7 @@ table's deviations, or the part's own noise when it gives none). The part's equa
 (``twin.parts.<part>``), called without their rounding and noise draws (a mean reading is smooth):
 
     vl53l0x     range = d − crosstalk; σ = k·d·√(33 ms/budget)   → crosstalk_offset_mm, sigma_fraction
+                (missing the table: curve_distance_mm/curve_reading_mm, sigma_floor_mm; see below)
     hcsr04      echo = 2(d + δ)/c(T) − ½ µs (pulseIn truncates)  → temperature_c, mount_x_m (+δ), echo_jitter_us
     gp2y0a21    V = a/(d + b) + c beyond the fold               → curve_a_v_m, curve_b_m, curve_c_v, noise_v
     potentiometer  V = V_ref(u + L sin 2πu), u = ½ + (θ − θ₀)/travel
@@ -25,8 +26,12 @@ table's deviations, or the part's own noise when it gives none). The part's equa
 
 Beside the part's model it reports alternatives a user may need: a straight line with a free gain and the
 measured curve itself (linear interpolation, judged by leave-one-out), for a sensor the part's equation does
-not capture (the VL53L0X off a round ball). ``StaticFit.to_toml`` is a rig-description table the twin loads
-(``--rig-file``); ``write_static_fit`` writes it atomically.
+not capture (the VL53L0X off a round ball). When the VL53L0X's offset-only law misses the table, the fit writes
+the table as the part's measured curve (``vl53l0x.curve_distance_mm``/``curve_reading_mm``: the true distances
+and mean readings, read between them along the same broken line), and when a constant deviation holds the
+table and the proportional law does not, the part's noise floor (``vl53l0x.sigma_floor_mm``: the pooled
+deviation less the whole-mm rounding's 1/12 mm² in quadrature). ``StaticFit.to_toml`` is a rig-description
+table the twin loads (``--rig-file``; a curve as a TOML array); ``write_static_fit`` writes it atomically.
 """
 
 from __future__ import annotations
@@ -35,7 +40,7 @@ import csv
 import dataclasses
 import io
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -46,6 +51,7 @@ from twin.parameters import ParameterError, Parameters
 
 __all__ = [
     "PARTS",
+    "Override",
     "Alternative",
     "Estimate",
     "RulerTable",
@@ -81,6 +87,10 @@ LEVEL = 0.95
 # all equal still has the quantization's spread): mm, µs and counts read in whole units.
 _MIN_SD = {"mm": 1 / math.sqrt(12), "us": 1 / math.sqrt(12), "counts": 1 / math.sqrt(12), "v": 1e-4}
 MAX_ROWS = 100_000
+
+
+# A fitted parameter's value: a number, or a measured curve's column (a ``twin.parameters.curve`` field).
+Override = float | tuple[float, ...]
 
 
 class StaticFitError(ValueError):
@@ -357,7 +367,7 @@ class StaticFit:
     chi2_dof: float
     chi2_limit: float
     adequate: bool
-    overrides: dict[str, float]
+    overrides: dict[str, Override]
     alternatives: tuple[Alternative, ...] = ()
     notes: tuple[str, ...] = ()
     used: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
@@ -422,6 +432,9 @@ class StaticFit:
         lines += ["", f"[{self.role}]", f'part = "{self.part}"']
         by_name = {e.name: e for e in self.estimates}
         for name, value in self.overrides.items():
+            if isinstance(value, tuple):  # a measured curve's column: a TOML array of its values
+                lines.append(f"{name.partition('.')[2]} = [{', '.join(repr(float(v)) for v in value)}]")
+                continue
             e = by_name.get(name)
             why = (
                 f"  # 95 %: {e.low:.6g} … {e.high:.6g} {e.unit}"
@@ -620,7 +633,7 @@ def _fit_vl53l0x(table: RulerTable, params: Parameters) -> StaticFit:
     s = _solve(lambda p: d - p[0], [group.crosstalk_offset_mm], r, sigma)
     notes = []
     estimates = [_est("vl53l0x.crosstalk_offset_mm", s.values[0], s.half[0], "mm")]
-    overrides = {"vl53l0x.crosstalk_offset_mm": float(s.values[0])}
+    overrides: dict[str, Override] = {"vl53l0x.crosstalk_offset_mm": float(s.values[0])}
     scale = math.sqrt(SIGMA_BUDGET_S / group.timing_budget_s)
     if table.sd is not None and np.all(table.n >= 2):
         # σ_i = k·d_i·√(B₀/B) (the part's) against a constant σ₀, each fitted to the points' deviations
@@ -635,14 +648,20 @@ def _fit_vl53l0x(table: RulerTable, params: Parameters) -> StaticFit:
         if prop.adequate:
             overrides["vl53l0x.sigma_fraction"] = float(prop.values[0])
             notes.append(verdict)
+        elif const.adequate:
+            # the twin rounds a range to whole mm after its noise: a reading's variance is σ₀² + 1/12 mm²
+            floor = math.sqrt(max(float(const.values[0]) ** 2 - 1.0 / 12.0, 0.0))
+            overrides["vl53l0x.sigma_floor_mm"] = floor
+            top = floor / (float(d[-1]) * scale)
+            notes.append(
+                f"{verdict}: the part's noise law does not hold this table, a floor does: vl53l0x.sigma_floor_mm "
+                f"= {floor:.4g} mm (σ₀ less the whole-mm rounding in quadrature; σ = max(σ₀, k·d·√(33 ms/B))); "
+                f"vl53l0x.sigma_fraction is left as it was ({group.sigma_fraction:g}): k ≤ {top:.3g} keeps the "
+                f"floor alone up to the table's {float(d[-1]):g} mm"
+            )
         else:
             notes.append(
-                f"{verdict}: the part's noise law does not hold this table, vl53l0x.sigma_fraction is left as it "
-                + (
-                    "was; a noise floor parameter (σ = √(σ₀² + (k·d)²)) would hold it"
-                    if const.adequate
-                    else "was"
-                )
+                f"{verdict}: the part's noise law does not hold this table, vl53l0x.sigma_fraction is left as it was"
             )
     notes.append(
         f"the timing budget is the parameters' vl53l0x.timing_budget_s = {group.timing_budget_s:g} s; distances "
@@ -653,13 +672,26 @@ def _fit_vl53l0x(table: RulerTable, params: Parameters) -> StaticFit:
     cubic = _polynomial(table, mask, sigma, 3, "mm")
     if not s.adequate:
         g = line.estimates[0]
+        monotone = bool(np.all(np.diff(r) > 0) and d[0] >= 0.0)
+        if monotone:
+            # the measured curve replaces range = d − crosstalk for the ball: the offset fitted above is not a
+            # cover's crosstalk but the curve's mean, so it is not written
+            del overrides["vl53l0x.crosstalk_offset_mm"]
+            overrides["vl53l0x.curve_distance_mm"] = tuple(float(v) for v in d)
+            overrides["vl53l0x.curve_reading_mm"] = tuple(float(v) for v in r)
+        written = (
+            f"vl53l0x.curve_distance_mm/curve_reading_mm are written ({d.size} points) and the crosstalk left "
+            "as it was"
+            if monotone
+            else "none is written: the mean readings do not increase strictly with the distance (no inverse)"
+        )
         notes.append(
             f"the part's offset-only range leaves an RMS of {float(np.sqrt(np.mean(s.residuals**2))):.3g} mm; "
             f"a free gain ({g.value:.4g}, 95 % {g.low:.4g} … {g.high:.4g}) leaves {line.rms:.3g} mm "
             f"({'adequate' if line.adequate else 'still beyond the noise'}), a cubic {cubic.rms:.3g} mm "
             f"({'adequate' if cubic.adequate else 'still beyond the noise'}); the measured curve's "
             f"leave-one-out RMS is {curve.rms:.3g} mm: the part needs a measured curve (distance → reading, as "
-            "the thesis's wiper curve) to hold this sensor"
+            f"the thesis's wiper curve) to hold this sensor: {written}"
         )
     return _result(
         "vl53l0x",
@@ -904,7 +936,7 @@ def _result(
     estimates: Sequence[Estimate],
     s: _Solved,
     mask: np.ndarray,
-    overrides: dict[str, float],
+    overrides: Mapping[str, Override],
     alternatives: Sequence[Alternative],
     notes: Sequence[str],
     p: int,
@@ -920,7 +952,7 @@ def _result(
         chi2_dof=s.chi2_dof,
         chi2_limit=s.chi2_limit,
         adequate=s.adequate,
-        overrides=overrides,
+        overrides=dict(overrides),
         alternatives=tuple(alternatives),
         notes=tuple(notes),
         used=mask,

@@ -240,7 +240,7 @@ class Shadow:
         self.params = params
         self.band = band
         self.test = test or Cusum()
-        self.period_s = float(params.daq.period_s)
+        self.period_s = float(params.period_s)
         self.W = max(2, int(round(window_s / self.period_s)))
         self.window_s = self.W * self.period_s
         self.horizon_s = horizon_s

@@ -66,7 +66,7 @@ class PolicyController(Controller):
         p = params or Parameters()
         self.params = p if software is None else replace(p, software=software)
         self.name = name
-        self.period_s = self.params.daq.period_s
+        self.period_s = self.params.period_s
         if self.obs_spec.setpoint:
             self.setpoint_m = float(setpoint_m)  # the Setpoint capability: the view and experiments move it
         self._ball = np.zeros(self.obs_spec.stack)

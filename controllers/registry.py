@@ -163,7 +163,7 @@ def _appendix_clp(params: Parameters) -> Controller:
 def _discrete(params: Parameters, u_kind: Literal["voltage", "torque"]) -> tuple[np.ndarray, np.ndarray]:
     from twin.reference import ReferenceModel
 
-    return ReferenceModel(params).discretize(u_kind, params.daq.period_s)
+    return ReferenceModel(params).discretize(u_kind, params.period_s)
 
 
 def _sf(params: Parameters) -> Controller:
@@ -181,7 +181,7 @@ def _sf(params: Parameters) -> Controller:
         StateFeedbackLaw(gain),
         software=params.software,
         u_kind="volts",
-        period_s=params.daq.period_s,
+        period_s=params.period_s,
     )
 
 
@@ -211,7 +211,7 @@ def _clp(params: Parameters) -> Controller:
         software=params.software,
         u_kind="torque",
         motor=_motor(params),
-        period_s=params.daq.period_s,
+        period_s=params.period_s,
     )
 
 
@@ -233,7 +233,7 @@ def _smc(params: Parameters) -> Controller:
         software=params.software,
         u_kind="torque",
         motor=_motor(params),
-        period_s=params.daq.period_s,
+        period_s=params.period_s,
     )
 
 
@@ -286,7 +286,7 @@ def _lqr(params: Parameters) -> Controller:
         StateFeedbackLaw(design.gain),
         software=params.software,
         u_kind="volts",
-        period_s=params.daq.period_s,
+        period_s=params.period_s,
     )
 
 
@@ -300,7 +300,7 @@ def _lqi(params: Parameters) -> Controller:
     design = lqi_design(
         phi,
         gamma,
-        params.daq.period_s,
+        params.period_s,
         state_scale=LQR_STATE_SCALE,
         integral_scale_m_s=LQI_INTEGRAL_SCALE_M_S,
         input_scale_v=LQR_INPUT_SCALE_V,
@@ -321,7 +321,7 @@ def _lqi(params: Parameters) -> Controller:
         law,
         software=sw,
         u_kind="volts",
-        period_s=params.daq.period_s,
+        period_s=params.period_s,
     )
 
 

@@ -6,11 +6,13 @@ parts describe (the thesis's, a hobby servo on a lever, ...).
 
 The design (``rig_lqg_design``): the reference model's linearization about the rig at rest
 (``twin.linearize.linearize_reference``: ∂f/∂(x, θ, ẋ, θ̇, u) at the level beam, the ball at the track's centre,
-the actuator's rest control), discretized with a zero-order hold at the board's period; LQR with Bryson weights
-and the Kalman gain for the sensors the rig has (ball only when it measures no angle). The runtime
-(``RigLqgController``) is a hardware ``Controller``: it reads the board's units and writes the board's command
-through the parts' own conversions (``BallSensorPart.position_of``, ``AngleSensorPart.angle_of``,
-``ActuatorPart.command_of``: what a sketch on the rig would compute), never the twin's state.
+the actuator's control that holds it there, ``twin.linearize.hold_control``: its rest control on a beam
+balanced on its pivot, more on one hinged at its end), discretized with a zero-order hold at the board's
+period; LQR with Bryson weights and the Kalman gain for the sensors the rig has (ball only when it measures
+no angle). The runtime (``RigLqgController``) is a hardware ``Controller``: it reads the board's units and
+writes the board's command through the parts' own conversions (``BallSensorPart.position_of``,
+``AngleSensorPart.angle_of``, ``ActuatorPart.command_of``: what a sketch on the rig would compute), never the
+twin's state.
 """
 
 from __future__ import annotations
@@ -151,7 +153,7 @@ class RigLqgController(Controller):
 def rig_lqg(params: Parameters) -> RigLqgController:
     """``rig-lqg`` for the rig ``params`` describes (its parts must give their conversions: a part without
     one is refused naming it)."""
-    from twin.linearize import linearize_reference
+    from twin.linearize import hold_control, linearize_reference
     from twin.parts import rig_parts
 
     parts = rig_parts(params)
@@ -178,7 +180,8 @@ def rig_lqg(params: Parameters) -> RigLqgController:
     )
     command_of = parts.actuator.command_of(params)
     control_of = parts.actuator.control_of(params)
-    rest_control = control_of(parts.actuator.rest_command(params))
+    # about the control that holds the level beam: a beam hinged at its end needs one to carry its weight
+    rest_control = hold_control(params, control_of(parts.actuator.rest_command(params)))
     a, b = linearize_reference(params, rest_control)
     limits = parts.io_board.output_range(params)
     span = max(abs(control_of(limits.low) - rest_control), abs(control_of(limits.high) - rest_control))
@@ -196,7 +199,7 @@ def rig_lqg(params: Parameters) -> RigLqgController:
         b,
         rest_control=rest_control,
         input_scale=input_scale,
-        period_s=params.daq.period_s,
+        period_s=params.period_s,
         measured=measured,
         measurement_noise=noise,
     )

@@ -172,7 +172,7 @@ def _replay_control(name: str, params: Parameters) -> tuple[np.ndarray, RunResul
         volts = np.array(recorded.volts)
     else:
         result = _episode(name, made)
-        dt, per_tick = params.physics.timestep_s, int(round(params.daq.period_s / params.physics.timestep_s))
+        dt, per_tick = params.physics.timestep_s, int(round(params.period_s / params.physics.timestep_s))
         free = int(round(params.start.free_run_s / dt))
         logged = result.log.motor_volts_v  # row k: after the k-th command (row 0: before the first)
         volts = np.concatenate([np.full(free, logged[0]), np.repeat(logged[1:], per_tick)])
@@ -277,7 +277,7 @@ def _grid_physics(side: int, duration_s: float, nthread: int) -> _GridPhysics:
     start, start_cpu = time.perf_counter(), time.process_time()
     sweep = run_batch(registry, "appendix-sf", **kw)
     sweep_s, sweep_cpu = time.perf_counter() - start, time.process_time() - start_cpu
-    dt, period = params.physics.timestep_s, params.daq.period_s
+    dt, period = params.physics.timestep_s, params.period_s
     free = int(round(params.start.free_run_s / dt))
     per_tick = int(round(period / dt))
     volts = np.array([r.log.motor_volts_v for r in full])  # row k: after the k-th command

@@ -843,7 +843,7 @@ def judge(
 
 def update_ticks(duration_s: float, params: Parameters) -> int:
     """Number of ``update`` ticks so that the last block ends at or after ``duration_s`` after release."""
-    free, period = params.start.free_run_s, params.daq.period_s
+    free, period = params.start.free_run_s, params.period_s
     return 1 + max(0, math.ceil((duration_s - free) / period - 1e-9))
 
 

@@ -17,7 +17,7 @@ from twin.parameters import Parameters
 from twin.plant import Plant
 from twin.reference import InputKind, ReferencePlant
 
-__all__ = ["linearize_mujoco", "linearize_reference", "LinearizationError"]
+__all__ = ["hold_control", "linearize_mujoco", "linearize_reference", "LinearizationError"]
 
 # The slow and fast modes must be well separated for the reduction to be meaningful.
 MIN_MODE_SEPARATION = 20.0
@@ -142,6 +142,28 @@ def linearize_mujoco(
     a_red = cv @ np.diag(eigvals[slow]) @ np.linalg.inv(cv)
     b_red = cv @ (left[slow] @ b)
     return np.real_if_close(a_red, tol=1e6).real, np.real_if_close(b_red, tol=1e6).real
+
+
+def hold_control(params: Parameters, rest_control: float, eps: float = 1e-6) -> float:
+    """The actuator's control that holds the beam level with the ball still at the track's centre: the root of
+    θ̈(0, 0, 0, 0, u) of ``ReferencePlant.derivative`` by Newton's method from ``rest_control``. A beam balanced
+    on its pivot (the thesis's) is held by its rest control itself, returned as it is; one hinged at its end
+    needs the torque that carries its weight and the ball's (a motor's volts, a servo's target a little past
+    level). A control with no effect on θ̈ there (a dead band) leaves ``rest_control``."""
+    f = ReferencePlant(params).derivative
+    u = rest_control
+    for _ in range(20):
+        thdd = f(0.0, 0.0, 0.0, 0.0, u)[3]
+        if thdd == 0.0:
+            break
+        slope = (f(0.0, 0.0, 0.0, 0.0, u + eps)[3] - f(0.0, 0.0, 0.0, 0.0, u - eps)[3]) / (2.0 * eps)
+        if slope == 0.0 or not np.isfinite(slope):
+            break
+        step = thdd / slope
+        u -= step
+        if abs(step) <= 1e-12 * max(1.0, abs(u)):
+            break
+    return u
 
 
 def linearize_reference(

@@ -43,6 +43,7 @@ __all__ = [
     "all_groups",
     "choice",
     "register_group",
+    "register_loop_period",
     "register_track_geometry",
     "TrackGeometry",
     "two_wires_geometry",
@@ -126,12 +127,28 @@ def param(
     )
 
 
-def curve(default: tuple[float, ...], unit: str, source: str, *, magnitude: float, why: str) -> Any:
+def curve(
+    default: tuple[float, ...],
+    unit: str,
+    source: str,
+    *,
+    magnitude: float,
+    why: str,
+    optional: bool = False,
+) -> Any:
     """A dataclass field holding a measured table column (a tuple of floats) with its unit and provenance;
-    every value's magnitude is at most ``magnitude`` (reason: ``why``)."""
+    every value's magnitude is at most ``magnitude`` (reason: ``why``). An ``optional`` curve may also be empty
+    (no measured curve: its part's own law holds)."""
     return field(
         default=default,
-        metadata={"unit": unit, "source": source, "curve": True, "magnitude": magnitude, "why": why},
+        metadata={
+            "unit": unit,
+            "source": source,
+            "curve": True,
+            "magnitude": magnitude,
+            "why": why,
+            "optional": optional,
+        },
     )
 
 
@@ -250,8 +267,9 @@ def _check_curve(name: str, value: Any, md: Mapping[str, Any]) -> tuple[float, .
         if abs(number) > magnitude:
             raise _refuse(f"{name}[{i}]", item, unit, f"within ±{magnitude!r}", md["why"])
         out.append(number)
-    if len(out) < 2:
-        raise ParameterError(f"{name} has {len(out)} values: a curve needs at least 2 points")
+    if len(out) < 2 and not (out == [] and md.get("optional")):
+        none = " (or none)" if md.get("optional") else ""
+        raise ParameterError(f"{name} has {len(out)} values: a curve needs at least 2 points{none}")
     return tuple(out)
 
 
@@ -1212,6 +1230,18 @@ def register_track_geometry(name: str, geometry: Callable[[Parameters], TrackGeo
     _TRACK_GEOMETRY[name] = geometry
 
 
+# Each board's control period by its part's name (``Parameters.period_s``): "group.field" of the board's own
+# group; a board not registered (the thesis's PCI-1712) ticks at ``daq.period_s``.
+_LOOP_PERIOD: dict[str, str] = {}
+
+
+def register_loop_period(board: str, name: str) -> None:
+    """The board part ``board`` runs its control loop every ``name`` ("group.field", a period in seconds)."""
+    if _LOOP_PERIOD.get(board, name) != name:
+        raise ParameterError(f"the board {board!r} has a loop period already")
+    _LOOP_PERIOD[board] = name
+
+
 def all_groups() -> Mapping[str, type]:
     """Every parameter group by name: the thesis's (``GROUPS``), then the parts' registered ones."""
     return MappingProxyType({**_GROUPS, **_PART_GROUPS})
@@ -1324,6 +1354,19 @@ class Parameters:
                 group: G = self.group(name)
                 return group
         raise ParameterError(f"{cls.__name__} is not a registered parameter group")
+
+    @property
+    def period_s(self) -> float:
+        """The control loop's period: the board's and its controller's (``register_loop_period``: an Arduino's
+        ``arduino.loop_period_s``), ``daq.period_s`` on the thesis's PCI-1712. The rig ticks at it."""
+        group, field_name = self.period_field.split(".", 1)
+        return float(getattr(self.group(group), field_name))
+
+    @property
+    def period_field(self) -> str:
+        """The name of the field ``period_s`` reads ("daq.period_s", "arduino.loop_period_s"): what a message
+        about the period names."""
+        return _LOOP_PERIOD.get(self.parts.io_board, "daq.period_s")
 
     # --- derived geometry -------------------------------------------------------------------------
     @property

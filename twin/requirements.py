@@ -431,7 +431,7 @@ def margins(
 ) -> dict[str, float]:
     """Each requirement's robustness over the run of ``log`` (``run_signals`` then ``robustness``)."""
     signals = run_signals(log, params, setpoint_m, named(requirements))
-    return robustness(requirements, signals, params.daq.period_s)
+    return robustness(requirements, signals, params.period_s)
 
 
 def violated(values: Mapping[str, float]) -> list[str]:

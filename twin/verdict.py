@@ -230,7 +230,7 @@ def ball_step_bound_m(params: Parameters) -> float:
     """The farthest a ball can move in one period: from rest at one end, the whole track downhill at the
     steepest beam (the stops) without rolling inertia or friction (a bound for any ball and contact)."""
     a = params.physics.gravity_m_s2 * math.sin(params.beam.stop_angle_rad)
-    t = params.daq.period_s
+    t = params.period_s
     v = math.sqrt(2.0 * a * 2.0 * params.track.half_length_m)
     return min(v * t + 0.5 * a * t * t, 2.0 * params.track.half_length_m)
 

@@ -91,7 +91,7 @@ class EnvConfig:
 
     @property
     def ticks(self) -> int:
-        return episode_ticks(self.duration_s, self.params.daq.period_s)
+        return episode_ticks(self.duration_s, self.params.period_s)
 
 
 def make_config(
@@ -151,7 +151,7 @@ def make_config(
         raise ValueError(f"observation = {observation!r}: expected 'volts' or 'converted'")
     if action not in ("dac", "motor"):
         raise ValueError(f"action = {action!r}: expected 'dac' or 'motor'")
-    episode_ticks(duration_s, base.daq.period_s, MAX_RUN_S)  # a positive duration, at most a run's
+    episode_ticks(duration_s, base.period_s, MAX_RUN_S)  # a positive duration, at most a run's
     x0r = _range("x0_range_m", x0_range_m)
     th0r = _range("theta0_range_rad", theta0_range_rad)
     spr = _range("setpoint_range_m", setpoint_range_m)

@@ -228,7 +228,7 @@ def fmu_controller(spec: str, params: Parameters) -> Controller:
     if not path:
         raise ParameterError(f"--controller {spec!r}: expected fmu:FILE.fmu")
     try:
-        return FmuController(path, params.daq.period_s)
+        return FmuController(path, params.period_s)
     except (FmuError, OSError) as exc:
         raise ParameterError(f"--controller {spec}: {one_line(exc)}") from None
 

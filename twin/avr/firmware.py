@@ -141,7 +141,7 @@ class AvrFirmware:
         self.board = board_for(self.mcu)
         self.io = params.mcu_io
         self.clock_hz = int(params.mcu_io.clock_hz)
-        self.period_s = params.daq.period_s
+        self.period_s = params.period_s
         self.name = name or f"avr:{path.name}"
         self.sha256 = hashlib.sha256(raw).hexdigest()
         self.telemetry = Telemetry()  # the firmware reports nothing of its estimates

@@ -182,7 +182,7 @@ class RigUnit:
         }
         if changed:
             params = params.with_overrides(changed, origin="the FMU's parameters")
-        self.period_s = params.daq.period_s
+        self.period_s = params.period_s
         self._stop_rad = params.beam.stop_angle_rad
         v = self.values
         self._sim = TwinRig(params, seed=int(v["seed"]), noise=bool(v["noise"]))

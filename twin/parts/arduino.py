@@ -18,7 +18,7 @@ and returns the board's output):
                     Wire library's 100 kHz: TWBR = 72, SCL = F_CPU/(16 + 2·TWBR), data sheet "2-wire Serial
                     Interface", "Bit Rate Generator Unit"): a latency the I²C sensors may use
     the loop        ``arduino.loop_period_s``: the sketch's control period (the board's and the controller's, not
-                    the twin's; a simulated rig still ticks at ``daq.period_s``)
+                    the twin's): the simulated rig ticks at it (``Parameters.period_s``)
 
 How the board's output reaches the actuator: ``dac_writer(params)`` turns the controller's command (µs) into
 the pulse width the servo pin carries (µs, ``servo_pulse_us``); the rig passes it to the actuator's
@@ -36,7 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from twin.interface import CommandRange
-from twin.parameters import Parameters, check_group, param, register_group
+from twin.parameters import Parameters, check_group, param, register_group, register_loop_period
 from twin.parts.contract import BatchForm, BatchWrite, IoBoardPart, MjcfFragment, register
 
 __all__ = [
@@ -136,6 +136,8 @@ class Arduino:
 
 
 register_group("arduino", Arduino)
+register_loop_period("arduino_uno", "arduino.loop_period_s")
+register_loop_period("arduino_nano", "arduino.loop_period_s")
 
 
 def analog_read_counts(volts: float | np.ndarray, reference_v: float | np.ndarray) -> float | np.ndarray:
@@ -380,6 +382,7 @@ def _board(name: str, source: str) -> IoBoardPart:
             batch_dac=_batch_dac,
             batch_adc=_batch_adc,
             volts_of=_volts_of,
+            adc_unit="counts",  # analogRead's 0 … 1023
         )
     )
 

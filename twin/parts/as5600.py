@@ -53,6 +53,7 @@ from twin.parts.contract import (
     MjcfFragment,
     board_adc,
     board_batch_adc,
+    board_reading_unit,
     board_volts_of,
     register,
 )
@@ -455,6 +456,11 @@ def as5600_angle_of(params: Parameters) -> Callable[[float], float]:
     return theta_rad
 
 
+def as5600_reading_unit(params: Parameters) -> str:
+    """Its reading's unit: RAW ANGLE counts over I²C, the board's ADC's for the analog OUT pin."""
+    return board_reading_unit(params) if params.of(AS5600).analog_output else "counts"
+
+
 AS5600_PART = register(
     AngleSensorPart(
         name="as5600",
@@ -474,5 +480,6 @@ AS5600_PART = register(
         chain=AS5600Chain,
         batch_read=AS5600Batch,
         angle_of=as5600_angle_of,
+        reading_unit=as5600_reading_unit,
     )
 )

@@ -56,6 +56,8 @@ __all__ = [
     "Role",
     "StepLaw",
     "board_batch_adc",
+    "board_reading_unit",
+    "fixed_unit",
     "missing_batch_runtime",
     "part_named",
     "register",
@@ -229,6 +231,23 @@ StepLaw = Callable[[float, float, float], float]
 BallBatchFactory = Callable[[Sequence[Parameters], np.ndarray, np.ndarray, float], BallSensorBatch]
 
 
+def board_reading_unit(params: Parameters) -> str:
+    """The unit of an analog sensor's reading (a sensor read through the board's ADC, the default
+    ``reading_unit``): the ADC's of the board ``params.parts.io_board`` names (``IoBoardPart.adc_unit``)."""
+    board = part_named("io_board", params.parts.io_board)
+    return board.adc_unit if isinstance(board, IoBoardPart) else "V"
+
+
+def _own_unit(unit: str, params: Parameters) -> str:
+    return unit
+
+
+def fixed_unit(unit: str) -> Callable[[Parameters], str]:
+    """A ``reading_unit`` that is the sensor's own, whatever the board (a digital sensor's: "mm" over I²C); a
+    partial, not a closure, so that a part still pickles."""
+    return functools.partial(_own_unit, unit)
+
+
 @dataclass(frozen=True, kw_only=True)
 class BallSensorPart(Part):
     """A ball sensor: ``chain(params, seed)`` is one run's chain (its noise seeded). ``batch_chain(params, seeds,
@@ -242,6 +261,9 @@ class BallSensorPart(Part):
     # the ball's x (m, from the track's centre), the inverse of the sensor's nominal curve; NaN for a reading that
     # carries no position (a lost echo). None: the part gives none (a controller that needs it is refused).
     position_of: Callable[[Parameters], Callable[[float], float]] | None = None
+    # The unit of its reading as the board reads it (the live view's plots name it): by default an analog
+    # sensor's, the board's ADC's (``board_reading_unit``); a digital sensor gives its own (``fixed_unit``).
+    reading_unit: Callable[[Parameters], str] = board_reading_unit
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -256,6 +278,8 @@ class AngleSensorPart(Part):
     # ``measures_angle`` False for a rig without an angle sensor (its reading carries nothing).
     angle_of: Callable[[Parameters], Callable[[float], float]] | None = None
     measures_angle: bool = True
+    # The unit of its reading, as ``BallSensorPart.reading_unit`` (default: the board's ADC's).
+    reading_unit: Callable[[Parameters], str] = board_reading_unit
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -275,6 +299,8 @@ class IoBoardPart(Part):
     # middle of its step): what an analog sensor's software conversion starts from. None: not given.
     volts_of: Callable[[Parameters], Callable[[float], float]] | None = None
     output_range: Callable[[Parameters], CommandRange] = dac_range
+    # The unit of ``adc``'s readings (the live view's plots name it; its output's is ``output_range``'s).
+    adc_unit: str = "V"
     batch_dac: Callable[[Sequence[Parameters]], BatchWrite] | None = None
     batch_adc: Callable[[Sequence[Parameters]], BatchWrite] | None = None
 
@@ -297,6 +323,8 @@ class ActuatorPart(Part):
     # command gives, nominally (no dead band, no quantization). None: the part gives none.
     command_of: Callable[[Parameters], Callable[[float], float]] | None = None
     control_of: Callable[[Parameters], Callable[[float], float]] | None = None
+    # The unit of its control (what ``drive`` gives: the motor's volts, a servo's target angle), for the view.
+    control_unit: str = "V"
     # A torque computed once per physics step from the drive joint's state (``StepLaw``; a fresh one per run),
     # for an actuator MuJoCo has no element for (a stepper's sine law and ramp): the simulated rig steps it
     # (``twin.rigs.sim.SimRig``) with its MuJoCo actuator a plain torque motor; the batch engine refuses it.

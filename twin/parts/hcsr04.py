@@ -20,7 +20,7 @@ import mujoco
 import numpy as np
 
 from twin.parameters import ParameterError, Parameters, check_group, param, register_group
-from twin.parts.contract import BallSensorPart, BatchForm, MjcfFragment, register
+from twin.parts.contract import BallSensorPart, BatchForm, MjcfFragment, fixed_unit, register
 from twin.parts.ranging import (
     SampledChain,
     Sampler,
@@ -299,5 +299,6 @@ HCSR04 = register(
         chain=_chain,
         batch_chain=Hcsr04Batch,
         position_of=hcsr04_position_of,
+        reading_unit=fixed_unit("µs"),  # pulseIn's echo width
     )
 )

@@ -398,5 +398,6 @@ HOBBY_SERVO = register(
         batch_drive=servo_batch_drive,
         command_of=servo_command_of,
         control_of=servo_control_of,
+        control_unit="rad",  # servo_drive's target angle
     )
 )

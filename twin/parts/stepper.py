@@ -610,5 +610,6 @@ STEPPER = register(
         step_law=StepperLaw,
         command_of=_steps,
         control_of=_steps,
+        control_unit="microsteps",  # stepper_drive's target
     )
 )

@@ -596,10 +596,10 @@ class BatchRig:
         on_tick: Callable[[int, int], None] | None = None,
     ) -> list[RunResult]:
         p = self.p
-        if abs(controller.period_s - p.daq.period_s) > _PERIOD_TOLERANCE_S:
+        if abs(controller.period_s - p.period_s) > _PERIOD_TOLERANCE_S:
             raise RigError(
                 f"{controller.name}: period_s = {controller.period_s!r} s does not match the DAQ's "
-                f"daq.period_s = {p.daq.period_s!r} s"
+                f"{p.period_field} = {p.period_s!r} s"
             )
         ticks = update_ticks(duration_s, p)
         cols = _Columns(ticks + 1, self.n, self.record)

@@ -51,12 +51,12 @@ __all__ = ["DaqSample", "ReferenceRig", "Rig", "RigError", "SimRig", "TwinRig", 
 
 
 def tick_schedule(params: Parameters) -> TickSchedule:
-    """The rig's ``TickSchedule`` from ``daq.period_s``, ``daq.output_latency_s`` and ``start.free_run_s``,
-    each a whole number of physics steps (else ``RigError`` naming it)."""
+    """The rig's ``TickSchedule`` from its board's period (``Parameters.period_s``), ``daq.output_latency_s``
+    and ``start.free_run_s``, each a whole number of physics steps (else ``RigError`` naming it)."""
     dt = params.physics.timestep_s
-    steps_per_tick = whole_steps(params.daq.period_s, dt, "daq.period_s")
+    steps_per_tick = whole_steps(params.period_s, dt, params.period_field)
     if steps_per_tick < 1:
-        raise RigError(f"daq.period_s = {params.daq.period_s!r} s is shorter than one physics step")
+        raise RigError(f"{params.period_field} = {params.period_s!r} s is shorter than one physics step")
     latency = whole_steps(params.daq.output_latency_s, dt, "daq.output_latency_s")
     return TickSchedule(steps_per_tick, latency, whole_steps(params.start.free_run_s, dt, "start.free_run_s"))
 
@@ -143,7 +143,7 @@ class SimRig(Rig):
     # --- the Rig interface ----------------------------------------------------------------------------
     @property
     def period_s(self) -> float:
-        return self.params.daq.period_s
+        return self.params.period_s
 
     def read(self) -> DaqSample:
         return self._read(None)

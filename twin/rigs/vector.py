@@ -212,7 +212,7 @@ class VectorRig:
 
 def _steps_key(p: Parameters) -> tuple[float, float]:
     tick_schedule(p)  # a period and latency of whole physics steps (RigError otherwise)
-    return (p.physics.timestep_s, p.daq.period_s)
+    return (p.physics.timestep_s, p.period_s)
 
 
 class _Blocks:

@@ -48,7 +48,7 @@ def warm(
 
 def _throwaway_run(rig: SimRig) -> None:
     """The ball still on one piece of the wiper curve (dropouts there), then flicked over the table's points
-    and off the track's end, the DAC at its zero command."""
+    and off the track's end, the board writing its actuator's rest command (the DAC's zero on the thesis's rig)."""
     half = rig.params.track.half_length_m
     curve = rig.params.ball_sensor.curve_position_m
     x0 = 0.5 * half
@@ -57,7 +57,7 @@ def _throwaway_run(rig: SimRig) -> None:
         x0 = 0.5 * (curve[piece - 1] + curve[piece])  # between two table points
     rig.reset(x0, 0.0)
     rig.read()  # the held block
-    zero_v = rig.params.amplifier.zero_command_v
+    zero_v = rig.parts.actuator.rest_command(rig.params)
     for tick in range(WARM_TICKS):
         if tick == WARM_TICKS // 4:
             rig.kick_ball(_FLICK_M_S)

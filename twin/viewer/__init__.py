@@ -4,7 +4,8 @@ One room per concern: ``session`` (the simulation loop's state: it owns the twin
 typed commands; GUI callbacks only enqueue actions, which the loop applies between ticks, a burst coalesced),
 ``actions`` (the GUI's handlers: a control's value checked, then a command of the session), ``security`` (who
 may connect and what a client's messages can reach: the only room touching viser's internals), ``scene`` (the
-3D nodes), ``gui`` (panels, plots, notifications), ``server`` (the viser server, the pacing loop, ``serve``)
+3D nodes), ``channels`` (what the plots show of the rig's board and parts, in its units, and the ranging
+sensor's beam), ``gui`` (panels, plots, notifications), ``server`` (the viser server, the pacing loop, ``serve``)
 and ``common`` (the controls' ranges, constants, one-line logs).
 
 Nothing a client sends is trusted: a foreign ``Origin`` or ``Host`` is refused at the handshake, a message

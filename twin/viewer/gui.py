@@ -16,43 +16,17 @@ import viser.uplot
 
 from twin.parameters import Parameters
 from twin.physics import beam_travel_rad
+from twin.viewer.channels import PLOTS as PLOTS  # the thesis's plots, where the view's tests import them
+from twin.viewer.channels import THESIS_PLOT_ASPECT as PLOT_ASPECT
+from twin.viewer.channels import plot_aspect
 from twin.viewer.common import DRIFT, FLICK, SETPOINT, SPEED, THETA0, X0, _markdown_text, _show
-from twin.viewer.scene import CAMERAS, on_camera
+from twin.viewer.scene import CAMERAS, on_camera, rig_cameras
 from twin.viewer.security import download_bytes_queued, send_uplot_data
 from twin.viewer.session import RECORD_LIMIT_S, LiveTwin, Refusal
 
 NOTIFY_EVERY_S = 0.5  # at most two refusal notifications a second (a flood shows as a count)
-# Live plots: title, then (legend label, history key, colour) per trace. Estimated = the controller's own
-# estimate (its observer or differentiator); measured = the raw readings through the software's converters.
-PLOTS = (
-    (
-        "x (m)",
-        (
-            ("x true", "x_true", "#1f77b4"),
-            ("measured", "x_meas", "#ff7f0e"),
-            ("estimated", "x_est", "#2ca02c"),
-            ("setpoint", "x_ref", "#000000"),
-        ),
-    ),
-    (
-        "θ (rad)",
-        (
-            ("θ true", "th_true", "#1f77b4"),
-            ("measured", "th_meas", "#ff7f0e"),
-            ("estimated", "th_est", "#2ca02c"),
-        ),
-    ),
-    ("θ̇ (rad/s)", (("θ̇ true", "thdot_true", "#1f77b4"), ("estimated", "thdot_est", "#2ca02c"))),
-    (
-        "I/O card (V)",
-        (
-            ("ball ADC", "ball_v", "#ff7f0e"),
-            ("angle ADC", "angle_v", "#8c564b"),
-            ("DAC out", "dac_v", "#9467bd"),
-        ),
-    ),
-    ("motor (V)", (("motor volts", "volts", "#d62728"),)),
-)
+# The live plots: the thesis rig's ``PLOTS``, a rig from other parts its own (twin.viewer.channels.part_plots).
+
 # The shadow's tab: the last predicted spans (measured and predicted), and the drift test's sums against h.
 SHADOW_PLOTS = (
     ("x (m)", (("measured", "#ff7f0e"), ("predicted", "#17becf"))),
@@ -70,7 +44,6 @@ def _series(name: str, colour: str) -> viser.uplot.Series:
 
 
 PLOT_AXIS_PX = 58  # room for a y value such as "−0.005" with its minus sign (uPlot's default clips it)
-PLOT_ASPECT = 3.4  # wide and low: all the plots fit the height of a 900 px window
 PLOT_PANEL_PX = 460
 
 
@@ -257,8 +230,9 @@ class Panels:
         gui = self.server.gui
         with gui.add_folder("Camera"):
             cameras = {name: gui.add_button(name) for name in CAMERAS}
+        views = rig_cameras(self.live.params)  # the thesis's, or moved to the rig's track
         for name, button in cameras.items():
-            button.on_click(functools.partial(on_camera, name))
+            button.on_click(functools.partial(on_camera, name, views))
         return {f"camera_{name}": button for name, button in cameras.items()}
 
     def _add_plot_panel(self) -> None:
@@ -269,9 +243,12 @@ class Panels:
         legend: viser.uplot.Legend = {"live": False}
         self.plots = []
         self.plot_panel = gui.add_panel()
+        groups = self.live.channels.plots  # the rig's channels in its board's units (PLOTS for the thesis's)
+        aspect = plot_aspect(len(groups), PLOT_PANEL_PX)
         with self.plot_panel.add_tab("Plots (last 10 s, time in s)"):
-            for label, traces in PLOTS:
-                handle = self._add_plot(label, [(name, colour) for name, _, colour in traces], scales, legend)
+            for label, traces in groups:
+                colours = [(name, colour) for name, _, colour in traces]
+                handle = self._add_plot(label, colours, scales, legend, aspect)
                 self.plots.append((handle, [key for _, key, _ in traces]))
         self.shadow_plots = []
         with self.plot_panel.add_tab("Shadow (predicted vs measured)"):
@@ -288,6 +265,7 @@ class Panels:
         traces: Sequence[tuple[str, str]],
         scales: dict[str, viser.uplot.Scale],
         legend: viser.uplot.Legend,
+        aspect: float = PLOT_ASPECT,
     ) -> viser.GuiUplotHandle:
         """One live chart: time against ``traces`` (legend label, colour), ``label`` on its y axis."""
         series = [viser.uplot.Series(label="t (s)")] + [_series(name, colour) for name, colour in traces]
@@ -297,7 +275,7 @@ class Panels:
         )
         data = tuple(np.zeros(2) for _ in series)
         return self.server.gui.add_uplot(
-            data, tuple(series), aspect=PLOT_ASPECT, scales=scales, axes=axes, legend=legend
+            data, tuple(series), aspect=aspect, scales=scales, axes=axes, legend=legend
         )
 
     def _download(self, client: Any, kind: str) -> None:

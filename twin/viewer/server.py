@@ -27,7 +27,7 @@ from twin.viewer.common import (
 )
 from twin.viewer.gui import Panels
 from twin.viewer.monitor import MonitorFactory
-from twin.viewer.scene import Scene, set_initial_camera
+from twin.viewer.scene import Scene, rig_cameras, set_initial_camera
 from twin.viewer.security import (
     OriginPolicy,
     _is_wildcard,
@@ -81,7 +81,7 @@ class Viewer:
         self.host, self.port = host, port
         harden_messages(self.server, lambda message: gui_update_refusal(self.server, message), self._dropped)
         self.server.gui.configure_theme(show_share_button=False, control_width="medium")
-        set_initial_camera(self.server)
+        set_initial_camera(self.server, rig_cameras(live.params))
         self.scene = Scene(self.server, live)
         self.panels = Panels(self.server, live, params_source)
         self.server.on_client_connect(lambda _client: live.enqueue("connected"))

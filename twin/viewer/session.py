@@ -21,7 +21,6 @@ from typing import Any
 
 import numpy as np
 
-from twin import converters
 from twin import log as log_io
 from twin.engine import Catalogue, ClosedLoop, ControllerError
 from twin.interface import DaqSample, Setpoint
@@ -30,6 +29,7 @@ from twin.physics import beam_travel_rad, check_initial_state
 from twin.rigs.sim import make_rig
 from twin.verdict import Criteria, Verdict
 from twin.viewer.actions import HANDLERS, Refused
+from twin.viewer.channels import RigChannels, rig_channels
 from twin.viewer.common import (
     FLICK_DEFAULT_M_S,
     FRAME_S,
@@ -120,6 +120,8 @@ class LiveTwin:
         initial: tuple[float, float] | None = None,
     ) -> None:
         self.params = params
+        # What the view plots of the rig, in its board's units, and the software's conversions of its readings.
+        self.channels: RigChannels = rig_channels(params)
         # The shadow (twin.viewer.monitor): off until asked for; it follows the runs at ``params``, while the
         # drift (% of motor resistance, from the next run) changes only the rig.
         self.monitor_factory = monitor
@@ -579,24 +581,25 @@ class LiveTwin:
         x, theta, xdot, thetadot = self.rig.true_state()
         est = self.controller.telemetry.estimate
         s = self.last_sample
-        sw = self.rig.params.software
+        ch = self.channels  # the parts' conversions (the thesis's: its software's eq 6.3.1 and 6.2.10)
         nan = float("nan")
         self.history.append(
             t=self.rig.time_s,
             x_true=x,
-            x_meas=converters.ball_position_m(s.ball_v, sw) if s is not None else nan,
+            x_meas=ch.x_measured_m(s.ball_v) if s is not None else nan,
             x_est=est[0],
             x_ref=self.setpoint_m,
             th_true=theta,
-            th_meas=converters.beam_angle_rad(s.angle_v, sw) if s is not None else nan,
+            th_meas=ch.theta_measured_rad(s.angle_v) if s is not None else nan,
             th_est=est[1],
             xdot_true=xdot,
             xdot_est=est[2],
             thdot_true=thetadot,
             thdot_est=est[3],
             ball_v=s.ball_v if s is not None else nan,
+            ball_read=ch.ball_shown(s.ball_v) if s is not None else nan,
             angle_v=s.angle_v if s is not None else nan,
-            dac_v=self.loop.command_v,
+            dac_v=ch.output_of(self.loop.command_v),
             volts=self.rig.motor_volts_v,
         )
 
@@ -646,7 +649,7 @@ class LiveTwin:
             f"run {self.runs} · **t = {self.rig.time_s:.2f} s** · {state} · controller: "
             f"**{_markdown_text(self.controller_name)}** · {ball}  \n"
             f"noise {'on' if self.noise else 'off'} · {speed} · "
-            f"motor {self.rig.motor_volts_v:+.2f} V{judged}{pending}{error}{notice}"
+            f"{self.channels.control_text(self.rig.motor_volts_v)}{judged}{pending}{error}{notice}"
         )
 
     def _speed_note(self) -> str:

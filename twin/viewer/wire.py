@@ -295,6 +295,6 @@ class WireCatalogue:
 
     def make(self, name: str, params: Parameters | None = None) -> Controller | StateLaw | Firmware:
         if name == self.name:
-            period_s = (params or self.server.settings.params).daq.period_s
+            period_s = (params or self.server.settings.params).period_s
             return WireClient(self.server, self.name, period_s, self._vacant)
         return self.inner.make(name, params)

@@ -155,7 +155,7 @@ class Config:
         return cls(
             role=role,
             mode=mode,
-            period_s=params.daq.period_s,
+            period_s=params.period_s,
             sample_rate_hz=params.daq.sample_rate_hz,
             watchdog_periods=watchdog_periods,
             dac_min_v=params.daq.dac_min_v,

@@ -121,7 +121,7 @@ def handle(o: Options) -> int:
     base, spread = job.params_and_spread()
     assert spread is not None
     spec = load_spec(o.spec)
-    check_timing(spec.requirements, o.spec, base.daq.period_s, o.duration)
+    check_timing(spec.requirements, o.spec, base.period_s, o.duration)
     x, th = o.x0, o.theta0
     check_start_box(base, x, th)
     runs_needed(o.guarantee, o.confidence)  # refused here if it cannot be stated

@@ -380,7 +380,7 @@ def log_bytes(text: str | None, duration_s: float, params: Parameters) -> int:
     """A lower bound of a log's size on disk (0 for a path the checks will refuse anyway)."""
     if not text:
         return 0
-    ticks = int(duration_s / params.daq.period_s) + 2
+    ticks = int(duration_s / params.period_s) + 2
     return ticks * _LOG_BYTES_PER_TICK.get(Path(text).suffix.lower(), 0)
 
 

@@ -133,7 +133,7 @@ def handle(o: Options) -> int:
     logs = [(path, read_log(path)) for path in o.logs]
     rigs = [rig_log(log, path) for path, log in logs]  # every log checked before the work
     for rig in rigs:  # a log at another period (or in ms) is the log's fault, not the window's
-        check_period(rig, params.daq.period_s)
+        check_period(rig, params.period_s)
     period_s = min(r.period_s for r in rigs)
     if o.window < 2 * period_s:
         raise ParameterError(

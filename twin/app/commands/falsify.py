@@ -175,7 +175,7 @@ def handle(o: Options) -> int:
         )
     base, spread = job.params_and_spread()
     spec = load_spec(o.spec)
-    check_timing(spec.requirements, o.spec, base.daq.period_s, o.duration)
+    check_timing(spec.requirements, o.spec, base.period_s, o.duration)
     x, th = o.x0, o.theta0
     check_start_box(base, x, th)
     axes = [Axis("x0_m", *x), Axis("theta0_rad", *th)]

@@ -48,7 +48,7 @@ def handle(o: Options) -> int:
     params = load_params(o.parameters)
     if o.setpoint is not None:
         check_on_track(params, "--setpoint", o.setpoint)
-    log = load_judged_log(o.log, params.daq.period_s)  # checked as every command checks a rig log
+    log = load_judged_log(o.log, params.period_s)  # checked as every command checks a rig log
     verdict = evaluate_measured(log, params, x_ref_m=o.setpoint or 0.0)
     summary = {
         "log": o.log,

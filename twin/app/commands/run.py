@@ -260,7 +260,7 @@ def handle(o: Options) -> int:
         from twin.avr.firmware import stuck_output
 
         summary["firmware"] = result.firmware
-        stuck = None if result.verdict.held else stuck_output(result.firmware, params.daq.period_s)
+        stuck = None if result.verdict.held else stuck_output(result.firmware, params.period_s)
         if stuck:
             summary["firmware_warning"] = stuck
             print(f"ballbeam run: {stuck}", file=sys.stderr)
@@ -330,7 +330,7 @@ def _check_timing(o: Options, requirements: tuple[Requirement, ...] | None, para
 
         where = o.spec if o.spec is not None else f"{o.replay}: requirements"
         assert o.duration is not None  # the default's, or the replay's
-        check_timing(requirements, where, params.daq.period_s, o.duration)
+        check_timing(requirements, where, params.period_s, o.duration)
 
 
 def _set_by_the_rig(o: Options) -> list[tuple[str, object]]:
@@ -441,7 +441,7 @@ def _run_in_process(
     controller = build(o.controller, params)
     if o.setpoint is not None:
         _apply_setpoint(controller, o.controller, o.setpoint, params)
-    pacer = WallClockPacer(params.daq.period_s) if o.realtime else None
+    pacer = WallClockPacer(params.period_s) if o.realtime else None
     try:
         result = run_closed_loop(
             controller,

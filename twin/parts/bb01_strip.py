@@ -1,0 +1,301 @@
+"""Quanser BB01's ball sensor (``bb01_strip``), group ``bb01_strip``: "a steel rod in parallel with a
+nickel-chromium wire-wound resistor forming the track"; the ball is the wiper, and the voltage is read at the rod
+(BB01 User Manual, Quanser Doc. No. 709 Rev 2.1, §2.2.1). The strip is fed ±5 V at its ends, so the rod's voltage
+is linear in the ball's position and FALLS as x rises: Quanser's calibration K_BS = −L/10 m/V (``config_bb.m``:
+±5 V over the beam's L = 0.42545 m).
+
+    V = V₀ + x/K_BS, clipped to ±V_s     ``strip_volts``: x (m) from the track's centre (the beam's middle, +x
+                                         toward the lifted end), V₀ an offset (0: the lab's software assumes
+                                         none), V_s the strip's ±5 V ends
+
+The board reads V at each block's end through its ADC (``IoBoardPart.adc``: the Q8-USB's 16-bit ±10 V), with the
+wiper's contact noise added: one Gaussian draw of ``noise_v`` per reading from the run's seeded generator
+(``ball_sensor.noise_enabled`` off: the draw is made and dropped, as the other ball sensors do). A ball off the
+track (lost) reads where the plant last had it, clipped to the strip's ends. ``filtered_v`` is the noiseless rod
+voltage now (no filter on the BB01's signal).
+
+The software's conversion (``position_of``) is the lab's x = K_BS·V (config_bb.m), from the board's volts.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from twin.parameters import ParameterError, Parameters, check_group, param, register_group
+from twin.parts.contract import (
+    BallSensorPart,
+    BatchForm,
+    MjcfFragment,
+    board_batch_adc,
+    board_volts_of,
+    register,
+)
+from twin.parts.ranging import form_inputs, make_rng
+from twin.physics import PhysicsBlock
+
+__all__ = ["BB01_STRIP", "Bb01Strip", "Bb01StripBatch", "Bb01StripChain", "strip_position_of", "strip_volts"]
+
+_CONTINUITY_S = 1e-9  # a block's first time and the chain's may differ by the clock's rounding
+
+
+@dataclass(frozen=True)
+class Bb01Strip:
+    """The strip's calibration (K_BS, offset), its supply and its contact noise."""
+
+    gain_m_per_v: float = param(
+        -0.042545,
+        "m/V",
+        "Quanser config_bb.m K_BS = −L/10 = −0.042545 m/V (±5 V over L = 0.42545 m; x rising, V falling)",
+        ge=-1.0,
+        le=1.0,
+        why="a strip on a bench beam under 2 m long fed at most ±10 V: |K| ≤ 1 m/V (0 is refused: no reading)",
+    )
+    offset_v: float = param(
+        0.0,
+        "V",
+        "assumed: the rod at 0 V with the ball at the beam's middle, as the lab's x = K_BS·V takes it; fit from a "
+        "log",
+        ge=-5.0,
+        le=5.0,
+        why="an offset within the strip's ±5 V",
+    )
+    supply_v: float = param(
+        5.0,
+        "V",
+        "Quanser config_bb.m: the sensor spans ±5 V over the beam (K_BS = −L/10 m/V)",
+        gt=0.0,
+        le=10.0,
+        why="a strip read by a ±10 V card",
+    )
+    noise_v: float = param(
+        0.005,
+        "V",
+        "assumed: 5 mV standard deviation of the wiper's contact noise on each reading (0.2 mm of x); fit from "
+        "a log",
+        ge=0.0,
+        le=1.0,
+        why="1 V of noise is 43 mm of ball, a fifth of the beam: a broken contact, not noise",
+    )
+
+    def __post_init__(self) -> None:
+        check_group(self, "bb01_strip")
+        if self.gain_m_per_v == 0.0:
+            raise ParameterError(
+                "bb01_strip.gain_m_per_v = 0.0 m/V is impossible: the strip would read nothing"
+            )
+
+
+register_group("bb01_strip", Bb01Strip)
+
+
+def strip_volts(
+    x_m: float | np.ndarray,
+    gain_m_per_v: float | np.ndarray,
+    offset_v: float | np.ndarray,
+    supply_v: float | np.ndarray,
+) -> float | np.ndarray:
+    """The rod's volts with the ball at x: V₀ + x/K_BS clipped to ±V_s (module docstring). One float in, one
+    float out; arrays elementwise, the same bits."""
+    volts = np.clip(
+        np.asarray(offset_v, dtype=float) + np.asarray(x_m, dtype=float) / gain_m_per_v,
+        -np.asarray(supply_v, dtype=float),
+        supply_v,
+    )
+    return float(volts) if np.ndim(volts) == 0 else volts
+
+
+class Bb01StripBatch:
+    """N runs' strips in step (``twin.parts.contract.BallSensorBatch``), each run its own parameters and seeded
+    generator; ``readings`` the board's last reading of each, ``output`` the rod's noiseless volts."""
+
+    def __init__(
+        self,
+        params: Sequence[Parameters],
+        seeds: np.ndarray | Sequence[int | np.random.Generator | None],
+        x0_m: np.ndarray,
+        t0_s: float,
+    ) -> None:
+        x0 = np.asarray(x0_m, dtype=float)
+        self.rngs = [make_rng(s) for s in (seeds.tolist() if isinstance(seeds, np.ndarray) else seeds)]
+        if not len(params) == len(self.rngs) == len(x0):
+            raise ValueError(f"{len(x0)} runs need {len(x0)} parameter sets and seeds")
+        self.use_params(params)
+        self.time_s = float(t0_s)
+        runs = np.arange(len(x0))
+        self.output = np.asarray(strip_volts(x0, self.gain, self.offset, self.supply), dtype=float)
+        self.readings = np.asarray(self.adc(runs, self.output), dtype=float)  # at rest: the noiseless rod
+
+    def use_params(self, params: Sequence[Parameters]) -> None:
+        strips = [p.of(Bb01Strip) for p in params]
+        self.gain = np.array([s.gain_m_per_v for s in strips])
+        self.offset = np.array([s.offset_v for s in strips])
+        self.supply = np.array([s.supply_v for s in strips])
+        self.noise = np.array([s.noise_v for s in strips])
+        self.noisy = np.array([p.ball_sensor.noise_enabled for p in params])
+        self.adc = board_batch_adc(params)
+
+    def advance(
+        self, runs: np.ndarray, times_s: np.ndarray, x_m: np.ndarray, on_track: np.ndarray
+    ) -> np.ndarray:
+        """The board's readings of the runs ``runs`` at the block's end: the rod's volts for x there, one noise
+        draw each (each run's generator, in order), clipped to the strip's ends, through the board's ADC."""
+        x = np.asarray(x_m, dtype=float)[:, -1]
+        level = np.asarray(strip_volts(x, self.gain[runs], self.offset[runs], self.supply[runs]), dtype=float)
+        z = np.array([self.rngs[i].standard_normal() for i in runs.tolist()])
+        noise = np.where(self.noisy[runs], self.noise[runs] * z, 0.0)
+        pin = np.clip(level + noise, -self.supply[runs], self.supply[runs])
+        self.output[runs] = level
+        self.readings[runs] = np.asarray(self.adc(runs, pin), dtype=float)
+        self.time_s = float(np.asarray(times_s)[-1])
+        return self.readings[runs].copy()
+
+
+_ONE_RUN = np.zeros(1, dtype=np.int64)
+
+
+class Bb01StripChain:
+    """One run of the strip (``twin.parts.contract.BallSensorChain``): the batch of one run."""
+
+    reading_v: float
+    filtered_v: float
+
+    def __init__(
+        self, params: Parameters, seed: int | np.random.Generator | None, *, x_m: float = 0.0
+    ) -> None:
+        self.params = params
+        self._rng = make_rng(seed)
+        self.reset(x_m)
+
+    @property
+    def dropout_count(self) -> int:
+        """The strip loses no readings (a lost ball reads where it was)."""
+        return 0
+
+    def reset(
+        self,
+        x_m: float,
+        t_s: float = 0.0,
+        *,
+        in_contact: bool = True,
+        seed: int | np.random.Generator | None = None,
+    ) -> None:
+        """The ball at rest at ``x_m``; ``seed`` (optional) restarts the noise from that seed."""
+        if seed is not None:
+            self._rng = make_rng(seed)
+        self._batch = Bb01StripBatch([self.params], [self._rng], np.array([float(x_m)]), float(t_s))
+        self._sync()
+
+    def set_params(self, params: Parameters) -> None:
+        """New parameters from now on; the generator runs on."""
+        self.params = params
+        self._batch.use_params([params])
+
+    def _sync(self) -> None:
+        self.reading_v = float(self._batch.readings[0])
+        self.filtered_v = float(self._batch.output[0])
+
+    def advance(self, times_s: np.ndarray, x_m: np.ndarray, in_contact: bool | np.ndarray = True) -> float:
+        """One block from the chain's time: the board's reading at its end."""
+        t, x = np.asarray(times_s, dtype=float), np.asarray(x_m, dtype=float)
+        if t.ndim != 1 or t.shape != x.shape or not (np.isfinite(t).all() and np.isfinite(x).all()):
+            raise ValueError("times_s and x_m must be finite 1-D arrays of one length")
+        if abs(float(t[0]) - self._batch.time_s) > _CONTINUITY_S:
+            raise ValueError(f"times_s[0] = {t[0]!r} s: the block must start at the chain's time")
+        return self._advance(t, x, np.broadcast_to(np.asarray(in_contact, dtype=bool), t.shape))
+
+    def advance_block(self, block: PhysicsBlock) -> float:
+        """``advance`` for a block the rig built."""
+        return self._advance(block.time_s, block.x_m, block.on_track)
+
+    def advance_rig_block(
+        self,
+        times_s: np.ndarray,
+        x_m: np.ndarray,
+        in_contact: np.ndarray,
+        equal_steps: bool,
+        x_range_m: tuple[float, float] | None = None,
+        all_on_track: bool | None = None,
+    ) -> float:
+        """``advance`` for a block the rig built (checked by the rig; the hints are unused)."""
+        return self._advance(np.asarray(times_s, dtype=float), np.asarray(x_m, dtype=float), in_contact)
+
+    def _advance(self, t: np.ndarray, x: np.ndarray, contact: np.ndarray) -> float:
+        self._batch.advance(_ONE_RUN, t, x[None, :], np.asarray(contact, dtype=bool)[None, :])
+        self._sync()
+        return self.reading_v
+
+
+def _chain(params: Parameters, seed: int) -> Bb01StripChain:
+    return Bb01StripChain(params, seed)
+
+
+def strip_position_of(params: Parameters) -> Callable[[float], float]:
+    """The lab software's conversion: the board's reading → volts → x = K_BS·V (config_bb.m); every finite volt is
+    a position on the strip (NaN only for a reading that is not a number)."""
+    gain = params.of(Bb01Strip).gain_m_per_v
+    volts_of = board_volts_of(params)
+    return lambda reading: gain * volts_of(reading) if math.isfinite(reading) else math.nan
+
+
+# --- the batch form: a ball rolling through blocks of the rig, N runs at once ---------------------------------
+_Q8 = Parameters().with_overrides({"parts.io_board": "quanser_q8_usb", "bb01_strip.noise_v": 0.05})
+_FORM_BLOCKS, _FORM_STEPS = 8, 20  # 160 ms of 20 ms blocks at 1 ms steps
+
+
+def _form_track(params: Parameters, row: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The row's ball (seed, start, speed) rolling at constant speed: times, positions, on-track flags."""
+    times = np.arange(_FORM_BLOCKS * _FORM_STEPS + 1) * params.physics.timestep_s
+    x = row[1] + row[2] * times
+    return times, x, np.abs(x) <= params.track.half_length_m
+
+
+def _single(params: Parameters, row: np.ndarray) -> np.ndarray:
+    """One run's chain as the rig resets and advances it: each block's reading and the rod's volts at the end."""
+    times, x, on = _form_track(params, row)
+    chain = Bb01StripChain(params, int(row[0]), x_m=float(x[0]))
+    out = []
+    for b in range(_FORM_BLOCKS):
+        k = slice(b * _FORM_STEPS, (b + 1) * _FORM_STEPS + 1)
+        out.append(chain.advance_rig_block(times[k], x[k], on[k], True))
+    return np.array([*out, chain.filtered_v])
+
+
+def _batch(params: Sequence[Parameters], rows: np.ndarray) -> np.ndarray:
+    """Every run at once (``Bb01StripBatch``)."""
+    tracks = [_form_track(p, row) for p, row in zip(params, rows, strict=True)]
+    times = tracks[0][0]
+    x = np.array([track[1] for track in tracks])
+    on = np.array([track[2] for track in tracks])
+    many = Bb01StripBatch(list(params), rows[:, 0].astype(np.int64), x[:, 0], 0.0)
+    runs = np.arange(len(rows))
+    out = []
+    for b in range(_FORM_BLOCKS):
+        k = slice(b * _FORM_STEPS, (b + 1) * _FORM_STEPS + 1)
+        out.append(many.advance(runs, times[k], x[:, k], on[:, k]))
+    return np.column_stack([*out, many.output])
+
+
+BB01_STRIP = register(
+    BallSensorPart(
+        name="bb01_strip",
+        source="BB01 User Manual (Quanser Doc. No. 709 Rev 2.1) §2.2.1: the ball as the wiper of a wire-wound "
+        "strip beside the steel rod; Quanser config_bb.m K_BS = −L/10 m/V over ±5 V; noise assumed (fit from a "
+        "log)",
+        groups={"bb01_strip": Bb01Strip},
+        equations=(strip_volts, strip_position_of, Bb01StripBatch),
+        mjcf=MjcfFragment(),
+        batch=BatchForm(
+            _single,
+            _batch,
+            form_inputs(_Q8, ("bb01_strip.gain_m_per_v", "bb01_strip.noise_v", "bb01_strip.offset_v")),
+            "twin.parts.bb01_strip.Bb01StripBatch",
+        ),
+        chain=_chain,
+        batch_chain=Bb01StripBatch,
+        position_of=strip_position_of,
+    )
+)
