@@ -9,6 +9,9 @@ The public surface (the implementation is in the modules named):
                                                        Calibration.problems; calib.adequacy: the residuals)
     FITTABLE                                           the parameters it can fit, with their bounds
     load_table(path), calibrate_table(table)           calib.static: Table 6.3-style sensor tables
+    calib.part_identify.calibrate_part_rig(serial_log, fit, start)
+                                                       a part-built rig (servo, lever, VL53L0X) fitted to
+                                                       its sketch's serial log (calib.serial_log)
     EXPERIMENTS, RECOMMENDED, run_experiment(name, params)
                                                        calib.experiments: what to record on a rig
     write_report(calibration, out_dir)                 calib.report: params.toml, calibration.json, report

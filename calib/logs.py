@@ -27,7 +27,9 @@ from pathlib import Path
 
 import numpy as np
 
+from twin.interface import CommandRange
 from twin.log import LogError, RunLog, load_csv, load_mat
+from twin.parameters import Parameters
 
 __all__ = [
     "rig_log",
@@ -106,6 +108,9 @@ class RigLog:
     # False: a span of a longer stream (the shadow's live windows): checked tick by tick as a log is, but not
     # held to identification's minimum duration and excitation.
     whole: bool = field(default=True, repr=False)
+    # The board's output range (a rig of other parts: its board's, ``CommandRange``); None: the PCI-1712's DAC,
+    # whose ADC's ±5 V the readings are held to as well (another board's readings are in its sensors' units).
+    board: CommandRange | None = field(default=None, repr=False)
     period_s: float = field(init=False)
 
     def __post_init__(self) -> None:
@@ -184,6 +189,14 @@ class RigLog:
                 f"{MIN_DURATION_S} s of data",
             )
         u = self.command_v
+        if self.board is not None:
+            bad = np.flatnonzero((u < self.board.low) | (u > self.board.high))
+            if bad.size:
+                i = int(bad[0])
+                raise self._fail(
+                    "command_v", i, f"{float(u[i])!r} {self.board.unit} is outside {self.board.text()}"
+                )
+            return period
         bad = np.flatnonzero((u < DAC_MIN_V) | (u > DAC_MAX_V))
         if bad.size:
             i = int(bad[0])
@@ -234,7 +247,7 @@ def load_rig_log(path: str | Path) -> RigLog:
     return rig_log(read_log(path), path)
 
 
-def check_period(log: RigLog, period_s: float) -> None:
+def check_period(log: RigLog, period_s: float, field_name: str = "daq.period_s") -> None:
     """Refuse a log whose median tick spacing is not ``period_s`` (the parameters' ``daq.period_s``) within
     ``PERIOD_TOLERANCE``: a log recorded at another period, or its ``timem`` in other units (ms), whose
     zero-order hold, block mean and times the model would read wrong. A ``LogError`` naming the file, the field
@@ -242,20 +255,30 @@ def check_period(log: RigLog, period_s: float) -> None:
     if abs(log.period_s - period_s) > PERIOD_TOLERANCE * period_s:
         raise LogError(
             f"{log.path}: {_name('time_s')} ticks every {log.period_s * 1e3:.6g} ms but the parameters' "
-            f"daq.period_s is {period_s * 1e3:.6g} ms: the model's zero-order hold and block mean would "
-            f"be wrong; give the log's period (--set daq.period_s={log.period_s:.6g})"
+            f"{field_name} is {period_s * 1e3:.6g} ms: the model's zero-order hold and block mean would "
+            f"be wrong; give the log's period (--set {field_name}={log.period_s:.6g})"
         )
 
 
-def load_judged_log(path: str | Path, period_s: float) -> RunLog:
+def board_range(params: Parameters) -> CommandRange | None:
+    """The output range a log of the rig ``params`` describes is held to: its board's (``RigLog.board``), None
+    for the thesis's PCI-1712 (its DAC's and ADC's volts)."""
+    from twin.parts import is_thesis_rig, rig_parts
+
+    parts = rig_parts(params)
+    return None if is_thesis_rig(parts) else parts.io_board.output_range(params)
+
+
+def load_judged_log(path: str | Path, params: Parameters) -> RunLog:
     """A log to judge (``ballbeam judge``): read as ``read_log`` does and checked tick by tick as every rig log
-    is (``RigLog``: the ADC's and DAC's volts, strictly increasing time without gaps, at least two ticks), its
-    tick spacing ``period_s`` (``check_period``), but not held to identification's minimum duration and
-    excitation (a ball lost after a second is a verdict too). Returns the log as read."""
+    is (``RigLog``: the ADC's and DAC's volts, or the board's range on a rig of other parts, strictly
+    increasing time without gaps, at least two ticks), its tick spacing the rig's period (``check_period``),
+    but not held to identification's minimum duration and excitation (a ball lost after a second is a verdict
+    too). Returns the log as read."""
     path = Path(path)
     log = read_log(path)
-    rig = rig_log(log, path, whole=False)
-    check_period(rig, period_s)
+    rig = rig_log(log, path, whole=False, board=board_range(params))
+    check_period(rig, params.period_s, params.period_field)
     return log
 
 
@@ -305,9 +328,11 @@ def read_mat73(path: str | Path) -> dict[str, np.ndarray]:
     return out
 
 
-def rig_log(log: RunLog, path: str | Path = "<memory>", *, whole: bool = True) -> RigLog:
+def rig_log(
+    log: RunLog, path: str | Path = "<memory>", *, whole: bool = True, board: CommandRange | None = None
+) -> RigLog:
     """The identification ticks of a log already in memory (e.g. a twin run), validated as a file would be
-    (``whole=False``: tick by tick only, see ``RigLog.whole``)."""
+    (``whole=False``: tick by tick only, see ``RigLog.whole``; ``board``: see ``RigLog.board``)."""
     return RigLog(
         path=Path(path),
         time_s=log.timem[1:],
@@ -315,4 +340,5 @@ def rig_log(log: RunLog, path: str | Path = "<memory>", *, whole: bool = True) -
         angle_v=log.datam2[1:],
         command_v=log.aout[1:],
         whole=whole,
+        board=board,
     )

@@ -14,6 +14,7 @@ from calib.logs import (
     DAC_STEP_V,
     MIN_DURATION_S,
     RigLog,
+    load_judged_log,
     load_rig_log,
 )
 from controllers import registry
@@ -121,6 +122,7 @@ def test_a_twin_log_loads_without_its_truth(tmp_path: Path, twin_log_path: Path)
         "command_v",
         "period_s",
         "whole",  # a whole log or a span of a stream (calib.shadow): a flag, no signal
+        "board",  # the board's output range a log is held to (a rig of other parts): no signal
     }
     for name in TRUTH_FIELDS:
         assert not hasattr(rig, name), name
@@ -284,3 +286,21 @@ def test_a_channel_outside_the_adc_range_is_refused(
 def test_unknown_suffix(tmp_path: Path, name: str, shown: str) -> None:
     path = write_rig_mat(tmp_path / "x.mat", rig_rows()).rename(tmp_path / name)
     refused(path, shown, ".mat", ".csv")
+
+
+@pytest.mark.quick
+def test_a_rig_of_other_parts_log_is_held_to_its_boards_range(tmp_path: Path) -> None:
+    """An Arduino rig's log carries servo pulses (µs): held to the board's pulse range, not the DAC's volts,
+    and a pulse outside it refused naming the tick, the value and the range's parameters."""
+    from twin.parts.description import preset
+
+    obb = preset("open-ball-and-beam")
+    rows = rig_rows()
+    rows["aout"] = np.full(len(rows["timem"]), 1500.0)
+    path = write_rig_mat(tmp_path / "obb.mat", rows)
+    assert load_judged_log(path, obb).aout[2] == 1500.0
+    with pytest.raises(LogError, match="'aout' .*index 2: 1500.0 V is outside the DAC"):
+        load_judged_log(path, Parameters())  # the thesis's card: volts
+    rows["aout"][5] = 3000.0
+    with pytest.raises(LogError, match=r"index 6: 3000.0 µs is outside the servo pulse.s range arduino.servo_min_us"):
+        load_judged_log(write_rig_mat(tmp_path / "far.mat", rows), obb)

@@ -65,7 +65,11 @@ def test_open_ball_and_beams_linkage_reproduces_its_measured_angle_against_pulse
         ("thesis", (0.15, -0.1), 5.0),  # measured: −1.4 mm, 0.86 mm RMS
         ("arduino-stepper-ultrasonic", (0.05, 0.0), 8.0),  # measured: 3.9 mm RMS
         ("arduino-stepper-ultrasonic", (-0.1, 0.0), 8.0),  # measured: 2.0 mm RMS
-        ("quanser-bb01", (-0.15, 0.0), 5.0),  # measured: 1.2 mm, 1.12 mm RMS (the arm's weight: test_preset_bb01)
+        (
+            "quanser-bb01",
+            (-0.15, 0.0),
+            5.0,
+        ),  # measured: 1.2 mm, 1.12 mm RMS (the arm's weight: test_preset_bb01)
     ],
 )
 def test_rig_lqg_designed_from_the_presets_linearization_holds_the_ball(

@@ -288,18 +288,15 @@ def test_the_screening_policy_falls_back_to_mujoco_for_a_rig_the_fast_engine_ref
 
 
 @pytest.mark.quick
-def test_a_beam_hinged_off_its_tracks_centre_is_refused_by_its_fields() -> None:
-    """The reference model's beam hinged elsewhere than under its track (``beam.track_offset_m``) has no kernel
-    form yet: the fast engine refuses it rather than run it as a centred beam."""
-    from twin.parameters import Beam
+def test_a_beam_hinged_off_its_tracks_centre_is_a_hinged_row() -> None:
+    """The reference model's beam hinged elsewhere than under its track (``beam.track_offset_m``) is run, not
+    refused, as a hinged row (tests/test_screen_hinged.py holds it to the reference plant)."""
+    from twin.screen.plant import HINGED, OFFSET
 
-    if "track_offset_m" not in Beam.__dataclass_fields__:
-        pytest.skip("this tree's beam has no track offset")
     rig = Parameters().with_overrides({**LEVER_SERVO, "beam.track_offset_m": 0.05})
-    refusal = kernel_refusal(rig)
-    assert refusal is not None and refusal.startswith("beam.track_offset_m = 0.05")
-    with pytest.raises(ValueError, match=r"run 0: beam\.track_offset_m = 0\.05"):
-        plant_rows([rig])
+    assert kernel_refusal(rig) is None
+    row = plant_rows([rig]).rows[0]
+    assert row[HINGED] == 1.0 and row[OFFSET] == 0.05
 
 
 @pytest.mark.quick

@@ -344,3 +344,18 @@ def test_the_cameras_look_at_the_rigs_track(name: str, shift_m: float, scale: fl
         assert look_at == pytest.approx((t_look_at[0] + shift_m, t_look_at[1], t_look_at[2]), abs=1e-12)
         ours, theirs = np.subtract(position, look_at), np.subtract(t_position, t_look_at)
         np.testing.assert_allclose(ours, scale * theirs, atol=1e-12)  # the same direction, nearer
+
+
+def test_the_status_lines_peak_is_the_actuators_control_in_its_unit() -> None:
+    """On a servo rig the verdict's peak control is the servo's target angle (rad), not motor volts at rails."""
+    from controllers.rig_lqg import rig_lqg
+    from twin.rigs.sim import run_closed_loop
+    from twin.viewer.channels import rig_channels
+    from twin.viewer.session import verdict_text
+
+    rig = preset("open-ball-and-beam")
+    result = run_closed_loop(rig_lqg(rig), x0_m=0.05, theta0_rad=0.0, duration_s=6.0, params=rig)
+    text = verdict_text(result.verdict, channels=rig_channels(rig))
+    peak = result.verdict.peak_motor_voltage_v
+    assert f"peak hobby_servo {peak:.4g} rad" in text and "rails" not in text
+    assert "% at the rails" in verdict_text(result.verdict)  # the thesis's line, as it always was

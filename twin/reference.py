@@ -47,6 +47,7 @@ __all__ = [
     "driven_beam_terms",
     "geared_motor_numbers",
     "geared_shaft_torque_nm",
+    "hinged_beam_terms",
     "pivot_friction_nm",
     "rk4_step",
     "step_boundary",
@@ -407,6 +408,15 @@ def driven_beam_terms(
     )
 
 
+def hinged_beam_terms(x: Any, co: Any, torque_nm: Any, offset_m: Any, weight_nm: Any) -> tuple[Any, Any]:
+    """A beam hinged elsewhere than under its track's centre (``beam.track_offset_m`` = d, ``beam.cog_along_m`` =
+    x_g): eq 3.1.26/3.1.27 hold in the ball's distance from the pivot, x + d (x stays measured from the track's
+    centre), and the beam's weight x_g out along it loads the drive, τ − M_B·g·x_g·cos θ (``weight_nm`` =
+    M_B·g·x_g, ``co`` = cos θ). (x + d, τ − M_B·g·x_g·cos θ); arithmetic only: the reference plant and the compiled
+    kernel (twin.screen) alike."""
+    return x + offset_m, torque_nm - weight_nm * co
+
+
 def drive_stop_derivative(
     k1: Any, g: Any, x: Any, th: Any, xd: Any, thd: Any, s: Any, xdd: Any, thdd: Any, lo: Any, hi: Any
 ) -> tuple[Any, Any, Any, Any]:
@@ -644,14 +654,14 @@ class ReferencePlant:
         weight_nm = self.params.beam.mass_kg * q.g * self.params.beam.cog_along_m
 
         def f(x: float, th: float, xd: float, thd: float, ctrl: float) -> tuple[float, float, float, float]:
+            # the compiled kernel's hinged rows (twin.screen.plant ``_f_driven``) are these calls in this order
             phi, dphi, ddphi = shaft(th)
             a2, torque = driven_beam_terms(alpha, j_s, dphi, ddphi, thd, shaft_torque(ctrl, phi, dphi * thd))
             s, co = math.sin(th), math.cos(th)
-            xp = x + d
+            xp, torque = hinged_beam_terms(x, co, torque, d, weight_nm)
             xdd, thdd = ball_beam_accelerations(
                 q.k1, q.k2, q.c, q.g, q.alpha_xdd, a2, q.alpha_thdd_x2,
-                b1, b2, b3, b4, q.beta_thetadot, xp, xd, thd, s, co, pivot_friction_nm(q.coulomb_nm, thd),
-                torque - weight_nm * co,
+                b1, b2, b3, b4, q.beta_thetadot, xp, xd, thd, s, co, pivot_friction_nm(q.coulomb_nm, thd), torque,
             )  # fmt: skip
             return drive_stop_derivative(q.k1, q.g, xp, th, xd, thd, s, xdd, thdd, lo, hi)
 

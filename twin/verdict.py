@@ -24,6 +24,7 @@ those signals (its docstring lists each field's source and limits).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, replace
 from typing import TYPE_CHECKING
 
@@ -35,6 +36,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "Criteria",
+    "MeasuredChannels",
     "at_rail",
     "Trace",
     "Verdict",
@@ -235,8 +237,34 @@ def ball_step_bound_m(params: Parameters) -> float:
     return min(v * t + 0.5 * a * t * t, 2.0 * params.track.half_length_m)
 
 
+# A rig of other parts whose ball sensor reads no position this long has lost the ball: several of the slowest
+# sensor's periods (an HC-SR04's 60 ms cycle), so one wrong return held over the ticks it spans is not a loss.
+NO_POSITION_LOST_S = 0.2
+
+
+@dataclass(frozen=True)
+class MeasuredChannels:
+    """How a rig of other parts than the thesis's turns its log's channels into what a verdict reads, each
+    through its part's software conversion (``twin.parts.measured_channels`` builds it): ``x_m`` the ball
+    reading's position (NaN for a reading that carries none: an out-of-range code, a lost echo); ``theta_rad``
+    the angle reading's angle, None for a rig that measures no angle; ``control`` the actuator's control for
+    the board's command (a servo's target angle, a motor's volts) and ``control_limit`` its magnitude at the
+    board's range ends (the "rails"); ``angle_step_rad`` one step of the angle reading (0 without one)."""
+
+    x_m: Callable[[np.ndarray], np.ndarray]
+    theta_rad: Callable[[np.ndarray], np.ndarray] | None
+    control: Callable[[np.ndarray], np.ndarray]
+    control_limit: float
+    angle_step_rad: float
+
+
 def _measured_loss(
-    t: np.ndarray, ball_v: np.ndarray, x: np.ndarray, params: Parameters, c: Criteria
+    t: np.ndarray,
+    ball_v: np.ndarray,
+    x: np.ndarray,
+    params: Parameters,
+    c: Criteria,
+    channels: MeasuredChannels | None = None,
 ) -> tuple[float | None, str]:
     """The time of the first released tick at which the signals say the ball is gone, and why."""
     from twin.daq import adc_lsb_v
@@ -247,8 +275,20 @@ def _measured_loss(
     step_m = ball_step_bound_m(params)
     n = len(t)
     for i in np.flatnonzero(t >= 0.0).tolist():
-        if ball_v[i] <= daq.adc_min_v + 0.5 * lsb or ball_v[i] >= daq.adc_max_v - 1.5 * lsb:
+        if channels is None and (
+            ball_v[i] <= daq.adc_min_v + 0.5 * lsb or ball_v[i] >= daq.adc_max_v - 1.5 * lsb
+        ):
             return float(t[i]), f"the ball channel at the ADC's rail ({ball_v[i]:+.4f} V)"
+        if channels is not None and not math.isfinite(x[i]):
+            # no position read: a wrong return lasts one range (a VL53L0X's 33 ms, an HC-SR04's 60 ms cycle,
+            # held over the ticks it spans); a ball gone reads none for good
+            gap = np.flatnonzero(np.isfinite(x[i:]))
+            last_s = float(t[i + int(gap[0]) - 1]) if gap.size else float(t[-1])
+            if last_s - float(t[i]) >= NO_POSITION_LOST_S:
+                return float(
+                    t[i]
+                ), f"the ball sensor read no ball ({ball_v[i]:g}) for {NO_POSITION_LOST_S:g} s"
+            continue
         if abs(x[i]) >= end_m:
             return float(t[i]), f"the ball read at {x[i] * 1e3:+.1f} mm, at the track's end"
         # A jump no ball can make in one period that does not come back the next tick: the wiper lost the
@@ -256,19 +296,37 @@ def _measured_loss(
         if i > 0 and abs(x[i] - x[i - 1]) > step_m and (i + 1 >= n or abs(x[i + 1] - x[i - 1]) > 2 * step_m):
             return float(t[i]), (
                 f"the ball reading jumped {(x[i] - x[i - 1]) * 1e3:+.0f} mm in one tick "
-                f"(a ball moves at most {step_m * 1e3:.0f} mm) and stayed: the wiper lost the ball"
+                f"(a ball moves at most {step_m * 1e3:.0f} mm) and stayed: the sensor lost the ball"
             )
     return None, ""
 
 
-def _without_glitches(x: np.ndarray) -> np.ndarray:
-    """The median of each reading and its two neighbours (the ends kept): a contact dropout reads the open
-    wiper for one tick, a spike of centimetres that no ball makes, which would pass for a limit cycle and
-    restart the settling clock; a ball's motion over three ticks (40 ms) is nearly straight and passes."""
-    if x.size < 3:
+def _without_glitches(x: np.ndarray, half: int = 1) -> np.ndarray:
+    """The median of each reading and its ``half`` neighbours on each side (the ends kept): a contact dropout
+    reads the open wiper for one tick, a spike of centimetres that no ball makes, which would pass for a limit
+    cycle and restart the settling clock; a ball's motion over three ticks (40 ms) is nearly straight and
+    passes. A sensor slower than the tick holds a wrong return over two ticks: ``half`` = 2 (five ticks, 80 ms,
+    still nearly straight)."""
+    width = 2 * half + 1
+    if x.size < width:
         return x
     out = x.copy()
-    out[1:-1] = np.median(np.stack([x[:-2], x[1:-1], x[2:]]), axis=0)
+    out[half:-half] = np.median(np.stack([x[k : x.size - width + 1 + k] for k in range(width)]), axis=0)
+    return out
+
+
+def _filled(x: np.ndarray) -> np.ndarray:
+    """``x`` with each NaN (a reading that carried no position) replaced by the last position read before it
+    (the first read one for NaNs at the start): what the software would hold."""
+    out = x.copy()
+    finite = np.isfinite(out)
+    if not finite.any():
+        return out
+    index = np.where(finite, np.arange(out.size), 0)
+    np.maximum.accumulate(index, out=index)
+    out = out[index]
+    first = int(np.flatnonzero(finite)[0])
+    out[:first] = x[first]
     return out
 
 
@@ -279,6 +337,7 @@ def evaluate_measured(
     x0_m: float | None = None,
     x_ref_m: float = 0.0,
     criteria: Criteria | None = None,
+    channels: MeasuredChannels | None = None,
 ) -> Verdict:
     """The verdict of a run from the rig's recorded signals only (timem, datam1, datam2, aout of a ``RunLog``;
     its true state, the controller's estimates and ``u`` are not read), judged about ``x_ref_m`` with the
@@ -325,20 +384,28 @@ def evaluate_measured(
     if not np.any(t < 0.0):  # no held row: the rig's clock, whose first tick is the first command's
         t = t - t[0] + params.start.free_run_s
     sw = params.software
-    x = np.asarray(ball_position_m(ball_v, sw), dtype=float)
-    theta = np.asarray(beam_angle_rad(angle_v, sw), dtype=float)
-    volts = np.asarray(motor_volts(aout, params), dtype=float)
-    lost_s, why = _measured_loss(t, ball_v, x, params, c)
-    x = _without_glitches(x)
+    if channels is None:
+        x = np.asarray(ball_position_m(ball_v, sw), dtype=float)
+        theta = np.asarray(beam_angle_rad(angle_v, sw), dtype=float)
+        volts = np.asarray(motor_volts(aout, params), dtype=float)
+        rail, count_rad = params.amplifier.rail_v, angle_count_step_rad(params)
+    else:  # a rig of other parts: its parts' conversions; no angle sensor, no angle (peak 0, stops unseen)
+        x = np.asarray(channels.x_m(ball_v), dtype=float)
+        theta = (
+            np.zeros_like(x) if channels.theta_rad is None else np.asarray(channels.theta_rad(angle_v), float)
+        )
+        volts = np.asarray(channels.control(aout), dtype=float)
+        rail, count_rad = channels.control_limit, channels.angle_step_rad
+    lost_s, why = _measured_loss(t, ball_v, x, params, c, channels)
+    x = _without_glitches(_filled(x), 1 if channels is None else 2)
     released = t >= 0.0
     kept = released if lost_s is None else released & (t < lost_s)
     peak = np.abs(theta[kept])
-    count_rad = angle_count_step_rad(params)
     verdict = evaluate(
         Trace(t, x - x_ref_m, theta, volts, peak),
         x0_m=(float(x[0]) if x0_m is None else x0_m) - x_ref_m,
         ball_lost_time_s=lost_s,
-        rail_v=params.amplifier.rail_v,
+        rail_v=rail,
         stop_angle_rad=params.beam.stop_angle_rad - count_rad,
         criteria=c,
     )

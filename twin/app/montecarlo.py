@@ -126,9 +126,12 @@ class Distribution:
 
 
 def _nominal(params: Parameters, name: str) -> float:
-    """The value of parameter ``group.name`` (a field, not a derived property)."""
+    """The value of parameter ``group.name`` (a field, not a derived property; a part's own group too)."""
     group, _, field_name = name.partition(".")
-    section = getattr(params, group, None)
+    try:
+        section = params.group(group)
+    except ParameterError:
+        section = None
     if section is None or not is_dataclass(section) or field_name not in {f.name for f in fields(section)}:
         raise ParameterError(f"unknown parameter {name!r} (see ballbeam params)")
     value = getattr(section, field_name)

@@ -30,7 +30,7 @@ from twin.app.options import MAX_LOCATE
 from twin.app.screening import ENGINE_NAMES, MAP_MARGINAL, Job, Screening, map_marginal, verdict_class
 from twin.outputs import JobFiles
 from twin.parameters import ParameterError, Parameters
-from twin.physics import check_initial_state
+from twin.physics import beam_travel_rad, check_initial_state
 from twin.rigs.backends import DEFAULT_PLANT, ScreeningPolicy, backend, engine_policy
 
 if TYPE_CHECKING:
@@ -45,6 +45,7 @@ __all__ = [
     "SweepSettings",
     "parse_range",
     "point_seeds",
+    "rig_grids",
     "run_sweep",
 ]
 
@@ -67,6 +68,18 @@ OUTPUT_FILES = JobFiles("sweep", ("sweep.json", "map.png"))
 DEFAULT_X0 = Grid(-0.32, 0.32, 41)
 DEFAULT_THETA0 = Grid(-0.7, 0.7, 41)
 MAX_POINTS = 250_000  # a grid beyond this is a typing error, not a study (about 3 h per 10 s runs here)
+
+
+def rig_grids(params: Parameters, n: int = 41) -> tuple[Grid, Grid]:
+    """A map's axes on the rig ``params`` when none are given: the chapter 7 grid (``DEFAULT_X0``,
+    ``DEFAULT_THETA0``) where it lies on the rig (the thesis's), else ``n`` starts over the rig's whole track
+    (±``track.half_length_m``) by ``n`` over its beam's travel (``twin.physics.beam_travel_rad``: its stops
+    narrowed to its drive's reach, which a lever makes lopsided)."""
+    half = params.track.half_length_m
+    low, high = beam_travel_rad(params)
+    if half >= DEFAULT_X0.hi and low <= -DEFAULT_THETA0.hi and DEFAULT_THETA0.hi <= high:
+        return DEFAULT_X0, DEFAULT_THETA0
+    return Grid(-half, half, n), Grid(low, high, n)
 
 
 def parse_range(option: str, text: str) -> Grid:

@@ -30,7 +30,7 @@ from twin.parts.contract import (
     rig_parts,
     vary,
 )
-from twin.parts.thesis import THESIS
+from twin.parts.thesis import THESIS, is_thesis_rig
 
 # The built-in parts beyond the thesis's: importing the package registers each (its group, fragment and laws),
 # after the thesis's, which each role lists first.
@@ -59,6 +59,7 @@ from twin.parts import (  # noqa: F401
 __all__ = [
     "ROLES",
     "THESIS",
+    "is_thesis_rig",
     "ActuatorPart",
     "AngleSensorChain",
     "AngleSensorPart",

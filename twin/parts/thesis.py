@@ -77,6 +77,7 @@ __all__ = [
     "NOT_PART_GROUPS",
     "THESIS",
     "TRACK",
+    "is_thesis_rig",
 ]
 
 
@@ -523,3 +524,9 @@ THESIS = RigParts(
     angle_sensor=ANGLE_SENSOR,
     io_board=IO_BOARD,
 )
+
+
+def is_thesis_rig(parts: RigParts) -> bool:
+    """Whether ``parts`` are the thesis's seven (whatever their parameters): what is written for the thesis's
+    software and card alone (its view, its log checks, its smooth identification model) applies."""
+    return all(ours is theirs for ours, theirs in zip(parts, THESIS, strict=True))

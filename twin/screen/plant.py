@@ -14,8 +14,10 @@ derivative and boundary call ``ReferencePlant``'s functions in ``ReferencePlant`
 (``twin.drive_equations``: ``lever_horn_closure_rad``, ``lever_ratio_slope``, ``lever_shaft_derivatives``;
 ``twin.drive_equations.servo_torque_nm``; ``twin.reference``: ``geared_shaft_torque_nm``, ``driven_beam_terms``,
 ``drive_stop_derivative``, ``drive_stop_boundary``). ``tests/test_screen_driven.py`` holds it to the reference
-plant on those rigs, each run its own servo and linkage. A part without such a form is refused by its field
-(``kernel_refusal``).
+plant on those rigs, each run its own servo and linkage. A beam hinged off its track's centre (Open Ball & Beam,
+BB01: ``ReferencePlant._hinged_off_centre_derivative``) is a driven row with ``twin.reference.hinged_beam_terms``
+between the beam's terms and the accelerations (``tests/test_screen_hinged.py``). A part without such a form is
+refused by its field (``kernel_refusal``).
 
 Why numba: it compiles the core's own Python functions (one home per equation) with no build step and no
 compiler on the user's machine; a C kernel would be a second copy of the equations.
@@ -51,6 +53,7 @@ from twin.reference import (
     driven_beam_terms,
     geared_motor_numbers,
     geared_shaft_torque_nm,
+    hinged_beam_terms,
     pivot_friction_nm,
     rk4_step,
     step_boundary,
@@ -79,6 +82,7 @@ _geared = numba.njit(inline="always")(geared_shaft_torque_nm)
 _beam_terms = numba.njit(inline="always")(driven_beam_terms)
 _stop_derivative = numba.njit(inline="always")(drive_stop_derivative)
 _drive_stops = numba.njit(inline="always")(drive_stop_boundary)
+_hinged = numba.njit(inline="always")(hinged_beam_terms)
 
 # A run's row of constants: the 13 of EquationCoefficients.as_row, then the motor's and the rig's (the thesis's
 # eq 3.1.27 as written reads these only) ...
@@ -91,7 +95,10 @@ K_TAU, K_B, RAIL, STOP, HALF = 13, 14, 15, 16, 17
 # ``ReferencePlant``'s.
 KIND, DRIVE, ACTUATOR, SHAFT_INERTIA, LO, HI, COUPLING = 18, 19, 20, 21, 22, 23, 24
 DRIVE_NUMBERS, ACTUATOR_NUMBERS = 25, 32  # 7 and 4 columns
-ROW = 36
+# ... then, for a driven beam hinged off its track's centre (``beam.hinged_off_centre``): whether it is (HINGED),
+# the track's centre's offset d from the pivot and the beam's weight moment M_B·g·x_g (``hinged_beam_terms``)
+HINGED, OFFSET, WEIGHT = 36, 37, 38
+ROW = 39
 THESIS, DRIVEN = 0.0, 1.0  # KIND
 PIVOT, END_LEVER = 0.0, 1.0  # DRIVE
 GEARED_MOTOR, HOBBY_SERVO = 0.0, 1.0  # ACTUATOR
@@ -127,12 +134,6 @@ def kernel_refusal(params: Parameters) -> str | None:
                 f"parts.{role} = {name!r}: the fast engine's compiled plant has no form for this part (it has "
                 f"{', '.join(repr(k) for k in known)})"
             )
-    beam = params.beam
-    if getattr(beam, "hinged_off_centre", False):  # the reference model's _hinged_off_centre_derivative
-        return (
-            f"beam.track_offset_m = {beam.track_offset_m!r}, beam.cog_along_m = {beam.cog_along_m!r}: the fast "
-            "engine's compiled plant has no form for a beam hinged off its track's centre"
-        )
     return None
 
 
@@ -172,6 +173,11 @@ def _driven_row(row: np.ndarray, p: Parameters, q: EquationCoefficients[float], 
     row[SHAFT_INERTIA] = shaft_inertia_kgm2
     row[LO], row[HI] = limits or (-math.inf, math.inf)
     row[COUPLING] = (q.k2 + q.c) / (1.0 + q.k1)
+    # ReferencePlant._hinged_off_centre_derivative's d and M_B·g·x_g, computed as it computes them
+    if p.beam.hinged_off_centre:
+        row[HINGED] = 1.0
+        row[OFFSET] = p.beam.track_offset_m
+        row[WEIGHT] = p.beam.mass_kg * q.g * p.beam.cog_along_m
     if row[DRIVE] == END_LEVER:
         row[DRIVE_NUMBERS : DRIVE_NUMBERS + 7] = law.drive_numbers
     if row[ACTUATOR] == HOBBY_SERVO:
@@ -217,7 +223,8 @@ def _lever(
 def _f_driven(
     r: np.ndarray, x: float, th: float, xd: float, thd: float, ctrl: float
 ) -> tuple[float, float, float, float]:
-    """``ReferencePlant._driven_derivative``'s derivative: the same functions called in the same order."""
+    """``ReferencePlant._driven_derivative``'s derivative (a hinged row: ``_hinged_off_centre_derivative``'s): the
+    same functions called in the same order."""
     if r[DRIVE] == END_LEVER:
         phi, dphi, ddphi = _lever(
             th, r[DRIVE_NUMBERS], r[DRIVE_NUMBERS + 1], r[DRIVE_NUMBERS + 2], r[DRIVE_NUMBERS + 3],
@@ -232,11 +239,15 @@ def _f_driven(
         tau = _geared(_torque, ctrl, dphi * thd, r[a], r[a + 1], r[a + 2], r[a + 3])
     a2, torque = _beam_terms(r[5], r[SHAFT_INERTIA], dphi, ddphi, thd, tau)
     s, co = math.sin(th), math.cos(th)
+    # the ball's distance from the pivot: x itself under the track's centre (x + 0.0 would turn −0.0 into +0.0)
+    along = x
+    if r[HINGED] != 0.0:
+        along, torque = _hinged(x, co, torque, r[OFFSET], r[WEIGHT])
     xdd, thdd = _accelerations(
         r[0], r[1], r[2], r[3], r[4], a2, r[6], r[7], r[8], r[9], r[10], r[11],
-        x, xd, thd, s, co, _friction(r[12], thd), torque,
+        along, xd, thd, s, co, _friction(r[12], thd), torque,
     )  # fmt: skip
-    return _stop_derivative(r[0], r[3], x, th, xd, thd, s, xdd, thdd, r[LO], r[HI])
+    return _stop_derivative(r[0], r[3], along, th, xd, thd, s, xdd, thdd, r[LO], r[HI])
 
 
 @numba.njit(inline="always")
@@ -259,7 +270,9 @@ def _thesis_boundary(
 def _driven_boundary(
     r: np.ndarray, x: float, th: float, xd: float, thd: float
 ) -> tuple[float, float, float, bool]:
-    """``ReferencePlant._driven_boundary``: the beam's stops, then the drive's with the ball's share."""
+    """``ReferencePlant._driven_boundary``: the beam's stops, then the drive's with the ball's share. On a hinged
+    row too: x is from the track's centre, whose ends are ±HALF; the ball's share is the same (d is constant, so
+    x + d and x change alike across the stop's impulse)."""
     before = thd
     th, thd, lost = _boundary(x, th, thd, r[STOP], r[HALF])
     th, xd, thd = _drive_stops(th, xd, thd, before, r[LO], r[HI], r[COUPLING])

@@ -18,7 +18,7 @@ import mujoco
 
 from twin.model import BEAM_BODY
 from twin.parameters import Parameters
-from twin.parts import THESIS, RigParts, rig_parts
+from twin.parts import is_thesis_rig, rig_parts
 
 __all__ = [
     "PLOTS",
@@ -69,11 +69,6 @@ PLOTS: tuple[PlotGroup, ...] = (
 )
 THESIS_PLOT_ASPECT = 3.4  # wide and low: the thesis's five plots fit the height of a 900 px window
 LEGEND_PX = 24.0  # a chart's static legend below it (one line)
-
-
-def is_thesis_rig(parts: RigParts) -> bool:
-    """Whether ``parts`` are the thesis's seven (whatever their parameters): its view is the thesis's."""
-    return all(ours is theirs for ours, theirs in zip(parts, THESIS, strict=True))
 
 
 def part_plots(params: Parameters) -> tuple[PlotGroup, ...]:

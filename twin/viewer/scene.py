@@ -14,9 +14,9 @@ import trimesh
 import viser
 
 from twin.parameters import Parameters
-from twin.parts import rig_parts
+from twin.parts import is_thesis_rig, rig_parts
 from twin.plant import Plant
-from twin.viewer.channels import SensorBeam, is_thesis_rig, sensor_beam
+from twin.viewer.channels import SensorBeam, sensor_beam
 from twin.viewer.session import LiveTwin
 
 # Camera presets: position, look-at point (m, world frame; the pivot is 0.25 m above the floor), up. For the

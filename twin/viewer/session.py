@@ -618,7 +618,7 @@ class LiveTwin:
         )
         verdict = self.verdict()
         judged = (
-            f"  \n{_markdown_text(verdict_text(verdict, self.setpoint_m, self.criteria))}"
+            f"  \n{_markdown_text(verdict_text(verdict, self.setpoint_m, self.criteria, self.channels))}"
             if verdict is not None
             else ""
         )
@@ -672,9 +672,13 @@ class LiveTwin:
             where = f"it rolled off the {'+' if x > 0 else '−'} end of the track (x = {x:+.3f} m)"
         else:  # thrown off the wires along the beam
             where = f"it was thrown off the wires at x = {x:+.3f} m, on the beam"
+        judged = (
+            verdict_text(verdict, self.setpoint_m, self.criteria, self.channels)
+            if verdict is not None
+            else "no verdict"
+        )
         return (
-            f"Ball lost at t = {self.rig.ball_lost_time_s:.2f} s: {where}. The run is paused "
-            f"({verdict_text(verdict, self.setpoint_m, self.criteria) if verdict is not None else 'no verdict'}). "
+            f"Ball lost at t = {self.rig.ball_lost_time_s:.2f} s: {where}. The run is paused ({judged}). "
             "Press Reset to start again."
         )
 
@@ -703,8 +707,11 @@ def firmware_text(f: dict[str, Any]) -> str:
     )
 
 
-def verdict_text(v: Verdict, setpoint_m: float = 0.0, criteria: Criteria | None = None) -> str:
-    """One line for a person watching: the verdict of the run so far. Until the final window
+def verdict_text(
+    v: Verdict, setpoint_m: float = 0.0, criteria: Criteria | None = None, channels: RigChannels | None = None
+) -> str:
+    """One line for a person watching: the verdict of the run so far (the peak of the actuator's control in
+    its unit, ``channels``: the thesis motor's volts and its share at the rails by default). Until the final window
     (``Criteria.window_s``) lies after a first window of the run, or the ball settled before it, that window
     still holds the release's transient: it is called the transient, not a limit cycle or an offset."""
     c = criteria or Criteria()
@@ -724,7 +731,10 @@ def verdict_text(v: Verdict, setpoint_m: float = 0.0, criteria: Criteria | None 
     parts.append(f"steady x {v.steady_x_m * 1e3:+.1f} mm" + (" from the setpoint" if setpoint_m else ""))
     if v.limit_cycle_x_pp_m is not None:
         parts.append(f"cycle {v.limit_cycle_x_pp_m * 1e3:.1f} mm p-p")
-    parts.append(f"peak {v.peak_motor_voltage_v:.1f} V ({100 * v.saturated_fraction:.0f} % at the rails)")
+    if channels is None or channels.thesis:
+        parts.append(f"peak {v.peak_motor_voltage_v:.1f} V ({100 * v.saturated_fraction:.0f} % at the rails)")
+    else:
+        parts.append(f"peak {channels.control_name} {v.peak_motor_voltage_v:.4g} {channels.control_unit}")
     judged = " · ".join(parts)
     about = f" (about the setpoint x = {setpoint_m:+.2f} m)" if setpoint_m else ""
     return f"verdict so far{about}: {judged}"

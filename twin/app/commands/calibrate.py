@@ -28,7 +28,17 @@ HELP = (
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("logs", nargs="+", metavar="LOG", help="data_file.mat or .csv logs of the same rig")
+    parser.add_argument("logs", nargs="*", metavar="LOG", help="data_file.mat or .csv logs of the same rig")
+    parser.add_argument(
+        "--log",
+        metavar="SERIAL.csv",
+        help="a part-built rig's serial log (what its sketch prints; with --rig-file and --columns)",
+    )
+    parser.add_argument(
+        "--columns",
+        metavar="MAP",
+        help="the serial log's column map, e.g. 'time=ms, distance=mm, pulse=us' or a preset map's name",
+    )
     parser.add_argument(
         "--fit",
         required=True,
@@ -53,6 +63,8 @@ class Options:
     """``calibrate``'s options."""
 
     logs: list[str]
+    log: str | None
+    columns: str | None
     fit: str
     out: str | None
     overwrite: bool
@@ -73,6 +85,8 @@ def handle(o: Options) -> int:
 
     check_overwrite(o.overwrite, [("--out", o.out)])
     start = load_params(o.parameters)
+    if o.log is not None or not o.logs:
+        return _serial(o, start)
     fit = [name.strip() for name in o.fit.split(",") if name.strip()]
     unknown = [n for n in fit if n not in FITTABLE]
     if not fit or unknown:
@@ -117,6 +131,40 @@ def handle(o: Options) -> int:
     # A fit that did not converge, or whose residuals or information say it cannot be trusted (model
     # mismatch, weak excitation, a parameter the logs do not identify: kept at its start value in
     # params.toml), exits 1: its files are written for inspection, its message is on stderr.
+    for problem in cal.problems:
+        print(f"calibrate: {problem}", file=sys.stderr)
+    return 0 if cal.trustworthy else 1
+
+
+def _serial(o: Options, start: object) -> int:
+    """A part-built rig's serial log (``calib.part_identify``): the fitted rig as ``rig.toml``."""
+    from calib.part_identify import calibrate_part_rig, write_outputs
+    from calib.serial_log import read_serial_log
+    from twin.parameters import ParameterError, Parameters
+
+    assert isinstance(start, Parameters)
+    if o.log is None or o.logs or o.columns is None:
+        raise ParameterError("calibrate: give LOG… (the thesis rig), or --log SERIAL.csv with --columns MAP")
+    log = read_serial_log(o.log, o.columns, start)
+    cal = calibrate_part_rig(
+        log, [n.strip() for n in o.fit.split(",") if n.strip()], start, window_s=o.window
+    )
+    if o.json:
+        print(json.dumps(cal.to_json()))
+    else:
+        for name, v in cal.values.items():
+            print(
+                f"{name:<32} {v.value:12.6g}  [{v.ci_low:.6g}, {v.ci_high:.6g}]  (start {v.initial:.6g}) {v.unit}"
+            )
+        for name in cal.not_identifiable:
+            print(f"{name:<32} not identifiable by these logs: kept at its start value")
+        a = cal.adequacy["ball"]
+        print(f"ball channel: RMS {a.rms:.3g} mm = {a.ratio:.2f} × floor {a.floor:.3g} mm, ρ(1) {a.lag1:.2f}")
+        print(f"converged: {cal.converged} ({cal.message}); {cal.wall_s:.1f} s")
+    if o.out is not None:
+        name = o.parameters.rig_file or "calibrated"
+        written = write_outputs(cal, o.out, f"{Path(name).stem} (calibrated)")
+        print(f"wrote {', '.join(str(p) for p in written)}")
     for problem in cal.problems:
         print(f"calibrate: {problem}", file=sys.stderr)
     return 0 if cal.trustworthy else 1

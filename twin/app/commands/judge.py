@@ -42,14 +42,16 @@ def run(args: argparse.Namespace) -> int:
 
 def handle(o: Options) -> int:
     from calib.logs import load_judged_log
+    from twin.parts.measured import measured_channels
     from twin.physics import check_on_track
     from twin.verdict import evaluate_measured
 
     params = load_params(o.parameters)
     if o.setpoint is not None:
         check_on_track(params, "--setpoint", o.setpoint)
-    log = load_judged_log(o.log, params.period_s)  # checked as every command checks a rig log
-    verdict = evaluate_measured(log, params, x_ref_m=o.setpoint or 0.0)
+    channels = measured_channels(params)  # a rig of other parts: its parts' conversions (refused if none)
+    log = load_judged_log(o.log, params)  # checked as every command checks a rig log
+    verdict = evaluate_measured(log, params, x_ref_m=o.setpoint or 0.0, channels=channels)
     summary = {
         "log": o.log,
         "source": "measured",

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -19,9 +20,17 @@ HELP = "continuous-time A, B at the origin"
 
 
 def _reference(params: Parameters, input: str) -> tuple[np.ndarray, np.ndarray]:
+    from twin.linearize import hold_control, linearize_reference
+    from twin.parts import is_thesis_rig, rig_parts
     from twin.reference import ReferenceModel
 
-    return ReferenceModel(params).linearize(input)  # type: ignore[arg-type]
+    parts = rig_parts(params)
+    if is_thesis_rig(parts):
+        return ReferenceModel(params).linearize(input)  # type: ignore[arg-type]
+    # a rig of other parts: its DriveLaw's model, about the control that holds the level beam
+    control_of = parts.actuator.control_of
+    rest = parts.actuator.rest_command(params)
+    return linearize_reference(params, hold_control(params, control_of(params)(rest) if control_of else rest))
 
 
 def _twin(params: Parameters, input: str) -> tuple[np.ndarray, np.ndarray]:
@@ -66,10 +75,24 @@ def run(args: argparse.Namespace) -> int:
 def handle(o: Options) -> int:
     import numpy as np
 
+    from twin.linearize import LinearizationError
+    from twin.parts import is_thesis_rig, rig_parts
     from twin.reference import STATE_NAMES
 
     params = load_params(o.parameters)
-    a, b = SOURCES[o.source](params, o.input)
+    parts = rig_parts(params)
+    thesis = is_thesis_rig(parts)
+    if not thesis and o.input == "torque":
+        raise ValueError(
+            f"--input torque: a rig of other parts ({parts.actuator.name} through {parts.beam_drive.name}) is "
+            "linearized in its actuator's control; give --input voltage (the control: "
+            f"{parts.actuator.control_unit})"
+        )
+    try:
+        a, b = SOURCES[o.source](params, o.input)
+    except LinearizationError as exc:
+        print(f"ballbeam linearize: the {o.source} model cannot be linearized here: {exc}", file=sys.stderr)
+        return 1
     result = {
         "state": list(STATE_NAMES),
         "input": o.input,
@@ -80,8 +103,9 @@ def handle(o: Options) -> int:
     if o.json:
         print(json.dumps(result))
     else:
-        unit = "N·m" if o.input == "torque" else "V"
-        print(f"Continuous-time linearization at the origin ({o.source}, input: {o.input} [{unit}])")
+        unit = "N·m" if o.input == "torque" else parts.actuator.control_unit
+        where = "the origin" if thesis else "the level beam, the ball at the track's centre"
+        print(f"Continuous-time linearization at {where} ({o.source}, input: {o.input} [{unit}])")
         print("state:", ", ".join(STATE_NAMES))
         with np.printoptions(precision=6, suppress=True, linewidth=120):
             print("A =\n", a)

@@ -56,13 +56,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--x0",
         type=GridType("--x0", max_n=_sweep_max_points),
         metavar="LO:HI:N",
-        help="initial ball positions (default -0.32:0.32:41, the chapter 7 range)",
+        help="initial ball positions (default -0.32:0.32:41, the chapter 7 range; on a rig whose track it "
+        "leaves: its whole track in 41)",
     )
     parser.add_argument(
         "--theta0",
         type=GridType("--theta0", max_n=_sweep_max_points),
         metavar="LO:HI:N",
-        help="initial beam angles (default -0.7:0.7:41, the chapter 7 range)",
+        help="initial beam angles (default -0.7:0.7:41, the chapter 7 range; on a rig whose travel it "
+        "leaves: the beam's whole travel, its stops narrowed to its drive's reach, in 41)",
     )
     parser.add_argument(
         "--duration", type=JOB_RUN_S, default=10.0, metavar="S", help="seconds per run (default 10)"
@@ -172,12 +174,11 @@ def run(args: argparse.Namespace) -> int:
 
 def handle(o: Options) -> int:
     from twin.app.sweep import (
-        DEFAULT_THETA0,
-        DEFAULT_X0,
         MAX_POINTS,
         OUTPUT_FILES,
         SweepSettings,
         parse_range,
+        rig_grids,
         run_sweep,
     )
     from twin.parameters import ParameterError
@@ -195,8 +196,9 @@ def handle(o: Options) -> int:
         if job.is_served:
             raise ParameterError("a robust map runs here or on workers, not as served sessions")
     params, spread = job.params_and_spread() if robust else (job.params(), None)
-    x0 = parse_range("--x0", o.x0) if o.x0 else DEFAULT_X0
-    theta0 = parse_range("--theta0", o.theta0) if o.theta0 else DEFAULT_THETA0
+    x0_default, theta0_default = rig_grids(params)  # the chapter 7 grid, or the rig's track and travel
+    x0 = parse_range("--x0", o.x0) if o.x0 else x0_default
+    theta0 = parse_range("--theta0", o.theta0) if o.theta0 else theta0_default
     engine = resolve_engine(
         o.engine, o.plant, "screen", plain=bool(o.refine), served=job.is_served, params=params
     )

@@ -1,0 +1,787 @@
+"""Dynamic identification of a part-built rig (a hobby servo lifting the beam through a lever, a ranging ball
+sensor, an Arduino) from what its board prints over serial: multiple shooting on the rig's reference model.
+
+The log is the sketch's CSV (``calib.serial_log``: time, the ball sensor's reading in its board unit, the
+servo pulse). As ``calib.identify`` does for the thesis rig, the log is cut into windows (1 s by default) whose
+initial states (x, θ, ẋ, θ̇) are free, the chosen parameters are shared by all windows, each window's end must
+meet the next one's start (soft continuity, ``calib.identify.CONTINUITY_SIGMA``), the loss is robust (soft_l1 at
+``ROBUST_SCALE`` σ) and the intervals are cluster-robust (sandwich, 5 s clusters, Student's t).
+
+The model is the rig's reference model (``twin.reference``: eq 3.1.26/27 with the ``DriveLaw`` of its drive and
+actuator, hinged off the track's centre as ``_hinged_off_centre_derivative``), vectorized in numpy over every
+window and every parameter set of a Jacobian at once, from the same one-home functions the reference plant and
+the compiled kernel call (``lever_shaft_angles``, ``servo_torque_nm``, ``driven_beam_terms``,
+``ball_beam_accelerations``); the horn's stops as ``drive_stop_derivative``/``drive_stop_boundary`` (written
+here on arrays: those two take floats). The command is the logged pulse through the actuator's own ``drive``
+(the pulse map with its dead band), held over the tick that follows it. The measurement is the ball sensor's
+board reading at the ball's position: for a VL53L0X, gain·1000·(mount − x − r) − crosstalk (mm) of the ball
+where it was τ = budget/2 + latency before the board read (the range is the mean over its timing budget: its
+midpoint's position, within 0.02 mm for the ball's accelerations), each reading weighted by the part's noise
+(``vl53l0x_sigma_mm``) and its 1 mm rounding; out-of-range codes are left out.
+
+Three quantities the parts have no field for are fitted as the calibration's own (``CALIBRATION_ONLY``):
+the reading's gain, its latency beyond the budget (I²C, the sketch's read before its tick) and the ball's
+rolling resistance (a force −c·m·ẋ on the ball along the track, which eq 3.1.26 leaves out). They are reported,
+and written into the output rig file as comments (no part reads them).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import scipy.optimize
+import scipy.sparse
+import scipy.sparse.linalg
+import scipy.stats
+
+from calib.adequacy import ChannelAdequacy, channel_adequacy
+from calib.identify import (
+    CLUSTER_S,
+    COLOURED_LAG1,
+    CONFIDENCE,
+    CONTINUITY_SIGMA,
+    MISMATCH_RATIO,
+    ROBUST_SCALE,
+    CalibrationError,
+    FittedValue,
+    _color_columns,
+    _unidentified,
+)
+from calib.serial_log import SerialLog
+from twin.drive_equations import servo_torque_nm
+from twin.parameters import GROUPS, ParameterError, Parameters, declaration
+from twin.parts import rig_parts
+from twin.parts.contract import ROLES
+from twin.parts.vl53l0x import OUT_OF_RANGE_MM, Vl53l0x, vl53l0x_sigma_mm
+from twin.reference import (
+    EquationCoefficients,
+    ball_beam_accelerations,
+    drive_law,
+    driven_beam_terms,
+    pivot_friction_nm,
+)
+
+__all__ = [
+    "CALIBRATION_ONLY",
+    "MODEL_RESOLUTION",
+    "PART_FITTABLE",
+    "PartCalibration",
+    "PartFitSpec",
+    "calibrate_part_rig",
+    "describe_toml",
+]
+
+
+@dataclass(frozen=True)
+class PartFitSpec:
+    """A quantity the part-built rig's fit can estimate: its search range, absolute (``lower``…``upper``) or
+    relative to its start value (``relative``: start·lower … start·upper, within the field's bounds), its
+    typical size and its meaning."""
+
+    name: str
+    lower: float
+    upper: float
+    scale: float
+    meaning: str
+    relative: bool = False
+    around: bool = False  # the range is start + lower … start + upper
+
+    @property
+    def unit(self) -> str:
+        return CALIBRATION_ONLY.get(self.name) or str(declaration(self.name)["unit"])
+
+    def search_range(self, start: float) -> tuple[float, float]:
+        if self.around:
+            return start + self.lower, start + self.upper
+        return (start * self.lower, start * self.upper) if self.relative else (self.lower, self.upper)
+
+
+# What no part has a field for (unit): the reading's gain and latency, the ball's rolling resistance.
+CALIBRATION_ONLY: dict[str, str] = {
+    "ball_reading.gain": "-",
+    "ball_reading.latency_s": "s",
+    "ball_rolling.damping_1_s": "1/s",
+}
+_START_ONLY = {"ball_reading.gain": 1.0, "ball_reading.latency_s": 0.0, "ball_rolling.damping_1_s": 0.0}
+# The servo's speed and inertia are searched within ×0.6…×2 and ×0.5…×4 of their start: the RK4 step (chosen
+# from the stiffest corner of the search box, ``_substeps``) stays stable and the search stays on a servo.
+PART_FITTABLE: dict[str, PartFitSpec] = {
+    s.name: s
+    for s in (
+        PartFitSpec("servo.no_load_speed_rad_s", 0.6, 2.0, 5.0, "the servo's speed limit", relative=True),
+        PartFitSpec(
+            "servo.saturation_error_rad",
+            0.005,
+            0.5,
+            0.05,
+            "the servo's loop: the error its drive saturates at",
+        ),
+        PartFitSpec("servo.armature_kgm2", 0.5, 4.0, 5e-4, "the servo's reflected inertia", relative=True),
+        PartFitSpec(
+            "linkage.horn_neutral_rad", -0.15, 0.15, 0.05, "the horn's angle at the centre pulse", around=True
+        ),
+        PartFitSpec("linkage.horn_travel_rad", 0.05, math.pi, 0.1, "the horn's travel to its stops"),
+        PartFitSpec("vl53l0x.crosstalk_offset_mm", -50.0, 50.0, 2.0, "the sensor's offset (crosstalk)"),
+        PartFitSpec("ball_reading.gain", 0.8, 1.25, 0.05, "the sensor's gain on the distance"),
+        PartFitSpec("ball_reading.latency_s", 0.0, 0.06, 0.01, "the reading's delay beyond half its budget"),
+        PartFitSpec("ball_rolling.damping_1_s", 0.0, 5.0, 0.2, "the ball's rolling resistance per unit mass"),
+    )
+}
+# The model's own resolution against a rig it does not describe exactly, (relative to the value, absolute), added
+# in quadrature to the statistical half-width as calib.identify's MODEL_RESOLUTION is. Derived from a small
+# study on tests/obb_simulator.py (60 s logs, the four fitted together; truths drawn around the preset: horn
+# ±0.06 rad, speed 4.5–8.5 rad/s, loop lag 10–18 ms, latency 0–20 ms; seeds 1–4, and seed 1 at horn −0.05 rad,
+# 5.5 rad/s, 13.3 ms, 10 ms): the smallest round floors that put every truth inside; the drawn seed 5, held out,
+# falls inside too. The simulator's servo is an ideal rate-limited lag, the model's a torque law with inertia,
+# load droop and a dead band: the fit put the horn up to 7.1 mrad off, the speed up to 14.5 %, the loop's band
+# up to 43 % high (its lag e_sat/ω₀ takes up what the ideal servo does differently) and the latency up to 5.1 ms
+# off. Parameters without a floor were not studied: their intervals are statistical only. The latency's floor is
+# short: a held-out fit of seed 5 with an 8 ms latency put it at 1.2 ms, outside [−4.0, 6.4] ms (the latency and the
+# loop's lag trade against each other); fit it only with the loop held, or read its interval as optimistic.
+MODEL_RESOLUTION: dict[str, tuple[float, float]] = {
+    "linkage.horn_neutral_rad": (0.0, 0.0075),
+    "servo.no_load_speed_rad_s": (0.13, 0.0),
+    "servo.saturation_error_rad": (0.30, 0.0),
+    "ball_reading.latency_s": (0.0, 0.0045),
+}
+# RK4 on the stiff servo loop is stable for h·λ below 2.78; this keeps a margin.
+_STABLE_H_LAMBDA = 2.0
+_MAX_SUBSTEPS = 100
+
+
+@dataclass
+class PartCalibration:
+    """The result: the fitted rig (``params``: loads as a rig description with ``describe_toml``), each fitted
+    value with its interval, the ones the log does not identify, the adequacy of the ball channel."""
+
+    params: Parameters
+    values: dict[str, FittedValue]
+    not_identifiable: dict[str, str]
+    adequacy: dict[str, ChannelAdequacy]
+    problems: list[str]
+    converged: bool
+    message: str
+    wall_s: float
+    n_windows: int
+    rms_before_mm: float
+    rms_after_mm: float
+    correlation: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    fitted_only: dict[str, float] = field(default_factory=dict)  # CALIBRATION_ONLY values (fitted or start)
+
+    @property
+    def trustworthy(self) -> bool:
+        return self.converged and not self.problems
+
+    def to_json(self) -> dict[str, object]:
+        return {
+            "params": {
+                n: {
+                    "value": v.value,
+                    "ci_low": v.ci_low,
+                    "ci_high": v.ci_high,
+                    "initial": v.initial,
+                    "unit": v.unit,
+                }
+                for n, v in self.values.items()
+            },
+            "not_identifiable": dict(self.not_identifiable),
+            "adequacy": {k: a.to_json() for k, a in self.adequacy.items()},
+            "problems": list(self.problems),
+            "converged": self.converged,
+            "message": self.message,
+            "windows": self.n_windows,
+            "rms_residual_mm": {"before": round(self.rms_before_mm, 4), "after": round(self.rms_after_mm, 4)},
+            "ci_level": CONFIDENCE,
+            "wall_s": round(self.wall_s, 2),
+        }
+
+
+# --- the log, cut into windows ------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class _Windows:
+    target: np.ndarray  # (nw, K) the servo's target angle over each tick of each window's simulation
+    reading: np.ndarray  # (nw, W) the readings each window predicts (mm), ticks s_w + M …
+    sigma: np.ndarray  # (nw, W) their standard deviations (mm); inf where left out
+    start: np.ndarray  # (nw, 4) the states' first guess
+    period_s: float
+    lead: int  # M: the ticks simulated before the first predicted reading (the latency's room)
+
+
+def _check_rig(params: Parameters) -> None:
+    names = (params.parts.beam_drive, params.parts.actuator, params.parts.ball_sensor)
+    if names != ("end_lever", "hobby_servo", "vl53l0x"):
+        raise CalibrationError(
+            f"parts (beam_drive, actuator, ball_sensor) = {names}: the part-built rig's dynamic fit covers the "
+            "end_lever drive with a hobby_servo and a vl53l0x ball sensor (the thesis rig: ballbeam calibrate LOG)"
+        )
+
+
+def _windows(log: SerialLog, params: Parameters, window_s: float, latency_max_s: float) -> _Windows:
+    t = np.asarray(log.log.timem, dtype=float)
+    y = np.asarray(log.log.datam1, dtype=float)
+    pulse = np.asarray(log.log.aout, dtype=float)
+    if t.size < 3:
+        raise CalibrationError(f"{log.path}: {t.size} ticks: too short to fit")
+    period = float(np.median(np.diff(t)))
+    if not period > 0 or np.max(np.abs(np.diff(t) - period)) > 0.25 * period:
+        raise CalibrationError(
+            f"{log.path}: the ticks are not evenly spaced (median {period * 1e3:.3g} ms, the largest gap "
+            f"{np.max(np.diff(t)) * 1e3:.3g} ms): record the loop without pauses"
+        )
+    drive = rig_parts(params).actuator.drive(params)  # the pulse map with its dead band, tick by tick
+    target = np.array([drive(float(p)) for p in pulse])
+    sensor = params.of(Vl53l0x)
+    W = max(2, int(round(window_s / period)))
+    lead = int(math.ceil((sensor.timing_budget_s / 2 + latency_max_s) / period))
+    nw = (t.size - lead) // W
+    if nw < 2:
+        raise CalibrationError(f"{log.path}: {t.size} ticks make fewer than two {window_s:g} s windows")
+    K = W + lead
+    valid = (y < min(OUT_OF_RANGE_MM, sensor.max_range_mm)) & np.isfinite(y)
+    sigma_all = np.sqrt(vl53l0x_sigma_mm(y, sensor.sigma_fraction, sensor.timing_budget_s) ** 2 + 1 / 12)
+    sigma_all = np.where(valid, sigma_all, np.inf)
+    x_read = sensor.mount_x_m - params.ball.radius_m - (y + sensor.crosstalk_offset_mm) / 1000.0
+    idx = np.arange(t.size)
+    x_read = np.interp(idx, idx[valid], x_read[valid])
+    xd = np.gradient(np.convolve(x_read, np.ones(5) / 5, mode="same"), period)
+    link = params.group("linkage")
+    starts = np.arange(nw) * W
+    theta0 = np.asarray(link.theta_rad(target[starts] + link.horn_neutral_rad), dtype=float)
+    rows = starts[:, None] + lead + np.arange(W)[None, :]
+    return _Windows(
+        target=target[starts[:, None] + np.arange(K)[None, :]],
+        reading=y[rows],
+        sigma=sigma_all[rows],
+        start=np.column_stack([x_read[starts], theta0, xd[starts], np.zeros(nw)]),
+        period_s=period,
+        lead=lead,
+    )
+
+
+# --- the model on arrays --------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class _Columns:
+    """A batch's parameter sets as (B, 1) columns of what the model takes."""
+
+    drive: tuple[np.ndarray, ...]  # lever_shaft_angles' numbers after θ
+    servo: tuple[np.ndarray, ...]  # servo_torque_nm's (k_p, τ_s, b)
+    shaft_inertia: np.ndarray
+    alpha: np.ndarray  # α₂ + the drive's inertia on the beam
+    lo: np.ndarray
+    hi: np.ndarray
+    gain: np.ndarray
+    tau: np.ndarray  # the reading's delay: budget/2 + latency
+    crosstalk: np.ndarray
+    mount: np.ndarray
+    rolling: np.ndarray
+
+
+class _Problem:
+    """The residual of a serial log for the parameters ``fit`` (the rest from ``base``)."""
+
+    def __init__(self, log: SerialLog, base: Parameters, fit: Sequence[str], window_s: float) -> None:
+        _check_rig(base)
+        self.base, self.fit = base, list(fit)
+        self.starts = np.array([_value(base, {}, n) for n in self.fit], dtype=float)
+        self.ranges = [PART_FITTABLE[n].search_range(s) for n, s in zip(self.fit, self.starts, strict=True)]
+        self.win = _windows(log, base, window_s, PART_FITTABLE["ball_reading.latency_s"].upper)
+        self.nw, self.W = self.win.reading.shape
+        self.K = self.win.target.shape[1]
+        self.q = EquationCoefficients.from_params(base, motor_inertia=False)
+        self.offset_m = base.beam.track_offset_m
+        self.weight_nm = base.beam.mass_kg * self.q.g * base.beam.cog_along_m
+        self.n_sub = self._substeps()
+        self.h = self.win.period_s / self.n_sub
+        self._cache: dict[tuple[float, ...], dict[str, float]] = {}
+
+    @property
+    def n_global(self) -> int:
+        return len(self.fit)
+
+    def _substeps(self) -> int:
+        """RK4 sub-steps per tick: h·λ ≤ ``_STABLE_H_LAMBDA`` for the servo loop's fast pole λ ≈ b/J_s at the
+        stiffest corner of the search box (the slowest speed, the least inertia)."""
+        corner = {n: r[0] for n, r in zip(self.fit, self.ranges, strict=True) if n.startswith("servo.")}
+        law = drive_law(_with(self.base, corner))
+        assert law is not None
+        b = law.actuator_numbers[2]
+        rate = b / law.shaft_inertia_kgm2
+        return int(min(_MAX_SUBSTEPS, max(4, math.ceil(self.win.period_s * rate / _STABLE_H_LAMBDA))))
+
+    def _row(self, zg: np.ndarray) -> dict[str, float]:
+        key = tuple(float(v) for v in zg)
+        if key not in self._cache:
+            overrides = dict(zip(self.fit, key, strict=True))
+            p = _with(self.base, overrides)
+            law = drive_law(p)
+            assert law is not None
+            s = p.of(Vl53l0x)
+            row = {f"d{i}": v for i, v in enumerate(law.drive_numbers)}
+            row.update({f"a{i}": v for i, v in enumerate(law.actuator_numbers)})
+            lo, hi = law.theta_limits_rad or (-math.inf, math.inf)
+            row.update(
+                js=law.shaft_inertia_kgm2,
+                alpha=self.q.alpha_thdd + law.beam_inertia_kgm2,
+                lo=lo,
+                hi=hi,
+                gain=_value(p, overrides, "ball_reading.gain"),
+                tau=s.timing_budget_s / 2 + _value(p, overrides, "ball_reading.latency_s"),
+                crosstalk=s.crosstalk_offset_mm,
+                mount=s.mount_x_m,
+                rolling=_value(p, overrides, "ball_rolling.damping_1_s"),
+            )
+            if len(self._cache) > 4096:
+                self._cache.clear()
+            self._cache[key] = row
+        return self._cache[key]
+
+    def columns(self, zgs: np.ndarray) -> _Columns:
+        rows = [self._row(zg) for zg in zgs]
+
+        def col(name: str) -> np.ndarray:
+            return np.array([r[name] for r in rows], dtype=float)[:, None]
+
+        return _Columns(
+            drive=tuple(col(f"d{i}") for i in range(7)),
+            servo=tuple(col(f"a{i}") for i in range(3)),
+            shaft_inertia=col("js"),
+            alpha=col("alpha"),
+            lo=col("lo"),
+            hi=col("hi"),
+            gain=col("gain"),
+            tau=col("tau"),
+            crosstalk=col("crosstalk"),
+            mount=col("mount"),
+            rolling=col("rolling"),
+        )
+
+    def simulate(self, zs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """For rows of z: the predicted readings (B, nw, W) in mm and each window's state after W ticks (B, nw, 4)."""
+        B, ng = zs.shape[0], self.n_global
+        c = self.columns(zs[:, :ng])
+        s0 = np.ascontiguousarray(zs[:, ng:].reshape(B, self.nw, 4))
+        q = self.q
+        consts = np.array([*q.as_row()[:12], q.coulomb_nm, self.offset_m, self.weight_nm], dtype=float)
+        rows = np.hstack([*c.drive, *c.servo, c.shaft_inertia, c.alpha, c.lo, c.hi, c.rolling])
+        n = self.n_sub
+        xs = np.empty((B, self.nw, self.K * n + 1))
+        end = np.empty((B, self.nw, 4))
+        _kernel()(
+            consts,
+            np.ascontiguousarray(rows),
+            np.ascontiguousarray(self.win.target),
+            s0,
+            n,
+            self.h,
+            self.W,
+            xs,
+            end,
+        )
+        # the ball where it was τ before each reading (linear in time between sub-steps of ``h``)
+        when = ((self.win.lead + np.arange(self.W))[None, :] * n - c.tau / self.h)[:, None, :]  # (B, 1, W)
+        i0 = np.clip(np.floor(when).astype(int), 0, self.K * n - 1)
+        frac = when - i0
+        idx = np.broadcast_to(i0, (B, self.nw, self.W))
+        x0 = np.take_along_axis(xs, idx, axis=2)
+        x1 = np.take_along_axis(xs, idx + 1, axis=2)
+        x_seen = x0 + frac * (x1 - x0)
+        radius = self.base.ball.radius_m
+        gain, off, mount = (v[:, :, None] for v in (c.gain, c.crosstalk, c.mount))
+        reading = gain * 1000.0 * np.maximum(mount - x_seen - radius, 0.0) - off
+        return reading, end
+
+    def residuals_batch(self, zs: np.ndarray) -> np.ndarray:
+        reading, end = self.simulate(zs)
+        ball = (reading - self.win.reading[None]) / self.win.sigma[None]
+        ball = np.where(np.isfinite(self.win.sigma)[None], ball, 0.0)
+        ng = self.n_global
+        starts = zs[:, ng:].reshape(zs.shape[0], self.nw, 4)
+        cont = (end[:, :-1, :] - starts[:, 1:, :]) / CONTINUITY_SIGMA
+        r = np.concatenate([ball.reshape(zs.shape[0], -1), cont.reshape(zs.shape[0], -1)], axis=1)
+        return np.where(np.isfinite(r), r, 1e6)
+
+    def residuals(self, z: np.ndarray) -> np.ndarray:
+        return self.residuals_batch(z[None, :])[0]
+
+    def sparsity(self) -> scipy.sparse.csr_matrix:
+        ng, nw, W = self.n_global, self.nw, self.W
+        rows, cols = [], []
+        n_ball = nw * W
+        for w in range(nw):
+            r = np.arange(w * W, (w + 1) * W)
+            for j in list(range(ng)) + list(range(ng + 4 * w, ng + 4 * w + 4)):
+                rows.append(r)
+                cols.append(np.full(W, j))
+        for w in range(nw - 1):
+            r = n_ball + 4 * w + np.arange(4)
+            for j in list(range(ng)) + list(range(ng + 4 * w, ng + 4 * w + 8)):
+                rows.append(r)
+                cols.append(np.full(4, j))
+        rr, cc = np.concatenate(rows), np.concatenate(cols)
+        return scipy.sparse.csr_matrix(
+            (np.ones(rr.size), (rr, cc)), shape=(n_ball + 4 * (nw - 1), ng + 4 * nw)
+        )
+
+    def initial_vector(self) -> np.ndarray:
+        return np.concatenate([self.starts, self.win.start.ravel()])
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        lo_s = np.tile([-0.5, -1.0, -5.0, -30.0], self.nw)
+        hi_s = np.tile([0.5, 1.0, 5.0, 30.0], self.nw)
+        lo_g = np.array([r[0] for r in self.ranges])
+        hi_g = np.array([r[1] for r in self.ranges])
+        return np.concatenate([lo_g, lo_s]), np.concatenate([hi_g, hi_s])
+
+    def scale(self) -> np.ndarray:
+        return np.concatenate(
+            [np.array([PART_FITTABLE[n].scale for n in self.fit]), np.tile([0.05, 0.05, 0.2, 0.5], self.nw)]
+        )
+
+    def cluster_of_rows(self) -> np.ndarray:
+        per_cluster = max(1, int(round(CLUSTER_S / (self.W * self.win.period_s))))
+        windows = np.concatenate(
+            [np.repeat(np.arange(self.nw), self.W), np.repeat(np.arange(self.nw - 1), 4)]
+        )
+        return windows // per_cluster
+
+
+_KERNEL: list[Callable[..., None]] = []
+
+
+def _kernel() -> Callable[..., None]:
+    """The windows' simulation compiled (numba, as twin.screen's kernel): ``ReferencePlant``'s hinged, driven
+    derivative from the same one-home functions (jitted here), the ball's rolling resistance added on eq
+    3.1.26's right side through the same 2×2 mass matrix, RK4 sub-steps with the tick's target held, the
+    horn's stops as ``drive_stop_derivative``/``drive_stop_boundary``. Compiled on first use (seconds)."""
+    if _KERNEL:
+        return _KERNEL[0]
+    import numba
+
+    from twin.drive_equations import lever_horn_closure_rad, lever_ratio_slope, lever_shaft_derivatives
+    from twin.reference import drive_stop_boundary, drive_stop_derivative, rk4_step
+
+    acc = numba.njit(inline="always")(ball_beam_accelerations)
+    fric = numba.njit(inline="always")(pivot_friction_nm)
+    horn = numba.njit(inline="always")(lever_horn_closure_rad)
+    ratio_slope = numba.njit(inline="always")(lever_ratio_slope)
+    shaft_derivatives = numba.njit(inline="always")(lever_shaft_derivatives)
+    servo = numba.njit(inline="always")(servo_torque_nm)
+    beam_terms = numba.njit(inline="always")(driven_beam_terms)
+    stop_derivative = numba.njit(inline="always")(drive_stop_derivative)
+    stops = numba.njit(inline="always")(drive_stop_boundary)
+
+    @numba.njit
+    def f(k: np.ndarray, r: np.ndarray, x: float, th: float, xd: float, thd: float, u: float) -> tuple:
+        # lever_shaft_angles: the same functions in the same order
+        phi = horn(th, r[0], r[1], r[2], r[3], r[4], r[5], r[6])
+        ratio, slope = ratio_slope(th, phi, r[0], r[2], r[3], r[4])
+        dphi, ddphi = shaft_derivatives(ratio, slope)
+        tau = servo(u, phi - r[6], dphi * thd, r[7], r[8], r[9])
+        a2, torque = beam_terms(r[11], r[10], dphi, ddphi, thd, tau)
+        s, co = math.sin(th), math.cos(th)
+        xp = x + k[13]
+        xdd, thdd = acc(
+            k[0], k[1], k[2], k[3], k[4], a2, k[6], k[7], k[8], k[9], k[10], k[11],
+            xp, xd, thd, s, co, fric(k[12], thd), torque - k[14] * co,
+        )  # fmt: skip
+        m22 = a2 + k[6] * xp * xp
+        det = (1.0 + k[0]) * m22 + (k[1] + k[2]) * k[4]
+        push = -r[14] * xd / det
+        xdd, thdd = xdd + push * m22, thdd - push * k[4]
+        return stop_derivative(k[0], k[3], xp, th, xd, thd, s, xdd, thdd, r[12], r[13])
+
+    rk4 = numba.njit(inline="always")(rk4_step)
+
+    @numba.njit(inline="always")
+    def f_held(x: float, th: float, xd: float, thd: float, held: tuple) -> tuple:
+        k, r, u = held
+        return f(k, r, x, th, xd, thd, u)
+
+    @numba.njit
+    def run(k: np.ndarray, rows: np.ndarray, target: np.ndarray, s0: np.ndarray, n: int, h: float, w_end: int,
+            xs: np.ndarray, end: np.ndarray) -> None:  # fmt: skip
+        coupling = (k[1] + k[2]) / (1.0 + k[0])
+        for b in range(rows.shape[0]):
+            r = rows[b]
+            for w in range(target.shape[0]):
+                x, th, xd, thd = s0[b, w, 0], s0[b, w, 1], s0[b, w, 2], s0[b, w, 3]
+                xs[b, w, 0] = x
+                for j in range(target.shape[1]):
+                    u = target[w, j]
+                    for i in range(n):
+                        x, th, xd, before = rk4(f_held, x, th, xd, thd, (k, r, u), h)
+                        th, xd, thd = stops(th, xd, before, before, r[12], r[13], coupling)
+                        xs[b, w, j * n + i + 1] = x
+                    if j == w_end - 1:
+                        end[b, w, 0], end[b, w, 1], end[b, w, 2], end[b, w, 3] = x, th, xd, thd
+
+    _KERNEL.append(run)
+    return run
+
+
+def _value(p: Parameters, overrides: dict[str, float], name: str) -> float:
+    if name in CALIBRATION_ONLY:
+        return float(overrides.get(name, _START_ONLY[name]))
+    group, field_name = name.split(".")
+    return float(getattr(p.group(group), field_name))
+
+
+def _with(base: Parameters, overrides: dict[str, float]) -> Parameters:
+    """``base`` with the fitted values. A horn's neutral moved by δ with its travel not fitted has its travel
+    shortened by |δ|: both ends stay within the start's travel, which the linkage checked clear of dead points
+    (a preset's travel ends just short of one); the stops matter only where the beam reaches them."""
+    real = {k: v for k, v in overrides.items() if k not in CALIBRATION_ONLY}
+    if "linkage.horn_neutral_rad" in real and "linkage.horn_travel_rad" not in real:
+        link = base.group("linkage")
+        moved = abs(real["linkage.horn_neutral_rad"] - link.horn_neutral_rad)
+        real["linkage.horn_travel_rad"] = max(link.horn_travel_rad - moved, 1e-3)
+    return base.with_overrides(real, origin="calibration") if real else base
+
+
+# --- the fit ----------------------------------------------------------------------------------------------------
+def _solve(
+    problem: _Problem, z0: np.ndarray, free: np.ndarray, max_nfev: int
+) -> scipy.optimize.OptimizeResult:
+    """least_squares over the ``free`` entries of z, the Jacobian by forward differences with the columns that
+    share no row perturbed together, all in one batched simulation (``calib.identify._solve``'s scheme)."""
+    lo, hi = problem.bounds()
+    scale = problem.scale()
+    pattern = problem.sparsity()[:, free].tocoo()
+    rows, cols = pattern.row.astype(np.int64), pattern.col.astype(np.int64)
+    groups = _color_columns(pattern.tocsc())
+    n_groups = int(groups.max()) + 1
+
+    def fun(u: np.ndarray) -> np.ndarray:
+        z = z0.copy()
+        z[free] = u
+        return problem.residuals(z)
+
+    def jac(u: np.ndarray) -> scipy.sparse.csr_matrix:
+        step = 1.49e-8 * np.maximum(np.abs(u), scale[free])
+        step = np.where(u + step > hi[free], -step, step)
+        zs = np.tile(z0, (n_groups + 1, 1))
+        zs[:, free] = u
+        for g in range(n_groups):
+            members = np.flatnonzero(groups == g)
+            zs[g + 1, free[members]] += step[members]
+        r = problem.residuals_batch(zs)
+        data = (r[groups[cols] + 1, rows] - r[0, rows]) / step[cols]
+        return scipy.sparse.csr_matrix((data, (rows, cols)), shape=pattern.shape)
+
+    return scipy.optimize.least_squares(
+        fun, np.clip(z0[free], lo[free], hi[free]), jac=jac, bounds=(lo[free], hi[free]), x_scale=scale[free],
+        loss="soft_l1", f_scale=ROBUST_SCALE, method="trf", tr_solver="lsmr",
+        tr_options={"atol": 1e-12, "btol": 1e-12}, max_nfev=max_nfev, xtol=1e-6, ftol=1e-6, gtol=1e-8,
+    )  # fmt: skip
+
+
+def _sandwich(
+    problem: _Problem, jac: scipy.sparse.spmatrix, rw: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, int]:
+    """The globals' cluster-robust covariance H⁻¹(Σ_c J_cᵀr_c r_cᵀJ_c)H⁻¹, their sensitivities (the norms of
+    their Jacobian columns: 0 where the residuals do not depend on them) and the clusters' count, as
+    ``calib.identify._sandwich`` (its clusters are the thesis log's rows; these the serial log's)."""
+    ng = problem.n_global
+    J = scipy.sparse.csr_matrix(jac)
+    H = (J.T @ J).tocsc()
+    d = np.sqrt(np.maximum(H.diagonal(), 1e-300))
+    Dinv = scipy.sparse.diags(1.0 / d)
+    Hn = (Dinv @ H @ Dinv + 1e-12 * scipy.sparse.identity(H.shape[0])).tocsc()
+    lu = scipy.sparse.linalg.splu(Hn)
+    rhs = np.zeros((H.shape[0], ng))
+    rhs[np.arange(ng), np.arange(ng)] = 1.0 / d[:ng]
+    with np.errstate(all="ignore"):
+        X = lu.solve(rhs) / d[:, None]
+        B = np.asarray(J @ X)
+    cluster = problem.cluster_of_rows()
+    n_c = int(cluster.max()) + 1
+    G = np.zeros((n_c, ng))
+    with np.errstate(all="ignore"):
+        for k in range(ng):
+            G[:, k] = np.bincount(cluster, weights=B[:, k] * rw, minlength=n_c)
+        cov = G.T @ G * n_c / max(n_c - 1, 1)
+    return cov, np.sqrt(np.maximum(H.diagonal()[:ng], 0.0)), n_c
+
+
+def calibrate_part_rig(
+    log: SerialLog,
+    fit: Sequence[str],
+    start: Parameters,
+    *,
+    window_s: float = 1.0,
+    max_nfev: int = 60,
+) -> PartCalibration:
+    """Fit ``fit`` (names from ``PART_FITTABLE``) to a serial log of the part-built rig ``start`` describes."""
+    started = time.perf_counter()
+    unknown = [n for n in fit if n not in PART_FITTABLE]
+    if not fit or unknown:
+        raise CalibrationError(f"--fit {','.join(fit)!r}: choose from {', '.join(PART_FITTABLE)}")
+    problem = _Problem(log, start, list(dict.fromkeys(fit)), window_s)
+    ng = problem.n_global
+    z0 = problem.initial_vector()
+    states = np.arange(ng, z0.size)
+    before = _solve(problem, z0, states, max_nfev)
+    z_before = z0.copy()
+    z_before[states] = before.x
+    result = _solve(problem, z_before, np.arange(z0.size), max_nfev)
+    z = result.x
+    r = problem.residuals(z)
+    rw = r / np.sqrt(np.sqrt(1.0 + (r / ROBUST_SCALE) ** 2))  # r·√ρ′ of soft_l1
+    cov, sensitivity, n_c = _sandwich(problem, result.jac, rw)
+    std = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    t_crit = float(scipy.stats.t.ppf(0.5 + CONFIDENCE / 2, max(n_c - 1, 1)))
+    values: dict[str, FittedValue] = {}
+    unidentified: dict[str, str] = {}
+    kept: dict[str, float] = {}
+    for i, name in enumerate(problem.fit):
+        statistical = t_crit * float(std[i])
+        rel, absolute = MODEL_RESOLUTION.get(name, (0.0, 0.0))
+        half = math.hypot(statistical, max(rel * abs(float(z[i])), absolute))
+        lo, hi = float(z[i] - half), float(z[i] + half)
+        reason = _unidentified(lo, hi, float(std[i]), float(sensitivity[i]))
+        low, high = problem.ranges[i]
+        if not reason and hi - lo > high - low:  # the log leaves it anywhere in its search range
+            reason = f"its {CONFIDENCE:.0%} interval [{lo:.6g}, {hi:.6g}] is wider than its search range"
+        if reason:
+            unidentified[name] = reason
+            continue
+        kept[name] = float(z[i])
+        values[name] = FittedValue(
+            float(z[i]), lo, hi, float(problem.starts[i]), PART_FITTABLE[name].unit, sd=half / t_crit,
+            statistical_half=statistical,
+        )  # fmt: skip
+    on_bound = [
+        f"{name} = {z[i]:.6g} {PART_FITTABLE[name].unit} sits on its search bound "
+        f"[{problem.ranges[i][0]:.6g}, {problem.ranges[i][1]:.6g}]: the log pushes it past what the fit allows"
+        for i, name in enumerate(problem.fit)
+        if name in values and min(abs(z[i] - b) for b in problem.ranges[i]) < 1e-6 * PART_FITTABLE[name].scale
+    ]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        corr = np.nan_to_num(cov / np.outer(std, std))
+    adequacy = _adequacy(problem, z)
+    problems = []
+    if unidentified:
+        told = "; ".join(
+            f"{n}: {why}; kept at its start {_value(start, {}, n):g} {PART_FITTABLE[n].unit}"
+            for n, why in unidentified.items()
+        )
+        problems.append(
+            f"not identifiable by these logs: {told} (record a log that exercises it, or drop it)"
+        )
+    problems += on_bound
+    a = adequacy["ball"]
+    if a.ratio > MISMATCH_RATIO or abs(a.lag1) > COLOURED_LAG1:
+        problems.append(
+            f"model mismatch: the ball channel's residual is {a.ratio:.2f}× its noise floor with lag-1 "
+            f"correlation {a.lag1:.2f} (adequate: ≤ {MISMATCH_RATIO:g}× and |ρ(1)| ≤ {COLOURED_LAG1:g})"
+        )
+    return PartCalibration(
+        params=_with(start, {k: v for k, v in kept.items()}),
+        values=values,
+        not_identifiable=unidentified,
+        adequacy=adequacy,
+        problems=problems,
+        converged=bool(result.success),
+        message=str(result.message),
+        wall_s=time.perf_counter() - started,
+        n_windows=problem.nw,
+        rms_before_mm=_rms_mm(problem, z_before),
+        rms_after_mm=_rms_mm(problem, z),
+        correlation=corr,
+        fitted_only={n: kept.get(n, _START_ONLY[n]) for n in CALIBRATION_ONLY},
+    )
+
+
+def _errors_mm(problem: _Problem, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    reading, _ = problem.simulate(z[None, :])
+    valid = np.isfinite(problem.win.sigma)
+    return np.where(valid, reading[0] - problem.win.reading, 0.0), valid
+
+
+def _rms_mm(problem: _Problem, z: np.ndarray) -> float:
+    e, valid = _errors_mm(problem, z)
+    return float(np.sqrt(np.sum(e * e) / max(int(valid.sum()), 1)))
+
+
+def _adequacy(problem: _Problem, z: np.ndarray) -> dict[str, ChannelAdequacy]:
+    """The ball channel's residual against its floor (the median reading's standard deviation, the part's
+    noise with its 1 mm rounding); readings beyond 6 floors are outliers (a wrong return)."""
+    e, valid = _errors_mm(problem, z)
+    # the part's noise, or the log's own tick-to-tick noise where larger (a part whose noise is set to 0): the
+    # second difference of white noise has 6σ² of variance, the ball's motion adds little over 20 ms
+    y = np.where(valid, problem.win.reading, np.nan)
+    second = np.diff(y, n=2, axis=1)
+    own = float(np.nanmedian(np.abs(second)) / 0.6745 / math.sqrt(6.0))
+    floor = max(float(np.median(problem.win.sigma[valid])), own)
+    e = np.where(valid, e, np.inf)  # left-out readings count as outliers, out of the RMS
+    a = channel_adequacy(e, channel="ball", unit="mm", floor=floor, outlier=6.0 * floor)
+    return {"ball": a}
+
+
+# --- the fitted rig as a description ------------------------------------------------------------------------
+def _toml_value(v: object) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, (int, float)):
+        return repr(float(v)) if isinstance(v, float) else str(v)
+    if isinstance(v, str):
+        return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(v, (tuple, list)):
+        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    raise ParameterError(f"cannot write {v!r} in a rig description")
+
+
+def describe_toml(cal: PartCalibration, name: str = "calibrated") -> str:
+    """The fitted rig as a rig description (``twin.parts.description``): every role's part and all its groups'
+    values, the groups no part owns where they differ from the defaults; the calibration-only values and each
+    fitted value's interval as comments."""
+    import dataclasses
+
+    p = cal.params
+    out = [f"# fitted by ballbeam calibrate from a serial log ({CONFIDENCE:.0%} intervals)"]
+    for n, v in cal.values.items():
+        out.append(
+            f"# {n} = {v.value:.6g} [{v.ci_low:.6g}, {v.ci_high:.6g}] {v.unit} (start {v.initial:.6g})"
+        )
+    for n in cal.not_identifiable:
+        out.append(f"# {n}: not identifiable by this log, kept at its start")
+    for n, value in cal.fitted_only.items():
+        out.append(f"# {n} = {value:.6g} {CALIBRATION_ONLY[n]} (no part has a field for it)")
+    out.append(f"name = {_toml_value(name)}")
+    owned: set[str] = set()
+    for role in ROLES:
+        part = getattr(rig_parts(p), role)
+        out += ["", f"[{role}]", f"part = {_toml_value(part.name)}"]
+        for group in part.groups:
+            owned.add(group)
+            out.append(f"[{role}.{group}]")
+            values = p.group(group)
+            out += [f"{f.name} = {_toml_value(getattr(values, f.name))}" for f in dataclasses.fields(values)]
+    defaults = Parameters()
+    for group in GROUPS:
+        if group in owned:
+            continue
+        values, base = p.group(group), defaults.group(group)
+        changed = [f for f in dataclasses.fields(values) if getattr(values, f.name) != getattr(base, f.name)]
+        if changed:
+            out += ["", f"[{group}]"] + [
+                f"{f.name} = {_toml_value(getattr(values, f.name))}" for f in changed
+            ]
+    return "\n".join(out) + "\n"
+
+
+def write_outputs(cal: PartCalibration, out_dir: str | Path, name: str) -> list[Path]:
+    """``rig.toml`` (the fitted description) and ``calibration.json`` in ``out_dir``."""
+    import json
+
+    folder = Path(out_dir)
+    folder.mkdir(parents=True, exist_ok=True)
+    rig, js = folder / "rig.toml", folder / "calibration.json"
+    rig.write_text(describe_toml(cal, name), encoding="utf-8")
+    js.write_text(json.dumps(cal.to_json(), indent=2), encoding="utf-8")
+    return [rig, js]
