@@ -302,5 +302,7 @@ def test_a_rig_of_other_parts_log_is_held_to_its_boards_range(tmp_path: Path) ->
     with pytest.raises(LogError, match="'aout' .*index 2: 1500.0 V is outside the DAC"):
         load_judged_log(path, Parameters())  # the thesis's card: volts
     rows["aout"][5] = 3000.0
-    with pytest.raises(LogError, match=r"index 6: 3000.0 µs is outside the servo pulse.s range arduino.servo_min_us"):
+    with pytest.raises(
+        LogError, match=r"index 6: 3000.0 µs is outside the servo pulse.s range arduino.servo_min_us"
+    ):
         load_judged_log(write_rig_mat(tmp_path / "far.mat", rows), obb)
