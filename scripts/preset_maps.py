@@ -1,4 +1,4 @@
-"""Each preset's 41 × 41 map, screened and confirmed by MuJoCo, against MuJoCo's brute force (issue 42's acceptance).
+"""Each preset's 41 × 41 map, screened and confirmed by MuJoCo, against MuJoCo's brute force.
 
     python scripts/preset_maps.py --out DIR [--preset NAME ...] [--controller rig-lqg] [--n 41] [--duration 10]
 

@@ -104,7 +104,7 @@ def _children(pid: int) -> list[int]:
 # --- progress counts whole runs done -------------------------------------------------------------------
 @pytest.mark.quick
 def test_jobs_are_cut_so_an_interrupt_keeps_most_of_them() -> None:
-    """At least BATCHES chunks of MIN_BATCH_RUNS … MAX_BATCH_RUNS runs, evened out: the issue's 500-run job
+    """At least BATCHES chunks of MIN_BATCH_RUNS … MAX_BATCH_RUNS runs, evened out: a 500-run job
     at one worker is 8 batches of 63 (it was one batch of 500: an interrupt kept nothing)."""
     assert chunk_runs(500, 1, None) == 63
     assert chunk_runs(20, 1, None) == 20  # a small job: one batch
@@ -177,7 +177,7 @@ def test_a_stage_of_waves_counts_on_instead_of_starting_again() -> None:
 def test_an_interrupted_monte_carlo_writes_the_runs_done(
     tmp_path: Path, signum: int, code: int, name: str
 ) -> None:
-    """The issue's case, at one worker: 256 runs (8 batches of 32) interrupted after a batch or more."""
+    """A one-batch job's case, at one worker: 256 runs (8 batches of 32) interrupted after a batch or more."""
     out = tmp_path / "mc"
     cli = Cli(
         "montecarlo", "--controller", "appendix-sf", "--spread", str(SPREAD), "--n", "256",

@@ -416,7 +416,7 @@ def test_a_link_to_a_folder_writes_into_the_folder(tmp_path: Path, capsys) -> No
     assert sorted(p.name for p in real.iterdir()) == [MANIFEST, "map.png", "mine.txt", "sweep.json"]
 
 
-# --- the issue's command ----------------------------------------------------------------------------------
+# --- the interrupted command ----------------------------------------------------------------------------------
 @pytest.mark.slow
 def test_calibrate_overwrite_keeps_the_rig_log_it_fitted(tmp_path: Path, capsys) -> None:
     """``ballbeam calibrate cal/rig_log.mat --fit … --out cal --overwrite`` (issue 17): the log, a spread,

@@ -311,7 +311,7 @@ def test_integer_fields_refuse_fractions_and_take_whole_floats(name: str) -> Non
 @pytest.mark.parametrize(
     ("override", "fragment"),
     [
-        # the cases of the issue
+        # the hostile cases
         ({"daq.adc_bits": 1e6}, "daq.adc_bits = 1000000.0 bit is impossible: it must be <= 24"),
         ({"ball.mass_kg": 1e308}, "ball.mass_kg = 1e+308 kg is impossible: it must be <= 1.0"),
         ({"daq.sample_rate_hz": 1}, "daq.sample_rate_hz = 1.0 Hz is impossible: it must be >= 100.0"),

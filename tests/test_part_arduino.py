@@ -68,7 +68,7 @@ def test_servo_pulse_quantization_and_the_librarys_default_clamp() -> None:
     assert write(math.inf) == 2400.0
     with pytest.raises(ValueError, match="nan"):
         write(math.nan)
-    # one µs apart stays one µs apart: the resolution is 1 µs, not the 4 µs the issue quoted
+    # one µs apart stays one µs apart: the resolution is 1 µs, not the 4 µs often quoted
     assert write(1501.0) - write(1500.0) == 1.0
 
 

@@ -1,4 +1,4 @@
-"""A preset's map (issue 42's acceptance: screened, MuJoCo confirming, classes equal to brute force): the map's
+"""A preset's map (screened, MuJoCo confirming, classes equal to brute force): the map's
 axes follow the rig's track and travel (``twin.app.sweep.rig_grids``), the Open Ball & Beam map screened by the
 fast engine (its beam hinged off the track's centre) has brute force's classes, and scripts/preset_maps.py
 refuses a folder with something in it."""

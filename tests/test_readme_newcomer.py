@@ -1,4 +1,4 @@
-"""What a newcomer pasting the README met (issue 40, item 17), one test each: the recipes' output folders do not
+"""What a newcomer pasting the README met, one test each: the recipes' output folders do not
 collide, a file path given as ``--controller`` is refused naming the module to give, the README's controller
 example is importable as ``mypkg.ctrl:MyController``, the Gymnasium snippet prints what it shows, ``run
 --realtime`` warns when it did not keep real time, and the README pins what a firmware's summary and a

@@ -25,7 +25,7 @@ from twin.parameters import (
 from twin.parts import ROLES, THESIS, rig_parts
 from twin.parts.description import PRESETS, describe_rig, load_rig, preset, rig_from_text, rig_of
 
-# The commands the issue names (the environment has its own test below).
+# The commands a rig description applies to (the environment has its own test below).
 COMMANDS = (
     "run",
     "view",

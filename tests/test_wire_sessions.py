@@ -1,4 +1,4 @@
-"""Wire sessions that a vanished peer must not hold (issue 40, items 6, 15, 16): an observer that goes —
+"""Wire sessions that a vanished peer must not hold: an observer that goes —
 its socket closed, its process killed, or silent — frees its place for the next; a lone HELLO does not take
 ``view --serve``'s session; the view releases a run only with its browser and its wire client both there,
 and the client waits for that as long as it was told; the waits are options on both sides, validated, and
