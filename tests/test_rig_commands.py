@@ -109,6 +109,24 @@ def test_the_commands_run_on_the_rig_or_say_why(
     # a torque input has no meaning on a servo rig: refused naming the option
     assert main(["linearize", *rig]) == 2
     assert "--input torque" in capsys.readouterr().err
+    spec = tmp_path / "spec.toml"
+    spec.write_text('[requirements]\nstays_on = "always[0:3] (abs(x_m) < 0.14)"\n')
+    search = ["--controller", "rig-lqg", "--spec", str(spec), "--spread", str(spread), "--duration", "3"]
+    falsify = ["falsify", *rig, *search, "--budget", "8", "--population", "4", "--x0", "-0.1:0.1"]
+    assert main([*falsify, "--theta0", "-0.03:0.03", "--out", str(tmp_path / "fz")]) == 0
+    assert json.loads((tmp_path / "fz" / "falsify.json").read_text())["runs_spent"] == 8
+    certify = ["certify", *rig, *search, "--x0", "-0.05:0.05", "--theta0", "-0.02:0.02", "--guarantee", "0.5"]
+    assert main([*certify, "--confidence", "0.5", "--out", str(tmp_path / "cert")]) == 0
+    # the commands whose model is the thesis rig's identification refuse the rig, saying what to use instead
+    for command in (
+        ["compare", "--out", str(tmp_path / "cmp"), str(held_log)],
+        ["calibrate", "--fit", "servo.no_load_speed_rad_s", str(held_log)],
+        ["shadow", "--rig", "udp://127.0.0.1:9"],
+    ):
+        capsys.readouterr()
+        assert main([*command, *rig]) == 2, command
+        err = capsys.readouterr().err
+        assert "the thesis rig's identification model" in err and "parts.actuator = 'hobby_servo'" in err
 
 
 @pytest.mark.quick

@@ -16,6 +16,7 @@ from twin.app.commands.common import (
     load_params,
     options_from,
     progress_bar,
+    refuse_part_rig,
     write_out,
 )
 from twin.app.options import finite_float
@@ -87,6 +88,7 @@ def handle(o: Options) -> int:
     start = load_params(o.parameters)
     if o.log is not None or not o.logs:
         return _serial(o, start)
+    refuse_part_rig(start, "calibrate LOG …", "give its board's serial log as --log SERIAL.csv --columns MAP")
     fit = [name.strip() for name in o.fit.split(",") if name.strip()]
     unknown = [n for n in fit if n not in FITTABLE]
     if not fit or unknown:

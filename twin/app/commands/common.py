@@ -344,6 +344,27 @@ def load_params(options: ParamsOptions) -> Parameters:
     return params.with_overrides(overrides, origin="--set") if overrides else params
 
 
+def refuse_part_rig(params: Parameters, command: str, instead: str) -> None:
+    """Refuse (a ParameterError: exit 2) a rig of other parts than the thesis's for ``command``, whose model is
+    the thesis rig's smooth one (calib.identify: its wiper curve, counter and amplifier), naming the parts and
+    what to use ``instead``. A rig's log is never read through another board's units."""
+    from twin.parameters import ParameterError
+    from twin.parts import ROLES, THESIS, is_thesis_rig, rig_parts
+
+    parts = rig_parts(params)
+    if is_thesis_rig(parts):
+        return
+    other = ", ".join(
+        f"parts.{role} = {getattr(parts, role).name!r}"
+        for role in ROLES
+        if getattr(parts, role) is not getattr(THESIS, role)
+    )
+    raise ParameterError(
+        f"{command} predicts with the thesis rig's identification model, not with a rig of other parts ({other}); "
+        f"{instead}"
+    )
+
+
 def params_source(options: ParamsOptions) -> str:
     """Where the parameters came from, as typed: ``--rig-file``, ``--params FILE`` and the ``--set`` items."""
     parts = [f"--rig-file {options.rig_file}"] if options.rig_file else []

@@ -19,6 +19,7 @@ from twin.app.commands.common import (
     inputs,
     options_from,
     progress_bar,
+    refuse_part_rig,
     write_out,
 )
 from twin.app.options import finite_float, seed
@@ -115,6 +116,7 @@ def handle(o: Options) -> int:
     from twin.plant import NumericalError
 
     params, source = compare_params(o.parameters, o.calibration)
+    refuse_part_rig(params, "compare", "judge its logs (ballbeam judge) or calibrate it (calibrate --log)")
     criterion = Criterion(min_fit_percent=o.min_fit, max_floor_ratio=o.max_floor_ratio)
     factory = None if o.controller is None else hardware_controller(o.controller, params)
     check_output_folder(

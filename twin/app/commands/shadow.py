@@ -18,6 +18,7 @@ from twin.app.commands.common import (
     inputs,
     options_from,
     progress_bar,
+    refuse_part_rig,
     refuse_unused,
 )
 from twin.app.options import count, finite_float
@@ -144,6 +145,7 @@ def handle(o: Options) -> int:
     if o.json:  # JSON prints the summary alone: there is nothing for --quiet to leave out
         refuse_unused([("--quiet", o.quiet)], "--json prints the summary alone: drop one")
     base, source = compare_params(o.parameters, o.calibration)
+    refuse_part_rig(base, "shadow", "watch it in the live view (ballbeam view --rig-file) instead")
     reference = o.reference_controller or REFERENCE_CONTROLLER
     factory = None if o.reference else hardware_controller(reference, base)
     paths = check_outputs(
