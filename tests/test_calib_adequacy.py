@@ -154,7 +154,8 @@ def test_before_is_the_start_with_converged_window_states() -> None:
 
 def test_calibrate_reads_its_log_read_only_and_shows_progress(tmp_path: Path, capsys, monkeypatch) -> None:
     """The log is opened for reading only (a read-only file works, no open() of it asks to write), and a
-    progress bar with evaluations and an ETA goes to stderr."""
+    progress bar with evaluations and an ETA goes to stderr, with --json as without (stdout is the JSON
+    alone)."""
     import builtins
 
     from twin.log import save_mat
@@ -172,12 +173,15 @@ def test_calibrate_reads_its_log_read_only_and_shows_progress(tmp_path: Path, ca
         return real_open(file, mode, *args, **kwargs)
 
     monkeypatch.setattr(builtins, "open", spy)
-    code = main(["calibrate", str(path), "--fit", "motor.resistance_ohm", "--out", str(tmp_path / "cal")])
+    code = main(
+        ["calibrate", str(path), "--fit", "motor.resistance_ohm", "--out", str(tmp_path / "cal"), "--json"]
+    )
     assert code in (0, 1)
     assert modes and all(set(m) <= {"r", "b"} for m in modes), modes
     assert path.read_bytes() == before
-    err = capsys.readouterr().err
-    assert "calibrate: window states" in err and "evaluation" in err
+    captured = capsys.readouterr()
+    assert "motor.resistance_ohm" in json.loads(captured.out)["params"]
+    assert "calibrate: window states" in captured.err and "evaluation" in captured.err
 
 
 @pytest.mark.quick
@@ -226,12 +230,9 @@ def test_a_loose_value_that_is_only_correlated_is_named_not_sent_to_record_again
     assert _excitation_problems(names, z, np.array([1e-5, 2e-5]), np.eye(2)) == []
 
 
-def test_the_fit_reports_its_progress_with_json_too(tmp_path: Path, capsys) -> None:
+def test_the_fit_reports_its_progress_stage_by_stage() -> None:
     """A short log: the progress callback is called per evaluation, counts increasing within each stage up to
-    its budget, the window states first; the command line's bar goes to stderr with --json as without (stdout
-    is the JSON alone)."""
-    from twin.log import save_mat
-
+    its budget, the window states first (the command line's bar: the read-only test above)."""
     run = run_experiment("square", RIG, duration_s=8.0, seed=2)
     calls: list[tuple[int, int, str]] = []
     calibrate([rig_log(run.log)], ["motor.resistance_ohm"], NOMINAL, diagnose=False,
@@ -244,12 +245,6 @@ def test_the_fit_reports_its_progress_with_json_too(tmp_path: Path, capsys) -> N
             done[0] == 1 and len(done) > 2 and all(b == a + 1 for a, b in zip(done, done[1:], strict=False))
         )
         assert {t for _, t, s in calls if s == stage} == {100} and done[-1] <= 100
-    path = tmp_path / "data_file.mat"
-    save_mat(run.log, path)
-    assert main(["calibrate", str(path), "--fit", "motor.resistance_ohm", "--json"]) in (0, 1)
-    captured = capsys.readouterr()
-    assert "motor.resistance_ohm" in json.loads(captured.out)["params"]
-    assert "calibrate: window states" in captured.err and "evaluation" in captured.err
 
 
 # --- screening (no fit: cheap) -----------------------------------------------------------------------------
