@@ -34,8 +34,7 @@ from twin.parts.contract import (
     board_volts_of,
     register,
 )
-from twin.parts.ranging import form_inputs, make_rng
-from twin.physics import PhysicsBlock
+from twin.parts.ranging import SampledChain, form_inputs, make_rng
 
 __all__ = ["BB01_STRIP", "Bb01Strip", "Bb01StripBatch", "Bb01StripChain", "strip_position_of", "strip_volts"]
 
@@ -128,6 +127,11 @@ class Bb01StripBatch:
         runs = np.arange(len(x0))
         self.output = np.asarray(strip_volts(x0, self.gain, self.offset, self.supply), dtype=float)
         self.readings = np.asarray(self.adc(runs, self.output), dtype=float)  # at rest: the noiseless rod
+        self.disturbed = np.zeros(len(x0), dtype=np.int64)  # the strip loses no readings
+
+    def set_params(self, params: Sequence[Parameters]) -> None:
+        """New parameters from now on; the generators run on."""
+        self.use_params(params)
 
     def use_params(self, params: Sequence[Parameters]) -> None:
         strips = [p.of(Bb01Strip) for p in params]
@@ -154,79 +158,20 @@ class Bb01StripBatch:
         return self.readings[runs].copy()
 
 
-_ONE_RUN = np.zeros(1, dtype=np.int64)
-
-
-class Bb01StripChain:
+class Bb01StripChain(SampledChain):
     """One run of the strip (``twin.parts.contract.BallSensorChain``): the batch of one run."""
-
-    reading_v: float
-    filtered_v: float
 
     def __init__(
         self, params: Parameters, seed: int | np.random.Generator | None, *, x_m: float = 0.0
     ) -> None:
-        self.params = params
-        self._rng = make_rng(seed)
-        self.reset(x_m)
+        super().__init__(params, seed, _one_run, x_m=x_m)
 
-    @property
-    def dropout_count(self) -> int:
-        """The strip loses no readings (a lost ball reads where it was)."""
-        return 0
 
-    def reset(
-        self,
-        x_m: float,
-        t_s: float = 0.0,
-        *,
-        in_contact: bool = True,
-        seed: int | np.random.Generator | None = None,
-    ) -> None:
-        """The ball at rest at ``x_m``; ``seed`` (optional) restarts the noise from that seed."""
-        if seed is not None:
-            self._rng = make_rng(seed)
-        self._batch = Bb01StripBatch([self.params], [self._rng], np.array([float(x_m)]), float(t_s))
-        self._sync()
-
-    def set_params(self, params: Parameters) -> None:
-        """New parameters from now on; the generator runs on."""
-        self.params = params
-        self._batch.use_params([params])
-
-    def _sync(self) -> None:
-        self.reading_v = float(self._batch.readings[0])
-        self.filtered_v = float(self._batch.output[0])
-
-    def advance(self, times_s: np.ndarray, x_m: np.ndarray, in_contact: bool | np.ndarray = True) -> float:
-        """One block from the chain's time: the board's reading at its end."""
-        t, x = np.asarray(times_s, dtype=float), np.asarray(x_m, dtype=float)
-        if t.ndim != 1 or t.shape != x.shape or not (np.isfinite(t).all() and np.isfinite(x).all()):
-            raise ValueError("times_s and x_m must be finite 1-D arrays of one length")
-        if abs(float(t[0]) - self._batch.time_s) > _CONTINUITY_S:
-            raise ValueError(f"times_s[0] = {t[0]!r} s: the block must start at the chain's time")
-        return self._advance(t, x, np.broadcast_to(np.asarray(in_contact, dtype=bool), t.shape))
-
-    def advance_block(self, block: PhysicsBlock) -> float:
-        """``advance`` for a block the rig built."""
-        return self._advance(block.time_s, block.x_m, block.on_track)
-
-    def advance_rig_block(
-        self,
-        times_s: np.ndarray,
-        x_m: np.ndarray,
-        in_contact: np.ndarray,
-        equal_steps: bool,
-        x_range_m: tuple[float, float] | None = None,
-        all_on_track: bool | None = None,
-    ) -> float:
-        """``advance`` for a block the rig built (checked by the rig; the hints are unused)."""
-        return self._advance(np.asarray(times_s, dtype=float), np.asarray(x_m, dtype=float), in_contact)
-
-    def _advance(self, t: np.ndarray, x: np.ndarray, contact: np.ndarray) -> float:
-        self._batch.advance(_ONE_RUN, t, x[None, :], np.asarray(contact, dtype=bool)[None, :])
-        self._sync()
-        return self.reading_v
+def _one_run(
+    params: Parameters, rng: np.random.Generator, x_m: float, t_s: float, present: bool
+) -> Bb01StripBatch:
+    """The batch of one run (the strip reads the ball where it is, on the track or not)."""
+    return Bb01StripBatch([params], [rng], np.array([x_m]), t_s)
 
 
 def _chain(params: Parameters, seed: int) -> Bb01StripChain:

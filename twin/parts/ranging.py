@@ -211,9 +211,25 @@ class SensorBatch(SampledBatch):
         return cls(params, [rng], np.array([x_m]), t_s, present)
 
 
+class RunsBatch(Protocol):
+    """What a chain of one run needs of its batch (``SampledBatch``, or another sensor's batch form)."""
+
+    readings: np.ndarray
+    output: np.ndarray
+    disturbed: np.ndarray
+    time_s: float
+
+    def advance(
+        self, runs: np.ndarray, times_s: np.ndarray, x_m: np.ndarray, on_track: np.ndarray
+    ) -> np.ndarray: ...
+
+    def set_params(self, params: Sequence[Parameters]) -> None: ...
+
+
 class SampledChain:
-    """One run of a ranging sensor (``twin.parts.contract.BallSensorChain``): the batch of one run
-    (``SampledBatch``), built by ``make_batch(params, rng, x_m, t_s, present)``. ``reading_v``: the board's last
+    """One run of a sensor's batch (``twin.parts.contract.BallSensorChain``): the batch of one run
+    (``SampledBatch`` for a ranging sensor, ``RunsBatch`` for any), built by
+    ``make_batch(params, rng, x_m, t_s, present)``. ``reading_v``: the board's last
     reading (its unit); ``filtered_v``: the sensor's output now (its unit: mm, µs or volts at the pin)."""
 
     reading_v: float
@@ -223,7 +239,7 @@ class SampledChain:
         self,
         params: Parameters,
         seed: int | np.random.Generator | None,
-        make_batch: Callable[[Parameters, np.random.Generator, float, float, bool], SampledBatch],
+        make_batch: Callable[[Parameters, np.random.Generator, float, float, bool], RunsBatch],
         *,
         x_m: float = 0.0,
     ) -> None:
