@@ -34,7 +34,7 @@ from twin.parts.contract import (
     board_volts_of,
     register,
 )
-from twin.parts.ranging import SampledChain, form_inputs, make_rng
+from twin.parts.ranging import SampledChain, form_batch, form_inputs, form_single, make_rng
 
 __all__ = ["BB01_STRIP", "Bb01Strip", "Bb01StripBatch", "Bb01StripChain", "strip_position_of", "strip_volts"]
 
@@ -188,40 +188,6 @@ def strip_position_of(params: Parameters) -> Callable[[float], float]:
 
 # --- the batch form: a ball rolling through blocks of the rig, N runs at once ---------------------------------
 _Q8 = Parameters().with_overrides({"parts.io_board": "quanser_q8_usb", "bb01_strip.noise_v": 0.05})
-_FORM_BLOCKS, _FORM_STEPS = 8, 20  # 160 ms of 20 ms blocks at 1 ms steps
-
-
-def _form_track(params: Parameters, row: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The row's ball (seed, start, speed) rolling at constant speed: times, positions, on-track flags."""
-    times = np.arange(_FORM_BLOCKS * _FORM_STEPS + 1) * params.physics.timestep_s
-    x = row[1] + row[2] * times
-    return times, x, np.abs(x) <= params.track.half_length_m
-
-
-def _single(params: Parameters, row: np.ndarray) -> np.ndarray:
-    """One run's chain as the rig resets and advances it: each block's reading and the rod's volts at the end."""
-    times, x, on = _form_track(params, row)
-    chain = Bb01StripChain(params, int(row[0]), x_m=float(x[0]))
-    out = []
-    for b in range(_FORM_BLOCKS):
-        k = slice(b * _FORM_STEPS, (b + 1) * _FORM_STEPS + 1)
-        out.append(chain.advance_rig_block(times[k], x[k], on[k], True))
-    return np.array([*out, chain.filtered_v])
-
-
-def _batch(params: Sequence[Parameters], rows: np.ndarray) -> np.ndarray:
-    """Every run at once (``Bb01StripBatch``)."""
-    tracks = [_form_track(p, row) for p, row in zip(params, rows, strict=True)]
-    times = tracks[0][0]
-    x = np.array([track[1] for track in tracks])
-    on = np.array([track[2] for track in tracks])
-    many = Bb01StripBatch(list(params), rows[:, 0].astype(np.int64), x[:, 0], 0.0)
-    runs = np.arange(len(rows))
-    out = []
-    for b in range(_FORM_BLOCKS):
-        k = slice(b * _FORM_STEPS, (b + 1) * _FORM_STEPS + 1)
-        out.append(many.advance(runs, times[k], x[:, k], on[:, k]))
-    return np.column_stack([*out, many.output])
 
 
 BB01_STRIP = register(
@@ -234,8 +200,8 @@ BB01_STRIP = register(
         equations=(strip_volts, strip_position_of, Bb01StripBatch),
         mjcf=MjcfFragment(),
         batch=BatchForm(
-            _single,
-            _batch,
+            form_single(_chain),
+            form_batch(Bb01StripBatch),
             form_inputs(_Q8, ("bb01_strip.gain_m_per_v", "bb01_strip.noise_v", "bb01_strip.offset_v")),
             "twin.parts.bb01_strip.Bb01StripBatch",
         ),

@@ -355,7 +355,7 @@ def form_single(
 
 
 def form_batch(
-    batch: Callable[[Sequence[Parameters], np.ndarray, np.ndarray, float], SampledBatch],
+    batch: Callable[[Sequence[Parameters], np.ndarray, np.ndarray, float], RunsBatch],
 ) -> Callable[[Sequence[Parameters], np.ndarray], np.ndarray]:
     """A batch form's batch side: every run at once (``batch(params, seeds, x0, t0)``)."""
 
