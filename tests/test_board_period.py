@@ -42,3 +42,14 @@ def test_an_arduino_loop_at_10_ms_ticks_every_10_ms_and_rig_lqg_designed_for_it_
     spacing = np.diff(result.log.timem)
     assert np.allclose(spacing, 0.01, rtol=0, atol=1e-9)  # 1000 ticks of 10 ms
     assert result.verdict.held
+
+
+@pytest.mark.quick
+def test_setting_the_pci_cards_period_on_another_board_is_refused_naming_the_boards_field(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    from twin.app.cli import main
+
+    args = ["run", "--rig-file", "open-ball-and-beam", "--controller", "rig-lqg", "--x0", "0", "--theta0", "0"]
+    assert main([*args, "--set", "daq.period_s=0.01"]) == 2
+    assert "ticks at arduino.loop_period_s = 0.02 s" in capsys.readouterr().err

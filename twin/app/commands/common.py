@@ -341,7 +341,13 @@ def load_params(options: ParamsOptions) -> Parameters:
         if not sep or "." not in name:
             raise ParameterError(f"--set {item!r}: expected GROUP.NAME=VALUE, e.g. start.free_run_s=0.02")
         overrides[name.strip()] = _parse_value(text.strip(), item)
-    return params.with_overrides(overrides, origin="--set") if overrides else params
+    params = params.with_overrides(overrides, origin="--set") if overrides else params
+    if "daq.period_s" in overrides and params.period_field != "daq.period_s":
+        raise ParameterError(
+            f"--set daq.period_s: this rig's board ({params.parts.io_board}) ticks at {params.period_field} "
+            f"= {params.period_s!r} s, not at the PCI-1712's daq.period_s: set {params.period_field}"
+        )
+    return params
 
 
 def refuse_part_rig(params: Parameters, command: str, instead: str) -> None:
