@@ -17,6 +17,7 @@ twin's state.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -153,7 +154,6 @@ class RigLqgController(Controller):
 def rig_lqg(params: Parameters) -> RigLqgController:
     """``rig-lqg`` for the rig ``params`` describes (its parts must give their conversions: a part without
     one is refused naming it)."""
-    from twin.linearize import hold_control, linearize_reference
     from twin.parts import rig_parts
 
     parts = rig_parts(params)
@@ -180,6 +180,28 @@ def rig_lqg(params: Parameters) -> RigLqgController:
     )
     command_of = parts.actuator.command_of(params)
     control_of = parts.actuator.control_of(params)
+    limits = parts.io_board.output_range(params)
+    return RigLqgController(
+        _design(params),
+        position_of=position_of,
+        angle_of=angle_of,
+        command_of=command_of,
+        control_of=control_of,
+        command_range=(limits.low, limits.high),
+    )
+
+
+@functools.lru_cache(maxsize=64)
+def _design(params: Parameters) -> RigLqgDesign:
+    """The design for the rig ``params`` describes (the same for every run of a batch on one rig: computed once;
+    a design is never changed by its controllers)."""
+    from twin.linearize import hold_control, linearize_reference
+    from twin.parts import rig_parts
+
+    parts = rig_parts(params)
+    assert parts.actuator.control_of is not None  # rig_lqg checked it
+    control_of = parts.actuator.control_of(params)
+    angle_measured = parts.angle_sensor.angle_of is not None and parts.angle_sensor.measures_angle
     # about the control that holds the level beam: a beam hinged at its end needs one to carry its weight
     rest_control = hold_control(params, control_of(parts.actuator.rest_command(params)))
     a, b = linearize_reference(params, rest_control)
@@ -192,8 +214,8 @@ def rig_lqg(params: Parameters) -> RigLqgController:
         # turns); the half keeps the loop well inside a stepper's speed ramp (at the whole scale it is not: the
         # ramp's lag rocked the stepper preset's beam onto its stops, at half it held from every start tried)
         input_scale = min(input_scale, abs(POSITION_SCALE_RAD * a[3, 1] / b[3, 0]))
-    measured = (0,) if angle_of is None else (0, 1)
-    noise = (BALL_NOISE_M,) if angle_of is None else (BALL_NOISE_M, ANGLE_NOISE_RAD)
+    measured = (0, 1) if angle_measured else (0,)
+    noise = (BALL_NOISE_M, ANGLE_NOISE_RAD) if angle_measured else (BALL_NOISE_M,)
     design = rig_lqg_design(
         a,
         b,
@@ -203,11 +225,6 @@ def rig_lqg(params: Parameters) -> RigLqgController:
         measured=measured,
         measurement_noise=noise,
     )
-    return RigLqgController(
-        design,
-        position_of=position_of,
-        angle_of=angle_of,
-        command_of=command_of,
-        control_of=control_of,
-        command_range=(limits.low, limits.high),
-    )
+    for shared in (design.phi, design.gamma, design.gain, design.kalman_gain):
+        shared.setflags(write=False)  # one design serves every controller of the rig
+    return design

@@ -104,3 +104,12 @@ def test_rig_lqg_is_refused_on_a_part_that_gives_no_conversion(monkeypatch: pyte
     finally:
         monkeypatch.undo()
         contract._rig_parts.cache_clear()
+
+
+@pytest.mark.quick
+def test_rig_lqg_designs_once_per_rig_and_its_controllers_cannot_change_the_design() -> None:
+    first, second = rig_lqg(preset("open-ball-and-beam")), rig_lqg(preset("open-ball-and-beam"))
+    assert first.design is second.design  # a batch of runs on one rig designs once
+    assert rig_lqg(preset("quanser-bb01")).design is not first.design
+    with pytest.raises(ValueError, match="read-only"):
+        first.design.gain[0, 0] = 0.0

@@ -346,3 +346,16 @@ def test_a_table_the_law_holds_or_whose_readings_fold_writes_no_curve() -> None:
     fit = fit_static("vl53l0x", folded)
     assert "vl53l0x.curve_distance_mm" not in fit.overrides
     assert "none is written: the mean readings do not increase strictly" in fit.notes[-1]
+
+
+@pytest.mark.quick
+def test_the_software_reads_the_broken_line_at_one_float_with_the_arrays_bits() -> None:
+    """The tick's scalar lookup (``_broken_line_at``, plain Python) is the array form's arithmetic: the same bits
+    at 20 000 random readings, inside, between and beyond the knots, and at every knot."""
+    from twin.parts.vl53l0x import _broken_line, _broken_line_at
+
+    rng = np.random.default_rng(7)
+    knots, values = np.sort(rng.uniform(0, 300, 18)), np.sort(rng.uniform(0, 300, 18))
+    xs = np.concatenate([rng.uniform(-50, 400, 20_000), knots])
+    scalar = np.array([_broken_line_at(float(x), list(knots), list(values)) for x in xs])
+    assert np.array_equal(scalar, _broken_line(xs, knots, values))

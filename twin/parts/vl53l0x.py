@@ -22,6 +22,7 @@ point 1.56 mm RMS against the broken line's 1.77 mm, both well under one reading
 
 from __future__ import annotations
 
+import bisect
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -221,6 +222,15 @@ def _broken_line(x: np.ndarray, knots: np.ndarray, values: np.ndarray) -> np.nda
     return (1.0 - t) * values[j] + t * values[j + 1]
 
 
+def _broken_line_at(x: float, knots: list[float], values: list[float]) -> float:
+    """``_broken_line`` at one float, in plain Python for a controller's tick (the same operations in the same
+    order on IEEE doubles: the same bits)."""
+    j = min(max(bisect.bisect_right(knots, x) - 1, 0), len(knots) - 2)
+    k0, k1 = knots[j], knots[j + 1]
+    t = (x - k0) / (k1 - k0)
+    return (1.0 - t) * values[j] + t * values[j + 1]
+
+
 def vl53l0x_curve_mm(
     distance_mm: np.ndarray, curve_distance_mm: Sequence[float], curve_reading_mm: Sequence[float]
 ) -> np.ndarray:
@@ -386,13 +396,13 @@ def vl53l0x_position_of(params: Parameters) -> Callable[[float], float]:
     inverse, as a sketch's lookup table is; Open Ball & Beam's own sketch fits a degree-5 polynomial to the same
     points instead, within 1.4 mm of them); NaN for the out-of-range code."""
     s, r = params.of(Vl53l0x), params.ball.radius_m
-    readings, distances = np.array(s.curve_reading_mm), np.array(s.curve_distance_mm)
+    readings, distances = list(s.curve_reading_mm), list(s.curve_distance_mm)
 
     def x_m(reading_mm: float) -> float:
         if reading_mm >= OUT_OF_RANGE_MM:
             return math.nan
         if s.has_curve:
-            d = float(_broken_line(np.array([float(reading_mm)]), readings, distances)[0])
+            d = _broken_line_at(float(reading_mm), readings, distances)
             return s.mount_x_m - r - d / 1000.0
         return s.mount_x_m - r - (reading_mm + s.crosstalk_offset_mm) / 1000.0
 
