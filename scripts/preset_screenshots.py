@@ -32,6 +32,7 @@ ANNOUNCE_S = 120.0  # the view designs its controller (rig-lqg: a linearization)
 STARTS: dict[str, tuple[float, float]] = {
     "open-ball-and-beam": (0.05, 0.0),
     "arduino-stepper-ultrasonic": (0.05, 0.0),
+    "quanser-bb01": (0.1, 0.0),
 }
 # The panel's number boxes in their order (twin.viewer.gui: speed, x0, θ0, flick, setpoint, drift).
 X0_BOX, THETA0_BOX = 1, 2
