@@ -14,8 +14,11 @@ verdict against stated criteria.
     monte carlo   (with --spread or --calibration) the success rate's lower confidence bound
 
 Every bound is a field of ``ValidationCriteria`` with its reason; ``--criteria FILE`` (TOML) overrides
-them. Every run goes through the batch engine (``twin.app.fanout``); the numbers in the report are
-formatted from the runs' verdicts.
+them. On a rig that is not the thesis's the defaults are the rig's (``default_criteria``: its track, its
+beam's travel, its board's period) and the battery runs what its parts have (``rig_battery``): a check they do
+not have (a zeroing error, an output latency, amplifier rails, a spread of groups they use) is reported "not
+applicable" with the reason, never passed. Every run goes through the batch engine (``twin.app.fanout``);
+the numbers in the report are formatted from the runs' verdicts.
 """
 
 from __future__ import annotations
@@ -23,7 +26,7 @@ from __future__ import annotations
 import math
 import time
 import tomllib
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
@@ -38,13 +41,25 @@ from twin.app.options import MAX_JOB_RUN_S, MAX_RIGS
 from twin.app.robust import run_robust
 from twin.app.sweep import MAX_POINTS, Grid, SweepResult, SweepSettings, point_seeds, run_sweep
 from twin.outputs import JobFiles
-from twin.parameters import ParameterError, Parameters
-from twin.physics import check_initial_state
+from twin.parameters import ParameterError, Parameters, PartNames
+from twin.physics import beam_travel_rad, check_initial_state
 from twin.requirements import Spec, violated
+from twin.rigs.backends import stand_in_refusal
 from twin.sensors import angle_count_step_rad
 
-__all__ = ["ValidationCriteria", "ValidationReport", "load_criteria", "validate"]
+__all__ = [
+    "RigBattery",
+    "ValidationCriteria",
+    "ValidationReport",
+    "default_criteria",
+    "load_criteria",
+    "rig_battery",
+    "validate",
+]
 
+
+# validate judges the twin itself (twin.rigs.backends: the plant whose stand-in screens the region).
+PLANT = "twin"
 
 # A validation runs 6 starts × nominal_seeds nominal runs; past 1000 seeds it is a typing error, not a study.
 MAX_NOMINAL_SEEDS = 1000
@@ -162,7 +177,12 @@ def _shown(value: Any) -> str:
 def check_criteria_for(criteria: ValidationCriteria, params: Parameters) -> None:
     """Refuse criteria that these parameters make impossible, before any run: a region or a required box
     off the track or past the stops, a sensitivity value the rig cannot take (ParameterError naming it)."""
-    c = criteria
+    _check_boxes(criteria, params)
+    _sensitivity_cases(criteria, params)
+
+
+def _check_boxes(c: ValidationCriteria, params: Parameters) -> None:
+    """Refuse a region or a required box off the track or past the beam's travel (ParameterError naming it)."""
     for name, (lo, hi) in (
         ("region_x0", c.region_x0[:2]),
         ("required_x0_m", c.required_x0_m),
@@ -175,7 +195,6 @@ def check_criteria_for(criteria: ValidationCriteria, params: Parameters) -> None
                 check_initial_state(params, float(x), float(th), 0.0, 0.0)
             except ValueError as exc:
                 raise ParameterError(f"{name} = {_shown(getattr(c, name))}: {exc}") from None
-    _sensitivity_cases(c, params)
 
 
 def _sensitivity_cases(
@@ -183,22 +202,24 @@ def _sensitivity_cases(
 ) -> list[tuple[str, str, Parameters]]:
     """Each sensitivity case: (parameter, label, the parameters with that value); a value the rig cannot
     take is refused naming the criterion (the largest zeroing error first: its count may be huge). For a
-    ``firmware`` no output latency: its DAC writes at its own cycles."""
-    count = angle_count_step_rad(params)
+    ``firmware`` no output latency: its DAC writes at its own cycles. Only the cases the rig's parts have
+    (``rig_battery``: a zeroing error where the angle sensor has one, a latency where the board has one)."""
+    rig = rig_battery(params, c)
     values: list[tuple[str, str, str, float]] = []
-    if c.zeroing_counts:
-        k = c.zeroing_counts
+    if c.zeroing_counts and rig.zeroing_field is not None:
+        count, k, zeroing = angle_count_step_rad(params), c.zeroing_counts, rig.zeroing_field
         try:
-            params.with_overrides({"angle_sensor.zeroing_error_rad": k * count}, origin="validate")
+            params.with_overrides({zeroing: k * count}, origin="validate")
         except ParameterError as exc:
             raise ParameterError(f"zeroing_counts = {k}: {exc}") from None
         values += [
-            ("zeroing_counts", "angle_sensor.zeroing_error_rad", f"{k:+d} counts", k * count)
+            ("zeroing_counts", zeroing, f"{k:+d} counts", k * count)
             for k in range(-c.zeroing_counts, c.zeroing_counts + 1)
             if k
         ]
-    if not firmware:  # a firmware's output timing is its own (the card's latency does not apply)
-        values += [("latencies_s", "daq.output_latency_s", f"{1e3 * v:g} ms", v) for v in c.latencies_s]
+    # a firmware's output timing is its own (the card's latency does not apply)
+    if not firmware and rig.latency_field is not None:
+        values += [("latencies_s", rig.latency_field, f"{1e3 * v:g} ms", v) for v in c.latencies_s]
     values += [("free_runs_s", "start.free_run_s", f"{1e3 * v:g} ms", v) for v in c.free_runs_s]
     cases = []
     for criterion, name, label, value in values:
@@ -210,15 +231,178 @@ def _sensitivity_cases(
     return cases
 
 
-def load_criteria(path: str | Path) -> ValidationCriteria:
-    """Criteria from a TOML file (any subset of ``ValidationCriteria``'s fields), checked for meaning."""
+# The groups every rig has whatever its parts (how a run starts, the physics, the software's conversion, an
+# Arduino-class front end for a firmware): a spread may vary them on any rig.
+_SHARED_GROUPS = ("physics", "software", "start", "mcu_io")
+
+
+@dataclass(frozen=True)
+class RigBattery:
+    """What the battery runs on a rig and why: its nominal starts, the sensitivity and Monte Carlo starts, the
+    sensitivity parameters its parts have, and each check that does not apply to it with the reason.
+    ``thesis``: the rig is the thesis's (its report is the thesis's, with no section on the rig)."""
+
+    thesis: bool
+    starts: tuple[tuple[float, float], ...]
+    starts_why: str
+    sensitivity_starts: tuple[tuple[float, float], ...]
+    sensitivity_why: str
+    montecarlo_start: tuple[float, float]
+    zeroing_field: str | None  # the angle sensor's zeroing error ("angle_sensor.zeroing_error_rad"), if any
+    latency_field: str | None  # the board's output latency ("daq.output_latency_s"), if any
+    rail_v: float | None  # the amplifier's rails, if the actuator has them
+    not_applicable: dict[str, str]  # check (or criterion) → why it does not apply to this rig
+    groups: tuple[str, ...]  # the parameter groups this rig's parts use (and the shared ones)
+
+
+def _field_of(part_groups: Mapping[str, type], name: str) -> str | None:
+    """``group.name`` if one of a part's groups has a field ``name``."""
+    for group, cls in part_groups.items():
+        if name in {f.name for f in fields(cls)}:
+            return f"{group}.{name}"
+    return None
+
+
+def _thesis_boxes_fit(params: Parameters) -> bool:
+    """Whether the thesis's region (the chapter 7 range) and required box lie on this rig's track and travel."""
+    try:
+        _check_boxes(ValidationCriteria(), params)
+    except ParameterError:
+        return False
+    return True
+
+
+def rig_battery(params: Parameters, c: ValidationCriteria | None = None) -> RigBattery:
+    """What the battery runs on the rig ``params`` names, under criteria ``c`` (default ``default_criteria``).
+    A rig on which the thesis's region fits runs the thesis's starts; another runs starts from its own
+    required box: its four corners and its two level edges (as the thesis's chapter 4 starts are its box's
+    corners), the sensitivities from its two corners at the upper angle, the Monte Carlo from the one at −x."""
+    from twin.parts import rig_parts
+
+    c = c or default_criteria(params)
+    parts = rig_parts(params)
+    zeroing = _field_of(parts.angle_sensor.groups, "zeroing_error_rad")
+    latency = _field_of(parts.io_board.groups, "output_latency_s")
+    rails = _field_of(parts.actuator.groups, "rail_v")
+    groups = tuple(dict.fromkeys([g for part in parts for g in part.groups] + list(_SHARED_GROUPS)))
+    na: dict[str, str] = {}
+    if zeroing is None:
+        na["zeroing_counts"] = (
+            f"parts.angle_sensor = {params.parts.angle_sensor!r} has no zeroing error (its groups: "
+            f"{', '.join(parts.angle_sensor.groups) or 'none'})"
+        )
+    if latency is None:
+        na["latencies_s"] = (
+            f"parts.io_board = {params.parts.io_board!r} has no output latency (its groups: "
+            f"{', '.join(parts.io_board.groups)}): its output is written at its tick"
+        )
+    if rails is None:
+        na["saturation"] = (
+            f"parts.actuator = {params.parts.actuator!r} has no amplifier rails (its groups: "
+            f"{', '.join(parts.actuator.groups)}): its command is bounded by the board's output range"
+        )
+    thesis = params.parts == PartNames()
+    if _thesis_boxes_fit(params):
+        hardware = tuple(T.HARDWARE_STARTS.values())
+        return RigBattery(
+            thesis,
+            (*T.CHAPTER4_STARTS, *hardware),
+            f"the thesis's {len(T.CHAPTER4_STARTS) + len(hardware)} starts",
+            T.CHAPTER4_STARTS,
+            "from the chapter 4 starts",
+            T.CHAPTER4_STARTS[1],
+            zeroing,
+            latency,
+            None if rails is None else params.amplifier.rail_v,
+            na,
+            groups,
+        )
+    (xlo, xhi), (tlo, thi) = c.required_x0_m, c.required_theta0_rad
+    corners = ((xhi, thi), (xlo, thi), (xhi, tlo), (xlo, tlo))
+    level = ((xhi, 0.0), (xlo, 0.0)) if tlo <= 0.0 <= thi else ()
+    starts = tuple(dict.fromkeys(corners + level))
+    return RigBattery(
+        thesis,
+        starts,
+        f"the required box's {len(starts)} starts (its corners and its edges at level)",
+        tuple(dict.fromkeys(corners[:2])),
+        "from the required box's corners at its upper angle",
+        (xlo, thi),
+        zeroing,
+        latency,
+        None if rails is None else params.amplifier.rail_v,
+        na,
+        groups,
+    )
+
+
+def _whole_steps(value_s: float, params: Parameters) -> float:
+    """A time rounded to whole physics steps (the rig's schedule takes no other), to the µs."""
+    dt = params.physics.timestep_s
+    return round(round(value_s / dt) * dt, 6)
+
+
+def default_criteria(params: Parameters) -> ValidationCriteria:
+    """The criteria a user of the rig ``params`` would expect (``criteria_reasons`` says why each): the
+    thesis's on a rig its region fits (the thesis's rig: ``ValidationCriteria()`` exactly), else the region
+    over the rig's whole track less the ball's radius by its beam's whole travel, the middle half of each
+    required. The latencies and free runs scale with the board's period (the thesis's at its 20 ms)."""
+    period = params.period_s
+    timed = replace(
+        ValidationCriteria(),
+        latencies_s=tuple(_whole_steps(f * period, params) for f in (0.0, 0.25, 0.5, 0.75)),
+        free_runs_s=tuple(_whole_steps(f * period, params) for f in (0.0, 0.5, 1.0, 2.0)),
+    )
+    if _thesis_boxes_fit(params):
+        return timed
+    # to the µm and µrad, rounded inward (a bound past the track or the travel by its last digit is refused)
+    half = math.floor(1e6 * (params.track.half_length_m - params.ball.radius_m)) / 1e6
+    low, high = (
+        f(1e6 * v) / 1e6 for f, v in zip((math.ceil, math.floor), beam_travel_rad(params), strict=True)
+    )
+    return replace(
+        timed,
+        required_x0_m=(-half / 2, half / 2),
+        required_theta0_rad=(low / 2, high / 2),
+        region_x0=(-half, half, 17),
+        region_theta0=(low, high, 15),
+    )
+
+
+def criteria_reasons(params: Parameters) -> dict[str, str]:
+    """Why each default of ``default_criteria(params)`` that the rig sets is what it is (as the thesis's
+    defaults say in ``ValidationCriteria``'s comments)."""
+    from twin.parts import rig_parts
+
+    period = f"the board's period {1e3 * params.period_s:g} ms ({params.period_field})"
+    why = {"free_runs_s": f"the unknown time from release to the first command: 0 to two of {period}"}
+    if _field_of(rig_parts(params).io_board.groups, "output_latency_s") is not None:
+        why["latencies_s"] = f"0 to three quarters of {period}, in whole physics steps"
+    if _thesis_boxes_fit(params):
+        return {"region_x0": "the thesis's chapter 7 range: it lies on this rig's track and travel", **why}
+    half, r = params.track.half_length_m, params.ball.radius_m
+    low, high = beam_travel_rad(params)
+    return {
+        "region_x0": f"the whole track less the ball's radius at 17 points: ±({half:g} − {r:g}) m "
+        "(track.half_length_m, ball.radius_m)",
+        "region_theta0": f"the beam's whole travel at 15 points: {low:.4g} … {high:.4g} rad (its stops narrowed "
+        f"to the reach of parts.beam_drive = {params.parts.beam_drive!r}, twin.physics.beam_travel_rad)",
+        "required_x0_m": "the middle half of the region's track",
+        "required_theta0_rad": "the middle half of the beam's travel each side of level",
+        **why,
+    }
+
+
+def load_criteria(path: str | Path, params: Parameters | None = None) -> ValidationCriteria:
+    """Criteria from a TOML file (any subset of ``ValidationCriteria``'s fields), checked for meaning; the
+    fields it leaves out are the rig ``params``'s defaults (``default_criteria``; none: the thesis's)."""
     path = Path(path)
     try:
         data = tomllib.loads(path.read_text(encoding="utf-8-sig"))
     except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
         raise ParameterError(f"{path}: cannot read criteria: {exc}") from None
     known = {f.name: f for f in fields(ValidationCriteria)}
-    default = ValidationCriteria()
+    default = ValidationCriteria() if params is None else default_criteria(params)
     values: dict[str, Any] = {}
     for name, value in data.items():
         if name not in known:
@@ -260,6 +444,9 @@ class ValidationReport:
     complete: bool = True  # False: interrupted (Ctrl-C); the checks done so far
     served: dict[str, Any] | None = None  # a served job: where, and the clients (fanout.Served.to_json)
     spec: str | None = None  # the requirements file the checks asked (None: the verdict's fields)
+    # a rig that is not the thesis's: its name, parts, starts, the defaults' reasons, the checks that do not
+    # apply (None: the thesis's rig, whose report says nothing of it)
+    rig: dict[str, Any] | None = None
 
     @property
     def passed(self) -> bool:
@@ -275,6 +462,7 @@ class ValidationReport:
             "criteria": asdict(self.criteria),
             "checks": [asdict(c) for c in self.checks],
             "wall_s": round(self.wall_s, 1),
+            **({"rig": self.rig} if self.rig is not None else {}),
         }
 
 
@@ -318,14 +506,22 @@ def _validate(
     spec: Spec | None,
     engine: tuple[str, int],
 ) -> ValidationReport:
-    c = criteria or ValidationCriteria()
+    c = criteria or default_criteria(params)
     check_criteria_for(c, params)  # before any run
     started = time.perf_counter()
     runs = Runs(
         controller, params, c.duration_s, True, "twin", False, spec.requirements if spec is not None else ()
     )
-    starts = [*T.CHAPTER4_STARTS, *T.HARDWARE_STARTS.values()]
+    rig = rig_battery(params, c)
+    starts = list(rig.starts)
     cases = _sensitivity_cases(c, params, host_of(controller).kind == "firmware")
+    engine_note = ""
+    if (refusal := stand_in_refusal(PLANT, params)) is not None:
+        # the fast engine cannot run this rig's parts (twin.screen.plant.kernel_refusal): MuJoCo decides alone
+        engine, engine_note = ("mujoco", 1), f" (MuJoCo alone: the fast engine refuses this rig: {refusal})"
+    spread_na = _spread_not_applicable(spread, rig)
+    if spread_na is not None:
+        spread = None
     x_required, theta_required = _required_grid(c)
     # One progress over the five stages' runs, counted up front (the region's corner states join its count
     # when it starts). A screened map runs every start on the fast engine and, at most, every start again on
@@ -336,14 +532,17 @@ def _validate(
         {
             "nominal": len(starts) * c.nominal_seeds,
             "region": c.region_x0[2] * c.region_theta0[2] * per_start,
-            "sensitivity": len(cases) * len(T.CHAPTER4_STARTS),
+            "sensitivity": len(cases) * len(rig.sensitivity_starts),
             "robust region": x_required.n * theta_required.n * c.robust_rigs * per_start
             if spread is not None
             else 0,
             "monte carlo": c.montecarlo_runs if spread is not None else 0,
         },
     )
-    b = _Battery(controller, params, c, spread, seed, workers, serve, runs, stages, started, _Judge(c, spec))
+    b = _Battery(
+        controller, params, c, spread, seed, workers, serve, runs, stages, started, _Judge(c, spec), rig
+    )
+    b.engine_note, b.spread_na = engine_note, spread_na
     # The stages in order; the first one interrupted ends the battery with the checks done so far.
     if not _nominal_stage(b, starts):
         return b.report(None, complete=False)
@@ -441,11 +640,17 @@ class _Battery:
     stages: Stages
     started: float
     judge: _Judge
+    rig: RigBattery
     checks: list[Check] = field(default_factory=list)
+    engine_note: str = ""  # the region's engine when the one asked for cannot run the rig
+    spread_na: str | None = None  # why the spread given does not apply to this rig
 
     def report(self, region: SweepResult | None, *, complete: bool = True) -> ValidationReport:
         wall_s = time.perf_counter() - self.started
-        return ValidationReport(self.controller, self.checks, region, wall_s, self.c, complete=complete)
+        report = ValidationReport(self.controller, self.checks, region, wall_s, self.c, complete=complete)
+        if not self.rig.thesis:
+            report.rig = _rig_json(self.params, self.rig)
+        return report
 
     def interrupted(
         self, stage: str, records: Sequence[dict[str, Any] | None], of: int, what: str = "runs"
@@ -482,28 +687,39 @@ def _nominal_stage(b: _Battery, starts: list[tuple[float, float]]) -> bool:
         Check(
             "nominal",
             held == len(done),
-            f"every run {asked or 'held'} from the thesis's {len(starts)} starts × {c.nominal_seeds} noise seeds",
+            f"every run {asked or 'held'} from {b.rig.starts_why} × {c.nominal_seeds} noise seeds",
             f"{'met' if asked else 'held'} {held} of {len(done)}" + b.judge.worst("nominal", done),
             done,
         )
     )
-    # A run whose controller failed has no figures (it already fails the nominal check).
-    saturated = max((r["saturated_fraction"] for r in records if r and not r.get("failed")), default=0.0)
-    asked = b.judge.asked("saturation")
-    b.checks.append(
-        Check(
-            "saturation",
-            all(b.judge.meets("saturation", r) for r in done if not r.get("failed")),
-            f"every nominal run {asked}"
-            if asked
-            else f"at most {100 * c.max_saturated_fraction:g} % of the ticks at the ±12 V rails in any nominal run",
-            f"at most {100 * saturated:.1f} %" + b.judge.worst("saturation", done),
-        )
-    )
+    b.checks.append(_saturation_check(b, records, done))
     target = [r for r in records if r and r.get("firmware")]
     if target:
         b.checks.append(_target_check(target))
     return True
+
+
+def _saturation_check(b: _Battery, records: list[dict[str, Any] | None], done: list[dict[str, Any]]) -> Check:
+    """The share of the nominal runs' ticks at the amplifier's rails; not applicable to an actuator without."""
+    c, rail = b.c, b.rig.rail_v
+    asked = b.judge.asked("saturation")
+    criterion = (
+        f"every nominal run {asked}"
+        if asked
+        else f"at most {100 * c.max_saturated_fraction:g} % of the ticks at the "
+        + ("amplifier's" if rail is None else f"±{rail:g} V")
+        + " rails in any nominal run"
+    )
+    if rail is None:
+        return Check("saturation", None, criterion, "not applicable: " + b.rig.not_applicable["saturation"])
+    # A run whose controller failed has no figures (it already fails the nominal check).
+    saturated = max((r["saturated_fraction"] for r in records if r and not r.get("failed")), default=0.0)
+    return Check(
+        "saturation",
+        all(b.judge.meets("saturation", r) for r in done if not r.get("failed")),
+        criterion,
+        f"at most {100 * saturated:.1f} %" + b.judge.worst("saturation", done),
+    )
 
 
 def _target_check(records: list[dict[str, Any]]) -> Check:
@@ -562,7 +778,8 @@ def _region_stage(b: _Battery, settings: SweepSettings) -> SweepResult | None:
                 else ""
             )
             + f"; {kept_all} of {len(region.points)} over the whole grid"
-            + _decided_by(region),
+            + _decided_by(region)
+            + b.engine_note,
         )
     )
     return region
@@ -584,7 +801,7 @@ def _sensitivity_stage(b: _Battery, cases: list[tuple[str, str, Parameters]]) ->
     per_run: list[Parameters] = []
     labels = []
     for name, label, p in cases:
-        for start in T.CHAPTER4_STARTS:
+        for start in b.rig.sensitivity_starts:
             per_run.append(p)
             labels.append((name, label, start))
     grid = np.array([start for _, _, start in labels], dtype=float)
@@ -614,13 +831,23 @@ def _sensitivity_stage(b: _Battery, cases: list[tuple[str, str, Parameters]]) ->
                 f"sensitivity: {name}",
                 not bad,
                 f"held at every value ({', '.join(dict.fromkeys(label for label, _ in rows))}) "
-                "from the chapter 4 starts",
+                + b.rig.sensitivity_why,
                 ("met at every value" if b.judge.spec else "held at every value")
                 if not bad
                 else "; ".join(bad[:4]),
                 [{"value": label, **r} for label, r in rows],
             )
         )
+    for criterion, what in (("zeroing_counts", "zeroing error"), ("latencies_s", "output latency")):
+        if criterion in b.rig.not_applicable and getattr(b.c, criterion):
+            b.checks.append(
+                Check(
+                    f"sensitivity: {what}",
+                    None,
+                    f"held at every {what} ({criterion}) {b.rig.sensitivity_why}",
+                    "not applicable: " + b.rig.not_applicable[criterion],
+                )
+            )
     return True
 
 
@@ -637,7 +864,7 @@ def _robust_region_stage(
                 None,
                 f"every required start kept by a share of plausible rigs with a 95 % lower bound ≥ "
                 f"{c.min_success_lower_bound:g}",
-                "not run: give --spread FILE or --calibration DIR",
+                _no_spread(b),
             )
         )
         return True
@@ -692,13 +919,13 @@ def _montecarlo_stage(b: _Battery) -> bool:
                 "monte carlo",
                 None,
                 f"95 % lower bound of the success rate ≥ {c.min_success_lower_bound:g}",
-                "not run: give --spread FILE or --calibration DIR",
+                _no_spread(b),
             )
         )
         return True
     mc = run_montecarlo(
         MonteCarloSettings(
-            b.controller, c.montecarlo_runs, *T.CHAPTER4_STARTS[1], duration_s=c.duration_s, seed=b.seed
+            b.controller, c.montecarlo_runs, *b.rig.montecarlo_start, duration_s=c.duration_s, seed=b.seed
         ),
         b.params,
         spread,
@@ -720,6 +947,52 @@ def _montecarlo_stage(b: _Battery) -> bool:
         )
     )
     return True
+
+
+def _no_spread(b: _Battery) -> str:
+    """Why a check on rigs drawn from a spread did not run: no spread given, or one this rig's parts do not use."""
+    if b.spread_na is not None:
+        return "not applicable: " + b.spread_na
+    if b.rig.thesis:
+        return "not run: give --spread FILE or --calibration DIR"
+    # a spread draws the table's groups only (twin.app.montecarlo), not a part's own (servo, vl53l0x, …)
+    table = {f.name for f in fields(Parameters)} - {"parts", "part_groups"}
+    drawable = [g for g in b.rig.groups if g in table and g not in _SHARED_GROUPS]
+    own = [g for g in b.rig.groups if g not in table]
+    return (
+        "not run: no spread given, and the parts have no spread of their own; give --calibration DIR, or "
+        f"--spread FILE over this rig's {', '.join(drawable)}"
+        + (f" (a spread cannot draw the parts' own groups {', '.join(own)})" if own else "")
+    )
+
+
+def _spread_not_applicable(spread: Distribution | None, rig: RigBattery) -> str | None:
+    """Why ``spread`` does not describe this rig: it varies parameters of groups that none of its parts use
+    (a thesis spread on a servo rig would draw rigs that all run alike and pass for nothing). None: it does."""
+    if spread is None:
+        return None
+    unused = [n for n in spread.names if n.partition(".")[0] not in rig.groups]
+    if not unused:
+        return None
+    return (
+        f"the spread ({spread.source}) varies {', '.join(unused[:6])}{' …' if len(unused) > 6 else ''}, "
+        f"which no part of this rig uses (its groups: {', '.join(rig.groups)}); the parts have no spread of "
+        "their own: give one of this rig's parameters (--spread FILE) or its calibration (--calibration DIR)"
+    )
+
+
+def _rig_json(params: Parameters, rig: RigBattery) -> dict[str, Any]:
+    """The report's section on a rig that is not the thesis's: its parts, starts, the defaults' reasons and the
+    checks that do not apply to it."""
+    return {
+        "parts": asdict(params.parts),
+        "starts": [list(s) for s in rig.starts],
+        "starts_why": rig.starts_why,
+        "sensitivity_starts": [list(s) for s in rig.sensitivity_starts],
+        "montecarlo_start": list(rig.montecarlo_start),
+        "default_reasons": criteria_reasons(params),
+        "not_applicable": dict(rig.not_applicable),
+    }
 
 
 def _required_grid(c: ValidationCriteria) -> tuple[Grid, Grid]:

@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 from dataclasses import asdict
 from pathlib import Path
+from typing import Any
 
 from twin.app.sweep_render import render_map
 from twin.app.validate import OUTPUT_FILES, ValidationReport
@@ -37,12 +38,15 @@ def render_markdown(report: ValidationReport) -> str:
         "| --- | --- | --- | --- |",
     ]
     for c in report.checks:
-        lines.append(f"| {c.name} | {mark[c.passed]} | {c.criterion} | {c.measured} |")
+        shown = "not applicable" if c.measured.startswith("not applicable") else mark[c.passed]
+        lines.append(f"| {c.name} | {shown} | {c.criterion} | {c.measured} |")
     if report.region is not None:
         lines += ["", "![region of attraction](region.png)", ""]
     nominal = next((c for c in report.checks if c.name == "nominal"), None)
     if nominal is None:
         return "\n".join(lines) + "\n"
+    # an actuator without amplifier rails (a servo, a stepper): its drive's peak is not volts at a rail
+    no_rails = any(c.name == "saturation" and c.measured.startswith("not applicable") for c in report.checks)
     lines += [
         "## Nominal runs",
         "",
@@ -53,7 +57,7 @@ def render_markdown(report: ValidationReport) -> str:
         settle = "—" if r["settling_time_s"] is None else f"{r['settling_time_s']:.2f}"
         steady = "—" if r["steady_x_m"] is None else f"{1e3 * r['steady_x_m']:+.1f}"
         cycle = "—" if r["limit_cycle_x_pp_m"] is None else f"{1e3 * r['limit_cycle_x_pp_m']:.1f}"
-        if r.get("failed"):  # the controller or the simulation failed: no figures
+        if r.get("failed") or no_rails:  # failed: no figures; no rails: its drive is not in volts
             peak, rails = "—", "—"
         else:
             peak, rails = f"{r['peak_motor_voltage_v']:.1f}", f"{100 * r['saturated_fraction']:.0f} %"
@@ -63,4 +67,27 @@ def render_markdown(report: ValidationReport) -> str:
         )
     lines += ["", "Criteria (override with `--criteria FILE`):", ""]
     lines += [f"- `{k}` = {v}" for k, v in asdict(report.criteria).items()]
+    if report.rig is not None:
+        lines += _rig_section(report.rig)
     return "\n".join(lines) + "\n"
+
+
+def _rig_section(rig: dict[str, Any]) -> list[str]:
+    """A rig that is not the thesis's: its parts, the starts, why each default is what it is, and the checks
+    that do not apply to it."""
+    lines = ["", "## The rig", "", "Parts: " + ", ".join(f"{k} `{v}`" for k, v in rig["parts"].items()), ""]
+    lines += [
+        f"Nominal starts, {rig['starts_why']}: "
+        + ", ".join(f"({x:+.4g} m, {t:+.4g} rad)" for x, t in rig["starts"]),
+        "",
+        f"Sensitivity starts: {', '.join(f'({x:+.4g} m, {t:+.4g} rad)' for x, t in rig['sensitivity_starts'])}; "
+        f"Monte Carlo start: ({rig['montecarlo_start'][0]:+.4g} m, {rig['montecarlo_start'][1]:+.4g} rad)",
+        "",
+        "The rig's defaults (derived from its parts, never typed per rig):",
+        "",
+    ]
+    lines += [f"- `{k}`: {why}" for k, why in rig["default_reasons"].items()]
+    if rig["not_applicable"]:
+        lines += ["", "Not applicable to this rig:", ""]
+        lines += [f"- `{k}`: {why}" for k, why in rig["not_applicable"].items()]
+    return lines

@@ -214,7 +214,13 @@ def run_batch(
     # its own (a controller FMU) runs one run at a time too: a batch would hold one process per run at once.
     every = not isinstance(probe, Controller) or bool(getattr(probe, "own_process", False))
     run_scenarios = list(scenarios) if scenarios is not None else [None] * n
-    single = [i for i in range(n) if every or run_scenarios[i] is not None]
+    # An actuator stepped with the physics (ActuatorPart.step_law: the stepper) runs one run at a time as well:
+    # the batch's rollout cannot call its law between MuJoCo's steps (BatchRig refuses it).
+    single = [
+        i
+        for i in range(n)
+        if every or run_scenarios[i] is not None or rig_parts(run_params[i]).actuator.step_law is not None
+    ]
     batched = sorted(set(range(n)) - set(single))
     results: list[RunResult | None] = [None] * n
     noisy: dict[int, Parameters] = {}  # the rig's parameters (noise switched as asked), per distinct object

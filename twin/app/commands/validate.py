@@ -42,7 +42,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     add_spread_options(parser, "for the robust-region and Monte Carlo checks")
     parser.add_argument(
-        "--criteria", metavar="FILE", help="TOML overriding the pass criteria (see the report)"
+        "--criteria",
+        metavar="FILE",
+        help="TOML overriding the pass criteria (see the report; the defaults are the rig's: docs/validate.md)",
     )
     parser.add_argument(
         "--spec",
@@ -97,8 +99,8 @@ def run(args: argparse.Namespace) -> int:
 def handle(o: Options) -> int:
     from twin.app.validate import (
         OUTPUT_FILES,
-        ValidationCriteria,
         check_criteria_for,
+        default_criteria,
         load_criteria,
         validate,
     )
@@ -107,7 +109,8 @@ def handle(o: Options) -> int:
     job = o.job()
     job.check_served()
     params, spread = job.params_and_spread()
-    criteria = load_criteria(o.criteria) if o.criteria else ValidationCriteria()
+    # the rig's own defaults (the thesis's on the thesis's rig); a file overrides them field by field
+    criteria = load_criteria(o.criteria, params) if o.criteria else default_criteria(params)
     spec = None
     if o.spec is not None:
         from twin.app.validate import SPEC_CHECKS
@@ -116,7 +119,7 @@ def handle(o: Options) -> int:
         spec = load_spec(o.spec, SPEC_CHECKS)
         for asking in SPEC_CHECKS:  # each check's runs are as long as the criteria say
             duration = criteria.region_duration_s if asking == "region" else criteria.duration_s
-            check_timing(spec.asked(asking), o.spec, params.daq.period_s, duration)
+            check_timing(spec.asked(asking), o.spec, params.period_s, duration)
     try:
         check_criteria_for(criteria, params)
     except ParameterError as exc:
@@ -149,6 +152,7 @@ def handle(o: Options) -> int:
         mark = {True: "pass", False: "FAIL", None: "not run"}
         for check in report.checks:
             shown = "stopped" if check.measured.startswith("interrupted") else mark[check.passed]
+            shown = "n/a" if check.measured.startswith("not applicable") else shown
             print(f"{shown:<8} {check.name}: {check.measured}  [{check.criterion}]")
         print(f"{report.controller}: {'PASS' if report.passed else 'FAIL'} ({report.wall_s:.0f} s)")
         if o.output.out is not None:
