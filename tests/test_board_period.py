@@ -50,6 +50,6 @@ def test_setting_the_pci_cards_period_on_another_board_is_refused_naming_the_boa
 ) -> None:
     from twin.app.cli import main
 
-    args = ["run", "--rig-file", "open-ball-and-beam", "--controller", "rig-lqg", "--x0", "0", "--theta0", "0"]
-    assert main([*args, "--set", "daq.period_s=0.01"]) == 2
+    args = ["run", "--rig-file", "open-ball-and-beam", "--controller", "rig-lqg", "--x0", "0"]
+    assert main([*args, "--theta0", "0", "--set", "daq.period_s=0.01"]) == 2
     assert "ticks at arduino.loop_period_s = 0.02 s" in capsys.readouterr().err
