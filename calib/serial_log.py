@@ -13,7 +13,9 @@ Roles and their words: time (``time``, ``t``, ``millis``, ``micros``); the ball 
 ``distance``, ``dist``, ``range``, ``echo``, ``reading``); the angle sensor's (``angle``); the board's output
 (``command``, ``pulse``, ``servo``, ``output``). Options: ``sep=comma|tab|space|auto`` (default auto: the
 first line splitting into several cells by comma, else tab, else spaces), ``header=yes|no|auto``. A preset's
-map is named instead of spelled out (``MAPS``: ``vl53l0x-servo`` is ``time=ms, distance=mm, pulse=us``).
+map is named instead of spelled out (``MAPS``: ``vl53l0x-servo`` is ``time=ms, distance=mm, pulse=us``;
+``quanser-bb01`` is ``time=ms, ball=V, angle=counts, command=V``: the strip's ADC volts, the SRV02 encoder's
+counts, the DAC's volts).
 
 ``read_serial_log(path, map, params)`` returns a ``SerialLog`` whose ``log`` is what calib's logs hold (a
 ``twin.log.RunLog``: ``timem`` s, ``datam1`` the ball channel, ``datam2`` the angle channel, ``aout`` the
@@ -92,6 +94,7 @@ MAPS: dict[str, str] = {
     "vl53l0x-servo-pot": "time=ms, distance=mm, angle=counts, pulse=us",
     "hcsr04-servo": "time=ms, echo=us, pulse=us",
     "gp2y0a21-servo": "time=ms, distance=counts, pulse=us",
+    "quanser-bb01": "time=ms, ball=V, angle=counts, command=V",
     "thesis": "time@timem=s, ball@datam1=V, angle@datam2=V, command@aout=V",
 }
 """Preset column maps by name: a sketch printing ``millis()``, the sensor's reading and the servo pulse (in
@@ -308,6 +311,9 @@ def board_units(params: Parameters) -> BoardUnits:
         if not params.of(AS5600).analog_output:
             angle = "counts"
             adc_range = adc_range if adc == "counts" else (0.0, float(COUNTS - 1))
+    angle_range = (0.0, 4095.0) if angle == "counts" and adc != "counts" else adc_range
+    if names.angle_sensor == "shaft_encoder":  # the card's signed counter, not its ADC
+        angle, angle_range = "counts", (-math.inf, math.inf)
     servo = (out.low, out.high) if command == "us" else (544.0, 2400.0)
     rig = f"{names.ball_sensor} on {names.io_board}"
     return BoardUnits(
@@ -315,7 +321,7 @@ def board_units(params: Parameters) -> BoardUnits:
         angle=angle,
         command=command,
         ball_range=adc_range if ball == adc else (0.0, math.inf),
-        angle_range=(0.0, 4095.0) if angle == "counts" and adc != "counts" else adc_range,
+        angle_range=angle_range,
         command_range=(out.low, out.high),
         servo_us=servo,
         rig=rig,

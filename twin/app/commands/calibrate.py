@@ -160,8 +160,11 @@ def _serial(o: Options, start: object) -> int:
             )
         for name in cal.not_identifiable:
             print(f"{name:<32} not identifiable by these logs: kept at its start value")
-        a = cal.adequacy["ball"]
-        print(f"ball channel: RMS {a.rms:.3g} mm = {a.ratio:.2f} × floor {a.floor:.3g} mm, ρ(1) {a.lag1:.2f}")
+        for channel, a in cal.adequacy.items():  # each in the board's unit (mm, V, counts)
+            print(
+                f"{channel} channel: RMS {a.rms:.3g} {a.unit} = {a.ratio:.2f} × floor {a.floor:.3g} {a.unit}, "
+                f"ρ(1) {a.lag1:.2f}"
+            )
         print(f"converged: {cal.converged} ({cal.message}); {cal.wall_s:.1f} s")
     if o.out is not None:
         name = o.parameters.rig_file or "calibrated"
