@@ -1,4 +1,4 @@
-"""``ballbeam validate`` on a rig that is not the thesis's (issue 42): its default criteria come from its parts
+"""``ballbeam validate`` on a rig that is not the thesis's: its default criteria come from its parts
 (the region over its whole track less the ball's radius by its beam's whole travel, the middle half of each
 required), checked here against boxes computed by hand; a check that does not apply to the rig's parts says so
 (never passed); a small validation of open-ball-and-beam gives the verdict of its runs."""

@@ -70,16 +70,23 @@ DEFAULT_THETA0 = Grid(-0.7, 0.7, 41)
 MAX_POINTS = 250_000  # a grid beyond this is a typing error, not a study (about 3 h per 10 s runs here)
 
 
+def rig_box(params: Parameters) -> tuple[tuple[float, float], tuple[float, float]]:
+    """The starts a rig of other parts is mapped and validated over (one home: ``rig_grids`` and validate's
+    ``default_criteria``): its whole track less the ball's radius, ±(``track.half_length_m`` − ``ball.radius_m``:
+    where the track ends in a holder, the ball's centre stops a radius short of it), by its beam's travel
+    (``twin.physics.beam_travel_rad``: its stops narrowed to its drive's reach, which a lever makes lopsided)."""
+    half = params.track.half_length_m - params.ball.radius_m
+    return (-half, half), beam_travel_rad(params)
+
+
 def rig_grids(params: Parameters, n: int = 41) -> tuple[Grid, Grid]:
     """A map's axes on the rig ``params`` when none are given: the chapter 7 grid (``DEFAULT_X0``,
-    ``DEFAULT_THETA0``) where it lies on the rig (the thesis's), else ``n`` starts over the rig's whole track
-    (±``track.half_length_m``) by ``n`` over its beam's travel (``twin.physics.beam_travel_rad``: its stops
-    narrowed to its drive's reach, which a lever makes lopsided)."""
-    half = params.track.half_length_m
-    low, high = beam_travel_rad(params)
-    if half >= DEFAULT_X0.hi and low <= -DEFAULT_THETA0.hi and DEFAULT_THETA0.hi <= high:
+    ``DEFAULT_THETA0``) where it lies on the rig (the thesis's), else ``n`` starts over ``rig_box`` each way."""
+    (x_lo, x_hi), (low, high) = rig_box(params)
+    on_track = params.track.half_length_m >= DEFAULT_X0.hi  # the thesis's range: to 3 mm of its wires' ends
+    if on_track and low <= -DEFAULT_THETA0.hi and DEFAULT_THETA0.hi <= high:
         return DEFAULT_X0, DEFAULT_THETA0
-    return Grid(-half, half, n), Grid(low, high, n)
+    return Grid(x_lo, x_hi, n), Grid(low, high, n)
 
 
 def parse_range(option: str, text: str) -> Grid:

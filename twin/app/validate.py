@@ -39,10 +39,10 @@ from twin.app.hosts import host_of
 from twin.app.montecarlo import MAX_RUNS, Distribution, MonteCarloSettings, run_montecarlo
 from twin.app.options import MAX_JOB_RUN_S, MAX_RIGS
 from twin.app.robust import run_robust
-from twin.app.sweep import MAX_POINTS, Grid, SweepResult, SweepSettings, point_seeds, run_sweep
+from twin.app.sweep import MAX_POINTS, Grid, SweepResult, SweepSettings, point_seeds, rig_box, run_sweep
 from twin.outputs import JobFiles
 from twin.parameters import ParameterError, Parameters, PartNames
-from twin.physics import beam_travel_rad, check_initial_state
+from twin.physics import check_initial_state
 from twin.requirements import Spec, violated
 from twin.rigs.backends import stand_in_refusal
 from twin.sensors import angle_count_step_rad
@@ -345,8 +345,9 @@ def _whole_steps(value_s: float, params: Parameters) -> float:
 def default_criteria(params: Parameters) -> ValidationCriteria:
     """The criteria a user of the rig ``params`` would expect (``criteria_reasons`` says why each): the
     thesis's on a rig its region fits (the thesis's rig: ``ValidationCriteria()`` exactly), else the region
-    over the rig's whole track less the ball's radius by its beam's whole travel, the middle half of each
-    required. The latencies and free runs scale with the board's period (the thesis's at its 20 ms)."""
+    over the rig's whole track less the ball's radius by its beam's whole travel (``twin.app.sweep.rig_box``,
+    a map's too), the middle half of each required. The latencies and free runs scale with the board's period
+    (the thesis's at its 20 ms)."""
     period = params.period_s
     timed = replace(
         ValidationCriteria(),
@@ -356,10 +357,9 @@ def default_criteria(params: Parameters) -> ValidationCriteria:
     if _thesis_boxes_fit(params):
         return timed
     # to the µm and µrad, rounded inward (a bound past the track or the travel by its last digit is refused)
-    half = math.floor(1e6 * (params.track.half_length_m - params.ball.radius_m)) / 1e6
-    low, high = (
-        f(1e6 * v) / 1e6 for f, v in zip((math.ceil, math.floor), beam_travel_rad(params), strict=True)
-    )
+    (_, x_hi), travel = rig_box(params)
+    half = math.floor(1e6 * x_hi) / 1e6
+    low, high = (f(1e6 * v) / 1e6 for f, v in zip((math.ceil, math.floor), travel, strict=True))
     return replace(
         timed,
         required_x0_m=(-half / 2, half / 2),
@@ -381,10 +381,10 @@ def criteria_reasons(params: Parameters) -> dict[str, str]:
     if _thesis_boxes_fit(params):
         return {"region_x0": "the thesis's chapter 7 range: it lies on this rig's track and travel", **why}
     half, r = params.track.half_length_m, params.ball.radius_m
-    low, high = beam_travel_rad(params)
+    _, (low, high) = rig_box(params)
     return {
         "region_x0": f"the whole track less the ball's radius at 17 points: ±({half:g} − {r:g}) m "
-        "(track.half_length_m, ball.radius_m)",
+        "(track.half_length_m, ball.radius_m; a map's too: twin.app.sweep.rig_box)",
         "region_theta0": f"the beam's whole travel at 15 points: {low:.4g} … {high:.4g} rad (its stops narrowed "
         f"to the reach of parts.beam_drive = {params.parts.beam_drive!r}, twin.physics.beam_travel_rad)",
         "required_x0_m": "the middle half of the region's track",
