@@ -63,13 +63,14 @@ def _horn_of(theta: float, link: Linkage) -> float:
 
 @pytest.mark.quick
 def test_a_maps_axes_are_the_chapter_7_grid_on_the_thesis_and_the_rigs_travel_elsewhere() -> None:
-    """The thesis keeps the chapter 7 grid. Open Ball & Beam: its whole 2 × 0.105 m track, and its beam's travel,
+    """The thesis keeps the chapter 7 grid. Open Ball & Beam: its 2 × 0.105 m track less the 19.05 mm ball's
+    radius at each end (the rail holders stop the ball's centre there), and its beam's travel,
     whose ends are where the horn reaches its ±0.98 rad (checked here on the closure solved by bisection); every
     corner of the grid is a start the rig accepts."""
     assert rig_grids(Parameters()) == (DEFAULT_X0, DEFAULT_THETA0)
     obb = preset("open-ball-and-beam")
     x0, theta0 = rig_grids(obb)
-    assert (x0.lo, x0.hi, x0.n) == (-0.105, 0.105, 41) and theta0.n == 41
+    assert (x0.lo, x0.hi, x0.n) == pytest.approx((-0.08595, 0.08595, 41), abs=1e-12) and theta0.n == 41
     link = obb.of(Linkage)
     travel = link.horn_travel_rad
     # the lever lifts the beam as the horn turns up (sense +1): its low end at −travel, its high end at +travel
@@ -87,7 +88,7 @@ def test_the_script_screens_the_presets_the_fast_engine_runs_and_refuses_a_folde
     script = _script()
     names = script.screenable()
     assert "open-ball-and-beam" in names and "thesis" in names
-    assert "arduino-stepper-ultrasonic" not in names  # the stepper has no kernel form
+    assert "arduino-stepper-ultrasonic" in names  # the stepper's kernel form: tests/test_screen_stepper.py
     (tmp_path / "old.json").write_text("{}")
     with pytest.raises(SystemExit, match="not an empty folder"):
         script.main(["--out", str(tmp_path)])

@@ -1,7 +1,9 @@
 """The equations of the drives and actuators beyond the thesis's that the compiled screening kernel runs too
 (``twin.screen``), in one home below it: the end lever's exact four-bar closure (its part: ``twin.parts.linkage``,
-where the geometry, the MJCF fragment and the refusals live) and the hobby servo's pulse map and torque law (its
-part: ``twin.parts.servo``). Arithmetic on floats or numpy arrays alike, numba compiles them as they are.
+where the geometry, the MJCF fragment and the refusals live), the hobby servo's pulse map and torque law (its
+part: ``twin.parts.servo``) and the stepper's torque law and its sketch's speed ramp on one run's floats (its part:
+``twin.parts.stepper``, which holds their array forms). Arithmetic on floats or numpy arrays alike (the
+stepper's: floats), numba compiles them as they are.
 
 The lever (``twin.parts.linkage``'s docstring draws it): the beam's pivot P at the origin, the attachment A at L
 along the beam at θ, the servo's shaft S at (S_x, S_z), its horn's pin C at c from S at φ, the push-rod of length r
@@ -10,6 +12,8 @@ between C and A.
 
 from __future__ import annotations
 
+import math
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -25,6 +29,12 @@ __all__ = [
     "servo_angle_rad",
     "servo_pulse_us",
     "servo_torque_nm",
+    "stepper_magnet_torque_nm",
+    "stepper_pullout_nm",
+    "stepper_ramp_acceleration",
+    "stepper_ramp_step",
+    "stepper_sketch_steps",
+    "stepper_shaft_torque_nm",
 ]
 
 
@@ -179,3 +189,104 @@ def servo_pulse_us(
         angle_at_max_rad - angle_at_min_rad
     )
     return np.minimum(np.maximum(pulse, pulse_min_us), pulse_max_us)
+
+
+# --- the stepper on one run's floats (twin.parts.stepper: the physics, the numbers and the array form) ----------
+def stepper_pullout_nm(
+    speed_rad_s: float,
+    holding_nm: float,
+    pole_pairs: float,
+    resistance_ohm: float,
+    inductance_h: float,
+    supply_impedance_ohm: float,
+) -> float:
+    """T_po(ω) = T_hold·min(1, (V_s/I)/√(R² + (p·ω·L)²)) on floats (``twin.parts.stepper.pullout_torque_nm``)."""
+    x = pole_pairs * abs(speed_rad_s) * inductance_h
+    return holding_nm * min(1.0, supply_impedance_ohm / math.sqrt(resistance_ohm * resistance_ohm + x * x))
+
+
+def stepper_magnet_torque_nm(
+    pullout: Callable[[float, float, float, float, float, float], float],
+    commanded_rad: float,
+    angle_rad: float,
+    speed_rad_s: float,
+    level_rad: float,
+    holding_nm: float,
+    pole_pairs: float,
+    detent_nm: float,
+    resistance_ohm: float,
+    inductance_h: float,
+    supply_impedance_ohm: float,
+) -> float:
+    """−T_po(φ̇)·sin(p·(φ − φ_c)) − T_det·sin(4p·(φ − φ₀)) on floats (``twin.parts.stepper.stepper_torque_nm``;
+    ``pullout``: ``stepper_pullout_nm``, or its compiled form in the kernel; 4 full steps per electrical cycle)."""
+    pull = pullout(speed_rad_s, holding_nm, pole_pairs, resistance_ohm, inductance_h, supply_impedance_ohm)
+    detent = detent_nm * math.sin(4 * pole_pairs * (angle_rad - level_rad))
+    return -pull * math.sin(pole_pairs * (angle_rad - commanded_rad)) - detent
+
+
+def stepper_shaft_torque_nm(
+    magnet: Callable[..., float],
+    pullout: Callable[[float, float, float, float, float, float], float],
+    target_steps: float,
+    angle_rad: float,
+    speed_rad_s: float,
+    level_rad: float,
+    microstep_rad: float,
+    holding_nm: float,
+    pole_pairs: float,
+    detent_nm: float,
+    resistance_ohm: float,
+    inductance_h: float,
+    supply_impedance_ohm: float,
+    damping_nm_s_per_rad: float,
+) -> float:
+    """The reference model's stepper at its shaft (``twin.parts.stepper``'s law for ``twin.reference.DriveLaw``,
+    stateless): the control as the commanded position, φ_c = φ₀ + μ·n, the magnet's torque
+    (``magnet``: ``stepper_magnet_torque_nm``) less the viscous b·φ̇. The reference plant and the compiled
+    kernel (twin.screen.plant) alike."""
+    commanded = level_rad + microstep_rad * target_steps
+    law = magnet(
+        pullout, commanded, angle_rad, speed_rad_s, level_rad, holding_nm, pole_pairs, detent_nm,
+        resistance_ohm, inductance_h, supply_impedance_ohm,
+    )  # fmt: skip
+    return law - damping_nm_s_per_rad * speed_rad_s
+
+
+def stepper_ramp_acceleration(
+    target_steps: float,
+    position_steps: float,
+    speed_steps_s: float,
+    max_speed: float,
+    acceleration: float,
+    step_s: float,
+) -> float:
+    """dv/dt of the sketch's ramp on floats (``twin.parts.stepper.ramp_acceleration``): the speed heads for
+    sign(D)·min(v_max, √(2a|D|), |D|/h), D = target − position, changing at most a."""
+    d = target_steps - position_steps
+    w = math.copysign(min(max_speed, math.sqrt(2.0 * acceleration * abs(d)), abs(d) / step_s), d)
+    return min(max((w - speed_steps_s) / step_s, -acceleration), acceleration)
+
+
+def stepper_ramp_step(
+    ramp_acceleration: Callable[[float, float, float, float, float, float], float],
+    target_steps: float,
+    position_steps: float,
+    speed_steps_s: float,
+    max_speed: float,
+    acceleration: float,
+    step_s: float,
+) -> tuple[float, float]:
+    """One physics step h of the sketch's ramp toward ``target_steps`` (``ramp_acceleration``:
+    ``stepper_ramp_acceleration``, or its compiled form): v ← v + h·dv/dt, s ← s + h·v (semi-implicit Euler: a
+    speed of D/h lands on the target). (s, v) after the step; ``twin.parts.stepper.StepperLaw``, the reference
+    model and the compiled kernel alike."""
+    speed = speed_steps_s + step_s * ramp_acceleration(
+        target_steps, position_steps, speed_steps_s, max_speed, acceleration, step_s
+    )
+    return position_steps + step_s * speed, speed
+
+
+def stepper_sketch_steps(position_steps: float) -> float:
+    """n = floor(s + ½): the sketch's whole position (the step pulses it has sent) for the ramp's position s."""
+    return float(math.floor(position_steps + 0.5))

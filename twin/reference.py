@@ -25,6 +25,7 @@ from typing import Any, Generic, Literal, TypeVar
 import numpy as np
 
 from twin.dcmotor import beam_torque_nm, torque_nm
+from twin.drive_equations import stepper_ramp_acceleration, stepper_ramp_step, stepper_sketch_steps
 from twin.parameters import Parameters
 from twin.physics import PhysicsBlock, check_initial_state
 
@@ -350,6 +351,9 @@ class DriveLaw:
     # the drive's and the actuator's numbers as the compiled kernel's row takes them (twin.screen.plant)
     drive_numbers: tuple[float, ...] = ()
     actuator_numbers: tuple[float, ...] = ()
+    # a stepper's sketch ramp (v_max, a: microsteps/s, /s²), or None: the law's control each step is then the
+    # ramp's whole position, the ramp heading for the written control (twin.drive_equations.stepper_ramp_step)
+    ramp: tuple[float, float] | None = None
 
 
 # Registered by the parts (twin.parts): a drive's kinematics and extra inertia (shaft, beam), and an actuator's
@@ -357,6 +361,7 @@ class DriveLaw:
 _SHAFT_MAPS: dict[str, Callable[[Parameters], DriveKinematics]] = {}
 _ACTUATOR_LAWS: dict[str, Callable[[Parameters], tuple[ShaftTorque, float]]] = {}
 _ACTUATOR_NUMBERS: dict[str, Callable[[Parameters], tuple[float, ...]]] = {}
+_ACTUATOR_RAMPS: dict[str, Callable[[Parameters], tuple[float, float]]] = {}
 THESIS_DRIVE = ("pivot", "escap_dc_motor")  # eq 3.1.27 as the thesis writes it: no ``DriveLaw``
 
 
@@ -454,12 +459,15 @@ def register_actuator_law(
     actuator: str,
     factory: Callable[[Parameters], tuple[ShaftTorque, float]],
     numbers: Callable[[Parameters], tuple[float, ...]] | None = None,
+    ramp: Callable[[Parameters], tuple[float, float]] | None = None,
 ) -> None:
     """An actuator's torque law and inertia at its shaft for the reference model (``twin.parts`` registers its
-    actuators' own)."""
+    actuators' own); ``ramp``: a stepper's sketch ramp between the written control and the law (``DriveLaw``)."""
     _ACTUATOR_LAWS[actuator] = factory
     if numbers is not None:  # its law's numbers, for the compiled kernel's row
         _ACTUATOR_NUMBERS[actuator] = numbers
+    if ramp is not None:
+        _ACTUATOR_RAMPS[actuator] = ramp
 
 
 def drive_law(params: Parameters) -> DriveLaw | None:
@@ -477,6 +485,7 @@ def drive_law(params: Parameters) -> DriveLaw | None:
     kin = DriveKinematics(_pivot) if names[0] == "pivot" else _SHAFT_MAPS[names[0]](params)
     torque, inertia = (_geared_motor if names[1] == "escap_dc_motor" else _ACTUATOR_LAWS[names[1]])(params)
     numbers = _ACTUATOR_NUMBERS.get(names[1])
+    ramp = _ACTUATOR_RAMPS.get(names[1])
     return DriveLaw(
         kin.shaft,
         torque,
@@ -485,6 +494,7 @@ def drive_law(params: Parameters) -> DriveLaw | None:
         kin.theta_limits_rad,
         kin.numbers,
         numbers(params) if numbers is not None else (),
+        ramp(params) if ramp is not None else None,
     )
 
 
@@ -525,6 +535,7 @@ class ReferencePlant:
         self._s = (float(x_m), float(theta_rad), float(xdot_m_s), float(thetadot_rad_s))
         self._time_s = 0.0
         self._lost_time_s: float | None = None
+        self._ramp_state = (0.0, 0.0)  # a stepper's sketch (DriveLaw.ramp): s, v from 0 at every start
 
     def state(self) -> np.ndarray:
         return np.array(self._s)
@@ -578,6 +589,8 @@ class ReferencePlant:
             return xd, thd, xdd, thdd
 
         law = self._law
+        ramp = None if law is None else law.ramp
+        position, speed = self._ramp_state
         lo, hi = -math.inf, math.inf
         if law is not None:
             f = self._driven_derivative(law)
@@ -586,6 +599,11 @@ class ReferencePlant:
         for i in range(n):
             if self._lost_time_s is None:
                 v = min(max(float(volts[i]), -rail), rail)
+                if ramp is not None:  # the law's control: the sketch's whole position, its ramp heading for v
+                    target, v = v, stepper_sketch_steps(position)
+                    position, speed = stepper_ramp_step(
+                        stepper_ramp_acceleration, target, position, speed, ramp[0], ramp[1], h
+                    )
                 x, th, xd, thd = rk4_step(f, x, th, xd, thd, v, h)
                 if law is None:
                     th, thd, lost = step_boundary(x, th, thd, stop, half)
@@ -600,6 +618,7 @@ class ReferencePlant:
             times[i + 1] = t0 + (i + 1) * h
             xs[i + 1], thetas[i + 1], on[i + 1] = x, th, self._lost_time_s is None
         self._s = (x, th, xd, thd)
+        self._ramp_state = (position, speed)
         self._time_s = float(times[-1])
         return PhysicsBlock(time_s=times, x_m=xs, theta_rad=thetas, on_track=on)
 

@@ -48,7 +48,10 @@ per-step law inside its rollout and refuses the rig; a law on the state or firmw
 the lever against the thesis's 16 µs (medians 35, 45 and 22 µs). Error: against scipy's integration of the same
 ODE, first order in the step (the torque held over it): 5.2e-4 rad at the rig's 1 ms and 5.1e-5 rad at 0.1 ms on a
 1.6e-2 rad step; against the same step written out by hand, 1e-17 rad. The reference model (``twin.reference``)
-runs the same sine, detent and damping law with ctrl as the commanded position (its law is stateless: no ramp).
+runs the same sine, detent and damping law (RK4, the law in each stage) with the sketch's whole position as the
+commanded one, and the same ramp each physics step (``DriveLaw.ramp``: ``twin.drive_equations.stepper_ramp_step``);
+its compiled form (``twin.screen.plant``) too. The float arithmetic of the law and the ramp lives in
+``twin.drive_equations`` (one home for this part, the reference model and the kernel).
 
 Defaults: MotionKing 17HS4401 (17HS series data sheet, the 17HS4401 row: 1.8°, 1.7 A, 1.5 Ω, 2.8 mH, holding
 torque 40 N·cm, detent torque 2.2 N·cm, rotor inertia 54 g·cm²), 12 V supply, 16 microsteps (TMC2209 data sheet:
@@ -67,6 +70,13 @@ import mujoco
 import numpy as np
 
 from twin import model as mdl
+from twin.drive_equations import (
+    stepper_magnet_torque_nm,
+    stepper_pullout_nm,
+    stepper_ramp_acceleration,
+    stepper_ramp_step,
+    stepper_shaft_torque_nm,
+)
 from twin.interface import CommandRange
 from twin.parameters import ParameterError, Parameters, check_group, param, register_group
 from twin.parts.arduino import register_step_dir_actuator
@@ -86,6 +96,7 @@ __all__ = [
     "ramp_acceleration",
     "stepper_batch_drive",
     "stepper_drive",
+    "stepper_kernel_numbers",
     "stepper_range",
     "stepper_rest_steps",
     "stepper_torque_nm",
@@ -260,12 +271,9 @@ def pullout_torque_nm(
     electrical frequency p·ω; past that corner the current, and with it the torque, fall as 1/|Z| (back-EMF left
     out: an upper bound). At 12 V, 1.7 A, 1.5 Ω, 2.8 mH and p = 50 the corner is √(7.06² − 1.5²)/(50·2.8e-3) =
     49.3 rad/s (470 rpm)."""
-    if isinstance(speed_rad_s, float) and isinstance(
-        holding_nm, float
-    ):  # one run's floats (the per-step law)
-        x = pole_pairs * abs(speed_rad_s) * inductance_h
-        return holding_nm * min(
-            1.0, supply_impedance_ohm / math.sqrt(resistance_ohm * resistance_ohm + x * x)
+    if isinstance(speed_rad_s, float) and isinstance(holding_nm, float):  # one run's floats (per-step law)
+        return stepper_pullout_nm(
+            speed_rad_s, holding_nm, pole_pairs, resistance_ohm, inductance_h, supply_impedance_ohm
         )
     reactance = pole_pairs * np.abs(speed_rad_s) * inductance_h
     impedance = np.sqrt(resistance_ohm * resistance_ohm + reactance * reactance)
@@ -287,12 +295,16 @@ def stepper_torque_nm(
     """The rotor's torque without its viscous term: −T_po(φ̇)·sin(p·(φ − φ_c)) − T_det·sin(4p·(φ − φ₀)). The
     magnetic torque pulls the rotor toward φ_c within half an electrical cycle of it, hardest (T_po) at a quarter
     cycle, one full step; the detent torque toward its full-step positions, zero on them and a full step off."""
+    if isinstance(speed_rad_s, (int, float)) and isinstance(angle_rad, (int, float)):  # one run's floats
+        return stepper_magnet_torque_nm(
+            stepper_pullout_nm, commanded_rad, angle_rad, speed_rad_s, level_rad, holding_nm, pole_pairs,
+            detent_nm, resistance_ohm, inductance_h, supply_impedance_ohm,
+        )  # fmt: skip
     pull = pullout_torque_nm(
         speed_rad_s, holding_nm, pole_pairs, resistance_ohm, inductance_h, supply_impedance_ohm
     )
-    sin = math.sin if isinstance(pull, float) and isinstance(angle_rad, float) else np.sin
-    detent = detent_nm * sin(_FULL_STEPS_PER_CYCLE * pole_pairs * (angle_rad - level_rad))
-    return -pull * sin(pole_pairs * (angle_rad - commanded_rad)) - detent
+    detent = detent_nm * np.sin(_FULL_STEPS_PER_CYCLE * pole_pairs * (angle_rad - level_rad))
+    return -pull * np.sin(pole_pairs * (angle_rad - commanded_rad)) - detent
 
 
 def ramp_acceleration(
@@ -304,9 +316,9 @@ def ramp_acceleration(
     target instead of hunting around it), changing at most a (reaching it within one step when it can). So it
     accelerates at a to v_max, cruises, and brakes at a onto the target; moving away, it brakes and turns."""
     if isinstance(target_steps, float) and isinstance(position_steps, float):  # one run's floats
-        d = target_steps - position_steps
-        w = math.copysign(min(max_speed, math.sqrt(2.0 * acceleration * abs(d)), abs(d) / step_s), d)
-        return min(max((w - speed_steps_s) / step_s, -acceleration), acceleration)
+        return stepper_ramp_acceleration(
+            target_steps, position_steps, speed_steps_s, max_speed, acceleration, step_s
+        )
     distance = np.asarray(target_steps) - position_steps
     reach = np.minimum(np.sqrt(2.0 * acceleration * np.abs(distance)), np.abs(distance) / step_s)
     wanted = np.sign(distance) * np.minimum(max_speed, reach)
@@ -419,12 +431,9 @@ class StepperLaw:
         torque: float = stepper_torque_nm(
             commanded, angle_rad, speed_rad_s, level, hold, pairs, detent, resistance, inductance, impedance
         )
-        max_speed, acceleration, step_s = self._ramp
-        speed = speed + step_s * ramp_acceleration(
-            target_steps, position, speed, max_speed, acceleration, step_s
+        self.position_steps, self.speed_steps_s = stepper_ramp_step(
+            stepper_ramp_acceleration, target_steps, position, speed, *self._ramp
         )
-        self.position_steps = position + step_s * speed
-        self.speed_steps_s = speed
         return torque
 
     @property
@@ -549,33 +558,46 @@ def _batch(params: Sequence[Parameters], rows: np.ndarray) -> np.ndarray:
 
 def _reference_law(params: Parameters) -> tuple[ShaftTorque, float]:
     """The stepper for the reference model (``twin.reference.DriveLaw``): the torque law at the shaft with the
-    ctrl (the target, microsteps) as the commanded position (its law is stateless: no ramp), its damping, and the
-    rotor's inertia. φ₀ is the drive joint's angle with the beam level (its reference in the model). The target
-    is not rounded here: the board's write path hands whole microsteps already (so a run is the same), and a
-    linearization (``twin.linearize.linearize_reference``) then sees the law's slope, not a step function's."""
+    ctrl as the commanded position in microsteps, its damping, and the rotor's inertia. φ₀ is the drive joint's
+    angle with the beam level (its reference in the model). ``ReferencePlant.advance`` hands it the sketch's
+    whole position (its ramp, ``DriveLaw.ramp``, heading for the target); the law does not round, so that a
+    linearization (``twin.linearize.linearize_reference``, ctrl straight in) sees its slope, not a step
+    function's."""
     s = params.of(Stepper)
-    level = level_angle_rad(params)
-    constants = (
-        level,
-        s.holding_torque_nm,
-        s.pole_pairs,
-        s.detent_torque_nm,
-        s.phase_resistance_ohm,
-        s.phase_inductance_h,
-        s.supply_impedance_ohm,
-    )
-    microstep, damping = s.microstep_rad, s.damping_nm_s_per_rad
+    numbers = stepper_kernel_numbers(params)
 
     def torque(target_steps: float, angle_rad: float, speed_rad_s: float) -> float:
-        commanded = level + microstep * target_steps
-        law = float(stepper_torque_nm(commanded, angle_rad, speed_rad_s, *constants))
-        return law - damping * speed_rad_s
+        return stepper_shaft_torque_nm(
+            stepper_magnet_torque_nm, stepper_pullout_nm, target_steps, angle_rad, speed_rad_s, *numbers
+        )
 
     return torque, s.rotor_inertia_kgm2
 
 
+def stepper_kernel_numbers(params: Parameters) -> tuple[float, ...]:
+    """``twin.drive_equations.stepper_shaft_torque_nm``'s numbers after φ̇ (φ₀, μ, T_hold, p, T_det, R, L, V_s/I,
+    b), as the reference model's law and the compiled kernel's row (twin.screen.plant) take them."""
+    s = params.of(Stepper)
+    return (
+        level_angle_rad(params),
+        s.microstep_rad,
+        s.holding_torque_nm,
+        float(s.pole_pairs),
+        s.detent_torque_nm,
+        s.phase_resistance_ohm,
+        s.phase_inductance_h,
+        s.supply_impedance_ohm,
+        s.damping_nm_s_per_rad,
+    )
+
+
 register_group("stepper", Stepper)
-register_actuator_law("stepper", _reference_law)
+register_actuator_law(
+    "stepper",
+    _reference_law,
+    stepper_kernel_numbers,
+    lambda params: (params.of(Stepper).max_speed_steps_s, params.of(Stepper).acceleration_steps_s2),
+)
 register_step_dir_actuator("stepper", stepper_range)
 
 

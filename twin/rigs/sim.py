@@ -132,7 +132,7 @@ class SimRig(Rig):
         # An actuator stepped with the physics (ActuatorPart.step_law) on the MuJoCo plant: its law reads the drive
         # joint's own angle and speed from MjData (the rotor's: on a lever the horn's, not the beam's through the
         # linkage's soft closure; and still the rotor's once a lost ball freezes the law's state floats). The
-        # reference plant runs the part's stateless law (twin.reference) on the tick's control instead.
+        # reference plant runs the part's ramp and law itself (twin.reference: DriveLaw.ramp) on the tick's control.
         self.step_law: StepLaw | None = None
         self._rotor_at: tuple[int, int] | None = None
         if self.parts.actuator.step_law is not None and isinstance(self.physics, Plant):

@@ -16,8 +16,11 @@ derivative and boundary call ``ReferencePlant``'s functions in ``ReferencePlant`
 ``drive_stop_derivative``, ``drive_stop_boundary``). ``tests/test_screen_driven.py`` holds it to the reference
 plant on those rigs, each run its own servo and linkage. A beam hinged off its track's centre (Open Ball & Beam,
 BB01: ``ReferencePlant._hinged_off_centre_derivative``) is a driven row with ``twin.reference.hinged_beam_terms``
-between the beam's terms and the accelerations (``tests/test_screen_hinged.py``). A part without such a form is
-refused by its field (``kernel_refusal``).
+between the beam's terms and the accelerations (``tests/test_screen_hinged.py``). A stepper is a driven row whose
+law is ``twin.drive_equations.stepper_shaft_torque_nm`` and whose control each step is its sketch's whole position
+(``stepper_sketch_steps``), the ramp (s, v: per-run state, ``advance_plant``'s ``ramps``) stepped toward the
+written target by ``stepper_ramp_step``, in ``ReferencePlant.advance``'s order (``tests/test_screen_stepper.py``).
+A part without such a form is refused by its field (``kernel_refusal``).
 
 Why numba: it compiles the core's own Python functions (one home per equation) with no build step and no
 compiler on the user's machine; a C kernel would be a second copy of the equations.
@@ -39,6 +42,12 @@ from twin.drive_equations import (
     lever_ratio_slope,
     lever_shaft_derivatives,
     servo_torque_nm,
+    stepper_magnet_torque_nm,
+    stepper_pullout_nm,
+    stepper_ramp_acceleration,
+    stepper_ramp_step,
+    stepper_shaft_torque_nm,
+    stepper_sketch_steps,
 )
 from twin.jit import njit_cached
 from twin.parameters import Parameters
@@ -78,6 +87,12 @@ _horn = numba.njit(inline="always")(lever_horn_closure_rad)
 _ratio_slope = numba.njit(inline="always")(lever_ratio_slope)
 _shaft_derivatives = numba.njit(inline="always")(lever_shaft_derivatives)
 _servo = numba.njit(inline="always")(servo_torque_nm)
+_stepper_pullout = numba.njit(inline="always")(stepper_pullout_nm)
+_stepper_magnet = numba.njit(inline="always")(stepper_magnet_torque_nm)
+_stepper = numba.njit(inline="always")(stepper_shaft_torque_nm)
+_ramp_acceleration = numba.njit(inline="always")(stepper_ramp_acceleration)
+_ramp_step = numba.njit(inline="always")(stepper_ramp_step)
+_sketch_steps = numba.njit(inline="always")(stepper_sketch_steps)
 _geared = numba.njit(inline="always")(geared_shaft_torque_nm)
 _beam_terms = numba.njit(inline="always")(driven_beam_terms)
 _stop_derivative = numba.njit(inline="always")(drive_stop_derivative)
@@ -98,22 +113,28 @@ DRIVE_NUMBERS, ACTUATOR_NUMBERS = 25, 32  # 7 and 4 columns
 # ... then, for a driven beam hinged off its track's centre (``beam.hinged_off_centre``): whether it is (HINGED),
 # the track's centre's offset d from the pivot and the beam's weight moment M_B·g·x_g (``hinged_beam_terms``)
 HINGED, OFFSET, WEIGHT = 36, 37, 38
-ROW = 39
+# ... then a stepper's numbers (``twin.parts.stepper.stepper_kernel_numbers``: 9 columns), and whether the law has
+# a sketch's ramp between the written control and it (RAMPED; ``DriveLaw.ramp``: v_max and a, 2 columns). A ramped
+# run's ramp state (s, v) is per-run state beside (x, θ, ẋ, θ̇): ``advance_plant``'s ``ramps``.
+STEPPER_NUMBERS = 39
+RAMPED, RAMP = 48, 49
+ROW = 51
 THESIS, DRIVEN = 0.0, 1.0  # KIND
 PIVOT, END_LEVER = 0.0, 1.0  # DRIVE
-GEARED_MOTOR, HOBBY_SERVO = 0.0, 1.0  # ACTUATOR
+GEARED_MOTOR, HOBBY_SERVO, STEPPER = 0.0, 1.0, 2.0  # ACTUATOR
 
 # The parts the kernel has a form for, by role: the plant's roles only (sensors and boards are the batch engine's
-# chains). Another part in one of these roles (a stepper, another track or ball) is refused (``kernel_refusal``):
-# its equations are not compiled here, and the screening falls back to MuJoCo.
+# chains). Another part in one of these roles (another track or ball) is refused (``kernel_refusal``): its
+# equations are not compiled here, and the screening falls back to MuJoCo. The stepper runs the reference model's
+# law and its sketch's ramp, as ``ReferencePlant`` does.
 KERNEL_PARTS: dict[str, tuple[str, ...]] = {
     "ball": ("steel_ball",),
     "track": ("two_wires", "v_groove", "rod_and_strip", "tube"),  # they enter through r* and h* alone
     "beam_drive": ("pivot", "end_lever"),
-    "actuator": ("escap_dc_motor", "hobby_servo"),
+    "actuator": ("escap_dc_motor", "hobby_servo", "stepper"),
 }
 _DRIVE_KINDS = {"pivot": PIVOT, "end_lever": END_LEVER}
-_ACTUATOR_KINDS = {"escap_dc_motor": GEARED_MOTOR, "hobby_servo": HOBBY_SERVO}
+_ACTUATOR_KINDS = {"escap_dc_motor": GEARED_MOTOR, "hobby_servo": HOBBY_SERVO, "stepper": STEPPER}
 
 
 @dataclass(frozen=True)
@@ -182,8 +203,13 @@ def _driven_row(row: np.ndarray, p: Parameters, q: EquationCoefficients[float], 
         row[DRIVE_NUMBERS : DRIVE_NUMBERS + 7] = law.drive_numbers
     if row[ACTUATOR] == HOBBY_SERVO:
         row[ACTUATOR_NUMBERS : ACTUATOR_NUMBERS + 3] = law.actuator_numbers
+    elif row[ACTUATOR] == STEPPER:
+        row[STEPPER_NUMBERS : STEPPER_NUMBERS + 9] = law.actuator_numbers
     else:
         row[ACTUATOR_NUMBERS : ACTUATOR_NUMBERS + 4] = geared_motor_numbers(p)
+    if law.ramp is not None:
+        row[RAMPED] = 1.0
+        row[RAMP : RAMP + 2] = law.ramp
 
 
 @numba.njit(inline="always")
@@ -235,6 +261,12 @@ def _f_driven(
     a = ACTUATOR_NUMBERS
     if r[ACTUATOR] == HOBBY_SERVO:
         tau = _servo(ctrl, phi, dphi * thd, r[a], r[a + 1], r[a + 2])
+    elif r[ACTUATOR] == STEPPER:
+        b = STEPPER_NUMBERS
+        tau = _stepper(
+            _stepper_magnet, _stepper_pullout, ctrl, phi, dphi * thd, r[b], r[b + 1], r[b + 2], r[b + 3],
+            r[b + 4], r[b + 5], r[b + 6], r[b + 7], r[b + 8],
+        )  # fmt: skip
     else:
         tau = _geared(_torque, ctrl, dphi * thd, r[a], r[a + 1], r[a + 2], r[a + 3])
     a2, torque = _beam_terms(r[5], r[SHAFT_INERTIA], dphi, ddphi, thd, tau)
@@ -307,17 +339,25 @@ def _advance(
     step0: int,
     xs: np.ndarray,
     thetas: np.ndarray,
+    ramps: np.ndarray,
 ) -> None:
     for i in range(volts.shape[0]):
         # the kind is a run's constant: one branch per run, each kind's step loop compiled on its own
         if rows[i, KIND] == THESIS:
             _advance_run(
-                _f_held, _thesis_boundary, rows[i], h, i, states, lost_step, volts, step0, xs, thetas
-            )
+                _f_held, _thesis_boundary, rows[i], h, i, states, lost_step, volts, step0, xs, thetas, ramps,
+                False,
+            )  # fmt: skip
+        elif rows[i, RAMPED] == 0.0:
+            _advance_run(
+                _f_driven_held, _driven_boundary, rows[i], h, i, states, lost_step, volts, step0, xs, thetas,
+                ramps, False,
+            )  # fmt: skip
         else:
             _advance_run(
-                _f_driven_held, _driven_boundary, rows[i], h, i, states, lost_step, volts, step0, xs, thetas
-            )
+                _f_driven_held, _driven_boundary, rows[i], h, i, states, lost_step, volts, step0, xs, thetas,
+                ramps, True,
+            )  # fmt: skip
 
 
 @numba.njit(inline="always")
@@ -333,16 +373,28 @@ def _advance_run(
     step0: int,
     xs: np.ndarray,
     thetas: np.ndarray,
+    ramps: np.ndarray,
+    ramped: bool,
 ) -> None:
-    """Run i over its volts: RK4 of ``f`` with each step's volts held through the rails, then ``boundary``."""
+    """Run i over its volts: RK4 of ``f`` with each step's volts held through the rails, then ``boundary``.
+    ``ramped`` (a stepper's sketch, ``ReferencePlant.advance``'s order): the step's control is the ramp's whole
+    position, then the ramp (``ramps[i]``: s, v) moves one step toward the written control."""
     m = volts.shape[1]
     record = xs.shape[1] == m + 1
     x, th, xd, thd = states[i, 0], states[i, 1], states[i, 2], states[i, 3]
+    position, speed = 0.0, 0.0
+    if ramped:
+        position, speed = ramps[i, 0], ramps[i, 1]
     if record:
         xs[i, 0], thetas[i, 0] = x, th
     for k in range(m):
         if lost_step[i] < 0:
             v = min(max(volts[i, k], -r[RAIL]), r[RAIL])
+            if ramped:
+                target, v = v, _sketch_steps(position)
+                position, speed = _ramp_step(
+                    _ramp_acceleration, target, position, speed, r[RAMP], r[RAMP + 1], h
+                )
             x, th, xd, thd = _rk4(f, x, th, xd, thd, (r, v), h)
             th, xd, thd, lost = boundary(r, x, th, xd, thd)
             if lost:
@@ -352,6 +404,8 @@ def _advance_run(
         if record:  # a lost run's state stays where it was
             xs[i, k + 1], thetas[i, k + 1] = x, th
     states[i, 0], states[i, 1], states[i, 2], states[i, 3] = x, th, xd, thd
+    if ramped:
+        ramps[i, 0], ramps[i, 1] = position, speed
 
 
 _NO_RECORD = np.empty((0, 0))
@@ -365,20 +419,27 @@ def advance_plant(
     step0: int = 0,
     *,
     record: bool = False,
+    ramps: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray] | None:
     """Advance every run's state (N, 4; in place) over its motor volts (N, M: one per physics step), as
     ``ReferencePlant.advance``; ``lost_step`` (N, int, −1: on the track) gets the step (counted from ``step0``)
     after which a run's ball passed the track's end, and that run stops there. ``record``: return each run's
-    x and θ before and after every step, (N, M + 1) each, as ``ReferencePlant.advance``'s block."""
+    x and θ before and after every step, (N, M + 1) each, as ``ReferencePlant.advance``'s block. ``ramps``: each
+    run's stepper ramp (N, 2: s in microsteps, v in microsteps/s; advanced in place, as ``ReferencePlant``'s
+    across its ``advance`` calls); None: every ramped run's ramp from rest at 0 (a run from its start)."""
     if states.dtype != np.float64 or not states.flags.c_contiguous:
         raise ValueError("states: a C-contiguous float64 (N, 4) array (advanced in place)")
+    if ramps is None:
+        ramps = np.zeros((states.shape[0], 2))
+    elif ramps.dtype != np.float64 or not ramps.flags.c_contiguous or ramps.shape != (states.shape[0], 2):
+        raise ValueError("ramps: a C-contiguous float64 (N, 2) array (advanced in place)")
     volts = np.ascontiguousarray(volts, dtype=float)
     if not record:
-        _advance(plant.rows, plant.timestep_s, states, lost_step, volts, step0, _NO_RECORD, _NO_RECORD)
+        _advance(plant.rows, plant.timestep_s, states, lost_step, volts, step0, _NO_RECORD, _NO_RECORD, ramps)
         return None
     xs = np.empty((volts.shape[0], volts.shape[1] + 1))
     thetas = np.empty_like(xs)
-    _advance(plant.rows, plant.timestep_s, states, lost_step, volts, step0, xs, thetas)
+    _advance(plant.rows, plant.timestep_s, states, lost_step, volts, step0, xs, thetas, ramps)
     return xs, thetas
 
 
@@ -399,6 +460,7 @@ class ReferenceBatchPhysics(BatchClock):
         self.states = np.zeros((self.n, 4))
         self.states[:, 0], self.states[:, 1] = x0, theta0
         self.lost_step = np.full(self.n, -1, dtype=np.int64)  # ≥ 0 once lost: the kernel skips the run
+        self.ramps = np.zeros((self.n, 2))  # a stepper's ramp (s, v), from rest as ReferencePlant.reset's
         super().__init__(self.n)
 
     def advance(self, runs: np.ndarray, volts: np.ndarray) -> BatchBlock:
@@ -406,8 +468,8 @@ class ReferenceBatchPhysics(BatchClock):
         live, m, h = runs, volts.shape[1], self.plant.timestep_s
         t0 = self._time_s
         plant = self.plant if len(live) == self.n else PlantRows(self.plant.rows[live], h)
-        states, lost_step = self.states[live], self.lost_step[live]
-        recorded = advance_plant(plant, states, lost_step, volts, record=True)
+        states, lost_step, ramps = self.states[live], self.lost_step[live], self.ramps[live]
+        recorded = advance_plant(plant, states, lost_step, volts, record=True, ramps=ramps)
         assert recorded is not None
         along, theta = recorded
         if not np.isfinite(states).all():
@@ -423,7 +485,7 @@ class ReferenceBatchPhysics(BatchClock):
             self._lost[i] = True
             self._lost_time_s[i] = t0 + k * h  # ReferencePlant's: its clock plus the step's offset
             on[j, k:] = False
-        self.states[live], self.lost_step[live] = states, lost_step
+        self.states[live], self.lost_step[live], self.ramps[live] = states, lost_step, ramps
         times = t0 + np.arange(m + 1) * h
         self._time_s = float(times[-1])
         return BatchBlock(times, along, theta, on)
