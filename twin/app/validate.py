@@ -955,14 +955,11 @@ def _no_spread(b: _Battery) -> str:
         return "not applicable: " + b.spread_na
     if b.rig.thesis:
         return "not run: give --spread FILE or --calibration DIR"
-    # a spread draws the table's groups only (twin.app.montecarlo), not a part's own (servo, vl53l0x, …)
-    table = {f.name for f in fields(Parameters)} - {"parts", "part_groups"}
-    drawable = [g for g in b.rig.groups if g in table and g not in _SHARED_GROUPS]
-    own = [g for g in b.rig.groups if g not in table]
+    # a spread draws any of the rig's groups (twin.app.montecarlo), the parts' own (servo, vl53l0x, …) too
+    drawable = [g for g in b.rig.groups if g not in _SHARED_GROUPS]
     return (
         "not run: no spread given, and the parts have no spread of their own; give --calibration DIR, or "
         f"--spread FILE over this rig's {', '.join(drawable)}"
-        + (f" (a spread cannot draw the parts' own groups {', '.join(own)})" if own else "")
     )
 
 
