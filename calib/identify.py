@@ -699,6 +699,37 @@ def _one_sided(rb: np.ndarray, toward_open: np.ndarray) -> np.ndarray:
     return np.where(d > c, -toward_open * pulled, rb)
 
 
+def colored_jacobian(
+    residuals_batch: Callable[[np.ndarray], np.ndarray],
+    z0: np.ndarray,
+    free: np.ndarray,
+    pattern: scipy.sparse.coo_matrix,
+    scale: np.ndarray,
+    hi: np.ndarray,
+) -> Callable[[np.ndarray], scipy.sparse.csr_matrix]:
+    """The Jacobian of the residuals in the ``free`` entries of z (the others held at ``z0``) by forward
+    differences, every group of columns that share no row of the sparsity ``pattern`` perturbed at once, all
+    groups in one batched simulation (``residuals_batch``: one row of residuals per row of z); a step that
+    would leave the upper bound ``hi`` is taken backwards."""
+    rows, cols = pattern.row.astype(np.int64), pattern.col.astype(np.int64)
+    groups = _color_columns(pattern.tocsc())
+    n_groups = int(groups.max()) + 1
+
+    def jac(u: np.ndarray) -> scipy.sparse.csr_matrix:
+        step = 1.49e-8 * np.maximum(np.abs(u), scale[free])
+        step = np.where(u + step > hi[free], -step, step)
+        zs = np.tile(z0, (n_groups + 1, 1))
+        zs[:, free] = u
+        for g in range(n_groups):
+            members = np.flatnonzero(groups == g)
+            zs[g + 1, free[members]] += step[members]
+        r = residuals_batch(zs)
+        data = (r[groups[cols] + 1, rows] - r[0, rows]) / step[cols]
+        return scipy.sparse.csr_matrix((data, (rows, cols)), shape=pattern.shape)
+
+    return jac
+
+
 def _solve(
     problem: WindowProblem,
     z0: np.ndarray,
@@ -717,8 +748,6 @@ def _solve(
     lo, hi = problem.bounds()
     scale = problem.scale()
     pattern = problem.sparsity()[:, free].tocoo()
-    rows, cols = pattern.row.astype(np.int64), pattern.col.astype(np.int64)
-    shape = pattern.shape
     calls = [0]
 
     def fun(u: np.ndarray) -> np.ndarray:
@@ -731,22 +760,7 @@ def _solve(
         return r
 
     u0 = np.clip(z0[free], lo[free], hi[free])
-    groups = _color_columns(pattern.tocsc())
-    n_groups = int(groups.max()) + 1
-
-    def jac(u: np.ndarray) -> scipy.sparse.csr_matrix:
-        # Forward differences, every group of columns that share no row perturbed at once, all groups in
-        # one batched simulation.
-        step = 1.49e-8 * np.maximum(np.abs(u), scale[free])
-        step = np.where(u + step > hi[free], -step, step)
-        zs = np.tile(z0, (n_groups + 1, 1))
-        zs[:, free] = u
-        for g in range(n_groups):
-            members = np.flatnonzero(groups == g)
-            zs[g + 1, free[members]] += step[members]
-        r = problem.residuals_batch(zs)
-        data = (r[groups[cols] + 1, rows] - r[0, rows]) / step[cols]
-        return scipy.sparse.csr_matrix((data, (rows, cols)), shape=shape)
+    jac = colored_jacobian(problem.residuals_batch, z0, free, pattern, scale, hi)
 
     return scipy.optimize.least_squares(
         fun,

@@ -60,8 +60,8 @@ from calib.identify import (
     ROBUST_SCALE,
     CalibrationError,
     FittedValue,
-    _color_columns,
     _unidentified,
+    colored_jacobian,
 )
 from calib.serial_log import SerialLog
 from twin.drive_equations import lever_shaft_angles, servo_torque_nm
@@ -888,26 +888,12 @@ def _solve(
     lo, hi = problem.bounds()
     scale = problem.scale()
     pattern = problem.sparsity()[:, free].tocoo()
-    rows, cols = pattern.row.astype(np.int64), pattern.col.astype(np.int64)
-    groups = _color_columns(pattern.tocsc())
-    n_groups = int(groups.max()) + 1
+    jac = colored_jacobian(problem.residuals_batch, z0, free, pattern, scale, hi)
 
     def fun(u: np.ndarray) -> np.ndarray:
         z = z0.copy()
         z[free] = u
         return problem.residuals(z)
-
-    def jac(u: np.ndarray) -> scipy.sparse.csr_matrix:
-        step = 1.49e-8 * np.maximum(np.abs(u), scale[free])
-        step = np.where(u + step > hi[free], -step, step)
-        zs = np.tile(z0, (n_groups + 1, 1))
-        zs[:, free] = u
-        for g in range(n_groups):
-            members = np.flatnonzero(groups == g)
-            zs[g + 1, free[members]] += step[members]
-        r = problem.residuals_batch(zs)
-        data = (r[groups[cols] + 1, rows] - r[0, rows]) / step[cols]
-        return scipy.sparse.csr_matrix((data, (rows, cols)), shape=pattern.shape)
 
     return scipy.optimize.least_squares(
         fun, np.clip(z0[free], lo[free], hi[free]), jac=jac, bounds=(lo[free], hi[free]), x_scale=scale[free],
