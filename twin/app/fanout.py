@@ -18,6 +18,7 @@ and its futures map one-to-one onto chunks; Ray would bring a much larger runtim
 
 from __future__ import annotations
 
+import gc
 import os
 import signal
 from collections.abc import Generator, Sequence
@@ -297,8 +298,17 @@ def _local(
         for lo, chunk in chunks:
             yield lo, run_chunk(chunk)
         return
-    pool = ProcessPoolExecutor(workers, initializer=_worker_signals)
-    pending: dict[Future, int] = {pool.submit(run_chunk, chunk): lo for lo, chunk in chunks}
+    # The workers are forked. An object holding MuJoCo's thread pool (a batch's, a rollout's) that a worker's
+    # garbage collection reaches there waits for pool threads the fork did not copy: a worker hung for good in
+    # the pool's destructor. So the garbage is collected here, where those threads run, and what lives is
+    # frozen out of the workers' collections (gc.freeze: made for fork) while they start.
+    gc.collect()
+    gc.freeze()
+    try:
+        pool = ProcessPoolExecutor(workers, initializer=_worker_signals)
+        pending: dict[Future, int] = {pool.submit(run_chunk, chunk): lo for lo, chunk in chunks}
+    finally:
+        gc.unfreeze()
     finished = False
     try:
         while pending:
