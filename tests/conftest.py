@@ -220,6 +220,26 @@ def _realtime_runs_alone(request: pytest.FixtureRequest) -> Iterator[None]:
                 fcntl.flock(gate, fcntl.LOCK_UN)
 
 
+MANUAL_WIRE_PORT = 5751  # the UDP port the manual's recipes serve on and its C client talks to
+
+
+@pytest.fixture
+def manual_wire_port() -> Iterator[int]:
+    """``MANUAL_WIRE_PORT`` for this test alone: under pytest-xdist a test that pastes the manual's serving
+    recipes holds an exclusive lock on the port for its duration, so two such tests on the two workers take
+    turns instead of one finding it taken."""
+    run = os.environ.get("PYTEST_XDIST_TESTRUNUID")
+    if run is None:
+        yield MANUAL_WIRE_PORT
+        return
+    with open(Path(tempfile.gettempdir()) / f"ballbeam-pytest-{run}.port{MANUAL_WIRE_PORT}", "a") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        try:
+            yield MANUAL_WIRE_PORT
+        finally:
+            fcntl.flock(lock, fcntl.LOCK_UN)
+
+
 @pytest.fixture
 def no_work(monkeypatch: pytest.MonkeyPatch) -> None:
     """The refusal must come before any run: starting one (a run, a sweep's, Monte Carlo's or validate's runs,

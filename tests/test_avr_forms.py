@@ -45,6 +45,7 @@ def test_the_card_on_the_boards_input_grid_reads_what_the_firmware_reads() -> No
     assert np.array_equal(card, firmware)
 
 
+@pytest.mark.study  # recomputes a published study's JSON (half a minute; the run's time)
 def test_the_comparison_recomputes_the_published_json(tmp_path: Path) -> None:
     """The three forms, the single-cause runs and the precision replay from the same starts and seeds give the
     published records bit for bit (the validation batteries, 4 minutes, are the script's alone); the firmware's

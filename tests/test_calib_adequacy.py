@@ -308,7 +308,7 @@ def test_regulation_only_is_weak_excitation() -> None:
     assert not any("model mismatch" in p for p in cal.problems)
 
 
-@pytest.mark.slow
+@pytest.mark.study  # a variant of test_regulation_only_is_weak_excitation (the run's time: see pyproject)
 def test_regulation_only_of_a_rig_without_damping_is_still_weak_excitation() -> None:
     """The same regulation log from a rig whose pivot damping is 0 (the twin's): judged against its typical
     size, not its value, the damping is still only loosely determined, and the problem says how loosely."""
@@ -319,7 +319,7 @@ def test_regulation_only_of_a_rig_without_damping_is_still_weak_excitation() -> 
     assert "beam.pivot_damping_nm_s_per_rad (standard deviation" in weak and "move the setpoint" in weak
 
 
-@pytest.mark.slow
+@pytest.mark.study  # a variant of test_contact_losses_are_in_the_noise_model (the run's time: see pyproject)
 def test_heavier_contact_noise_is_white_excess_and_the_fit_stays_within_tolerance() -> None:
     """0.6 mm of noise and 10 % spikes (twice the rig's): the ball residual rises above the floor's 0.6× but
     stays white, so it is noise, not mismatch; every parameter within the acceptance tolerance."""

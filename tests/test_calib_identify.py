@@ -56,7 +56,9 @@ def test_recovery_from_twin_logs_five_seeds() -> None:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("seed", [1, 2, 3])
+@pytest.mark.parametrize(
+    "seed", [1, pytest.param(2, marks=pytest.mark.study), pytest.param(3, marks=pytest.mark.study)]
+)  # one seed in the default run, the three in the study tier (the run's time)
 def test_recovery_from_an_independent_simulator(seed: int) -> None:
     """Logs the twin did not make (tests/independent_rig.py: mass-matrix equations, adaptive DOP853, its own
     noise, spikes, encoder and controller): the same tolerances."""

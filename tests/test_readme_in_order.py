@@ -406,7 +406,7 @@ def test_every_block_is_pasted_or_skipped_for_a_counted_reason() -> None:
 
 
 @pytest.mark.slow
-def test_the_readme_recipes_run_in_order_in_one_folder(tmp_path: Path) -> None:
+def test_the_readme_recipes_run_in_order_in_one_folder(tmp_path: Path, manual_wire_port: int) -> None:
     work, terminal = tmp_path / "clone", tmp_path / "terminal"
     work.mkdir()
     terminal.mkdir()

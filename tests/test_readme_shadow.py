@@ -34,7 +34,7 @@ def recipe() -> list[list[str]]:
 
 
 @pytest.mark.slow
-def test_the_readmes_shadow_recipe_works_as_pasted(tmp_path: Path) -> None:
+def test_the_readmes_shadow_recipe_works_as_pasted(tmp_path: Path, manual_wire_port: int) -> None:
     serve_cmd, shadow_cmd, run_cmd = recipe()
     idle_s = 5.0  # the shadow's --idle default, which the recipe leaves as it is
     assert "--idle" not in shadow_cmd
@@ -45,7 +45,7 @@ def test_the_readmes_shadow_recipe_works_as_pasted(tmp_path: Path) -> None:
         )
         procs.append(serve)
         assert serve.stdout is not None
-        assert serve.stdout.readline().startswith("serving on udp://127.0.0.1:5751")
+        assert serve.stdout.readline().startswith(f"serving on udp://127.0.0.1:{manual_wire_port}")
         with open(tmp_path / "shadow.err", "w") as err:
             shadow = subprocess.Popen(
                 shadow_cmd, cwd=tmp_path, stdout=subprocess.PIPE, stderr=err, text=True, env=ENV
