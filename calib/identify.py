@@ -868,11 +868,15 @@ def _row_windows(problem: WindowProblem) -> np.ndarray:
     return np.concatenate([per_tick, per_tick, np.repeat(joins, 4)])
 
 
-def _sandwich(problem: WindowProblem, jac: scipy.sparse.spmatrix, rw: np.ndarray) -> _Covariance:
-    """The globals' block of the sandwich covariance H⁻¹·(Σ_c J_cᵀr_c r_cᵀJ_c)·H⁻¹ (H = JᵀJ) without
-    forming a dense matrix over the window states: the g columns of H⁻¹ by a sparse LU of H (normalized by
-    its diagonal, which keeps it well scaled), then J·H⁻¹[:, :g] (rows × g) summed per cluster."""
-    n_g = problem.n_global
+def cluster_sandwich(
+    jac: scipy.sparse.spmatrix, n_g: int, cluster: np.ndarray, rw: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """The globals' block of the sandwich covariance H⁻¹·(Σ_c J_cᵀr_c r_cᵀJ_c)·H⁻¹ (H = JᵀJ, the first ``n_g``
+    columns the globals, the rows' clusters ``cluster``, their weighted residuals ``rw``) without forming a dense
+    matrix over the window states: the g columns of H⁻¹ by a sparse LU of H (normalized by its diagonal, which
+    keeps it well scaled), then J·H⁻¹[:, :g] (rows × g) summed per cluster. Returns the covariance, H⁻¹'s global
+    block, the globals' sensitivities (their Jacobian columns' norms: 0 where no residual depends on them) and
+    the clusters' count. One home for the thesis rig's fit and a part-built rig's (``calib.part_identify``)."""
     J = scipy.sparse.csr_matrix(jac)
     H = (J.T @ J).tocsc()
     d = np.sqrt(np.maximum(H.diagonal(), 1e-300))
@@ -885,8 +889,6 @@ def _sandwich(problem: WindowProblem, jac: scipy.sparse.spmatrix, rw: np.ndarray
     rhs[np.arange(n_g), np.arange(n_g)] = 1.0 / d[:n_g]
     with np.errstate(over="ignore", invalid="ignore"):  # a flat direction: inf, refused as not identifiable
         X = lu.solve(rhs) / d[:, None]  # H⁻¹[:, :g]
-    per_cluster = max(1, int(round(CLUSTER_S / (problem.W * problem.windows.period_s))))
-    cluster = _row_windows(problem) // per_cluster
     n_c = int(cluster.max()) + 1 if cluster.size else 1
     with np.errstate(over="ignore", invalid="ignore"):
         B = np.asarray(J @ X)  # (rows, g)
@@ -895,10 +897,16 @@ def _sandwich(problem: WindowProblem, jac: scipy.sparse.spmatrix, rw: np.ndarray
         for k in range(n_g):
             G[:, k] = np.bincount(cluster, weights=B[:, k] * rw, minlength=n_c)
         cov = G.T @ G * n_c / max(n_c - 1, 1)
-    inv_block = X[:n_g]
+    return cov, X[:n_g], np.sqrt(np.maximum(H.diagonal()[:n_g], 0.0)), n_c
+
+
+def _sandwich(problem: WindowProblem, jac: scipy.sparse.spmatrix, rw: np.ndarray) -> _Covariance:
+    """``cluster_sandwich`` over clusters of ``CLUSTER_S`` of log, with the information matrix."""
+    per_cluster = max(1, int(round(CLUSTER_S / (problem.W * problem.windows.period_s))))
+    cluster = _row_windows(problem) // per_cluster
+    cov, inv_block, sensitivity, n_c = cluster_sandwich(jac, problem.n_global, cluster, rw)
     with np.errstate(all="ignore"):
         information = np.linalg.pinv(0.5 * (inv_block + inv_block.T))
-    sensitivity = np.sqrt(np.maximum(H.diagonal()[:n_g], 0.0))
     return _Covariance(cov, np.diag(inv_block).copy(), information, n_c, sensitivity)
 
 

@@ -61,6 +61,7 @@ from calib.identify import (
     CalibrationError,
     FittedValue,
     _unidentified,
+    cluster_sandwich,
     colored_jacobian,
 )
 from calib.serial_log import SerialLog
@@ -905,29 +906,10 @@ def _solve(
 def _sandwich(
     problem: _Problem, jac: scipy.sparse.spmatrix, rw: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, int]:
-    """The globals' cluster-robust covariance H⁻¹(Σ_c J_cᵀr_c r_cᵀJ_c)H⁻¹, their sensitivities (the norms of
-    their Jacobian columns: 0 where the residuals do not depend on them) and the clusters' count, as
-    ``calib.identify._sandwich`` (its clusters are the thesis log's rows; these the serial log's)."""
-    ng = problem.n_global
-    J = scipy.sparse.csr_matrix(jac)
-    H = (J.T @ J).tocsc()
-    d = np.sqrt(np.maximum(H.diagonal(), 1e-300))
-    Dinv = scipy.sparse.diags(1.0 / d)
-    Hn = (Dinv @ H @ Dinv + 1e-12 * scipy.sparse.identity(H.shape[0])).tocsc()
-    lu = scipy.sparse.linalg.splu(Hn)
-    rhs = np.zeros((H.shape[0], ng))
-    rhs[np.arange(ng), np.arange(ng)] = 1.0 / d[:ng]
-    with np.errstate(all="ignore"):
-        X = lu.solve(rhs) / d[:, None]
-        B = np.asarray(J @ X)
-    cluster = problem.cluster_of_rows()
-    n_c = int(cluster.max()) + 1
-    G = np.zeros((n_c, ng))
-    with np.errstate(all="ignore"):
-        for k in range(ng):
-            G[:, k] = np.bincount(cluster, weights=B[:, k] * rw, minlength=n_c)
-        cov = G.T @ G * n_c / max(n_c - 1, 1)
-    return cov, np.sqrt(np.maximum(H.diagonal()[:ng], 0.0)), n_c
+    """The globals' cluster-robust covariance, their sensitivities and the clusters' count
+    (``calib.identify.cluster_sandwich``; these clusters are the serial log's rows')."""
+    cov, _, sensitivity, n_c = cluster_sandwich(jac, problem.n_global, problem.cluster_of_rows(), rw)
+    return cov, sensitivity, n_c
 
 
 def calibrate_part_rig(
